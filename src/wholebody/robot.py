@@ -1,0 +1,303 @@
+"""The robot: a Pinocchio model, its contacts, and the per-cycle cache of rigid-body terms.
+
+Conventions (Pinocchio's, everywhere inside the library):
+
+* ``q = [base position (3), base quaternion x, y, z, w (4), joint positions (n)]``;
+* ``v = [base linear velocity, base angular velocity (both in the LOCAL base frame), joint velocities]``;
+* contact Jacobians, drifts and forces are expressed in the **LOCAL_WORLD_ALIGNED** frame of the
+  contact: origin at the contact frame, axes parallel to the world axes. A point contact has a 3D
+  force ``f`` (world axes); a rectangle contact has a 6D wrench ``[f; tau]`` about the contact frame
+  origin (world axes). With these, the equations of motion read ``M qdd + h = S^T tau + J_c^T lambda``
+  (Herzog et al. 2016, eq. 1) and the contact constraint ``J_c qdd + drift = 0`` (eq. 2), where
+  ``drift`` is the classical acceleration of the contact frame at zero ``qdd``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from .robots.description import ContactSpec, RobotDescription
+from .robots.torque_limits import TorqueLimits
+
+log = logging.getLogger(__name__)
+
+FREE_FLYER_NQ = 7
+FREE_FLYER_NV = 6
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact of the robot: the description plus the resolved Pinocchio frame id."""
+
+    spec: ContactSpec
+    frame_id: int
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def dim(self) -> int:
+        return self.spec.dim
+
+
+def check_vector(value, size: int, field: str) -> np.ndarray:
+    """Return ``value`` as a float vector of length ``size``; ValueError naming ``field`` otherwise."""
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim != 1 or arr.shape[0] != size:
+        raise ValueError(f"{field}: expected a vector of size {size}, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        raise ValueError(f"{field}: contains NaN or inf at indices {bad.tolist()}")
+    return arr
+
+
+class Robot:
+    """A floating-base robot built from a :class:`RobotDescription`.
+
+    Call :meth:`update` once per control cycle; tasks then read the cached terms (``M``, ``h``,
+    ``com``, ``A_G``, contact Jacobians...). Nothing is recomputed within a cycle: other frames'
+    Jacobians and drifts are computed on first request and cached until the next ``update``.
+    """
+
+    def __init__(self, description: RobotDescription):
+        from .robots.locate import resolve_model_path
+
+        self.description = description
+        self.name = description.name
+        urdf = resolve_model_path(description.urdf, description.base_dir)
+        full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+        q_posture = self._posture(full, description)
+        if description.locked_joints:
+            missing = [j for j in description.locked_joints if not full.existJointName(j)]
+            if missing:
+                raise ValueError(f"robot '{self.name}': field 'locked_joints' names unknown joints "
+                                 f"{missing}")
+            lock_ids = [full.getJointId(j) for j in description.locked_joints]
+            model = pin.buildReducedModel(full, lock_ids, q_posture)
+        else:
+            model = full
+        self.model: pin.Model = model
+        self.nq, self.nv = model.nq, model.nv
+        self.na = model.nv - FREE_FLYER_NV
+        self.joint_names: tuple[str, ...] = tuple(model.names[2:])
+        self._check_joint_types()
+        self._set_armature(description.armature)
+        self.data: pin.Data = model.createData()
+        self.mass = float(pin.computeTotalMass(model))
+
+        self.contacts: tuple[Contact, ...] = tuple(
+            Contact(spec, self._frame_id(spec.frame, f"contacts '{spec.name}'.frame"))
+            for spec in description.contacts)
+        self.contact_names = tuple(c.name for c in self.contacts)
+        self.friction = description.friction
+
+        self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
+        self.q_max = model.upperPositionLimit[FREE_FLYER_NQ:].copy()
+        self.v_max = model.velocityLimit[FREE_FLYER_NV:].copy()
+        self.torque_limits = TorqueLimits(self.joint_names, model.effortLimit[FREE_FLYER_NV:],
+                                          description.torque_limits)
+        self.q_ref = self._rest_on_ground(self._reduce_posture(full, model, q_posture))
+
+        self.cycle = 0
+        self._frame_cache: dict[tuple[str, int], np.ndarray] = {}
+        self._a0 = np.zeros(self.nv)
+        self.q = self.q_ref.copy()
+        self.v = np.zeros(self.nv)
+        self.update(self.q_ref, np.zeros(self.nv))
+
+    # ------------------------------------------------------------------ construction helpers
+    @staticmethod
+    def _posture(full: pin.Model, d: RobotDescription) -> np.ndarray:
+        if isinstance(d.posture, str):
+            from .robots.locate import resolve_model_path
+
+            srdf = resolve_model_path(d.srdf, d.base_dir)  # type: ignore[arg-type]
+            pin.loadReferenceConfigurations(full, str(srdf), False)
+            if d.posture not in full.referenceConfigurations:
+                raise ValueError(f"robot '{d.name}': field 'posture' = '{d.posture}' is not a group "
+                                 f"state of {srdf.name}; have {list(full.referenceConfigurations)}")
+            return np.array(full.referenceConfigurations[d.posture], dtype=float)
+        q = pin.neutral(full)
+        for joint, value in d.posture.items():
+            if not full.existJointName(joint):
+                raise ValueError(f"robot '{d.name}': field 'posture' names unknown joint '{joint}'")
+            q[full.joints[full.getJointId(joint)].idx_q] = value
+        return q
+
+    @staticmethod
+    def _reduce_posture(full: pin.Model, model: pin.Model, q_full: np.ndarray) -> np.ndarray:
+        q = pin.neutral(model)
+        q[:FREE_FLYER_NQ] = q_full[:FREE_FLYER_NQ]
+        for jid in range(2, model.njoints):
+            src = full.joints[full.getJointId(model.names[jid])]
+            dst = model.joints[jid]
+            q[dst.idx_q:dst.idx_q + dst.nq] = q_full[src.idx_q:src.idx_q + src.nq]
+        return q
+
+    def _check_joint_types(self) -> None:
+        root = self.model.joints[1]
+        if root.nq != FREE_FLYER_NQ or root.nv != FREE_FLYER_NV:
+            raise ValueError(f"robot '{self.name}': the root joint must be a free flyer")
+        for jid in range(2, self.model.njoints):
+            j = self.model.joints[jid]
+            if j.nq != 1 or j.nv != 1:
+                raise ValueError(f"robot '{self.name}': joint '{self.model.names[jid]}' "
+                                 f"({j.shortname()}) is not a 1-DoF revolute/prismatic joint")
+
+    def _set_armature(self, armature) -> None:
+        arm = np.zeros(self.nv)
+        if isinstance(armature, dict):
+            for joint, value in armature.items():
+                if joint not in self.joint_names:
+                    raise ValueError(f"robot '{self.name}': field 'armature' names unknown joint "
+                                     f"'{joint}'")
+                arm[FREE_FLYER_NV + self.joint_names.index(joint)] = value
+        else:
+            arm[FREE_FLYER_NV:] = float(armature)
+        self.model.armature = arm
+
+    def _frame_id(self, frame: str, field: str) -> int:
+        if not self.model.existFrame(frame):
+            raise ValueError(f"robot '{self.name}': {field} = '{frame}' is not a frame of the model")
+        return int(self.model.getFrameId(frame))
+
+    def _rest_on_ground(self, q: np.ndarray) -> np.ndarray:
+        """Shift the base vertically so that the lowest contact touches the ground z = 0."""
+        pin.framesForwardKinematics(self.model, self.data, q)
+        heights = [self.data.oMf[c.frame_id].translation[2] - c.spec.radius for c in self.contacts]
+        q = q.copy()
+        q[2] -= min(heights)
+        return q
+
+    # ------------------------------------------------------------------ per-cycle cache
+    def update(self, q, v) -> None:
+        """One Pinocchio pass for this control cycle (state in Pinocchio convention).
+
+        Caches: ``M`` (symmetric), ``h`` (nonlinear effects), ``com``, ``vcom``, ``J_com``,
+        ``com_drift`` (= J̇_com v), ``A_G`` (centroidal momentum matrix), ``h_G``, ``A_G_dot_v``
+        (= Ȧ_G v), and for every contact its Jacobian and drift (LOCAL_WORLD_ALIGNED).
+        """
+        q = check_vector(q, self.nq, "q")
+        v = check_vector(v, self.nv, "v")
+        quat_norm = np.linalg.norm(q[3:7])
+        if abs(quat_norm - 1.0) > 1e-3:
+            raise ValueError(f"q: base quaternion q[3:7] must be unit, has norm {quat_norm:.6f}")
+        model, data = self.model, self.data
+        self.q, self.v = q.copy(), v.copy()
+        self.cycle += 1
+        self._frame_cache.clear()
+        # computeAllTerms: FK with zero acceleration (data.a = bias accelerations), crba, nle,
+        # joint Jacobians, CoM and its Jacobian, CCRBA (A_G, h_G).
+        pin.computeAllTerms(model, data, q, v)
+        pin.updateFramePlacements(model, data)
+        dh = pin.computeCentroidalMomentumTimeVariation(model, data)
+        M = data.M
+        M[np.tril_indices(self.nv, -1)] = M.T[np.tril_indices(self.nv, -1)]
+        self.M = M
+        self.h = data.nle
+        self.com = data.com[0].copy()
+        self.vcom = data.vcom[0].copy()
+        self.J_com = data.Jcom
+        self.A_G = data.Ag
+        self.h_G = data.hg.vector.copy()
+        self.A_G_dot_v = dh.vector.copy()
+        self.com_drift = self.A_G_dot_v[:3] / self.mass
+        self.contact_jacobians = {c.name: self._contact_jacobian(c) for c in self.contacts}
+        self.contact_drifts = {c.name: self._contact_drift(c) for c in self.contacts}
+
+    def _contact_jacobian(self, c: Contact) -> np.ndarray:
+        J = pin.getFrameJacobian(self.model, self.data, c.frame_id, pin.LOCAL_WORLD_ALIGNED)
+        return J[:3] if c.dim == 3 else J
+
+    def _contact_drift(self, c: Contact) -> np.ndarray:
+        acc = pin.getFrameClassicalAcceleration(self.model, self.data, c.frame_id,
+                                                pin.LOCAL_WORLD_ALIGNED)
+        return acc.linear.copy() if c.dim == 3 else acc.vector.copy()
+
+    def frame_jacobian(self, frame: str) -> np.ndarray:
+        """6×nv Jacobian [linear; angular] of ``frame`` (LOCAL_WORLD_ALIGNED), cached per cycle."""
+        key = (frame, 0)
+        if key not in self._frame_cache:
+            fid = self._frame_id(frame, "frame")
+            self._frame_cache[key] = pin.getFrameJacobian(self.model, self.data, fid,
+                                                          pin.LOCAL_WORLD_ALIGNED)
+        return self._frame_cache[key]
+
+    def frame_drift(self, frame: str) -> np.ndarray:
+        """Classical acceleration [linear; angular] of ``frame`` at zero qdd (J̇v), cached per cycle."""
+        key = (frame, 1)
+        if key not in self._frame_cache:
+            fid = self._frame_id(frame, "frame")
+            self._frame_cache[key] = pin.getFrameClassicalAcceleration(
+                self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED).vector.copy()
+        return self._frame_cache[key]
+
+    def frame_placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
+        """(position, rotation matrix) of ``frame`` in the world."""
+        oMf = self.data.oMf[self._frame_id(frame, "frame")]
+        return oMf.translation.copy(), oMf.rotation.copy()
+
+    def frame_velocity(self, frame: str) -> np.ndarray:
+        """Spatial velocity [linear; angular] of ``frame`` (LOCAL_WORLD_ALIGNED)."""
+        return pin.getFrameVelocity(self.model, self.data, self._frame_id(frame, "frame"),
+                                    pin.LOCAL_WORLD_ALIGNED).vector.copy()
+
+    def contact(self, name: str) -> Contact:
+        for c in self.contacts:
+            if c.name == name:
+                return c
+        raise ValueError(f"contact: unknown contact '{name}'; have {list(self.contact_names)}")
+
+    # ------------------------------------------------------------------ stacked contact terms
+    def stacked_contact_jacobian(self, names: Sequence[str] | None = None) -> np.ndarray:
+        """Contact Jacobians of ``names`` (default: all contacts) stacked row-wise."""
+        names = self.contact_names if names is None else names
+        if not names:
+            return np.zeros((0, self.nv))
+        return np.vstack([self.contact_jacobians[n] for n in names])
+
+    def stacked_contact_drift(self, names: Sequence[str] | None = None) -> np.ndarray:
+        names = self.contact_names if names is None else names
+        if not names:
+            return np.zeros(0)
+        return np.concatenate([self.contact_drifts[n] for n in names])
+
+    # ------------------------------------------------------------------ helpers
+    def torque_bounds(self, q=None) -> tuple[np.ndarray, np.ndarray]:
+        """(tau_min(q), tau_max(q)) for the actuated joints at ``q`` (default: the cached state)."""
+        q = self.q if q is None else q
+        return self.torque_limits.bounds(q[FREE_FLYER_NQ:])
+
+    def random_state(self, rng: np.random.Generator, velocity_scale: float = 1.0
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """A random (q, v) with joints inside their limits (for tests and benchmarks)."""
+        q = self.q_ref.copy()
+        lo = np.where(np.isfinite(self.q_min), self.q_min, -np.pi)
+        hi = np.where(np.isfinite(self.q_max), self.q_max, np.pi)
+        q[FREE_FLYER_NQ:] = rng.uniform(lo, hi)
+        q[:3] += rng.normal(scale=0.1, size=3)
+        quat = rng.normal(size=4)
+        q[3:7] = quat / np.linalg.norm(quat)
+        v = rng.normal(scale=velocity_scale, size=self.nv)
+        return q, v
+
+    def summary(self) -> dict:
+        """Name, DoF, mass and contacts (for ``wholebody robots``)."""
+        return {
+            "name": self.name,
+            "actuated_dof": self.na,
+            "nq": self.nq,
+            "nv": self.nv,
+            "mass_kg": round(self.mass, 3),
+            "contacts": [f"{c.name} ({c.spec.type})" for c in self.contacts],
+        }
+
+    def __repr__(self) -> str:
+        return (f"Robot({self.name!r}, {self.na} actuated DoF, {self.mass:.1f} kg, "
+                f"contacts={list(self.contact_names)})")

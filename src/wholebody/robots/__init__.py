@@ -1,0 +1,51 @@
+"""Robot presets and the loader: a preset name or a path to a robot description file."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+from .description import ContactSpec, DescriptionError, RobotDescription
+
+__all__ = ["ContactSpec", "DescriptionError", "RobotDescription", "load_robot", "preset_names",
+           "preset_description"]
+
+
+class UnknownRobotError(ValueError):
+    """The name is neither a preset nor an existing description file."""
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped presets (``talos14``, ``talos``, ``hyq``...)."""
+    folder = resources.files(__package__) / "presets"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def preset_description(name: str) -> RobotDescription:
+    folder = resources.files(__package__) / "presets"
+    path = folder / f"{name}.toml"
+    if not path.is_file():
+        raise UnknownRobotError(f"unknown robot '{name}'; presets: {', '.join(preset_names())}")
+    with resources.as_file(path) as real:
+        return RobotDescription.from_toml(real)
+
+
+def load_robot(name_or_path: str | Path | Mapping[str, Any] | RobotDescription):
+    """Build a :class:`wholebody.Robot` from a preset name, a TOML file path, a dict or a description."""
+    from ..robot import Robot
+
+    if isinstance(name_or_path, RobotDescription):
+        return Robot(name_or_path)
+    if isinstance(name_or_path, Mapping):
+        return Robot(RobotDescription.from_dict(name_or_path))
+    text = str(name_or_path)
+    if text in preset_names():
+        return Robot(preset_description(text))
+    path = Path(text).expanduser()
+    if path.suffix == ".toml" or path.is_file():
+        if not path.is_file():
+            raise UnknownRobotError(f"robot file not found: {path}")
+        return Robot(RobotDescription.from_toml(path))
+    raise UnknownRobotError(
+        f"unknown robot '{text}'; presets: {', '.join(preset_names())} (or a path to a .toml file)")

@@ -1,0 +1,143 @@
+"""Thin QP backend adapters with one contract.
+
+Every adapter solves the strictly convex QP
+
+    minimise ½ xᵀ H x + gᵀ x   subject to   lower ≤ A x ≤ upper
+
+(rows with ``lower == upper`` are equalities; ±inf bounds make one-sided or free rows) and
+returns ``(x, status, ok)``. Adapters never raise for numerical reasons: on failure ``ok`` is
+False, ``status`` names the reason and ``x`` is None (DAQP, for one, returns uninitialised
+memory on failure, so a failed x is never passed on).
+
+* ``quadprog`` — Goldfarb–Idnani dual active set (the method used by Herzog et al. 2016, §5):
+  two-sided rows are split into two one-sided rows ``Cᵀx ≥ b``, equalities go first (``meq``).
+* ``daqp`` — dual active set on the LDP (Arnström et al. 2022): native two-sided rows,
+  equalities flagged with ``sense = 5``; infinite bounds are passed as ±1e30 (DAQP_INF).
+* ``proxsuite`` — ProxQP dense (augmented Lagrangian); equalities as its ``A x = b`` block.
+  Its accuracy is a tolerance, not an active-set exactness: ``eps_abs`` defaults to 1e-9 here.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+__all__ = ["solve_qp", "BACKENDS"]
+
+log = logging.getLogger(__name__)
+
+_DAQP_INF = 1e30
+_DAQP_EXIT = {
+    1: "optimal",
+    2: "soft optimal",
+    -1: "infeasible",
+    -2: "cycling",
+    -3: "unbounded",
+    -4: "iteration limit",
+    -5: "nonconvex (H not positive definite)",
+    -6: "overdetermined initial active set (inconsistent equalities)",
+    -7: "time limit",
+}
+
+
+def _split_rows(lower: np.ndarray, upper: np.ndarray):
+    """Masks of equality rows, finite-lower inequality rows and finite-upper inequality rows."""
+    eq = lower == upper
+    lo = np.isfinite(lower) & ~eq
+    up = np.isfinite(upper) & ~eq
+    return eq, lo, up
+
+
+def _check_x(x, name: str):
+    if x is None or not np.all(np.isfinite(x)):
+        return None, f"{name}: non-finite solution", False
+    return x, "optimal", True
+
+
+def solve_quadprog(H, g, A, lower, upper, **_):
+    """Goldfarb–Idnani via ``quadprog.solve_qp`` (min ½xᵀGx − aᵀx s.t. Cᵀx ≥ b, first meq equal)."""
+    import quadprog
+
+    n = H.shape[0]
+    if A.shape[0]:
+        eq, lo, up = _split_rows(lower, upper)
+        Ct = np.concatenate((A[eq], A[lo], -A[up]), axis=0).T
+        bb = np.concatenate((lower[eq], lower[lo], -upper[up]))
+        meq = int(np.count_nonzero(eq))
+    else:
+        Ct, bb, meq = np.zeros((n, 0)), np.zeros(0), 0
+    try:
+        if Ct.shape[1]:
+            x = quadprog.solve_qp(H, -g, Ct, bb, meq)[0]
+        else:
+            x = quadprog.solve_qp(H, -g)[0]
+    except ValueError as exc:  # "constraints are inconsistent", "G is not positive definite"
+        return None, f"quadprog: {exc}", False
+    return _check_x(x, "quadprog")
+
+
+def solve_daqp(H, g, A, lower, upper, **opts):
+    """DAQP via ``daqp.solve(H, f, A, bupper, blower, sense)``; equalities have sense 5."""
+    import daqp
+
+    m = A.shape[0]
+    if m == 0:
+        # DAQP needs at least one row: add a free one.
+        A = np.zeros((1, H.shape[0]))
+        lower, upper = np.full(1, -np.inf), np.full(1, np.inf)
+        m = 1
+    sense = np.where(lower == upper, 5, 0).astype(np.intc)
+    bu = np.minimum(upper, _DAQP_INF)
+    bl = np.maximum(lower, -_DAQP_INF)
+    x, _, flag, _ = daqp.solve(
+        np.ascontiguousarray(H), np.ascontiguousarray(g), np.ascontiguousarray(A), bu, bl, sense, **opts
+    )
+    if flag not in (1, 2):
+        return None, f"daqp: {_DAQP_EXIT.get(flag, 'exitflag')} ({flag})", False
+    return _check_x(np.array(x), "daqp")
+
+
+def solve_proxsuite(H, g, A, lower, upper, eps_abs=1e-9, max_iter=10_000, **opts):
+    """ProxQP dense via ``proxsuite.proxqp.dense.solve``; equality rows go to its A x = b block."""
+    from proxsuite import proxqp
+
+    n = H.shape[0]
+    eq = lower == upper
+    Ae, be = A[eq], lower[eq]
+    iq = ~eq & (np.isfinite(lower) | np.isfinite(upper))
+    Ci, li, ui = A[iq], np.maximum(lower[iq], -1e20), np.minimum(upper[iq], 1e20)
+    try:
+        res = proxqp.dense.solve(
+            H, g,
+            Ae if Ae.shape[0] else None, be if Ae.shape[0] else None,
+            Ci if Ci.shape[0] else None, li if Ci.shape[0] else None, ui if Ci.shape[0] else None,
+            eps_abs=eps_abs, eps_rel=0.0, max_iter=max_iter, **opts,
+        )
+    except (ValueError, RuntimeError) as exc:
+        return None, f"proxsuite: {exc}", False
+    status = res.info.status
+    if status != proxqp.PROXQP_SOLVED:
+        return None, f"proxsuite: {str(status).rsplit('.', 1)[-1]}", False
+    return _check_x(np.array(res.x[:n]), "proxsuite")
+
+
+BACKENDS = {"quadprog": solve_quadprog, "daqp": solve_daqp, "proxsuite": solve_proxsuite}
+
+
+def solve_qp(H, g, A, lower, upper, backend: str = "quadprog", **options):
+    """min ½xᵀHx + gᵀx s.t. lower ≤ A x ≤ upper with the named backend → ``(x, status, ok)``.
+
+    H must be symmetric positive definite (the cascade of Herzog et al. 2016, eq. 5, is made
+    strictly convex by its ε term). Never raises for numerical reasons; unknown backend names
+    raise ValueError.
+    """
+    try:
+        fn = BACKENDS[backend]
+    except KeyError:
+        raise ValueError(f"unknown backend {backend!r}; choose from {sorted(BACKENDS)}") from None
+    try:
+        return fn(H, g, A, lower, upper, **options)
+    except (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError) as exc:
+        log.debug("backend %s failed: %s", backend, exc)
+        return None, f"{backend}: {type(exc).__name__}: {exc}", False
