@@ -170,10 +170,20 @@ class Robot:
     def _rest_on_ground(self, q: np.ndarray) -> np.ndarray:
         """Shift the base vertically so that the lowest contact touches the ground z = 0."""
         pin.framesForwardKinematics(self.model, self.data, q)
-        heights = [self.data.oMf[c.frame_id].translation[2] - c.spec.radius for c in self.contacts]
+        heights = [self.contact_lowest_point(c, self.data.oMf[c.frame_id])[2] for c in self.contacts]
         q = q.copy()
         q[2] -= min(heights)
         return q
+
+    @staticmethod
+    def contact_lowest_point(contact: Contact, placement: pin.SE3) -> np.ndarray:
+        """Lowest point of a contact's geometry (sphere bottom, or lowest sole corner) in the world."""
+        if contact.spec.type == "point":
+            return placement.translation - np.array([0.0, 0.0, contact.spec.radius])
+        hx, hy = contact.spec.half_size
+        corners = np.array([[sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+        world = corners @ placement.rotation.T + placement.translation
+        return world[np.argmin(world[:, 2])]
 
     # ------------------------------------------------------------------ per-cycle cache
     def update(self, q, v) -> None:

@@ -1,0 +1,136 @@
+"""Command line: ``wholebody robots | scenarios | run SCENARIO``.
+
+Exit codes: 0 success; 1 the scenario ran but did not meet its success criterion; 2 bad usage
+(unknown robot, scenario, controller or parameter; malformed robot file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from . import __version__
+
+EXIT_OK, EXIT_SCENARIO_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+def _parse_sets(pairs: list[str]) -> dict[str, str]:
+    out = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--set expects key=value, got '{pair}'")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _usage_error(exc: Exception) -> int:
+    print(f"wholebody: error: {exc}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _cmd_robots(args) -> int:
+    from .robots import load_robot, preset_names
+
+    rows = [load_robot(name).summary() for name in preset_names()]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return EXIT_OK
+    print(f"{'robot':<10} {'DoF':>4} {'mass (kg)':>10}  contacts")
+    for r in rows:
+        print(f"{r['name']:<10} {r['actuated_dof']:>4} {r['mass_kg']:>10.1f}  "
+              f"{', '.join(r['contacts'])}")
+    return EXIT_OK
+
+
+def _cmd_scenarios(args) -> int:
+    from .scenarios import SCENARIOS
+
+    if args.json:
+        print(json.dumps({s.name: {"summary": s.summary, "controllers": list(s.controllers),
+                                   "default_robot": s.default_robot,
+                                   "parameters": {p.name: {"default": p.default, "help": p.help}
+                                                  for p in s.parameters}}
+                          for s in SCENARIOS.values()}, indent=2))
+        return EXIT_OK
+    for s in SCENARIOS.values():
+        print(f"{s.name}  (robot {s.default_robot}; controllers: {', '.join(s.controllers)})")
+        print(f"    {s.summary}")
+        for p in s.parameters:
+            setting = f"--set {p.name}={p.default!r}"
+            print(f"    {setting:<32} {p.help}")
+    return EXIT_OK
+
+
+def _cmd_run(args) -> int:
+    from .robots import load_robot
+    from .scenarios import get_scenario
+
+    try:  # every usage error surfaces here, before anything runs
+        scenario = get_scenario(args.scenario)
+        overrides = _parse_sets(args.set)
+        scenario.resolve(overrides)
+        if args.controller and args.controller not in scenario.controllers:
+            raise ValueError(f"scenario '{scenario.name}' has no controller '{args.controller}'; "
+                             f"controllers: {', '.join(scenario.controllers)}")
+        robot = load_robot(args.robot or scenario.default_robot)
+    except (ValueError, FileNotFoundError) as exc:
+        return _usage_error(exc)
+    out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"
+    result = scenario.run(robot, args.controller, overrides, out_dir,
+                          progress=not args.no_progress and sys.stderr.isatty())
+    status = "SUCCESS" if result.success else "FAILED"
+    print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
+          f"in {result.wall_time_s:.1f} s")
+    for key, value in result.summary()["metrics"].items():
+        if isinstance(value, float):
+            value = f"{value:.4g}"
+        print(f"  {key}: {value}")
+    for note in result.notes:
+        print(f"  note: {note}")
+    print(f"wrote {out_dir / 'summary.json'}" +
+          (f" and {len(result.figures)} figure(s)" if result.figures else ""))
+    return EXIT_OK if result.success else EXIT_SCENARIO_FAILED
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="wholebody",
+        description="Whole-body control of torque-controlled legged robots, checked in a MuJoCo twin.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("robots", help="list the robot presets (DoF, mass, contacts)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=_cmd_robots)
+
+    p = sub.add_parser("scenarios", help="list the scenarios and their parameters")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=_cmd_scenarios)
+
+    p = sub.add_parser("run", help="run a closed-loop scenario in the MuJoCo twin")
+    p.add_argument("scenario", help="scenario name (see `wholebody scenarios`)")
+    p.add_argument("--robot", help="preset name or path to a robot .toml (default: the scenario's)")
+    p.add_argument("--controller", help="controller variant (default: the scenario's first)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scenario parameter (repeatable)")
+    p.add_argument("--out", help="output directory (default: results/SCENARIO-ROBOT)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    return args.func(args)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

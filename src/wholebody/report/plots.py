@@ -1,0 +1,42 @@
+"""Matplotlib figures of scenario logs (PNG, headless)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def time_series_figure(path: Path, t: np.ndarray,
+                       panels: Sequence[tuple[str, str, dict[str, np.ndarray]]],
+                       title: str = "", shaded: Sequence[tuple[float, float]] = ()) -> Path:
+    """One stacked panel per (title, y label, {label: series}) sharing the time axis; saves a PNG.
+
+    ``shaded`` intervals (t0, t1) are drawn grey on every panel (e.g. pushes, single support).
+    """
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(8, 2.2 * len(panels) + 0.6),
+                             squeeze=False)
+    for ax, (panel_title, ylabel, series) in zip(axes[:, 0], panels):
+        for label, values in series.items():
+            ax.plot(t, values, label=label, linewidth=1.0)
+        for t0, t1 in shaded:
+            ax.axvspan(t0, t1, color="0.85", zorder=0)
+        ax.set_title(panel_title, fontsize=9)
+        ax.set_ylabel(ylabel, fontsize=8)
+        ax.grid(True, alpha=0.3)
+        if len(series) > 1:
+            ax.legend(fontsize=7, ncol=min(len(series), 4), loc="best")
+    axes[-1, 0].set_xlabel("time (s)")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

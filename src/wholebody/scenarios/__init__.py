@@ -1,0 +1,22 @@
+"""Registered scenarios: each experiment of the papers as a function returning a log and metrics."""
+
+from __future__ import annotations
+
+from .base import Parameter, Scenario, ScenarioResult
+from .stand import SCENARIO as _STAND
+
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (_STAND,)}
+
+
+class UnknownScenarioError(ValueError):
+    pass
+
+
+def get_scenario(name: str) -> Scenario:
+    if name not in SCENARIOS:
+        raise UnknownScenarioError(f"unknown scenario '{name}'; scenarios: {', '.join(SCENARIOS)}")
+    return SCENARIOS[name]
+
+
+__all__ = ["Parameter", "Scenario", "ScenarioResult", "SCENARIOS", "get_scenario",
+           "UnknownScenarioError"]

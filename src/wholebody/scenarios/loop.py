@@ -1,0 +1,36 @@
+"""Run a controller against the simulator in closed loop."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from tqdm import tqdm
+
+from ..sim.simulator import Simulator
+
+
+def run_closed_loop(sim: Simulator, controller, duration: float, control_period: float | None = None,
+                    progress: bool = False, on_result: Callable | None = None) -> int:
+    """Step ``sim`` for ``duration`` s; the controller runs every ``control_period`` (default: every
+    simulation step) and its last torque is held in between. Returns the number of failed cycles
+    (results with ``ok`` False); ``on_result(t, result)`` sees every controller result.
+    """
+    steps = int(round(duration / sim.dt))
+    every = 1 if control_period is None else max(1, int(round(control_period / sim.dt)))
+    failures = 0
+    tau = np.zeros(sim.robot.na)
+    with tqdm(total=steps, disable=not progress, unit="step", leave=False,
+              desc=f"{sim.robot.name}") as bar:
+        for k in range(steps):
+            if k % every == 0:
+                q, v = sim.state()
+                result = controller.compute(q, v, sim.t)
+                tau = result.tau
+                failures += not result.ok
+                if on_result is not None:
+                    on_result(sim.t, result)
+            sim.step(tau)
+            if k % 100 == 99:
+                bar.update(100)
+    return failures

@@ -1,0 +1,103 @@
+"""``stand``: the robot stands on flat ground in the twin under the baseline standing controller."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ..control.standing import StandingController
+from ..report.plots import time_series_figure
+from ..sim.environment import Environment
+from ..sim.simulator import Simulator
+from .base import Parameter, Scenario, ScenarioResult
+from .loop import run_closed_loop
+
+PARAMETERS = (
+    Parameter("duration", 5.0, "simulated time (s)"),
+    Parameter("kp", 1000.0, "joint stiffness of the PD (Nm/rad)"),
+    Parameter("kd", 30.0, "joint damping of the PD (Nm s/rad)"),
+    Parameter("friction", 1.0, "floor friction coefficient"),
+    Parameter("drift_tolerance", 0.01, "largest base drift counted as success (m)"),
+)
+
+
+def standing_metrics(arrays: dict, robot) -> dict:
+    """Base drift and tilt, foot slip, and contact forces of a logged standing run."""
+    q = arrays["q"]
+    base = q[:, :3]
+    drift = np.linalg.norm(base - base[0], axis=1)
+    tilt = np.array([np.degrees(np.arccos(np.clip(pin.Quaternion(qi[6], *qi[3:6])
+                                                  .toRotationMatrix()[2, 2], -1, 1))) for qi in q])
+    wrenches = arrays["contact_wrenches"]
+    return {
+        "base_drift_max_m": float(drift.max()),
+        "base_drift_final_m": float(drift[-1]),
+        "base_tilt_max_deg": float(tilt.max()),
+        "base_height_min_m": float(base[:, 2].min()),
+        "normal_force_mean_N": {n: float(wrenches[:, i, 2].mean())
+                                for i, n in enumerate(robot.contact_names)},
+        "normal_force_min_N": {n: float(wrenches[:, i, 2].min())
+                               for i, n in enumerate(robot.contact_names)},
+    }
+
+
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+    sim = Simulator(robot, Environment(floor_friction=params["friction"]))
+    ctrl = StandingController(robot, kp=params["kp"], kd=params["kd"])
+    start_sites = {n: p for n, (p, _) in sim.contact_frame_poses().items()}
+    slip = {n: 0.0 for n in robot.contact_names}
+    force_error = []
+
+    def observe(t, result):
+        for n, (p, _) in sim.contact_frame_poses().items():
+            slip[n] = max(slip[n], float(np.linalg.norm((p - start_sites[n])[:2])))
+        if t > 0.5:  # after settling: the controller's contact forces vs the simulator's
+            measured = sim.contact_wrenches()
+            force_error.append(max(np.linalg.norm(result.contact_forces[n][:3] - measured[n][:3])
+                                   for n in robot.contact_names))
+
+    failures = run_closed_loop(sim, ctrl, params["duration"], progress=progress, on_result=observe)
+    arrays = sim.log.arrays()
+    metrics = standing_metrics(arrays, robot)
+    metrics["foot_slip_max_m"] = max(slip.values())
+    metrics["contact_force_prediction_error_max_N"] = float(max(force_error, default=0.0))
+    metrics["torque_saturated_cycles"] = failures
+    metrics["simulated_s"] = float(arrays["t"][-1] + sim.dt)
+    fell = metrics["base_tilt_max_deg"] > 30 or metrics["base_height_min_m"] < 0.5 * robot.q_ref[2]
+    metrics["fell"] = bool(fell)
+    success = (not fell) and metrics["base_drift_max_m"] < params["drift_tolerance"]
+    result = ScenarioResult("stand", robot.name, controller, success, metrics, params,
+                            log=sim.log)
+    if out_dir is not None:
+        result.figures = [str(p) for p in plot(arrays, robot, Path(out_dir))]
+    return result
+
+
+def plot(arrays: dict, robot, out_dir: Path) -> list[Path]:
+    t = arrays["t"]
+    base = arrays["q"][:, :3]
+    err = 1000 * (base - base[0])
+    wrenches = arrays["contact_wrenches"]
+    tau = arrays["tau_applied"]
+    joint_panels = {robot.joint_names[i]: tau[:, i] for i in np.argsort(-np.abs(tau).max(0))[:6]}
+    path = time_series_figure(
+        out_dir / "stand.png", t,
+        [("base position change", "mm", {"x": err[:, 0], "y": err[:, 1], "z": err[:, 2]}),
+         ("contact normal forces (simulator)", "N",
+          {n: wrenches[:, i, 2] for i, n in enumerate(robot.contact_names)}),
+         ("largest joint torques", "Nm", joint_panels)],
+        title=f"stand — {robot.name}")
+    return [path]
+
+
+SCENARIO = Scenario(
+    name="stand",
+    summary="stand still on flat ground for `duration` s with contact-consistent gravity "
+            "compensation + joint PD; success = no fall and base drift < drift_tolerance",
+    parameters=PARAMETERS,
+    controllers=("standing",),
+    default_robot="talos14",
+    run_function=run,
+)

@@ -1,0 +1,202 @@
+"""The simulator: step the MuJoCo twin at 1 kHz with joint torques, read state and contact wrenches.
+
+Everything the outside sees is in Pinocchio convention (see :mod:`wholebody.sim.convert`).
+Torques are saturated here to the robot's limits tau_min(q), tau_max(q) (the actuators' ctrlrange is
+disabled so that MuJoCo never clamps silently); the amount clipped is logged.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from ..robot import FREE_FLYER_NQ, Robot, check_vector
+from . import convert
+from .disturbance import Push
+from .environment import Environment
+from .mismatch import Mismatch
+from .twin import SimOptions, Twin, build_twin
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class SimLog:
+    """Time series recorded by :class:`Simulator` (one row per step, Pinocchio convention)."""
+
+    contact_names: tuple[str, ...]
+    t: list = field(default_factory=list)
+    q: list = field(default_factory=list)
+    v: list = field(default_factory=list)
+    tau_command: list = field(default_factory=list)
+    tau_applied: list = field(default_factory=list)
+    contact_wrenches: list = field(default_factory=list)  # (ncontact, 6) world [f; torque]
+    push_force: list = field(default_factory=list)  # (3,) world
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The log as numpy arrays."""
+        out = {k: np.asarray(getattr(self, k)) for k in
+               ("t", "q", "v", "tau_command", "tau_applied", "contact_wrenches", "push_force")}
+        out["contact_names"] = np.asarray(self.contact_names)
+        return out
+
+    def save(self, path) -> None:
+        np.savez_compressed(path, **self.arrays())
+
+
+class Simulator:
+    """A MuJoCo twin of ``robot`` with an environment, optional model mismatch and pushes."""
+
+    def __init__(self, robot: Robot, environment: Environment | None = None,
+                 mismatch: Mismatch | None = None, options: SimOptions | None = None,
+                 record: bool = True):
+        self.robot = robot
+        self.environment = environment or Environment()
+        self.mismatch = mismatch or Mismatch()
+        self.options = options or SimOptions()
+        self.twin: Twin = build_twin(robot, self.environment, self.mismatch, self.options)
+        self.model = self.twin.model
+        self.data = mujoco.MjData(self.model)
+        self.dt = self.model.opt.timestep
+        self.record = record
+        self._rng = np.random.default_rng(self.mismatch.seed + 1)
+        self._pushes: list[Push] = []
+        self._push_bodies: list[int] = []
+        self._push_offsets: list[np.ndarray] = []
+        self._geom_to_contact = {g: i for i, c in enumerate(robot.contact_names)
+                                 for g in self.twin.contact_geoms[c]}
+        self._pin_data = robot.model.createData()
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self, q=None, v=None) -> None:
+        """Reset to ``q`` (default: the robot's reference posture resting on the support surface)."""
+        robot = self.robot
+        if q is None:
+            q = robot.q_ref.copy()
+            q[2] += self.environment.support_height()
+        q = check_vector(q, robot.nq, "q")
+        v = np.zeros(robot.nv) if v is None else check_vector(v, robot.nv, "v")
+        mujoco.mj_resetData(self.model, self.data)
+        self._set_platform(0.0)
+        self.data.qpos[:robot.nq], self.data.qvel[:robot.nv] = convert.pin_to_mj(q, v)
+        mujoco.mj_forward(self.model, self.data)
+        self._delay = deque([np.zeros(robot.na)] * self.mismatch.torque_delay)
+        self.log = SimLog(robot.contact_names)
+        self.last_clipped = np.zeros(robot.na)
+
+    @property
+    def t(self) -> float:
+        return float(self.data.time)
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """(q, v) of the simulated robot in Pinocchio convention."""
+        n, nv = self.robot.nq, self.robot.nv
+        return convert.mj_to_pin(self.data.qpos[:n], self.data.qvel[:nv])
+
+    # ------------------------------------------------------------------ disturbances
+    def add_push(self, push: Push) -> None:
+        """Schedule a push (see :class:`Push`)."""
+        model = self.robot.model
+        if not model.existFrame(push.frame):
+            raise ValueError(f"push.frame: '{push.frame}' is not a frame of robot "
+                             f"'{self.robot.name}'")
+        frame = model.frames[model.getFrameId(push.frame)]
+        body = self.twin.joint_bodies[model.names[frame.parentJoint]]
+        self._pushes.append(push)
+        self._push_bodies.append(body)
+        self._push_offsets.append(frame.placement.act(np.asarray(push.offset, dtype=float)))
+
+    def _apply_pushes(self, t: float) -> np.ndarray:
+        self.data.xfrc_applied[:] = 0.0
+        total = np.zeros(3)
+        for push, body, local in zip(self._pushes, self._push_bodies, self._push_offsets):
+            magnitude = push.magnitude(t)
+            if magnitude == 0.0:
+                continue
+            force = magnitude * push.unit_direction
+            point = self.data.xpos[body] + self.data.xmat[body].reshape(3, 3) @ local
+            self.data.xfrc_applied[body, :3] += force
+            self.data.xfrc_applied[body, 3:] += np.cross(point - self.data.xipos[body], force)
+            total += force
+        return total
+
+    def _set_platform(self, t: float) -> None:
+        platform = self.environment.platform
+        if platform is None or platform.motion is None:
+            return
+        pose = np.concatenate(platform.motion(t))
+        h = 1e-4
+        rate = (np.concatenate(platform.motion(t + h)) - np.concatenate(platform.motion(t - h))) / (
+            2 * h)
+        self.data.qpos[self.twin.platform_qpos] = pose
+        self.data.qvel[self.twin.platform_qvel] = rate
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, tau) -> None:
+        """Advance one time step with the commanded actuated-joint torques ``tau``."""
+        robot = self.robot
+        tau = check_vector(tau, robot.na, "tau")
+        q, v = self.state()
+        if self.mismatch.torque_delay:
+            self._delay.append(tau)
+            applied = self._delay.popleft()
+        else:
+            applied = tau
+        if self.mismatch.torque_noise:
+            applied = applied + self._rng.normal(scale=self.mismatch.torque_noise, size=robot.na)
+        lo, hi = robot.torque_bounds(q)
+        clipped = np.clip(applied, lo, hi)
+        self.last_clipped = applied - clipped
+        self.data.ctrl[:] = clipped
+        push_force = self._apply_pushes(self.t)
+        self._set_platform(self.t)
+        if self.record:
+            self.log.t.append(self.t)
+            self.log.q.append(q)
+            self.log.v.append(v)
+            self.log.tau_command.append(tau.copy())
+            self.log.tau_applied.append(clipped)
+            self.log.contact_wrenches.append(self.contact_wrenches_array())
+            self.log.push_force.append(push_force)
+        mujoco.mj_step(self.model, self.data)
+
+    # ------------------------------------------------------------------ contact forces
+    def contact_wrenches_array(self) -> np.ndarray:
+        """(ncontact, 6): force on the robot and torque about each contact frame origin (world)."""
+        out = np.zeros((len(self.robot.contact_names), 6))
+        d, m = self.data, self.model
+        buf = np.zeros(6)
+        for i in range(d.ncon):
+            con = d.contact[i]
+            g1, g2 = int(con.geom[0]), int(con.geom[1])
+            if g1 in self._geom_to_contact:
+                idx, sign = self._geom_to_contact[g1], -1.0
+            elif g2 in self._geom_to_contact:
+                idx, sign = self._geom_to_contact[g2], 1.0
+            else:
+                continue
+            mujoco.mj_contactForce(m, d, i, buf)
+            # buf[:3] is in the contact frame (rows of con.frame), the force geom1 exerts on geom2
+            force = sign * (con.frame.reshape(3, 3).T @ buf[:3])
+            site = self.twin.contact_sites[self.robot.contact_names[idx]]
+            lever = con.pos - d.site_xpos[site]
+            out[idx, :3] += force
+            out[idx, 3:] += np.cross(lever, force)
+        return out
+
+    def contact_wrenches(self) -> dict[str, np.ndarray]:
+        """Contact name -> 6D wrench on the robot [force; torque about the contact frame] (world axes)."""
+        arr = self.contact_wrenches_array()
+        return {n: arr[i] for i, n in enumerate(self.robot.contact_names)}
+
+    def contact_frame_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Contact name -> (position, rotation) of the contact frame in the simulator."""
+        d = self.data
+        return {n: (d.site_xpos[s].copy(), d.site_xmat[s].reshape(3, 3).copy())
+                for n, s in self.twin.contact_sites.items()}
