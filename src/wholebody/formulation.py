@@ -1,0 +1,260 @@
+"""From a stack of tasks to solver levels and back to (qdd, lambda, tau).
+
+Herzog et al. 2016 Sect. 2.3: the decision vector is either the **full** y = [qdd, lambda, tau] with
+all nv rows of the equations of motion (eq. 1) as a task, or the **reduced** x = [qdd, lambda] with
+tau eliminated everywhere by eq. 14 (tau = M_u qdd + h_u - J_{c,u}^T lambda) and only the 6
+Newton-Euler rows (eq. 13) kept. A task row ``a_q qdd + a_l lambda + a_t tau`` becomes, in reduced
+form, ``(a_q + a_t M_u) qdd + (a_l - a_t J_{c,u}^T) lambda`` with ``a_t h_u`` moved to the right.
+
+Sect. 2.4, the analytic first priority: when level 1 holds only the dynamics (Newton-Euler, or the
+full eq. 1) and torque limits, y*_1 = B_1^+ b_1 via the small Gram matrix B_1 B_1^T and Z_1 spans the
+null space of B_1 — no QP. tau = 0, lambda = 0, qdd = -M^{-1} h satisfies level 1 exactly (eqs. 17-18),
+so the torque limits are then imposed with zero slack on every lower level.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .robot import FREE_FLYER_NV, Robot
+from .solvers import Level, solve_hierarchy
+from .tasks.base import Task, TaskRows
+from .tasks.dynamics import FullDynamics, NewtonEuler
+from .tasks.limits import TorqueLimits
+from .variables import Variables
+
+log = logging.getLogger(__name__)
+
+
+class Stack:
+    """Prioritised levels of tasks (highest first), e.g. Herzog et al. 2016 Tables 1, 2 and 4."""
+
+    def __init__(self, levels: Sequence[Sequence[Task]]):
+        self.levels = [list(level) for level in levels]
+        if not self.levels or any(not level for level in self.levels):
+            raise ValueError("levels: a stack needs at least one level and no empty level")
+
+    def tasks(self) -> list[Task]:
+        return [t for level in self.levels for t in level]
+
+    def find(self, name: str) -> Task:
+        for t in self.tasks():
+            if t.name == name:
+                return t
+        raise ValueError(f"task: no task named '{name}' in the stack")
+
+    def table(self, robot: Robot, variables: Variables) -> str:
+        """The stack as a table: rank, number of eq/ineq rows, task names (at the robot's state)."""
+        lines = [f"{'rank':<5} {'rows':<14} task", "-" * 48]
+        for rank, level in enumerate(self.levels, start=1):
+            for i, task in enumerate(level):
+                rows = task.rows(robot, variables)
+                kind = "eq" if rows.is_equality else "ineq"
+                lines.append(f"{rank if i == 0 else '':<5} {f'{rows.m} {kind}':<14} {task.name}")
+        lines.append(f"DoFs: {robot.na}   variables: {variables.n_full} full")
+        return "\n".join(lines)
+
+
+@dataclass
+class TaskReport:
+    """How well one task was achieved: residual (eq) or violation (ineq) norm, active rows."""
+
+    name: str
+    level: int
+    kind: str
+    rows: int
+    error: float
+    active: int = 0
+
+
+@dataclass
+class Solution:
+    """Result of one whole-body solve (Herzog et al. 2016 eq. 14 for tau)."""
+
+    qdd: np.ndarray
+    lam: np.ndarray
+    tau: np.ndarray
+    forces: dict[str, np.ndarray]
+    ok: bool
+    status: str
+    level_costs: np.ndarray
+    tasks: list[TaskReport] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    contacts: tuple[str, ...] = ()
+
+    def sacrificed(self, tol: float = 1e-6) -> list[TaskReport]:
+        """Tasks not achieved (error above ``tol``), worst first."""
+        return sorted((t for t in self.tasks if t.error > tol), key=lambda t: -t.error)
+
+    @property
+    def contact_forces(self) -> dict[str, np.ndarray]:
+        return self.forces
+
+
+class Formulation:
+    """Maps task rows to solver levels over the reduced [qdd, lambda] or full [qdd, lambda, tau].
+
+    The solver sees the decision vector in scaled units, x = s * x_scaled, with s = 1 for
+    accelerations, the robot's weight m g for contact forces and tau_max for torques, so that the
+    regulariser eps ||x_scaled||^2 of eq. 5 weighs rad/s^2, N and Nm alike. (Unscaled, eps ||lambda||^2
+    with lambda ~ 500 N outweighs task costs of 1e-2 and visibly trades off the contact constraint.)
+    """
+
+    def __init__(self, robot: Robot, reduced: bool = True):
+        self.robot = robot
+        self.reduced = reduced
+        self._tau_scale = np.abs(robot.torque_limits.upper(robot.q_ref[7:]))
+
+    def size(self, variables: Variables) -> int:
+        return variables.nv + variables.n_lambda + (0 if self.reduced else variables.na)
+
+    def scales(self, variables: Variables) -> np.ndarray:
+        """s with x = s * x_scaled (see class docstring)."""
+        parts = [np.ones(variables.nv), np.full(variables.n_lambda, self.robot.mass * 9.81)]
+        if not self.reduced:
+            parts.append(self._tau_scale)
+        return np.concatenate(parts)
+
+    # ------------------------------------------------------------------ rows -> x
+    def map_rows(self, rows: TaskRows, variables: Variables) -> tuple[np.ndarray, np.ndarray]:
+        """(A_x, offset) with A y = A_x x + offset for the chosen decision vector."""
+        robot, nv, nl = self.robot, variables.nv, variables.n_lambda
+        A = np.zeros((rows.m, self.size(variables)))
+        offset = np.zeros(rows.m)
+        if rows.qdd is not None:
+            A[:, :nv] = rows.qdd
+        if rows.lam is not None:
+            A[:, nv:nv + nl] = rows.lam
+        if rows.tau is not None:
+            if self.reduced:  # eq. 14
+                J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
+                A[:, :nv] += rows.tau @ robot.M[FREE_FLYER_NV:]
+                A[:, nv:nv + nl] -= rows.tau @ J_u.T
+                offset = rows.tau @ robot.h[FREE_FLYER_NV:]
+            else:
+                A[:, nv + nl:] = rows.tau
+        return A, offset
+
+    def levels(self, stack: Stack, variables: Variables) -> tuple[list[Level], list[list[tuple]]]:
+        """Solver levels over the scaled x, plus per level (task, kind, A, rhs...) for diagnostics."""
+        out, meta = [], []
+        scale = self.scales(variables)
+        for rank, tasks in enumerate(stack.levels, start=1):
+            eq_A, eq_b, eq_w, in_A, in_lo, in_up, in_w, level_meta = [], [], [], [], [], [], [], []
+            for task in tasks:
+                if self.reduced and isinstance(task, FullDynamics):
+                    raise ValueError("FullDynamics belongs to the full formulation; the reduced one "
+                                     "uses NewtonEuler (tau is eliminated by eq. 14)")
+                rows = task.rows(self.robot, variables)
+                if rows.m == 0:
+                    continue
+                A, offset = self.map_rows(rows, variables)
+                A *= scale
+                w = np.broadcast_to(np.asarray(task.weight, dtype=float), (rows.m,))
+                if rows.is_equality:
+                    eq_A.append(A), eq_b.append(rows.target - offset), eq_w.append(w)
+                    level_meta.append((task, "eq", A, rows.target - offset, None))
+                else:
+                    lo, up = rows.lower - offset, rows.upper - offset
+                    in_A.append(A), in_lo.append(lo), in_up.append(up), in_w.append(w)
+                    level_meta.append((task, "ineq", A, lo, up))
+            out.append(Level(
+                eq=(np.vstack(eq_A), np.concatenate(eq_b)) if eq_A else None,
+                ineq=(np.vstack(in_A), np.concatenate(in_lo), np.concatenate(in_up)) if in_A else None,
+                weights=np.concatenate(eq_w) if eq_w else None,
+                ineq_weights=np.concatenate(in_w) if in_w else None,
+                name=f"level {rank}"))
+            meta.append(level_meta)
+        return out, meta
+
+    # ------------------------------------------------------------------ analytic level 1
+    @staticmethod
+    def analytic_first_level(stack: Stack) -> bool:
+        """True when level 1 is dynamics (+ torque limits) only, as Herzog et al. 2016 Sect. 2.4."""
+        first = stack.levels[0]
+        return (any(isinstance(t, (NewtonEuler, FullDynamics)) for t in first)
+                and all(isinstance(t, (NewtonEuler, FullDynamics, TorqueLimits)) for t in first))
+
+    @staticmethod
+    def first_level_solution(level: Level) -> tuple[np.ndarray, np.ndarray]:
+        """x1 = B^T (B B^T)^-1 b (least norm) and an orthonormal null-space basis Z1 of B (eq. 17).
+
+        B has full row rank (the base part of M is positive definite), so the Gram matrix is SPD.
+        Z1 comes from a complete QR of B^T: its last n - k columns span null(B).
+        """
+        B = level.B * level.w[:, None]
+        b = level.b * level.w
+        gram = B @ B.T
+        x1 = B.T @ np.linalg.solve(gram, b)
+        Q, _ = np.linalg.qr(B.T, mode="complete")
+        return x1, Q[:, B.shape[0]:]
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
+              backend: str = "quadprog", regularization: float = 1e-6,
+              analytic_first_level: bool | None = None) -> Solution:
+        """Solve the stack at the robot's cached state (call ``robot.update`` first).
+
+        Never raises for numerical reasons: a failed solve returns ``ok=False`` with the reason and a
+        torque computed from the best available solution, clipped to the torque limits.
+        """
+        robot = self.robot
+        variables = variables or Variables(robot)
+        t0 = time.perf_counter()
+        levels, meta = self.levels(stack, variables)
+        t_rows = time.perf_counter()
+        use_analytic = (self.analytic_first_level(stack) if analytic_first_level is None
+                        else analytic_first_level)
+        if use_analytic and not self.analytic_first_level(stack):
+            raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque limits")
+        fls = self.first_level_solution(levels[0]) if use_analytic and method == "cascade" else None
+        result = solve_hierarchy(levels, method=method, backend=backend,
+                                 regularization=regularization, first_level_solution=fls)
+        t_solve = time.perf_counter()
+        x = result.x * self.scales(variables)
+        solution = self._recover(x, variables, result.ok, result.status, result.costs)
+        solution.tasks = self._task_reports(result.x, meta)
+        solution.timings = {"rows": t_rows - t0, "solve": t_solve - t_rows,
+                            "total": time.perf_counter() - t0}
+        return solution
+
+    def _recover(self, x, variables: Variables, ok: bool, status: str, costs) -> Solution:
+        robot, nv, nl = self.robot, variables.nv, variables.n_lambda
+        qdd, lam = x[:nv].copy(), x[nv:nv + nl].copy()
+        if self.reduced:
+            J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
+            tau = robot.M[FREE_FLYER_NV:] @ qdd + robot.h[FREE_FLYER_NV:] - J_u.T @ lam  # eq. 14
+        else:
+            tau = x[nv + nl:].copy()
+        lo, hi = robot.torque_bounds()
+        if not np.all(np.isfinite(tau)):
+            ok, status, tau = False, f"{status}; non-finite torque replaced by zero", np.zeros(robot.na)
+        outside = np.any(tau < lo - 1e-6) | np.any(tau > hi + 1e-6)
+        if not ok or outside:
+            if outside and ok:
+                ok, status = False, "torque outside limits after solve; clipped"
+            tau = np.clip(tau, lo, hi)
+        forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
+        return Solution(qdd, lam, tau, forces, ok, status, np.asarray(costs), contacts=variables.contacts)
+
+    @staticmethod
+    def _task_reports(x, meta, active_tol: float = 1e-7) -> list[TaskReport]:
+        reports = []
+        for rank, level_meta in enumerate(meta, start=1):
+            for task, kind, A, first, second in level_meta:
+                value = A @ x
+                if kind == "eq":
+                    reports.append(TaskReport(task.name, rank, kind, len(value),
+                                              float(np.linalg.norm(value - first))))
+                else:
+                    violation = np.maximum(0.0, np.maximum(first - value, value - second))
+                    scale = active_tol * (1.0 + np.abs(value))
+                    active = int(np.sum((value - first <= scale) | (second - value <= scale)))
+                    reports.append(TaskReport(task.name, rank, kind, len(value),
+                                              float(np.linalg.norm(violation)), active))
+        return reports

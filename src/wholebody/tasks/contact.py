@@ -1,0 +1,174 @@
+"""Contact constraints and contact-force conditions (Herzog et al. 2016 Sect. 2.1; Fahmi et al. 2019
+Sect. II-C)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Task, TaskRows, contact_subset
+
+WORLD_UP = np.array([0.0, 0.0, 1.0])
+
+
+def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit normal and two unit tangents (t1, t2, n right-handed) for a surface normal."""
+    n = np.asarray(normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = np.cross(helper, n)
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(n, t1), n
+
+
+class _PerContact(Task):
+    """A task with one block of rows per selected contact, placed in the lambda columns."""
+
+    def __init__(self, name=None, weight=1.0, contacts=None, normals=None):
+        super().__init__(name, weight)
+        self.contacts = None if contacts is None else tuple(contacts)
+        self.normals = dict(normals or {})  # contact name -> surface normal (default world up)
+
+    def normal(self, contact: str) -> np.ndarray:
+        return np.asarray(self.normals.get(contact, WORLD_UP), dtype=float)
+
+    def _lambda_rows(self, variables, blocks: dict[str, np.ndarray]) -> np.ndarray:
+        """Stack per-contact (rows x dim) blocks into (rows x n_lambda)."""
+        m = sum(b.shape[0] for b in blocks.values())
+        out = np.zeros((m, variables.n_lambda))
+        r = 0
+        for name, block in blocks.items():
+            sl = variables.lambda_slices[name]
+            out[r:r + block.shape[0], sl] = block
+            r += block.shape[0]
+        return out
+
+
+class ContactConstraint(_PerContact):
+    """Active contacts do not move: J_c qdd + Jdot_c v = 0 (Herzog et al. 2016, eq. 2).
+
+    With ``kp``/``kd`` > 0 it becomes Fahmi et al. 2019's stance task (eq. 32): the contact
+    acceleration tracks kp (x_anchor - x) - kd v, holding each foot at its touchdown position
+    ``anchors[name]`` (set on first use) so that slipping feet are pulled back.
+    """
+
+    def __init__(self, name=None, weight=1.0, contacts=None, kp: float = 0.0, kd: float = 0.0):
+        super().__init__(name, weight, contacts)
+        self.kp, self.kd = kp, kd
+        self.anchors: dict[str, np.ndarray] = {}
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        J = robot.stacked_contact_jacobian(names)
+        target = -robot.stacked_contact_drift(names)
+        if self.kp or self.kd:
+            r = 0
+            for n in names:
+                c = robot.contact(n)
+                pos = robot.data.oMf[c.frame_id].translation
+                anchor = self.anchors.setdefault(n, pos.copy())
+                vel = robot.contact_jacobians[n] @ robot.v
+                target[r:r + 3] += self.kp * (anchor - pos) - self.kd * vel[:3]
+                if c.dim == 6:
+                    target[r + 3:r + 6] -= self.kd * vel[3:]
+                r += c.dim
+        return TaskRows(qdd=J, lam=None, tau=None, target=target)
+
+
+class FrictionCone(_PerContact):
+    """Linearised friction cone: |f.t1| <= mu f.n and |f.t2| <= mu f.n, 4 rows per contact
+    (Herzog et al. 2016 Sect. 2.1; Fahmi et al. 2019 eqs. 13-14), about each contact's normal."""
+
+    kind = "ineq"
+
+    def __init__(self, mu: float, name=None, weight=1.0, contacts=None, normals=None):
+        super().__init__(name, weight, contacts, normals)
+        if not mu > 0:
+            raise ValueError(f"mu: must be > 0, got {mu}")
+        self.mu = mu
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        blocks = {}
+        for n in names:
+            t1, t2, nrm = tangent_basis(self.normal(n))
+            face = np.array([t1 - self.mu * nrm, -t1 - self.mu * nrm,
+                             t2 - self.mu * nrm, -t2 - self.mu * nrm])
+            block = np.zeros((4, robot.contact(n).dim))
+            block[:, :3] = face
+            blocks[n] = block
+        A = self._lambda_rows(variables, blocks)
+        return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
+                        upper=np.zeros(A.shape[0]))
+
+
+class NormalForceBounds(_PerContact):
+    """f_min <= f.n <= f_max per contact (unilaterality and loading limits; Fahmi et al. 2019 eq. 14)."""
+
+    kind = "ineq"
+
+    def __init__(self, f_min: float = 0.0, f_max: float = np.inf, name=None, weight=1.0,
+                 contacts=None, normals=None):
+        super().__init__(name, weight, contacts, normals)
+        if f_min > f_max:
+            raise ValueError(f"f_min ({f_min}) > f_max ({f_max})")
+        self.f_min, self.f_max = f_min, f_max
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        blocks = {}
+        for n in names:
+            block = np.zeros((1, robot.contact(n).dim))
+            block[0, :3] = tangent_basis(self.normal(n))[2]
+            blocks[n] = block
+        A = self._lambda_rows(variables, blocks)
+        return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(len(names), self.f_min),
+                        upper=np.full(len(names), self.f_max))
+
+
+class CenterOfPressure(_PerContact):
+    """The centre of pressure of each rectangular contact stays in its sole (Herzog et al. 2016
+    Sect. 2.1): with the wrench [f; tau] about the sole frame expressed in sole axes,
+    |tau_y| <= hx f_z and |tau_x| <= hy f_z — 4 linear rows per sole. ``margin`` shrinks the sole
+    (0.1 = 10 % smaller half-lengths)."""
+
+    kind = "ineq"
+
+    def __init__(self, name=None, weight=1.0, contacts=None, margin: float = 0.0):
+        super().__init__(name, weight, contacts)
+        self.margin = margin
+
+    def rows(self, robot, variables):
+        names = [n for n in contact_subset(variables, self.contacts)
+                 if robot.contact(n).spec.type == "rectangle"]
+        blocks = {}
+        for n in names:
+            c = robot.contact(n)
+            R = robot.data.oMf[c.frame_id].rotation
+            hx, hy = (1.0 - self.margin) * np.asarray(c.spec.half_size)
+            ex, ey, ez = R[:, 0], R[:, 1], R[:, 2]  # sole axes in world
+            blocks[n] = np.array([
+                np.concatenate([-hx * ez, -ey]),   # -tau_y - hx f_z <= 0
+                np.concatenate([-hx * ez, ey]),    #  tau_y - hx f_z <= 0
+                np.concatenate([-hy * ez, ex]),    #  tau_x - hy f_z <= 0
+                np.concatenate([-hy * ez, -ex]),   # -tau_x - hy f_z <= 0
+            ])
+        A = self._lambda_rows(variables, blocks)
+        return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
+                        upper=np.zeros(A.shape[0]))
+
+
+class ForceRegularizer(_PerContact):
+    """lambda_i ≈ target_i (default zero): regularises contact forces, or unloads a contact before
+    it is removed (Herzog et al. 2016 Sect. 5.4)."""
+
+    def __init__(self, name=None, weight=1.0, contacts=None, targets=None):
+        super().__init__(name, weight, contacts)
+        self.targets = dict(targets or {})  # contact name -> target force/wrench
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        blocks = {n: np.eye(robot.contact(n).dim) for n in names}
+        A = self._lambda_rows(variables, blocks)
+        target = np.concatenate([np.asarray(self.targets.get(n, np.zeros(robot.contact(n).dim)),
+                                            dtype=float) for n in names]) if names else np.zeros(0)
+        return TaskRows(qdd=None, lam=A, tau=None, target=target)

@@ -1,0 +1,76 @@
+"""Centroidal momentum tasks (Herzog et al. 2016 Sect. 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Task, TaskRows, contact_subset
+
+
+def skew(x: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
+
+
+def momentum_map(robot, contacts) -> np.ndarray:
+    """The matrix of eq. 21 mapping stacked contact forces/wrenches to the momentum rate about the
+    CoM: block [I 0; [x_i - x_cog]x I] per 6D contact, [I; [x_i - x_cog]x] per point contact."""
+    blocks = []
+    for n in contacts:
+        c = robot.contact(n)
+        r = robot.data.oMf[c.frame_id].translation - robot.com
+        block = np.zeros((6, c.dim))
+        block[:3, :3] = np.eye(3)
+        block[3:, :3] = skew(r)
+        if c.dim == 6:
+            block[3:, 3:] = np.eye(3)
+        blocks.append(block)
+    return np.hstack(blocks) if blocks else np.zeros((6, 0))
+
+
+class MomentumPD(Task):
+    """Eq. 22: A_G qdd + Adot_G v = P [m (x_ref - x_cog); 0] + D (h_ref - h) + hdot_ref."""
+
+    def __init__(self, P=None, D=None, name=None, weight=1.0):
+        super().__init__(name, weight)
+        self.P = np.diag([50.0] * 3 + [0.0] * 3) if P is None else np.asarray(P, dtype=float)
+        self.D = np.diag([15.0] * 3 + [5.0] * 3) if D is None else np.asarray(D, dtype=float)
+        self.com_ref: np.ndarray | None = None  # None: hold the CoM first seen
+        self.h_ref = np.zeros(6)
+        self.hdot_ref = np.zeros(6)
+
+    def desired_rate(self, robot) -> np.ndarray:
+        if self.com_ref is None:
+            self.com_ref = robot.com.copy()
+        e = np.concatenate([robot.mass * (self.com_ref - robot.com), np.zeros(3)])
+        return self.P @ e + self.D @ (self.h_ref - robot.h_G) + self.hdot_ref
+
+    def rows(self, robot, variables):
+        return TaskRows(qdd=robot.A_G, lam=None, tau=None,
+                        target=self.desired_rate(robot) - robot.A_G_dot_v)
+
+
+class MomentumForce(Task):
+    """Eq. 24: G (lambda + K [x_cog; h] - k) = 0 — the LQR force law of eq. 23 projected into
+    momentum space, leaving the internal forces free. ``K`` (n_lambda x 9) and ``k`` (n_lambda)
+    come from :mod:`wholebody.control.lqr`; they must match the active contacts' order."""
+
+    def __init__(self, K=None, k=None, name=None, weight=1.0, contacts=None):
+        super().__init__(name, weight)
+        self.K = None if K is None else np.asarray(K, dtype=float)
+        self.k = None if k is None else np.asarray(k, dtype=float)
+        self.contacts = None if contacts is None else tuple(contacts)
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        if self.K is None or self.k is None:
+            raise ValueError(f"{self.name}: gains K and k are not set")
+        G = momentum_map(robot, names)
+        if self.K.shape != (G.shape[1], 9) or self.k.shape != (G.shape[1],):
+            raise ValueError(f"{self.name}: K must be ({G.shape[1]}, 9) and k ({G.shape[1]},) for "
+                             f"contacts {list(names)}; got {self.K.shape} and {self.k.shape}")
+        state = np.concatenate([robot.com, robot.h_G])
+        lam_cols = np.zeros((6, variables.n_lambda))
+        for n, start in zip(names, np.cumsum([0] + [robot.contact(n).dim for n in names])):
+            sl = variables.lambda_slices[n]
+            lam_cols[:, sl] = G[:, start:start + robot.contact(n).dim]
+        return TaskRows(qdd=None, lam=lam_cols, tau=None, target=G @ (self.k - self.K @ state))

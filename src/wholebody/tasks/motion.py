@@ -1,0 +1,120 @@
+"""Motion tasks: desired closed-loop accelerations J qdd + Jdot v = a_ref (Herzog et al. 2016 Sect. 2.1,
+"Motion and force control tasks"; Fahmi et al. 2019 eqs. 6, 11-12 for the swing foot)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
+from .base import Task, TaskRows, pd_acceleration
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+class CoMTask(Task):
+    """CoM PD: J_com qdd + Jdot_com v = a_d + Kp (x_d - x) + Kd (v_d - v). ``axes`` selects rows."""
+
+    def __init__(self, kp=100.0, kd=20.0, name=None, weight=1.0, axes: str = "xyz"):
+        super().__init__(name, weight)
+        self.kp, self.kd = kp, kd
+        self.rows_idx = [AXES[a] for a in axes]
+        self.position: np.ndarray | None = None  # None: hold the CoM where it was first seen
+        self.velocity = np.zeros(3)
+        self.acceleration = np.zeros(3)
+
+    def rows(self, robot, variables):
+        if self.position is None:
+            self.position = robot.com.copy()
+        a = pd_acceleration(self.kp, self.kd, self.position - robot.com,
+                            self.velocity - robot.vcom, self.acceleration)
+        i = self.rows_idx
+        return TaskRows(qdd=robot.J_com[i], lam=None, tau=None, target=(a - robot.com_drift)[i])
+
+
+class FrameTask(Task):
+    """PD on a frame's position and/or orientation (world axes), e.g. a swing foot.
+
+    Orientation error: log3(R_d R^T) (world axes). ``mask`` is "6d", "position" or "orientation".
+    """
+
+    MASKS = {"6d": slice(0, 6), "position": slice(0, 3), "orientation": slice(3, 6)}
+
+    def __init__(self, frame: str, kp=100.0, kd=20.0, name=None, weight=1.0, mask: str = "6d"):
+        super().__init__(name or f"frame {frame}", weight)
+        if mask not in self.MASKS:
+            raise ValueError(f"mask: expected one of {list(self.MASKS)}, got '{mask}'")
+        self.frame, self.kp, self.kd, self.mask = frame, kp, kd, mask
+        self.position: np.ndarray | None = None  # None: hold the pose first seen
+        self.rotation: np.ndarray | None = None
+        self.velocity = np.zeros(6)  # [linear; angular], world axes
+        self.acceleration = np.zeros(6)
+
+    def rows(self, robot, variables):
+        pos, rot = robot.frame_placement(self.frame)
+        if self.position is None:
+            self.position = pos
+        if self.rotation is None:
+            self.rotation = rot
+        error = np.concatenate([self.position - pos, pin.log3(self.rotation @ rot.T)])
+        vel = robot.frame_velocity(self.frame)
+        a = pd_acceleration(self.kp, self.kd, error, self.velocity - vel, self.acceleration)
+        s = self.MASKS[self.mask]
+        return TaskRows(qdd=robot.frame_jacobian(self.frame)[s], lam=None, tau=None,
+                        target=(a - robot.frame_drift(self.frame))[s])
+
+
+class PostureTask(Task):
+    """Joint-space PD toward a reference posture; with ``base_kp`` > 0 also the floating base
+    (position and orientation, LOCAL base frame as Pinocchio's v) — Table 2's "14 + 6 eq"."""
+
+    def __init__(self, kp=50.0, kd=10.0, name=None, weight=1.0, q_ref=None,
+                 base_kp: float = 0.0, base_kd: float = 0.0):
+        super().__init__(name, weight)
+        self.kp, self.kd, self.base_kp, self.base_kd = kp, kd, base_kp, base_kd
+        self.q_ref = None if q_ref is None else np.asarray(q_ref, dtype=float)
+
+    def rows(self, robot, variables):
+        q_ref = robot.q_ref if self.q_ref is None else self.q_ref
+        n = FREE_FLYER_NV
+        joint_acc = pd_acceleration(self.kp, self.kd, q_ref[FREE_FLYER_NQ:] - robot.q[FREE_FLYER_NQ:],
+                                    -robot.v[n:])
+        if not (self.base_kp or self.base_kd):
+            sel = np.zeros((robot.na, robot.nv))
+            sel[:, n:] = np.eye(robot.na)
+            return TaskRows(qdd=sel, lam=None, tau=None, target=joint_acc)
+        # base error in the local frame: log6 of the relative placement
+        base = pin.XYZQUATToSE3(robot.q[:FREE_FLYER_NQ])
+        base_ref = pin.XYZQUATToSE3(q_ref[:FREE_FLYER_NQ])
+        err = pin.log6(base.actInv(base_ref)).vector
+        base_acc = self.base_kp * err - self.base_kd * robot.v[:n]
+        return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None,
+                        target=np.concatenate([base_acc, joint_acc]))
+
+
+class JointTrajectoryTask(Task):
+    """Named joints track q_d(t), qdot_d(t), qddot_d(t) with a PD (Herzog et al. 2016 Sect. 5.4)."""
+
+    def __init__(self, joints, kp=100.0, kd=20.0, name=None, weight=1.0):
+        super().__init__(name or f"joints {','.join(joints)}", weight)
+        self.joints, self.kp, self.kd = tuple(joints), kp, kd
+        self.position: np.ndarray | None = None
+        self.velocity = np.zeros(len(self.joints))
+        self.acceleration = np.zeros(len(self.joints))
+        self._idx: np.ndarray | None = None
+
+    def rows(self, robot, variables):
+        if self._idx is None:
+            missing = [j for j in self.joints if j not in robot.joint_names]
+            if missing:
+                raise ValueError(f"joints: unknown joints {missing}")
+            self._idx = np.array([robot.joint_names.index(j) for j in self.joints])
+        q = robot.q[FREE_FLYER_NQ + self._idx]
+        qd = robot.v[FREE_FLYER_NV + self._idx]
+        if self.position is None:
+            self.position = q.copy()
+        a = pd_acceleration(self.kp, self.kd, self.position - q, self.velocity - qd,
+                            self.acceleration)
+        sel = np.zeros((len(self._idx), robot.nv))
+        sel[np.arange(len(self._idx)), FREE_FLYER_NV + self._idx] = 1.0
+        return TaskRows(qdd=sel, lam=None, tau=None, target=a)
