@@ -62,7 +62,7 @@ def test_solution_satisfies_dynamics_contacts_and_limits(robots, name, rng):
     for _ in range(3):
         robot.update(*nominal_state(robot, rng))
         variables = Variables(robot)
-        sol = Formulation(robot).solve(standard_stack(robot), variables, regularization=1e-8)
+        sol = Formulation(robot).solve(standard_stack(robot), variables, regularization=1e-8, backend="daqp")
         assert sol.ok, sol.status
         assert check_physics(robot, sol, variables, contact_tol=1e-6) < 1e-8
         assert sol.timings["total"] > 0 and len(sol.tasks) == len(standard_stack(robot).tasks())
@@ -77,9 +77,9 @@ def test_reduced_equals_full(robots, name, rng):
     robot.update(*nominal_state(robot, rng))
     variables = Variables(robot)
     reduced = Formulation(robot, reduced=True).solve(
-        standard_stack(robot, pin_everything=True), variables, regularization=1e-8)
+        standard_stack(robot, pin_everything=True), variables, regularization=1e-8, backend="daqp")
     full = Formulation(robot, reduced=False).solve(
-        standard_stack(robot, full=True, pin_everything=True), variables, regularization=1e-8)
+        standard_stack(robot, full=True, pin_everything=True), variables, regularization=1e-8, backend="daqp")
     assert reduced.ok and full.ok
     for a, b in ((reduced.qdd, full.qdd), (reduced.lam, full.lam), (reduced.tau, full.tau)):
         np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5 * (1 + np.abs(b).max()))
@@ -94,8 +94,8 @@ def test_analytic_first_level_matches_qp(robots, name, rng):
     variables = Variables(robot)
     f = Formulation(robot)
     stack = standard_stack(robot, pin_everything=True)
-    analytic = f.solve(stack, variables, analytic_first_level=True, regularization=1e-8)
-    qp = f.solve(stack, variables, analytic_first_level=False, regularization=1e-8)
+    analytic = f.solve(stack, variables, analytic_first_level=True, regularization=1e-8, backend="daqp")
+    qp = f.solve(stack, variables, analytic_first_level=False, regularization=1e-8, backend="daqp")
     np.testing.assert_allclose(analytic.tau, qp.tau, rtol=1e-5, atol=1e-4)
     np.testing.assert_allclose(analytic.level_costs, qp.level_costs, rtol=1e-4, atol=1e-8)
     assert check_physics(robot, analytic, variables) < 1e-8
@@ -270,3 +270,17 @@ def test_bad_task_input_is_named(robots):
         Formulation(robot).solve(Stack([[NewtonEuler()], [com]]), Variables(robot))
     with pytest.raises(ValueError, match="reduced"):
         Formulation(robot).solve(Stack([[FullDynamics()]]), Variables(robot))
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_backends_agree_on_robots(robots, name, rng):
+    """Goldfarb-Idnani (quadprog, the paper's solver) and DAQP give the same whole-body solution."""
+    robot = robots[name]
+    robot.update(*nominal_state(robot, rng))
+    variables = Variables(robot)
+    f = Formulation(robot)
+    a = f.solve(standard_stack(robot), variables, backend="quadprog")
+    b = f.solve(standard_stack(robot), variables, backend="daqp")
+    assert a.ok and b.ok
+    np.testing.assert_allclose(a.level_costs, b.level_costs, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(a.tau, b.tau, rtol=1e-4, atol=1e-3)

@@ -109,6 +109,7 @@ class Formulation:
         self.robot = robot
         self.reduced = reduced
         self._tau_scale = np.abs(robot.torque_limits.upper(robot.q_ref[7:]))
+        self._plan: _Plan | None = None
 
     def size(self, variables: Variables) -> int:
         return variables.nv + variables.n_lambda + (0 if self.reduced else variables.na)
@@ -121,11 +122,15 @@ class Formulation:
         return np.concatenate(parts)
 
     # ------------------------------------------------------------------ rows -> x
-    def map_rows(self, rows: TaskRows, variables: Variables) -> tuple[np.ndarray, np.ndarray]:
-        """(A_x, offset) with A y = A_x x + offset for the chosen decision vector."""
+    def map_rows(self, rows: TaskRows, variables: Variables, out: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """(A_x, offset) with A y = A_x x + offset for the chosen (unscaled) decision vector.
+
+        ``out`` (rows.m x size, zero where the task has no block) is filled in place if given.
+        """
         robot, nv, nl = self.robot, variables.nv, variables.n_lambda
-        A = np.zeros((rows.m, self.size(variables)))
-        offset = np.zeros(rows.m)
+        A = np.zeros((rows.m, self.size(variables))) if out is None else out
+        offset = None
         if rows.qdd is not None:
             A[:, :nv] = rows.qdd
         if rows.lam is not None:
@@ -133,45 +138,39 @@ class Formulation:
         if rows.tau is not None:
             if self.reduced:  # eq. 14
                 J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
-                A[:, :nv] += rows.tau @ robot.M[FREE_FLYER_NV:]
-                A[:, nv:nv + nl] -= rows.tau @ J_u.T
-                offset = rows.tau @ robot.h[FREE_FLYER_NV:]
+                M_u, h_u = robot.M[FREE_FLYER_NV:], robot.h[FREE_FLYER_NV:]
+                if rows.tau_identity:
+                    tau_qdd, tau_lam, offset = M_u, -J_u.T, h_u
+                else:
+                    tau_qdd, tau_lam, offset = rows.tau @ M_u, -(rows.tau @ J_u.T), rows.tau @ h_u
+                if rows.qdd is None:
+                    A[:, :nv] = tau_qdd
+                else:
+                    A[:, :nv] += tau_qdd
+                if rows.lam is None:
+                    A[:, nv:nv + nl] = tau_lam
+                else:
+                    A[:, nv:nv + nl] += tau_lam
             else:
                 A[:, nv + nl:] = rows.tau
-        return A, offset
+        return A, (np.zeros(rows.m) if offset is None else offset)
 
     def levels(self, stack: Stack, variables: Variables) -> tuple[list[Level], list[list[tuple]]]:
-        """Solver levels over the scaled x, plus per level (task, kind, A, rhs...) for diagnostics."""
-        out, meta = [], []
-        scale = self.scales(variables)
-        for rank, tasks in enumerate(stack.levels, start=1):
-            eq_A, eq_b, eq_w, in_A, in_lo, in_up, in_w, level_meta = [], [], [], [], [], [], [], []
-            for task in tasks:
-                if self.reduced and isinstance(task, FullDynamics):
-                    raise ValueError("FullDynamics belongs to the full formulation; the reduced one "
-                                     "uses NewtonEuler (tau is eliminated by eq. 14)")
-                rows = task.rows(self.robot, variables)
-                if rows.m == 0:
-                    continue
-                A, offset = self.map_rows(rows, variables)
-                A *= scale
-                w = np.broadcast_to(np.asarray(task.weight, dtype=float), (rows.m,))
-                if rows.is_equality:
-                    eq_A.append(A), eq_b.append(rows.target - offset), eq_w.append(w)
-                    level_meta.append((task, "eq", A, rows.target - offset, None))
-                else:
-                    lo, up = rows.lower - offset, rows.upper - offset
-                    in_A.append(A), in_lo.append(lo), in_up.append(up), in_w.append(w)
-                    level_meta.append((task, "ineq", A, lo, up))
-            out.append(Level(
-                eq=(np.vstack(eq_A), np.concatenate(eq_b)) if eq_A else None,
-                ineq=(np.vstack(in_A), np.concatenate(in_lo), np.concatenate(in_up)) if in_A else None,
-                weights=np.concatenate(eq_w) if eq_w else None,
-                ineq_weights=np.concatenate(in_w) if in_w else None,
-                name=f"level {rank}"))
-            meta.append(level_meta)
-        return out, meta
+        """Solver levels over the scaled x, plus per level (task, kind, A, rhs...) for diagnostics.
 
+        The level matrices are allocated once per stack structure and contact set (a plan) and
+        refilled in place every cycle; the returned arrays are only valid until the next call.
+        """
+        key = (id(stack), tuple(id(t) for t in stack.tasks()), variables.contacts, self.reduced)
+        rows_now = [[task.rows(self.robot, variables) for task in tasks] for tasks in stack.levels]
+        plan = self._plan
+        if plan is None or plan.key != key or not plan.matches(rows_now):
+            for task in stack.tasks():
+                if self.reduced and isinstance(task, FullDynamics):
+                    raise ValueError("FullDynamics belongs to the full formulation; the reduced "
+                                     "one uses NewtonEuler (tau is eliminated by eq. 14)")
+            plan = self._plan = _Plan(key, stack, rows_now, self.size(variables))
+        return plan.fill(self, variables, rows_now)
     # ------------------------------------------------------------------ analytic level 1
     @staticmethod
     def analytic_first_level(stack: Stack) -> bool:
@@ -196,7 +195,7 @@ class Formulation:
 
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
-              backend: str = "quadprog", regularization: float = 1e-6,
+              backend: str = "daqp", regularization: float = 1e-6,
               analytic_first_level: bool | None = None) -> Solution:
         """Solve the stack at the robot's cached state (call ``robot.update`` first).
 
@@ -258,3 +257,69 @@ class Formulation:
                     reports.append(TaskReport(task.name, rank, kind, len(value),
                                               float(np.linalg.norm(violation)), active))
         return reports
+
+
+class _LevelPlan:
+    """Preallocated arrays of one level and where each task's rows go."""
+
+    def __init__(self, rank: int, tasks: Sequence[Task], rows: Sequence[TaskRows], n: int):
+        self.rank = rank
+        self.slots = []  # (index of the task in the level, task, kind, start, stop)
+        k = m = 0
+        for i, (task, r) in enumerate(zip(tasks, rows)):
+            if r.m == 0:
+                continue
+            if r.is_equality:
+                self.slots.append((i, task, "eq", k, k + r.m))
+                k += r.m
+            else:
+                self.slots.append((i, task, "ineq", m, m + r.m))
+                m += r.m
+        self.E, self.e, self.w = np.zeros((k, n)), np.zeros(k), np.ones(k)
+        self.C, self.lo, self.up, self.vw = np.zeros((m, n)), np.zeros(m), np.zeros(m), np.ones(m)
+        self.signature = [(r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
+                          for r in rows]
+
+
+class _Plan:
+    """Level layout for one stack structure and contact set (see ``Formulation.levels``)."""
+
+    def __init__(self, key, stack: Stack, rows: list[list[TaskRows]], n: int):
+        self.key = key
+        self.levels = [_LevelPlan(rank, tasks, level_rows, n)
+                       for rank, (tasks, level_rows) in enumerate(zip(stack.levels, rows), start=1)]
+
+    def matches(self, rows: list[list[TaskRows]]) -> bool:
+        return all(lp.signature == [(r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
+                                    for r in level_rows]
+                   for lp, level_rows in zip(self.levels, rows))
+
+    def fill(self, formulation: "Formulation", variables: Variables, rows: list[list[TaskRows]]):
+        scale_tail = formulation.scales(variables)[variables.nv:]
+        nv = variables.nv
+        out, meta = [], []
+        for lp, level_rows in zip(self.levels, rows):
+            level_meta = []
+            for i, task, kind, a, b in lp.slots:
+                r = level_rows[i]
+                if kind == "eq":
+                    _, offset = formulation.map_rows(r, variables, lp.E[a:b])
+                    np.subtract(r.target, offset, out=lp.e[a:b])
+                    lp.w[a:b] = task.weight
+                    level_meta.append((task, "eq", lp.E[a:b], lp.e[a:b], None))
+                else:
+                    _, offset = formulation.map_rows(r, variables, lp.C[a:b])
+                    np.subtract(r.lower, offset, out=lp.lo[a:b])
+                    np.subtract(r.upper, offset, out=lp.up[a:b])
+                    lp.vw[a:b] = task.weight
+                    level_meta.append((task, "ineq", lp.C[a:b], lp.lo[a:b], lp.up[a:b]))
+            lp.E[:, nv:] *= scale_tail
+            lp.C[:, nv:] *= scale_tail
+            out.append(Level(
+                eq=(lp.E, lp.e) if lp.E.shape[0] else None,
+                ineq=(lp.C, lp.lo, lp.up) if lp.C.shape[0] else None,
+                weights=lp.w if lp.E.shape[0] else None,
+                ineq_weights=lp.vw if lp.C.shape[0] else None,
+                name=f"level {lp.rank}"))
+            meta.append(level_meta)
+        return out, meta

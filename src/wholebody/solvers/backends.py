@@ -12,9 +12,15 @@ memory on failure, so a failed x is never passed on).
 * ``quadprog`` — Goldfarb–Idnani dual active set (the method used by Herzog et al. 2016, §5):
   two-sided rows are split into two one-sided rows ``Cᵀx ≥ b``, equalities go first (``meq``).
 * ``daqp`` — dual active set on the LDP (Arnström et al. 2022): native two-sided rows,
-  equalities flagged with ``sense = 5``; infinite bounds are passed as ±1e30 (DAQP_INF).
+  equalities flagged with ``sense = 5``; infinite bounds are passed as ±1e30 (DAQP_INF). For
+  ill-conditioned H (cond ≳ 1e9, tiny ε) its infeasibility test misfires on feasible QPs; an
+  "infeasible" verdict is retried once with proximal iterations (``eps_prox = 1e-6``), which
+  converge to the same solution.
 * ``proxsuite`` — ProxQP dense (augmented Lagrangian); equalities as its ``A x = b`` block.
-  Its accuracy is a tolerance, not an active-set exactness: ``eps_abs`` defaults to 1e-9 here.
+  Its accuracy is a tolerance, not active-set exactness: ``eps_abs`` defaults to 1e-9 here.
+  Its infeasibility certificates misfire on small feasible problems; see the adapter.
+
+Keyword options are passed to the solver (e.g. ``eps_abs`` for proxsuite, DAQP settings).
 """
 
 from __future__ import annotations
@@ -83,23 +89,35 @@ def solve_daqp(H, g, A, lower, upper, **opts):
 
     m = A.shape[0]
     if m == 0:
-        # DAQP needs at least one row: add a free one.
+        # DAQP needs at least one row: add a free one (not a zero row: DAQP normalises rows)
         A = np.zeros((1, H.shape[0]))
+        A[0, 0] = 1.0
         lower, upper = np.full(1, -np.inf), np.full(1, np.inf)
         m = 1
     sense = np.where(lower == upper, 5, 0).astype(np.intc)
     bu = np.minimum(upper, _DAQP_INF)
     bl = np.maximum(lower, -_DAQP_INF)
-    x, _, flag, _ = daqp.solve(
-        np.ascontiguousarray(H), np.ascontiguousarray(g), np.ascontiguousarray(A), bu, bl, sense, **opts
-    )
+    H, g, A = np.ascontiguousarray(H), np.ascontiguousarray(g), np.ascontiguousarray(A)
+    x, _, flag, _ = daqp.solve(H, g, A, bu, bl, sense, **opts)
+    if flag == -1 and "eps_prox" not in opts:
+        # DAQP works on the LDP with R⁻¹ (H = RᵀR); for cond(H) ≳ 1e9 (tiny ε in the cascade)
+        # its infeasibility test misfires on feasible problems. Proximal-point iterations
+        # (eps_prox > 0) converge to the same strictly convex QP's solution: retry once.
+        x, _, flag, _ = daqp.solve(H, g, A, bu, bl, sense, eps_prox=1e-6, **opts)
     if flag not in (1, 2):
         return None, f"daqp: {_DAQP_EXIT.get(flag, 'exitflag')} ({flag})", False
     return _check_x(np.array(x), "daqp")
 
 
 def solve_proxsuite(H, g, A, lower, upper, eps_abs=1e-9, max_iter=10_000, **opts):
-    """ProxQP dense via ``proxsuite.proxqp.dense.solve``; equality rows go to its A x = b block."""
+    """ProxQP dense via ``proxsuite.proxqp.dense.solve``; equality rows go to its A x = b block.
+
+    ProxQP's infeasibility certificates misfire on small, strictly convex, feasible problems
+    (DUAL_INFEASIBLE with H positive definite, PRIMAL_INFEASIBLE on degenerate but feasible
+    rows); both are retried once without the Ruiz preconditioner, and a remaining
+    PRIMAL_INFEASIBLE once more as a closest-feasible solve, accepted only if that point is in
+    fact feasible.
+    """
     from proxsuite import proxqp
 
     n = H.shape[0]
@@ -107,16 +125,29 @@ def solve_proxsuite(H, g, A, lower, upper, eps_abs=1e-9, max_iter=10_000, **opts
     Ae, be = A[eq], lower[eq]
     iq = ~eq & (np.isfinite(lower) | np.isfinite(upper))
     Ci, li, ui = A[iq], np.maximum(lower[iq], -1e20), np.minimum(upper[iq], 1e20)
+    args = (
+        H, g,
+        Ae if Ae.shape[0] else None, be if Ae.shape[0] else None,
+        Ci if Ci.shape[0] else None, li if Ci.shape[0] else None, ui if Ci.shape[0] else None,
+    )
+    base = {"eps_abs": eps_abs, "eps_rel": 0.0, "max_iter": max_iter, **opts}
+    retry_on = (proxqp.PROXQP_DUAL_INFEASIBLE, proxqp.PROXQP_PRIMAL_INFEASIBLE, proxqp.PROXQP_MAX_ITER_REACHED)
     try:
-        res = proxqp.dense.solve(
-            H, g,
-            Ae if Ae.shape[0] else None, be if Ae.shape[0] else None,
-            Ci if Ci.shape[0] else None, li if Ci.shape[0] else None, ui if Ci.shape[0] else None,
-            eps_abs=eps_abs, eps_rel=0.0, max_iter=max_iter, **opts,
-        )
+        res = proxqp.dense.solve(*args, **base)
+        status = res.info.status
+        if status in retry_on and "compute_preconditioner" not in opts:
+            res = proxqp.dense.solve(*args, **{**base, "compute_preconditioner": False})
+            status = res.info.status
+        if status == proxqp.PROXQP_PRIMAL_INFEASIBLE and "primal_infeasibility_solving" not in opts:
+            res = proxqp.dense.solve(*args, **{**base, "primal_infeasibility_solving": True})
+            status = res.info.status
+            if status == proxqp.PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE:
+                ax = A @ np.asarray(res.x[:n])
+                tol = 10.0 * eps_abs * (1.0 + np.abs(ax))
+                if np.all(ax >= lower - tol) and np.all(ax <= upper + tol):
+                    status = proxqp.PROXQP_SOLVED
     except (ValueError, RuntimeError) as exc:
         return None, f"proxsuite: {exc}", False
-    status = res.info.status
     if status != proxqp.PROXQP_SOLVED:
         return None, f"proxsuite: {str(status).rsplit('.', 1)[-1]}", False
     return _check_x(np.array(res.x[:n]), "proxsuite")

@@ -27,6 +27,7 @@ class TaskRows:
     target: np.ndarray | None = None  # equality rows: A y ≈ target
     lower: np.ndarray | None = None  # inequality rows: lower <= A y <= upper
     upper: np.ndarray | None = None
+    tau_identity: bool = False  # tau block is the identity (lets the formulation skip a product)
 
     @property
     def m(self) -> int:

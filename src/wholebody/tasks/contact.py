@@ -10,14 +10,25 @@ from .base import Task, TaskRows, contact_subset
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two 3-vectors (np.cross is ~10x slower on tiny arrays)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unit normal and two unit tangents (t1, t2, n right-handed) for a surface normal."""
     n = np.asarray(normal, dtype=float)
     n = n / np.linalg.norm(n)
     helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t1 = np.cross(helper, n)
+    t1 = cross3(helper, n)
     t1 /= np.linalg.norm(t1)
-    return t1, np.cross(n, t1), n
+    return t1, cross3(n, t1), n
+
+
+def friction_faces(normal: np.ndarray, mu: float) -> np.ndarray:
+    """The 4 x 3 rows F with F f <= 0 <=> f in the friction pyramid about ``normal``."""
+    t1, t2, n = tangent_basis(normal)
+    return np.array([t1 - mu * n, -t1 - mu * n, t2 - mu * n, -t2 - mu * n])
 
 
 class _PerContact(Task):
@@ -85,20 +96,24 @@ class FrictionCone(_PerContact):
         if not mu > 0:
             raise ValueError(f"mu: must be > 0, got {mu}")
         self.mu = mu
+        self._cache_key = None
+        self._cache: TaskRows | None = None
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
-        blocks = {}
-        for n in names:
-            t1, t2, nrm = tangent_basis(self.normal(n))
-            face = np.array([t1 - self.mu * nrm, -t1 - self.mu * nrm,
-                             t2 - self.mu * nrm, -t2 - self.mu * nrm])
-            block = np.zeros((4, robot.contact(n).dim))
-            block[:, :3] = face
-            blocks[n] = block
-        A = self._lambda_rows(variables, blocks)
-        return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
-                        upper=np.zeros(A.shape[0]))
+        key = (names, tuple(variables.lambda_slices[n].start for n in names), variables.n_lambda,
+               self.mu, tuple(tuple(self.normal(n)) for n in names))
+        if self._cache_key != key:  # the rows only change with mu, normals or the contact set
+            blocks = {}
+            for n in names:
+                block = np.zeros((4, robot.contact(n).dim))
+                block[:, :3] = friction_faces(self.normal(n), self.mu)
+                blocks[n] = block
+            A = self._lambda_rows(variables, blocks)
+            self._cache = TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
+                                   upper=np.zeros(A.shape[0]))
+            self._cache_key = key
+        return self._cache
 
 
 class NormalForceBounds(_PerContact):

@@ -35,7 +35,8 @@ class TorqueLimits(Task):
 
     def rows(self, robot, variables):
         lo, hi = self.bounds(robot)
-        return TaskRows(qdd=None, lam=None, tau=np.eye(robot.na), lower=lo, upper=hi)
+        return TaskRows(qdd=None, lam=None, tau=np.eye(robot.na), lower=lo, upper=hi,
+                        tau_identity=True)
 
 
 class JointAccelerationLimits(Task):

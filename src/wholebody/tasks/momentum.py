@@ -20,7 +20,9 @@ def momentum_map(robot, contacts) -> np.ndarray:
         r = robot.data.oMf[c.frame_id].translation - robot.com
         block = np.zeros((6, c.dim))
         block[:3, :3] = np.eye(3)
-        block[3:, :3] = skew(r)
+        block[3, 1], block[3, 2] = -r[2], r[1]
+        block[4, 0], block[4, 2] = r[2], -r[0]
+        block[5, 0], block[5, 1] = -r[1], r[0]
         if c.dim == 6:
             block[3:, 3:] = np.eye(3)
         blocks.append(block)

@@ -1,0 +1,113 @@
+"""Per-cycle time of hierarchical inverse dynamics: robot update + task rows + solve + tau.
+
+Herzog et al. 2016 Sect. 5.1: Table 2 on the 14-DoF biped (max 0.9 ms), Table 1 on a 25-DoF
+humanoid (max 3 ms), and the reduced formulation ~40 % faster than the full one (Fig. 5).
+This script measures the same on `talos14` (Table 2) and `talos` (Table 1, double and single
+support) over a moving state, reduced vs full, per method/backend, and prints median, p95, p99, max
+with the breakdown. It is a benchmark, not a test: nothing here fails on time.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_wbc.py [--cycles 2000] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import wholebody as wb  # noqa: E402
+from wholebody.control.stacks import table1_stack, table2_stack  # noqa: E402
+from wholebody.formulation import Formulation  # noqa: E402
+from wholebody.variables import Variables  # noqa: E402
+
+
+def moving_states(robot, cycles: int, dt: float = 1e-3):
+    """A smooth joint motion around the reference posture (q, v per cycle)."""
+    rng = np.random.default_rng(0)
+    amp = rng.uniform(0.02, 0.1, robot.na)
+    freq = rng.uniform(0.3, 1.0, robot.na)
+    phase = rng.uniform(0, 2 * np.pi, robot.na)
+    lo, hi = robot.q_min + 0.05, robot.q_max - 0.05
+    for k in range(cycles):
+        t = k * dt
+        q = robot.q_ref.copy()
+        q[7:] = np.clip(q[7:] + amp * np.sin(2 * np.pi * freq * t + phase), lo, hi)
+        v = np.zeros(robot.nv)
+        v[6:] = amp * 2 * np.pi * freq * np.cos(2 * np.pi * freq * t + phase)
+        v[:6] = 0.05 * np.sin(2 * np.pi * 0.5 * t + np.arange(6))
+        yield q, v
+
+
+def stats(samples_s) -> str:
+    us = np.asarray(samples_s) * 1e6
+    return (f"median {np.median(us):7.0f}  p95 {np.percentile(us, 95):7.0f}  "
+            f"p99 {np.percentile(us, 99):7.0f}  max {us.max():7.0f} µs")
+
+
+def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: str, cycles: int):
+    stack = make_stack(full=not reduced)
+    formulation = Formulation(robot, reduced=reduced)
+    variables = Variables(robot, contacts)
+    t_update, t_rows, t_solve, t_total, failures = [], [], [], [], 0
+    for q, v in moving_states(robot, cycles):
+        t0 = time.perf_counter()
+        robot.update(q, v)
+        t1 = time.perf_counter()
+        sol = formulation.solve(stack, variables, method=method, backend=backend)
+        t2 = time.perf_counter()
+        failures += not sol.ok
+        t_update.append(t1 - t0)
+        t_rows.append(sol.timings["rows"])
+        t_solve.append(sol.timings["solve"])
+        t_total.append(t2 - t0)
+    return t_update, t_rows, t_solve, t_total, failures
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cycles", type=int, default=2000)
+    parser.add_argument("--quick", action="store_true", help="quadprog cascade only")
+    args = parser.parse_args()
+    combos = [("cascade", "quadprog")] if args.quick else [
+        ("cascade", "quadprog"), ("cascade", "daqp"), ("cascade", "proxsuite"), ("daqp", "daqp")]
+    talos14, talos = wb.load_robot("talos14"), wb.load_robot("talos")
+    cases = [
+        ("talos14 Table 2 double support", talos14,
+         lambda full: table2_stack(talos14, full=full), None),
+        ("talos Table 1 double support", talos,
+         lambda full: table1_stack(talos, talos.contact_names, full=full), None),
+        ("talos Table 1 single support", talos,
+         lambda full: table1_stack(talos, ["left_sole"], ["right_sole_link"], full=full),
+         ["left_sole"]),
+    ]
+    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, {args.cycles} cycles")
+    for title, robot, make_stack, contacts in cases:
+        print(f"\n== {title}")
+        medians = {}
+        for method, backend in combos:
+            for reduced in (True, False):
+                label = f"{method}/{backend} {'reduced' if reduced else 'full   '}"
+                try:
+                    upd, rows, solve, total, fails = run_case(robot, make_stack, contacts, reduced,
+                                                              method, backend, args.cycles)
+                except Exception as exc:  # a benchmark reports, it does not stop
+                    print(f"{label}: error {exc}")
+                    continue
+                medians[(method, backend, reduced)] = np.median(total)
+                print(f"{label} total {stats(total)}  failed {fails}")
+                print(f"{'':28} update {np.median(upd) * 1e6:5.0f}  rows {np.median(rows) * 1e6:5.0f}"
+                      f"  solve {np.median(solve) * 1e6:5.0f} µs (medians)")
+        for method, backend in combos:
+            r, f = medians.get((method, backend, True)), medians.get((method, backend, False))
+            if r and f:
+                print(f"reduced vs full ({method}/{backend}): {100 * (1 - r / f):+.0f} % time "
+                      f"(median ratio {r / f:.2f})")
+
+
+if __name__ == "__main__":
+    main()

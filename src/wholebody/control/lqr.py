@@ -1,0 +1,611 @@
+"""LQR design of the momentum feedback law (Herzog et al. 2016, Sect. 3.2).
+
+The centroidal model (eq. 21) with state ``s = [x_cog (3); h (6)]`` (``h = [h_lin; h_ang]``, the
+linear and angular momentum about the CoM, world axes, as in eq. 19) and input ``u = lambda``
+(the stacked contact forces/wrenches, eq. 21's generalized external forces)::
+
+    x_cog' = h_lin / m
+    h'     = G(x_cog) lambda + [m g; 0],   G block of contact i = [I 0; [x_i - x_cog]x I]
+
+is linearised at the nominal point ``(x_cog0, lambda0)``, an infinite-horizon LQR problem with the
+cost of eq. 26 is solved, and the result is the force law of eq. 23,
+``lambda = -K [x_cog; h] + k(x_ref, h_ref)``, which the :class:`~wholebody.tasks.momentum.MomentumForce`
+task projects into momentum space (eq. 24). Gains are computed once per contact configuration and
+interpolated during contact transitions (Remark at the end of Sect. 3.2).
+
+Conventions (those of :mod:`wholebody.robot` and :func:`~wholebody.tasks.momentum.momentum_map`):
+a point contact has a 3D force ``f`` (world axes); a rectangle contact a 6D wrench ``[f; tau]`` about
+the contact frame origin ``x_i`` (world axes). Gravity is ``g = (0, 0, -gravity)``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import scipy.linalg
+
+log = logging.getLogger(__name__)
+
+STATE_DIM = 9
+#: Herzog et al. 2016, Sect. 5.2.2 (eq. 26): state cost on [x_cog; h_lin; h_ang].
+DEFAULT_Q_DIAG = np.array([30.0, 30.0, 50.0, 0.5, 0.5, 0.5, 0.1, 0.1, 0.1])
+#: Herzog et al. 2016, Sect. 5.2.2 (eq. 26): input cost of one contact wrench [f; tau]; a point
+#: contact (3D force) uses the first three entries.
+DEFAULT_R_DIAG = np.array([0.1, 0.1, 0.01, 2.0, 2.0, 2.0])
+
+
+# ---------------------------------------------------------------------------------------- helpers
+def _skew(x: np.ndarray) -> np.ndarray:
+    """[x]x such that [x]x y = x × y."""
+    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
+
+
+def _vector(value, size: int, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected a numeric vector of size {size}") from exc
+    if arr.shape != (size,):
+        raise ValueError(f"{name}: expected a vector of size {size}, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return arr
+
+
+def _check_dims(dims, n_contacts: int | None, name: str = "dims") -> tuple[int, ...]:
+    try:
+        out = tuple(int(d) for d in dims)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected a list of per-contact dimensions (3 or 6)") from exc
+    if any(d not in (3, 6) for d in out):
+        raise ValueError(f"{name}: every contact dimension must be 3 (point force) or 6 (wrench), "
+                         f"got {list(out)}")
+    if n_contacts is not None and len(out) != n_contacts:
+        raise ValueError(f"{name}: {len(out)} entries for {n_contacts} contacts")
+    return out
+
+
+def _square(value, size: int, name: str, definite: bool) -> np.ndarray:
+    """A symmetric (size x size) weight from a matrix or the vector of its diagonal."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected a {size}x{size} matrix or its diagonal") from exc
+    if arr.shape == (size,):
+        arr = np.diag(arr)
+    if arr.shape != (size, size):
+        raise ValueError(f"{name}: expected a {size}x{size} matrix or a diagonal of size {size}, "
+                         f"got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    if not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12):
+        raise ValueError(f"{name}: must be symmetric")
+    arr = 0.5 * (arr + arr.T)
+    eig_min = float(np.linalg.eigvalsh(arr).min()) if size else 1.0
+    tol = 1e-12 * max(1.0, float(np.abs(arr).max()) if size else 1.0)
+    if definite and eig_min <= tol:
+        raise ValueError(f"{name}: must be positive definite (smallest eigenvalue {eig_min:.3g})")
+    if not definite and eig_min < -tol:
+        raise ValueError(f"{name}: must be positive semi-definite (smallest eigenvalue "
+                         f"{eig_min:.3g})")
+    return arr
+
+
+def contact_cost(dims: Sequence[int], R=None) -> np.ndarray:
+    """Block-diagonal input cost of eq. 26 for contacts of dimensions ``dims``.
+
+    ``R`` is the cost of ONE contact wrench ``[f; tau]``: a 6-vector (diagonal) or a 6x6 matrix
+    (default ``diag(.1, .1, .01, 2, 2, 2)``, Sect. 5.2.2). A 3D point contact uses its top-left 3x3
+    block (the force part).
+    """
+    dims = _check_dims(dims, None)
+    R6 = _square(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
+    return scipy.linalg.block_diag(*[R6[:d, :d] for d in dims]) if dims else np.zeros((0, 0))
+
+
+def _weighted_least_norm(G: np.ndarray, w: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable)."""
+    L = np.linalg.cholesky(W)  # W = L L^T; lambda = L^-T mu, min |mu|
+    GL = np.linalg.solve(L, G.T).T  # G L^-T
+    mu, *_ = np.linalg.lstsq(GL, w, rcond=None)
+    return np.linalg.solve(L.T, mu)
+
+
+def _gravity_wrench(mass: float, gravity: float) -> np.ndarray:
+    """[m g; 0] of eq. 21 with g = (0, 0, -gravity)."""
+    return np.array([0.0, 0.0, -mass * gravity, 0.0, 0.0, 0.0])
+
+
+def _momentum_map(contact_positions: np.ndarray, com: np.ndarray,
+                  dims: Sequence[int]) -> np.ndarray:
+    """The matrix of eq. 21 (same as :func:`wholebody.tasks.momentum.momentum_map`)."""
+    blocks = []
+    for x_i, d in zip(contact_positions, dims):
+        block = np.zeros((6, d))
+        block[:3, :3] = np.eye(3)
+        block[3:, :3] = _skew(x_i - com)
+        if d == 6:
+            block[3:, 3:] = np.eye(3)
+        blocks.append(block)
+    return np.hstack(blocks) if blocks else np.zeros((6, 0))
+
+
+def _contact_positions(value, name: str = "contact_positions") -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected an (n_contacts, 3) array of positions") from exc
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] == 0:
+        raise ValueError(f"{name}: expected an (n_contacts, 3) array with n_contacts >= 1, "
+                         f"got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return arr
+
+
+def _positive(value, name: str) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected a positive number, got {value!r}") from exc
+    if not np.isfinite(out) or out <= 0.0:
+        raise ValueError(f"{name}: expected a positive number, got {value!r}")
+    return out
+
+
+def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | None = None,
+                     gravity: float = 9.81, weight=None, hdot=None) -> np.ndarray:
+    """Contact forces that make eq. 21 give ``h' = hdot`` (default 0: gravity balanced).
+
+    The minimiser of ``lambda^T W lambda`` subject to ``G(com) lambda + [m g; 0] = hdot``, with
+    ``W = weight`` (n_lambda x n_lambda or its diagonal; default identity = the least-norm
+    distribution). If the wrench cannot be produced by these contacts (rank-deficient ``G``, e.g. a
+    single point foot not below the CoM) the least-squares solution is returned and a warning logged.
+    """
+    X = _contact_positions(contact_positions)
+    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
+    com = _vector(com, 3, "com")
+    mass = _positive(mass, "mass")
+    gravity = _positive(gravity, "gravity")
+    n = sum(dims)
+    W = np.eye(n) if weight is None else _square(weight, n, "weight", definite=True)
+    hdot = np.zeros(6) if hdot is None else _vector(hdot, 6, "hdot")
+    G = _momentum_map(X, com, dims)
+    w = hdot - _gravity_wrench(mass, gravity)
+    lam = _weighted_least_norm(G, w, W)
+    residual = float(np.linalg.norm(G @ lam - w))
+    if residual > 1e-6 * max(1.0, float(np.linalg.norm(w))):
+        log.warning("balancing_forces: the contacts cannot balance the wrench %s exactly "
+                    "(residual %.3g)", np.round(w, 3), residual)
+    fz = [lam[s + 2] for s in np.cumsum((0,) + dims[:-1])]
+    if min(fz) < 0.0:
+        log.warning("balancing_forces: negative normal force %s (CoM outside the support?)",
+                    np.round(fz, 3))
+    return lam
+
+
+# ---------------------------------------------------------------------------------- the model
+def centroidal_dynamics(s, lam, contact_positions, mass: float, dims: Sequence[int] | None = None,
+                        gravity: float = 9.81) -> np.ndarray:
+    """The nonlinear centroidal model s' = f(s, lambda) of eqs. 20-21 (contacts fixed in place)."""
+    X = _contact_positions(contact_positions)
+    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
+    s = _vector(s, STATE_DIM, "s")
+    lam = _vector(lam, sum(dims), "lam")
+    mass = _positive(mass, "mass")
+    gravity = _positive(gravity, "gravity")
+    G = _momentum_map(X, s[:3], dims)
+    return np.concatenate([s[3:6] / mass, G @ lam + _gravity_wrench(mass, gravity)])
+
+
+@dataclass(frozen=True)
+class MomentumModel:
+    """Linearised centroidal model ``s' ≈ A s + B lambda + c`` (Herzog et al. 2016, eq. 21).
+
+    Unpacks as ``A, B, c = model``. Also carries the linearisation point (``com0``, ``lambda0``),
+    the contact ``dims``, ``mass``, ``gravity`` and ``contact_positions``.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    c: np.ndarray
+    com0: np.ndarray
+    lambda0: np.ndarray
+    dims: tuple[int, ...]
+    mass: float
+    gravity: float
+    contact_positions: np.ndarray
+
+    def __iter__(self):
+        return iter((self.A, self.B, self.c))
+
+    @property
+    def n_lambda(self) -> int:
+        return int(sum(self.dims))
+
+
+def momentum_model(contact_positions, com, mass: float, nominal_forces=None,
+                   gravity: float = 9.81, dims: Sequence[int] | None = None) -> MomentumModel:
+    """Linearise the centroidal model of eq. 21 at ``(x_cog0 = com, lambda0)``.
+
+    Parameters
+    ----------
+    contact_positions : (n_c, 3) positions ``x_i`` of the contact frame origins (world).
+    com : CoM position ``x_cog0`` at which to linearise.
+    mass : total mass ``m``.
+    nominal_forces : ``lambda0`` (size ``sum(dims)``); default: the least-norm distribution that
+        balances gravity, ``G(x_cog0) lambda0 + [m g; 0] = 0`` (see :func:`balancing_forces`).
+    gravity : magnitude of g; the gravity vector is ``(0, 0, -gravity)``.
+    dims : per-contact dimensions, 3 (point force) or 6 (wrench ``[f; tau]``); default all 6.
+
+    Returns
+    -------
+    MomentumModel ``(A, B, c)`` with state ``s = [x_cog; h_lin; h_ang]`` and input ``lambda`` such
+    that ``s' = A s + B lambda + c`` is the first-order expansion of eq. 21 at ``(s0, lambda0)``
+    (exact at that point; ``c = f(s0, lambda0) - A s0 - B lambda0``).
+
+    Derivation. ``x_cog' = h_lin / m`` is linear. ``h_lin' = sum f_i + m g`` is linear. The
+    angular rows ``h_ang' = sum_i (x_i - x_cog) × f_i + sum tau_i`` are bilinear in (x_cog, f_i);
+    with ``x_cog = x_cog0 + dx`` and ``f_i = f_i0 + df_i``::
+
+        (x_i - x_cog0 - dx) × (f_i0 + df_i)
+          ≈ (x_i - x_cog0) × f_i0 + (x_i - x_cog0) × df_i - dx × f_i0
+          = ... + [x_i - x_cog0]x df_i + [f_i0]x dx        (since -dx × f = f × dx)
+
+    so ``d h_ang' / d x_cog = + sum_i [f_i0]x = +[F0]x`` with ``F0`` the total nominal contact force
+    (``F0 = -m g = (0, 0, m |g|)`` when gravity is balanced), ``B = [0; G(x_cog0)]`` and::
+
+        A = [[0, I/m, 0],
+             [0,  0,  0],
+             [[F0]x, 0, 0]]
+
+    Moving the CoM by dx under unchanged contact forces changes the moment of those forces about
+    the CoM by ``F0 × dx`` (e.g. dx = +y with F0 = +z m|g| gives ``h_ang_x' = -m|g| dy``).
+    """
+    X = _contact_positions(contact_positions)
+    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
+    com = _vector(com, 3, "com")
+    mass = _positive(mass, "mass")
+    gravity = _positive(gravity, "gravity")
+    n = sum(dims)
+    if nominal_forces is None:
+        lam0 = balancing_forces(X, com, mass, dims, gravity)
+    else:
+        lam0 = _vector(nominal_forces, n, "nominal_forces")
+    G = _momentum_map(X, com, dims)
+    starts = np.cumsum((0,) + dims[:-1])
+    F0 = np.sum([lam0[s:s + 3] for s in starts], axis=0)
+
+    A = np.zeros((STATE_DIM, STATE_DIM))
+    A[0:3, 3:6] = np.eye(3) / mass
+    A[6:9, 0:3] = _skew(F0)
+    B = np.zeros((STATE_DIM, n))
+    B[3:9] = G
+    s0 = np.concatenate([com, np.zeros(6)])
+    f0 = np.concatenate([np.zeros(3), G @ lam0 + _gravity_wrench(mass, gravity)])
+    c = f0 - A @ s0 - B @ lam0
+    return MomentumModel(A, B, c, com.copy(), lam0.copy(), dims, mass, gravity, X.copy())
+
+
+# ------------------------------------------------------------------------------------ the LQR
+def _check_stabilizable(A: np.ndarray, B: np.ndarray) -> None:
+    """PBH test on the eigenvalues of A with non-negative real part."""
+    n = A.shape[0]
+    scale = max(1.0, float(np.abs(A).max()), float(np.abs(B).max()) if B.size else 1.0)
+    for ev in np.linalg.eigvals(A):
+        if ev.real >= -1e-9:
+            M = np.hstack([A - ev * np.eye(n), B])
+            if np.linalg.matrix_rank(M, tol=1e-9 * scale) < n:
+                raise ValueError(
+                    f"model: (A, B) is not stabilizable (mode at eigenvalue {ev:.3g} cannot be "
+                    f"controlled); the contact set cannot regulate all of the CoM and momentum "
+                    f"(e.g. a single point contact)")
+
+
+def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool = False):
+    """Infinite-horizon LQR gain ``K`` for the linearised model: ``u = u0 - K (s - s_ref)``.
+
+    Minimises the cost of eq. 26, ``sum/integral of s^T Q s + lambda^T R lambda`` (in deviation
+    coordinates around the nominal point; the affine term ``c`` is carried by the feedforward).
+
+    Continuous time by default (``scipy.linalg.solve_continuous_are``): the gains are applied in a
+    1 kHz loop, far faster than the closed-loop momentum dynamics (with eq. 26's weights the
+    poles lie between about -0.1 and -10 rad/s for Talos and HyQ), so the continuous-time law is the ``dt -> 0`` limit of the discrete one; the paper's sum over
+    control ticks with the same Q and R gives the same gains as the integral with Q dt and R dt
+    (scaling both weights leaves K unchanged). Pass ``dt`` for the discrete-time design instead
+    (zero-order-hold discretisation, ``solve_discrete_are``).
+
+    Parameters
+    ----------
+    model : a :class:`MomentumModel` or a tuple ``(A, B[, c])``.
+    Q : 9x9 state weight or its diagonal; default ``diag(30, 30, 50, .5, .5, .5, .1, .1, .1)``.
+    R : n_lambda x n_lambda input weight or its diagonal; default (a MomentumModel only): per
+        contact ``diag(.1, .1, .01, 2, 2, 2)`` (first 3 entries for a point contact).
+    dt : None (continuous) or the control period for a discrete-time design.
+    full_output : also return the Riccati solution ``P``.
+
+    Returns ``K`` (n_lambda x 9), or ``(K, P)`` with ``full_output``.
+    """
+    if isinstance(model, MomentumModel):
+        A, B = model.A, model.B
+    else:
+        try:
+            A, B = (np.asarray(m, dtype=float) for m in tuple(model)[:2])
+        except (TypeError, ValueError) as exc:
+            raise ValueError("model: expected a MomentumModel or a tuple (A, B[, c])") from exc
+    n = A.shape[0] if A.ndim == 2 else -1
+    if A.ndim != 2 or A.shape != (n, n) or B.ndim != 2 or B.shape[0] != n or B.shape[1] == 0:
+        raise ValueError(f"model: A must be square and B have as many rows, got A {A.shape} and "
+                         f"B {B.shape}")
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        raise ValueError("model: A or B contains NaN or inf")
+    m = B.shape[1]
+    if Q is None:
+        if n != STATE_DIM:
+            raise ValueError(f"Q: no default for a {n}-dimensional state; pass Q")
+        Q = DEFAULT_Q_DIAG
+    Q = _square(Q, n, "Q", definite=False)
+    if R is None:
+        if not isinstance(model, MomentumModel):
+            raise ValueError("R: no default without contact dims; pass R or a MomentumModel")
+        R = contact_cost(model.dims)
+    R = _square(R, m, "R", definite=True)
+    _check_stabilizable(A, B)
+    try:
+        if dt is None:
+            P = scipy.linalg.solve_continuous_are(A, B, Q, R)
+            K = np.linalg.solve(R, B.T @ P)
+        else:
+            dt = _positive(dt, "dt")
+            E = np.zeros((n + m, n + m))
+            E[:n, :n], E[:n, n:] = A, B
+            Phi = scipy.linalg.expm(E * dt)
+            Ad, Bd = Phi[:n, :n], Phi[:n, n:]
+            Qd, Rd = Q * dt, R * dt
+            P = scipy.linalg.solve_discrete_are(Ad, Bd, Qd, Rd)
+            K = np.linalg.solve(Rd + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ValueError(f"model: the Riccati equation has no stabilising solution ({exc})") from exc
+    P = 0.5 * (P + P.T)
+    return (K, P) if full_output else K
+
+
+# ------------------------------------------------------------------------------ gains objects
+@dataclass(frozen=True)
+class ContactGains:
+    """LQR gains of one contact configuration (or a blend of two).
+
+    ``K`` (n_lambda x 9) and ``lambda0`` (n_lambda) are ordered as ``contacts`` with ``dims``
+    entries each. ``com0`` is the CoM the model was linearised at; ``P`` and ``poles`` (closed-loop
+    eigenvalues of ``A - B K``) are None for blended gains. ``components`` lists ``(weight,
+    ContactGains)`` of the configurations a blend is made of (empty for a plain configuration).
+    """
+
+    contacts: tuple[str, ...]
+    dims: tuple[int, ...]
+    K: np.ndarray
+    lambda0: np.ndarray
+    com0: np.ndarray
+    weight: np.ndarray | None = None  # input weight R of the configuration (nominal distribution)
+    P: np.ndarray | None = None
+    poles: np.ndarray | None = None
+    components: tuple = field(default=(), repr=False)
+
+    @property
+    def n_lambda(self) -> int:
+        return int(sum(self.dims))
+
+    def slices(self) -> dict[str, slice]:
+        out, start = {}, 0
+        for name, d in zip(self.contacts, self.dims):
+            out[name] = slice(start, start + d)
+            start += d
+        return out
+
+
+def _embed(g: ContactGains, contacts: tuple[str, ...], dims: tuple[int, ...], vec: np.ndarray
+           ) -> np.ndarray:
+    """Rows of ``vec`` (ordered as g.contacts) placed in the layout of ``contacts`` (zeros elsewhere)."""
+    out = np.zeros((sum(dims),) + vec.shape[1:])
+    src = g.slices()
+    start = 0
+    for name, d in zip(contacts, dims):
+        if name in src:
+            out[start:start + d] = vec[src[name]]
+        start += d
+    return out
+
+
+def blend_gains(gains_a: ContactGains, gains_b: ContactGains, alpha: float,
+                contacts: Sequence[str] | None = None) -> ContactGains:
+    """Interpolate two configurations' gains for a contact transition (Sect. 3.2, Remark).
+
+    ``K = (1 - alpha) K_a + alpha K_b`` and ``lambda0`` likewise, over the UNION of the two contact
+    sets, row block by row block (contact by contact): a contact absent from a configuration
+    contributes zero rows there. So the rows of a contact that is being removed (in ``a``, not in
+    ``b``) fade from ``K_a``'s rows at ``alpha = 0`` to 0 at ``alpha = 1`` (its force command, and
+    its share of the nominal load, go to zero), and those of a contact being added (in ``b`` only)
+    grow from 0. The columns (the 9 state components) are the same for every configuration.
+
+    The result is ordered as ``contacts`` (must be the union) or, by default, ``gains_a``'s order
+    followed by the contacts new in ``gains_b``. ``alpha = 0`` gives ``gains_a`` and ``alpha = 1``
+    ``gains_b`` (embedded in the union). Like the paper notes, the blend is not guaranteed to be
+    stabilising; it keeps the commanded forces continuous.
+    """
+    if not isinstance(gains_a, ContactGains):
+        raise ValueError("gains_a: expected a ContactGains (from MomentumLQR.gains)")
+    if not isinstance(gains_b, ContactGains):
+        raise ValueError("gains_b: expected a ContactGains (from MomentumLQR.gains)")
+    try:
+        alpha = float(alpha)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"alpha: expected a number in [0, 1], got {alpha!r}") from exc
+    if not (0.0 <= alpha <= 1.0):
+        raise ValueError(f"alpha: expected a number in [0, 1], got {alpha!r}")
+    dim_of = dict(zip(gains_a.contacts, gains_a.dims))
+    for name, d in zip(gains_b.contacts, gains_b.dims):
+        if dim_of.setdefault(name, d) != d:
+            raise ValueError(f"gains_b: contact '{name}' has dimension {d} but {dim_of[name]} in "
+                             f"gains_a")
+    union = gains_a.contacts + tuple(n for n in gains_b.contacts if n not in gains_a.contacts)
+    if contacts is None:
+        order = union
+    else:
+        order = tuple(contacts)
+        if sorted(order) != sorted(union):
+            raise ValueError(f"contacts: must be an ordering of the union {list(union)}, got "
+                             f"{list(order)}")
+    dims = tuple(dim_of[n] for n in order)
+    K = (1.0 - alpha) * _embed(gains_a, order, dims, gains_a.K) \
+        + alpha * _embed(gains_b, order, dims, gains_b.K)
+    lam0 = (1.0 - alpha) * _embed(gains_a, order, dims, gains_a.lambda0) \
+        + alpha * _embed(gains_b, order, dims, gains_b.lambda0)
+    com0 = (1.0 - alpha) * gains_a.com0 + alpha * gains_b.com0
+    components = tuple((w * cw, cg) for w, g in ((1.0 - alpha, gains_a), (alpha, gains_b))
+                       for cw, cg in (g.components or ((1.0, g),)) if w * cw > 0.0)
+    return ContactGains(order, dims, K, lam0, com0, components=components)
+
+
+# ----------------------------------------------------------------------------- the controller
+class MomentumLQR:
+    """Per-contact-configuration LQR gains for the momentum force task (eqs. 23-24).
+
+    Parameters
+    ----------
+    robot : the :class:`~wholebody.robot.Robot` (checks contact names; gives mass and dims).
+    contacts : the current contact configuration (list of contact names), used by
+        :meth:`feedback` unless told otherwise.
+    Q : 9x9 state weight or its diagonal (eq. 26), default ``diag(30,30,50,.5,.5,.5,.1,.1,.1)``.
+    R : weight of ONE contact wrench ``[f; tau]`` (6-vector diagonal or 6x6), default
+        ``diag(.1,.1,.01,2,2,2)``; point contacts use the force part. The same R weights the
+        nominal force distribution ``lambda0`` (least ``lambda^T R lambda`` balancing gravity).
+    dt : None for the continuous-time design (default), or the control period (discrete design).
+    gravity : magnitude of g (default: from the Pinocchio model).
+    """
+
+    def __init__(self, robot, contacts: Sequence[str], Q=None, R=None, dt: float | None = None,
+                 gravity: float | None = None):
+        self.contacts = self._check_contacts(robot, contacts)
+        self.Q = _square(DEFAULT_Q_DIAG if Q is None else Q, STATE_DIM, "Q", definite=False)
+        self.R = _square(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
+        self.dt = None if dt is None else _positive(dt, "dt")
+        if gravity is None:
+            gravity = float(np.linalg.norm(robot.model.gravity.linear))
+        self.gravity = _positive(gravity, "gravity")
+        self._cache: dict[tuple[str, ...], ContactGains] = {}
+
+    @staticmethod
+    def _check_contacts(robot, contacts) -> tuple[str, ...]:
+        if isinstance(contacts, str):
+            raise ValueError(f"contacts: expected a list of contact names, got the string "
+                             f"{contacts!r}")
+        try:
+            names = tuple(contacts)
+        except TypeError as exc:
+            raise ValueError(f"contacts: expected a list of contact names, got {contacts!r}") \
+                from exc
+        if not names:
+            raise ValueError("contacts: at least one contact is needed")
+        unknown = [n for n in names if n not in robot.contact_names]
+        if unknown:
+            raise ValueError(f"contacts: unknown contact(s) {unknown}; robot '{robot.name}' has "
+                             f"{list(robot.contact_names)}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"contacts: duplicate names in {list(names)}")
+        return names
+
+    blend = staticmethod(blend_gains)
+
+    def clear(self) -> None:
+        """Forget every cached configuration (gains are recomputed at the next request)."""
+        self._cache.clear()
+
+    def model(self, robot, contacts: Sequence[str] | None = None) -> MomentumModel:
+        """The linearised model (eq. 21) at the robot's current pose for ``contacts``."""
+        names = self.contacts if contacts is None else self._check_contacts(robot, contacts)
+        dims = tuple(robot.contact(n).dim for n in names)
+        X = np.array([robot.data.oMf[robot.contact(n).frame_id].translation for n in names])
+        lam0 = balancing_forces(X, robot.com, robot.mass, dims, self.gravity,
+                              weight=contact_cost(dims, self.R))
+        return momentum_model(X, robot.com, robot.mass, lam0, self.gravity, dims)
+
+    def gains(self, robot, contacts: Sequence[str] | None = None, recompute: bool = False
+              ) -> ContactGains:
+        """K and lambda0 for ``contacts`` (default: the current configuration).
+
+        Computed at the robot's CURRENT pose (``robot.update`` must have been called) the first
+        time a configuration is requested and cached under ``tuple(contacts)`` (order matters: it
+        is the row order of K); ``recompute=True`` refreshes the entry. K only depends on the
+        contact positions relative to the CoM, so it stays valid while the robot translates.
+        """
+        names = self.contacts if contacts is None else self._check_contacts(robot, contacts)
+        if not recompute and names in self._cache:
+            return self._cache[names]
+        model = self.model(robot, names)
+        R = contact_cost(model.dims, self.R)
+        K, P = lqr_gains(model, self.Q, R, dt=self.dt, full_output=True)
+        # continuous-time closed-loop poles (for a discrete design: of the same K in continuous time)
+        poles = np.linalg.eigvals(model.A - model.B @ K)
+        g = ContactGains(names, model.dims, K, model.lambda0, model.com0.copy(), weight=R, P=P,
+                         poles=poles)
+        log.debug("MomentumLQR: gains for %s, slowest closed-loop pole %.3f rad/s", list(names),
+                  float(np.max(poles.real)))
+        self._cache[names] = g
+        return g
+
+    def feedforward(self, robot, gains: ContactGains, com_ref, hdot_ref=None) -> np.ndarray:
+        """The nominal forces of ``gains`` re-balanced at the reference CoM.
+
+        For a plain configuration: ``argmin lambda^T R lambda`` s.t. ``G(com_ref) lambda + [m g; 0]
+        = hdot_ref`` with the robot's current contact positions; for a blend, the same weighted
+        sum of its components' re-balanced forces (a leaving contact keeps its fading share).
+        """
+        com_ref = _vector(com_ref, 3, "com_ref")
+        if hdot_ref is not None:
+            hdot_ref = _vector(hdot_ref, 6, "hdot_ref")
+        parts = gains.components or ((1.0, gains),)
+        lam = np.zeros(gains.n_lambda)
+        for w, g in parts:
+            X = np.array([robot.data.oMf[robot.contact(n).frame_id].translation
+                          for n in g.contacts])
+            weight = g.weight if g.weight is not None else contact_cost(g.dims, self.R)
+            lam_g = balancing_forces(X, com_ref, robot.mass, g.dims, self.gravity, weight=weight,
+                                   hdot=hdot_ref)
+            lam += w * _embed(g, gains.contacts, gains.dims, lam_g)
+        return lam
+
+    def feedback(self, robot, com_ref, h_ref=None, *, contacts: Sequence[str] | None = None,
+                 gains: ContactGains | None = None, hdot_ref=None, rebalance: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """``(K, k)`` of the force law eq. 23, ``lambda = -K [x_cog; h] + k``, for eq. 24.
+
+        ``k = lambda_ff + K [com_ref; h_ref]``, i.e. ``lambda = lambda_ff - K (s - s_ref)``.
+        With ``rebalance=False``, ``lambda_ff`` is the cached ``lambda0`` (gravity balanced about
+        the CoM at which the gains were computed), literally ``k = lambda0 + K s_ref``. By default
+        (``rebalance=True``) ``lambda_ff`` balances gravity (plus ``hdot_ref``) about ``com_ref``
+        with the current contact positions (:meth:`feedforward`), so that ``s_ref`` is an
+        equilibrium of the nonlinear model (eq. 21) even when ``com_ref`` is away from the
+        linearisation CoM; both coincide when ``com_ref`` is that CoM and the feet have not moved.
+
+        ``gains`` (e.g. from :meth:`blend`) overrides ``contacts`` (default: the current
+        configuration). Shapes ``(n_lambda, 9)`` and ``(n_lambda,)`` in the order of the gains'
+        contacts, ready for ``MomentumForce(K, k, contacts=gains.contacts)``.
+        """
+        com_ref = _vector(com_ref, 3, "com_ref")
+        h_ref = np.zeros(6) if h_ref is None else _vector(h_ref, 6, "h_ref")
+        if gains is None:
+            gains = self.gains(robot, contacts)
+        elif not isinstance(gains, ContactGains):
+            raise ValueError("gains: expected a ContactGains (from MomentumLQR.gains or blend)")
+        if rebalance:
+            lam_ff = self.feedforward(robot, gains, com_ref, hdot_ref)
+        else:
+            if hdot_ref is not None:
+                raise ValueError("hdot_ref: only used with rebalance=True")
+            lam_ff = gains.lambda0
+        s_ref = np.concatenate([com_ref, h_ref])
+        K = gains.K.copy()
+        return K, lam_ff + K @ s_ref

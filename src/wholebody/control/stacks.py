@@ -1,0 +1,85 @@
+"""The task hierarchies of Herzog et al. 2016 (Tables 1, 2 and 4) as stack builders.
+
+Each returns a :class:`Stack`; tasks are reachable by name (``stack.find("momentum")``) so that a
+controller can update references and gains every cycle. Weights are chosen among the paper's
+{1e4, 1, 1e-1, 1e-4} (Sect. 5.2.1).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+from ..formulation import Stack
+from ..robot import Robot
+from ..tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
+                     FrictionCone, FullDynamics, JointAccelerationLimits, MomentumForce, MomentumPD,
+                     NewtonEuler, PostureTask, TorqueLimits)
+
+
+def _dynamics(full: bool):
+    return [FullDynamics(name="dynamics") if full else NewtonEuler(name="newton-euler"),
+            TorqueLimits(name="torque limits")]
+
+
+def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None):
+    """CoP (weight 1e4, as the paper favours CoPs), friction pyramid, joint acceleration limits."""
+    rows = []
+    if any(robot.contact(c).spec.type == "rectangle" for c in contacts):
+        rows.append(CenterOfPressure(name="center of pressure", weight=1e4, contacts=contacts))
+    rows.append(FrictionCone(mu or robot.friction, name="friction", contacts=contacts))
+    rows.append(JointAccelerationLimits(name="joint acceleration limits"))
+    return rows
+
+
+def momentum_task(lqr: bool):
+    """The momentum task of level 3: LQR force law (eq. 24) or diagonal PD (eq. 22)."""
+    if lqr:
+        return MomentumForce(name="momentum", weight=1e4)
+    return MomentumPD(name="momentum", weight=1e4)
+
+
+def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool = False,
+                 full: bool = False, mu: float | None = None) -> Stack:
+    """Table 2, double support: (1) Newton-Euler + torque limits; (2) contact constraints, CoP,
+    friction, joint acceleration limits; (3) momentum control, posture (joints + base), GRF
+    regulariser."""
+    contacts = tuple(contacts or robot.contact_names)
+    return Stack([
+        _dynamics(full),
+        [ContactConstraint(name="contacts", contacts=contacts)] + _contact_conditions(robot, contacts, mu),
+        [momentum_task(lqr),
+         PostureTask(name="posture", weight=1e-1, kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0),
+         ForceRegularizer(name="force regularizer", weight=1e-4, contacts=contacts)],
+    ])
+
+
+def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
+                 lqr: bool = False, full: bool = False, mu: float | None = None) -> Stack:
+    """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
+    acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
+    regulariser."""
+    stance = tuple(stance)
+    swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
+    return Stack([
+        _dynamics(full),
+        _contact_conditions(robot, stance, mu),
+        [momentum_task(lqr), ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
+        + swing + [PostureTask(name="posture", weight=1e-1, kp=50.0, kd=14.0)],
+        [ForceRegularizer(name="force regularizer", weight=1e-4, contacts=stance)],
+    ])
+
+
+def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
+                 full: bool = False, mu: float | None = None) -> Stack:
+    """Table 1, the stepping benchmark: (1) dynamics + torque limits; (2) contact constraints, CoP,
+    friction, joint acceleration limits; (3) CoG PD + swing-foot PD; (4) posture (joints + base);
+    (5) GRF regulariser."""
+    stance = tuple(stance)
+    swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
+    return Stack([
+        _dynamics(full),
+        [ContactConstraint(name="contacts", contacts=stance)] + _contact_conditions(robot, stance, mu),
+        [CoMTask(name="com", kp=100.0, kd=20.0)] + swing,
+        [PostureTask(name="posture", kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0)],
+        [ForceRegularizer(name="force regularizer", contacts=stance)],
+    ])

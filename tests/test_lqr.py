@@ -1,0 +1,348 @@
+"""Tests of wholebody.control.lqr (Herzog et al. 2016, Sect. 3.2, eqs. 21, 23, 24, 26).
+
+Every check compares against an independent computation written here: the nonlinear centroidal
+model (eq. 21) with np.cross, finite differences, the Riccati residual, a simulation of the
+nonlinear closed loop, and the momentum map built from the contact placements.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+
+import wholebody as wb
+from wholebody.control.lqr import (ContactGains, MomentumLQR, blend_gains, contact_cost,
+                                   lqr_gains, momentum_model)
+from wholebody.tasks.momentum import MomentumForce
+from wholebody.variables import Variables
+
+G0 = 9.81
+TALOS_DS = ("left_sole", "right_sole")
+TALOS_SS = ("left_sole",)
+HYQ_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
+
+
+# ------------------------------------------------------------------ independent reference model
+def centroidal_rhs(s, lam, positions, dims, mass, g=G0):
+    """s' = f(s, lambda) of eq. 21, written with np.cross (independent of the module)."""
+    x, h_lin = s[:3], s[3:6]
+    force = np.array([0.0, 0.0, -mass * g])
+    torque = np.zeros(3)
+    start = 0
+    for p, d in zip(positions, dims):
+        f = lam[start:start + 3]
+        force = force + f
+        torque = torque + np.cross(p - x, f)
+        if d == 6:
+            torque = torque + lam[start + 3:start + 6]
+        start += d
+    return np.concatenate([h_lin / mass, force, torque])
+
+
+def fd_jacobian(fun, x0, eps=1e-6):
+    cols = []
+    for i in range(len(x0)):
+        e = np.zeros(len(x0))
+        e[i] = eps
+        cols.append((fun(x0 + e) - fun(x0 - e)) / (2 * eps))
+    return np.array(cols).T
+
+
+def contact_setup(robot, names):
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    pos = np.array([robot.data.oMf[robot.contact(n).frame_id].translation for n in names])
+    dims = [robot.contact(n).dim for n in names]
+    return pos, dims
+
+
+def vertical_force(lam, dims):
+    starts = np.cumsum([0] + list(dims[:-1]))
+    return float(sum(lam[s + 2] for s in starts))
+
+
+@pytest.fixture(scope="module")
+def talos():
+    r = wb.load_robot("talos14")
+    r.update(r.q_ref, np.zeros(r.nv))
+    return r
+
+
+@pytest.fixture(scope="module")
+def hyq():
+    r = wb.load_robot("hyq")
+    r.update(r.q_ref, np.zeros(r.nv))
+    return r
+
+
+CONFIGS = [("talos", TALOS_DS), ("talos", TALOS_SS), ("hyq", HYQ_FEET)]
+
+
+def get_robot(request, which):
+    return request.getfixturevalue(which)
+
+
+# ------------------------------------------------------------------------------ linearisation
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), dims=st.lists(st.sampled_from([3, 6]), min_size=1,
+                                                      max_size=4))
+def test_linearisation_matches_finite_differences(seed, dims):
+    rng = np.random.default_rng(seed)
+    n = sum(dims)
+    pos = rng.normal(scale=0.5, size=(len(dims), 3))
+    com = rng.normal(scale=0.5, size=3)
+    mass = rng.uniform(5.0, 100.0)
+    lam0 = rng.normal(scale=50.0, size=n)  # arbitrary, not balancing: exercises the general F0
+    h0 = rng.normal(size=6)
+    A, B, c = momentum_model(pos, com, mass, nominal_forces=lam0, dims=dims)
+    s0 = np.concatenate([com, h0])
+
+    A_fd = fd_jacobian(lambda s: centroidal_rhs(s, lam0, pos, dims, mass), s0)
+    B_fd = fd_jacobian(lambda u: centroidal_rhs(s0, u, pos, dims, mass), lam0)
+    np.testing.assert_allclose(A, A_fd, atol=1e-6)
+    np.testing.assert_allclose(B, B_fd, atol=1e-6)
+    # the affine model is exact at the linearisation point
+    np.testing.assert_allclose(A @ s0 + B @ lam0 + c, centroidal_rhs(s0, lam0, pos, dims, mass),
+                               atol=1e-8)
+    # and second order accurate nearby (the only nonlinearity is x_cog x f)
+    ds, du = rng.normal(scale=1e-3, size=9), rng.normal(scale=1e-2, size=n)
+    lin = A @ (s0 + ds) + B @ (lam0 + du) + c
+    np.testing.assert_allclose(lin, centroidal_rhs(s0 + ds, lam0 + du, pos, dims, mass),
+                               atol=1e-3 * 1e-2 * 10 * n)
+
+
+def test_linearisation_sign_of_force_cross_term():
+    """d(h_ang')/d(x_cog) = +[F0]x: CoM moved +y under a vertical load F gives h_ang_x' = -F dy."""
+    pos = np.array([[0.0, 0.1, 0.0], [0.0, -0.1, 0.0]])
+    m = 50.0
+    A, B, c = momentum_model(pos, [0.0, 0.0, 1.0], m, dims=[6, 6])
+    F = m * G0
+    np.testing.assert_allclose(A[6:9, 0:3], [[0, -F, 0], [F, 0, 0], [0, 0, 0]], atol=1e-9)
+    np.testing.assert_allclose(A[0:3, 3:6], np.eye(3) / m)
+
+
+@pytest.mark.parametrize("which,names", CONFIGS)
+def test_default_nominal_forces_balance_gravity(request, which, names):
+    robot = get_robot(request, which)
+    pos, dims = contact_setup(robot, names)
+    model = momentum_model(pos, robot.com, robot.mass, dims=dims)
+    s0 = np.concatenate([robot.com, np.zeros(6)])
+    np.testing.assert_allclose(centroidal_rhs(s0, model.lambda0, pos, dims, robot.mass),
+                               np.zeros(9), atol=1e-8)
+    # robot-based model: same A as the finite differences
+    ctl = MomentumLQR(robot, names)
+    m2 = ctl.model(robot)
+    A_fd = fd_jacobian(lambda s: centroidal_rhs(s, m2.lambda0, pos, dims, robot.mass), s0)
+    np.testing.assert_allclose(m2.A, A_fd, atol=1e-6)
+    np.testing.assert_allclose(vertical_force(m2.lambda0, dims), robot.mass * G0, rtol=1e-10)
+
+
+# ------------------------------------------------------------------------------------ Riccati
+@pytest.mark.parametrize("which,names", CONFIGS)
+def test_riccati_solution_and_hurwitz(request, which, names):
+    robot = get_robot(request, which)
+    ctl = MomentumLQR(robot, names)
+    model = ctl.model(robot)
+    A, B, _ = model
+    Q = np.diag([30, 30, 50, .5, .5, .5, .1, .1, .1])
+    R6 = np.diag([.1, .1, .01, 2, 2, 2])
+    R = np.zeros((model.n_lambda, model.n_lambda))
+    start = 0
+    for d in model.dims:
+        R[start:start + d, start:start + d] = R6[:d, :d]
+        start += d
+    np.testing.assert_allclose(contact_cost(model.dims), R)
+
+    K, P = lqr_gains(model, Q, R, full_output=True)
+    residual = A.T @ P + P @ A - P @ B @ np.linalg.solve(R, B.T @ P) + Q
+    assert np.abs(residual).max() < 1e-8 * max(1.0, np.abs(P).max())
+    np.testing.assert_allclose(P, P.T, atol=1e-9)
+    assert np.linalg.eigvalsh(P).min() > 0
+    np.testing.assert_allclose(K, np.linalg.solve(R, B.T @ P), atol=1e-8)
+    poles = np.linalg.eigvals(A - B @ K)
+    assert poles.real.max() < -1e-3
+    # the defaults are eq. 26's weights, and the class gives the same K
+    np.testing.assert_allclose(lqr_gains(model), K, rtol=1e-9, atol=1e-9)
+    g = ctl.gains(robot)
+    np.testing.assert_allclose(g.K, K, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.sort_complex(g.poles), np.sort_complex(poles), atol=1e-9)
+
+
+def test_discrete_design_approaches_continuous(talos):
+    model = MomentumLQR(talos, TALOS_DS).model(talos)
+    Kc = lqr_gains(model)
+    Kd = lqr_gains(model, dt=1e-3)
+    assert np.abs(Kd - Kc).max() < 1e-2 * np.abs(Kc).max()
+    Kd2 = lqr_gains(model, dt=1e-4)
+    assert np.abs(Kd2 - Kc).max() < np.abs(Kd - Kc).max()
+
+
+def test_single_point_contact_is_not_stabilizable(hyq):
+    with pytest.raises(ValueError, match="^model:"):
+        MomentumLQR(hyq, ["lf_foot"]).gains(hyq)
+
+
+# -------------------------------------------------------------------------------- closed loop
+def simulate(K, k, pos, dims, mass, s_init, t_end):
+    def rhs(_t, s):
+        return centroidal_rhs(s, k - K @ s, pos, dims, mass)
+    sol = solve_ivp(rhs, (0.0, t_end), s_init, method="LSODA", rtol=1e-9, atol=1e-11)
+    assert sol.success
+    return sol.y[:, -1]
+
+
+@pytest.mark.parametrize("which,names", CONFIGS)
+def test_closed_loop_nonlinear_converges(request, which, names):
+    robot = get_robot(request, which)
+    pos, dims = contact_setup(robot, names)
+    ctl = MomentumLQR(robot, names)
+    com_ref = robot.com.copy()
+    K, k = ctl.feedback(robot, com_ref)
+    s_ref = np.concatenate([com_ref, np.zeros(6)])
+    # at the reference the force law balances gravity: total vertical force = m g, s' = 0
+    lam_eq = k - K @ s_ref
+    np.testing.assert_allclose(vertical_force(lam_eq, dims), robot.mass * G0, rtol=1e-9)
+    np.testing.assert_allclose(centroidal_rhs(s_ref, lam_eq, pos, dims, robot.mass), 0, atol=1e-8)
+
+    s_init = s_ref + np.concatenate([[0.02, -0.02, 0.02], [4.0, -3.0, 2.0], [1.0, -0.8, 0.5]])
+    slowest = -np.max(np.linalg.eigvals(ctl.model(robot).A - ctl.model(robot).B @ K).real)
+    s_end = simulate(K, k, pos, dims, robot.mass, s_init, t_end=8.0 / slowest)
+    err = s_end - s_ref
+    assert np.abs(err[:3]).max() < 2e-5  # CoM within 20 um (from 2 cm)
+    assert np.abs(err[3:]).max() < 2e-3  # momentum (kick of several N s) damped
+    np.testing.assert_allclose(vertical_force(k - K @ s_end, dims), robot.mass * G0, rtol=1e-5)
+
+
+def test_closed_loop_tracks_offset_reference(talos):
+    """rebalance=True makes an offset com_ref an exact equilibrium of the nonlinear model."""
+    pos, dims = contact_setup(talos, TALOS_DS)
+    ctl = MomentumLQR(talos, TALOS_DS)
+    com_ref = talos.com + np.array([0.01, 0.03, -0.02])
+    K, k = ctl.feedback(talos, com_ref)
+    s_ref = np.concatenate([com_ref, np.zeros(6)])
+    np.testing.assert_allclose(centroidal_rhs(s_ref, k - K @ s_ref, pos, dims, talos.mass), 0,
+                               atol=1e-8)
+    s_end = simulate(K, k, pos, dims, talos.mass, np.concatenate([talos.com, np.zeros(6)]), 80.0)
+    assert np.abs(s_end[:3] - com_ref).max() < 1e-4
+    # the literal k = lambda0 + K s_ref equals it when com_ref is the linearisation CoM
+    K1, k1 = ctl.feedback(talos, talos.com, rebalance=False)
+    K2, k2 = ctl.feedback(talos, talos.com)
+    np.testing.assert_allclose(k1, k2, atol=1e-8)
+
+
+# ----------------------------------------------------------------------- MomentumForce (eq. 24)
+@pytest.mark.parametrize("which,names", CONFIGS)
+def test_momentum_force_projection(request, which, names, rng):
+    robot = get_robot(request, which)
+    q, v = robot.q_ref.copy(), rng.normal(scale=0.3, size=robot.nv)
+    robot.update(q, v)
+    ctl = MomentumLQR(robot, names)
+    K, k = ctl.feedback(robot, robot.com + [0.01, 0.0, 0.0], h_ref=rng.normal(size=6))
+    n_lam = sum(robot.contact(n).dim for n in names)
+    assert K.shape == (n_lam, 9) and k.shape == (n_lam,)
+    variables = Variables(robot, names)
+    rows = MomentumForce(K, k).rows(robot, variables)
+    s = np.concatenate([robot.com, robot.h_G])
+    lam = -K @ s + k  # eq. 23
+    # independent G of eq. 21 from the contact placements
+    blocks = []
+    for n in names:
+        c = robot.contact(n)
+        r = robot.data.oMf[c.frame_id].translation - robot.com
+        b = np.zeros((6, c.dim))
+        b[:3, :3] = np.eye(3)
+        for j in range(3):
+            b[3:, j] = np.cross(r, np.eye(3)[j])
+        if c.dim == 6:
+            b[3:, 3:] = np.eye(3)
+        blocks.append(b)
+    G = np.hstack(blocks)
+    np.testing.assert_allclose(rows.target, G @ lam, atol=1e-8)
+    np.testing.assert_allclose(rows.lam @ lam, rows.target, atol=1e-8)
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+
+
+# ---------------------------------------------------------------------- configurations, blend
+def test_gains_per_configuration_and_blend(talos):
+    talos.update(talos.q_ref, np.zeros(talos.nv))
+    ctl = MomentumLQR(talos, TALOS_DS)
+    ds = ctl.gains(talos)
+    ss = ctl.gains(talos, TALOS_SS)
+    assert ctl.gains(talos, TALOS_DS) is ds  # cached per configuration
+    assert ctl.gains(talos, TALOS_DS, recompute=True) is not ds
+    assert ds.K.shape == (12, 9) and ss.K.shape == (6, 9)
+    assert not np.allclose(ds.K[:6], ss.K, rtol=0.05)  # different gains per configuration
+    assert not np.allclose(ds.lambda0[:6], ss.lambda0)
+
+    b0 = blend_gains(ds, ss, 0.0)
+    b1 = MomentumLQR.blend(ds, ss, 1.0)
+    assert b0.contacts == TALOS_DS == b1.contacts
+    np.testing.assert_array_equal(b0.K, ds.K)
+    np.testing.assert_array_equal(b0.lambda0, ds.lambda0)
+    np.testing.assert_array_equal(b1.K[:6], ss.K)
+    np.testing.assert_array_equal(b1.K[6:], 0.0)  # the leaving contact's rows vanish
+    np.testing.assert_array_equal(b1.lambda0[6:], 0.0)
+    bh = blend_gains(ds, ss, 0.5)
+    np.testing.assert_allclose(bh.K[:6], 0.5 * (ds.K[:6] + ss.K))
+    np.testing.assert_allclose(bh.K[6:], 0.5 * ds.K[6:])
+    # landing: single -> double, the arriving contact starts at zero
+    land = blend_gains(ss, ds, 0.0)
+    assert land.contacts == TALOS_DS
+    np.testing.assert_array_equal(land.K[6:], 0.0)
+    np.testing.assert_array_equal(blend_gains(ss, ds, 1.0).K, ds.K)
+    # explicit order
+    rev = blend_gains(ds, ss, 0.3, contacts=("right_sole", "left_sole"))
+    np.testing.assert_allclose(rev.K[:6], blend_gains(ds, ss, 0.3).K[6:])
+
+    # blended feedback: the feedforward keeps gravity balanced at every alpha, and the leaving
+    # contact carries no force at alpha = 1
+    for alpha in (0.0, 0.4, 1.0):
+        g = blend_gains(ds, ss, alpha)
+        K, k = ctl.feedback(talos, talos.com, gains=g)
+        lam = k - K @ np.concatenate([talos.com, np.zeros(6)])
+        np.testing.assert_allclose(vertical_force(lam, g.dims), talos.mass * G0, rtol=1e-9)
+        if alpha == 1.0:
+            np.testing.assert_array_equal(lam[6:], 0.0)
+        rows = MomentumForce(K, k, contacts=g.contacts).rows(talos, Variables(talos, TALOS_DS))
+        np.testing.assert_allclose(rows.target[:3], [0, 0, talos.mass * G0], atol=1e-6)
+
+
+# ------------------------------------------------------------------------------------ errors
+def test_errors_name_the_argument(talos):
+    pos = np.zeros((2, 3))
+    cases = [
+        (lambda: momentum_model(np.zeros((2, 2)), np.zeros(3), 1.0), "contact_positions"),
+        (lambda: momentum_model(pos, np.zeros(2), 1.0), "com"),
+        (lambda: momentum_model(pos, np.zeros(3), -1.0), "mass"),
+        (lambda: momentum_model(pos, np.zeros(3), 1.0, nominal_forces=np.zeros(5)),
+         "nominal_forces"),
+        (lambda: momentum_model(pos, np.zeros(3), 1.0, dims=[6, 4]), "dims"),
+        (lambda: momentum_model(pos, np.zeros(3), 1.0, dims=[6]), "dims"),
+        (lambda: momentum_model(pos, np.zeros(3), 1.0, gravity=0.0), "gravity"),
+        (lambda: MomentumLQR(talos, ["left_sole", "nose"]), "contacts"),
+        (lambda: MomentumLQR(talos, "left_sole"), "contacts"),
+        (lambda: MomentumLQR(talos, TALOS_DS, Q=np.eye(8)), "Q"),
+        (lambda: MomentumLQR(talos, TALOS_DS, Q=-np.eye(9)), "Q"),
+        (lambda: MomentumLQR(talos, TALOS_DS, R=np.zeros(6)), "R"),
+        (lambda: MomentumLQR(talos, TALOS_DS).gains(talos, ["left_sole", "left_sole"]),
+         "contacts"),
+        (lambda: MomentumLQR(talos, TALOS_DS).feedback(talos, np.zeros(2)), "com_ref"),
+        (lambda: MomentumLQR(talos, TALOS_DS).feedback(talos, np.zeros(3), np.zeros(9)),
+         "h_ref"),
+        (lambda: lqr_gains((np.eye(9), np.zeros((8, 3)))), "model"),
+        (lambda: lqr_gains(momentum_model(pos + [[0, 1, 0], [0, -1, 0]], [0, 0, 1], 1.0),
+                           R=np.eye(3)), "R"),
+        (lambda: contact_cost([6, 6], R=np.eye(5)), "R"),
+    ]
+    ctl = MomentumLQR(talos, TALOS_DS)
+    ds, ss = ctl.gains(talos), ctl.gains(talos, TALOS_SS)
+    cases += [
+        (lambda: blend_gains(ds, ss, 1.5), "alpha"),
+        (lambda: blend_gains(ds, "x", 0.5), "gains_b"),
+        (lambda: blend_gains(ds, ss, 0.5, contacts=["left_sole"]), "contacts"),
+        (lambda: ctl.feedback(talos, talos.com, gains=ds.K), "gains"),
+    ]
+    for call, name in cases:
+        with pytest.raises(ValueError, match=f"^{name}:"):
+            call()
+    assert isinstance(ds, ContactGains)

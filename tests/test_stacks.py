@@ -1,0 +1,81 @@
+"""The hierarchies of Herzog et al. 2016 Tables 1, 2 and 4 build, print with the paper's row counts,
+and solve to physically consistent torques."""
+
+import numpy as np
+import pytest
+
+from wholebody.control.stacks import table1_stack, table2_stack, table4_stack
+from wholebody.formulation import Formulation
+from wholebody.variables import Variables
+
+
+def _rows_of(table: str) -> list[tuple[str, str]]:
+    """(rows, task) pairs of a printed stack."""
+    out = []
+    for line in table.splitlines()[2:-1]:
+        parts = line[6:].split(None, 2)
+        out.append((" ".join(parts[:2]), parts[2]))
+    return out
+
+
+def _physics_ok(robot, sol, variables):
+    S_T = np.zeros((robot.nv, robot.na))
+    S_T[6:] = np.eye(robot.na)
+    J = robot.stacked_contact_jacobian(variables.contacts)
+    eom = robot.M @ sol.qdd + robot.h - S_T @ sol.tau - J.T @ sol.lam
+    lo, hi = robot.torque_bounds()
+    return (np.abs(eom).max() < 1e-8 and np.all(sol.tau >= lo - 1e-6)
+            and np.all(sol.tau <= hi + 1e-6))
+
+
+def test_table2_on_talos14(robots):
+    robot = robots["talos14"]
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    variables = Variables(robot)
+    stack = table2_stack(robot)
+    rows = _rows_of(stack.table(robot, variables))
+    # Table 2: 6 eq Newton-Euler, 2x14 ineq torque limits (two-sided rows), 2x6 eq contacts,
+    # 2x4 ineq CoP, 2x4 ineq friction, 14 two-sided joint acceleration limits, 6 eq momentum,
+    # 14+6 eq posture, 2x6 eq force regulariser
+    assert rows == [("6 eq", "newton-euler"), ("14 ineq", "torque limits"), ("12 eq", "contacts"),
+                    ("8 ineq", "center of pressure"), ("8 ineq", "friction"),
+                    ("14 ineq", "joint acceleration limits"), ("6 eq", "momentum"),
+                    ("20 eq", "posture"), ("12 eq", "force regularizer")]
+    sol = Formulation(robot).solve(stack, variables)
+    assert sol.ok and _physics_ok(robot, sol, variables)
+    # standing still at the reference: nothing to sacrifice, the feet carry the weight
+    assert sum(f[2] for f in sol.forces.values()) == pytest.approx(robot.mass * 9.81, rel=1e-3)
+
+
+@pytest.mark.parametrize("stance,swing", [(("left_sole", "right_sole"), ()),
+                                          (("left_sole",), ("right_sole_link",))])
+def test_table1_on_talos(robots, stance, swing):
+    robot = robots["talos"]
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    variables = Variables(robot, stance)
+    for full in (False, True):
+        stack = table1_stack(robot, stance, swing, full=full)
+        rows = _rows_of(stack.table(robot, variables))
+        c = len(stance)
+        expected_first = ("38 eq", "dynamics") if full else ("6 eq", "newton-euler")
+        assert rows[0] == expected_first and rows[1] == ("32 ineq", "torque limits")
+        assert ("%d eq" % (6 * c), "contacts") in rows and ("3 eq", "com") in rows
+        assert (("6 eq", "swing right_sole_link") in rows) == bool(swing)
+        assert ("38 eq", "posture") in rows
+        sol = Formulation(robot, reduced=not full).solve(stack, variables)
+        assert sol.ok and _physics_ok(robot, sol, variables)
+
+
+def test_table4_single_support_with_lqr_placeholder(robots):
+    """Table 4 builds with the PD momentum task; the LQR variant needs gains (a clear error)."""
+    robot = robots["talos14"]
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    variables = Variables(robot, ["left_sole"])
+    stack = table4_stack(robot, ["left_sole"], ["right_sole_link"])
+    rows = _rows_of(stack.table(robot, variables))
+    assert rows[2:5] == [("4 ineq", "center of pressure"), ("4 ineq", "friction"),
+                         ("14 ineq", "joint acceleration limits")]
+    sol = Formulation(robot).solve(stack, variables)
+    assert sol.ok and _physics_ok(robot, sol, variables)
+    with pytest.raises(ValueError, match="gains K and k are not set"):
+        Formulation(robot).solve(table4_stack(robot, ["left_sole"], lqr=True), variables)
