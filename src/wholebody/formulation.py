@@ -196,11 +196,18 @@ class Formulation:
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
               backend: str = "daqp", regularization: float = 1e-6,
-              analytic_first_level: bool | None = None) -> Solution:
+              analytic_first_level: bool | None = None, fallback_backend: str | None = "quadprog",
+              diagnostics: bool = True) -> Solution:
         """Solve the stack at the robot's cached state (call ``robot.update`` first).
 
-        Never raises for numerical reasons: a failed solve returns ``ok=False`` with the reason and a
-        torque computed from the best available solution, clipped to the torque limits.
+        ``backend`` solves the QPs; if it fails, the cycle is solved again with
+        ``fallback_backend`` (each backend has rare failure modes of its own on these
+        ill-conditioned cascades — measured in ``benchmarks/bench_wbc.py``). ``diagnostics``
+        computes the per-task report (a few tens of µs). Never raises for numerical reasons: a
+        failed solve returns ``ok=False`` with the reason and a torque computed from the best
+        available solution, clipped to the torque limits. ``regularization`` is the eps of eq. 5
+        on the scaled variables; the paper's 1e-4 visibly trades tasks off (see the tests), 1e-6
+        does not, and much smaller values make quadprog cycle.
         """
         robot = self.robot
         variables = variables or Variables(robot)
@@ -214,10 +221,19 @@ class Formulation:
         fls = self.first_level_solution(levels[0]) if use_analytic and method == "cascade" else None
         result = solve_hierarchy(levels, method=method, backend=backend,
                                  regularization=regularization, first_level_solution=fls)
+        status = result.status
+        if not result.ok and fallback_backend and fallback_backend != backend:
+            retry = solve_hierarchy(levels, method="cascade", backend=fallback_backend,
+                                    regularization=regularization, first_level_solution=fls)
+            if retry.ok:
+                log.debug("%s failed (%s); solved with %s", backend, result.status, fallback_backend)
+                status = f"optimal ({fallback_backend} after {backend}: {result.status})"
+                result = retry
         t_solve = time.perf_counter()
         x = result.x * self.scales(variables)
-        solution = self._recover(x, variables, result.ok, result.status, result.costs)
-        solution.tasks = self._task_reports(result.x, meta)
+        solution = self._recover(x, variables, result.ok, status, result.costs)
+        if diagnostics:
+            solution.tasks = self._task_reports(result.x, meta)
         solution.timings = {"rows": t_rows - t0, "solve": t_solve - t_rows,
                             "total": time.perf_counter() - t0}
         return solution
@@ -280,6 +296,29 @@ class _LevelPlan:
         self.signature = [(r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
                           for r in rows]
 
+    def check(self) -> None:
+        """The boundary check of the refilled arrays: finite rows, lower <= upper, valid weights.
+
+        A NaN reference or gain set on a task ends here as a ValueError naming the level and task.
+        """
+        everything = slice(None)
+        if self._valid(everything, "eq") and self._valid(everything, "ineq"):
+            return
+        for _, task, kind, a, b in self.slots:
+            if not self._valid(slice(a, b), kind):
+                raise ValueError(f"level {self.rank}: task '{task.name}' produced NaN/inf rows, "
+                                 f"lower > upper or a bad weight")
+
+    def _valid(self, rows: slice, kind: str) -> bool:
+        if kind == "eq":
+            w = self.w[rows]
+            return bool(np.isfinite(self.E[rows]).all() and np.isfinite(self.e[rows]).all()
+                        and np.isfinite(w).all() and (w >= 0).all())
+        lo, up, vw = self.lo[rows], self.up[rows], self.vw[rows]
+        return bool(np.isfinite(self.C[rows]).all() and not np.isnan(lo).any()
+                    and not np.isnan(up).any() and (lo <= up).all()
+                    and np.isfinite(vw).all() and (vw > 0).all())
+
 
 class _Plan:
     """Level layout for one stack structure and contact set (see ``Formulation.levels``)."""
@@ -315,11 +354,8 @@ class _Plan:
                     level_meta.append((task, "ineq", lp.C[a:b], lp.lo[a:b], lp.up[a:b]))
             lp.E[:, nv:] *= scale_tail
             lp.C[:, nv:] *= scale_tail
-            out.append(Level(
-                eq=(lp.E, lp.e) if lp.E.shape[0] else None,
-                ineq=(lp.C, lp.lo, lp.up) if lp.C.shape[0] else None,
-                weights=lp.w if lp.E.shape[0] else None,
-                ineq_weights=lp.vw if lp.C.shape[0] else None,
-                name=f"level {lp.rank}"))
+            lp.check()
+            out.append(Level.trusted(lp.E, lp.e, lp.w, lp.C, lp.lo, lp.up, lp.vw,
+                                     name=f"level {lp.rank}"))
             meta.append(level_meta)
         return out, meta

@@ -140,6 +140,21 @@ class Level:
         self.v = v
         self.n = n
 
+    @classmethod
+    def trusted(cls, B: np.ndarray, b: np.ndarray, w: np.ndarray, C: np.ndarray,
+                lower: np.ndarray, upper: np.ndarray, v: np.ndarray, name: str = "") -> "Level":
+        """A level from arrays the caller has already checked (shapes consistent, finite data,
+        lower <= upper, weights > 0); skips the validation of the constructor. For assemblers
+        that refill preallocated arrays every control cycle (``wholebody.formulation``)."""
+        level = object.__new__(cls)
+        level.eq = (B, b) if B.shape[0] else None
+        level.ineq = (C, lower, upper) if C.shape[0] else None
+        level.weights, level.ineq_weights, level.name = w, v, name
+        level.B, level.b, level.w = B, b, w
+        level.C, level.lower, level.upper, level.v = C, lower, upper, v
+        level.n = B.shape[1]
+        return level
+
     # ------------------------------------------------------------------ evaluation
     @property
     def n_eq(self) -> int:
