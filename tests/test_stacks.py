@@ -79,3 +79,27 @@ def test_table4_single_support_with_lqr_placeholder(robots):
     assert sol.ok and _physics_ok(robot, sol, variables)
     with pytest.raises(ValueError, match="gains K and k are not set"):
         Formulation(robot).solve(table4_stack(robot, ["left_sole"], lqr=True), variables)
+
+
+@pytest.mark.parametrize("name", ["talos14", "hyq"])
+def test_table2_hierarchy_stands_in_twin(robots, name):
+    """Closed loop in MuJoCo, the hierarchy's torques as the only command (no joint PD, as in the
+    paper): the robot stands 2 s, base still, every cycle solved, the floor carries the weight."""
+    from wholebody.sim.simulator import Simulator
+
+    robot = robots[name]
+    sim = Simulator(robot)
+    stack, formulation, variables = table2_stack(robot), Formulation(robot), Variables(robot)
+    q0, _ = sim.state()
+    failures = 0
+    for _ in range(2000):
+        q, v = sim.state()
+        robot.update(q, v)
+        sol = formulation.solve(stack, variables, diagnostics=False)
+        failures += not sol.ok
+        sim.step(sol.tau)
+    q, v = sim.state()
+    assert failures == 0
+    assert np.linalg.norm(q[:3] - q0[:3]) < 5e-3 and np.abs(v).max() < 0.05
+    normal = sim.log.arrays()["contact_wrenches"][500:, :, 2].sum(axis=1)
+    np.testing.assert_allclose(normal, robot.mass * 9.81, rtol=0.02)

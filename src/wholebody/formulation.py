@@ -110,16 +110,20 @@ class Formulation:
         self.reduced = reduced
         self._tau_scale = np.abs(robot.torque_limits.upper(robot.q_ref[7:]))
         self._plan: _Plan | None = None
+        self._scales_key = None
 
     def size(self, variables: Variables) -> int:
         return variables.nv + variables.n_lambda + (0 if self.reduced else variables.na)
 
     def scales(self, variables: Variables) -> np.ndarray:
         """s with x = s * x_scaled (see class docstring)."""
-        parts = [np.ones(variables.nv), np.full(variables.n_lambda, self.robot.mass * 9.81)]
-        if not self.reduced:
-            parts.append(self._tau_scale)
-        return np.concatenate(parts)
+        key = (variables.nv, variables.n_lambda)
+        if self._scales_key != key:
+            parts = [np.ones(variables.nv), np.full(variables.n_lambda, self.robot.mass * 9.81)]
+            if not self.reduced:
+                parts.append(self._tau_scale)
+            self._scales, self._scales_key = np.concatenate(parts), key
+        return self._scales
 
     # ------------------------------------------------------------------ rows -> x
     def map_rows(self, rows: TaskRows, variables: Variables, out: np.ndarray | None = None
@@ -310,14 +314,15 @@ class _LevelPlan:
                                  f"lower > upper or a bad weight")
 
     def _valid(self, rows: slice, kind: str) -> bool:
+        # one reduction per array: a sum is non-finite iff some entry is NaN/inf (or it overflows,
+        # which is as bad)
         if kind == "eq":
             w = self.w[rows]
-            return bool(np.isfinite(self.E[rows]).all() and np.isfinite(self.e[rows]).all()
-                        and np.isfinite(w).all() and (w >= 0).all())
+            return bool(np.isfinite(self.E[rows].sum() + self.e[rows].sum() + w.sum())
+                        and (w >= 0).all())
         lo, up, vw = self.lo[rows], self.up[rows], self.vw[rows]
-        return bool(np.isfinite(self.C[rows]).all() and not np.isnan(lo).any()
-                    and not np.isnan(up).any() and (lo <= up).all()
-                    and np.isfinite(vw).all() and (vw > 0).all())
+        return bool(np.isfinite(self.C[rows].sum() + vw.sum()) and (vw > 0).all()
+                    and (lo <= up).all())  # NaN bounds fail the comparison
 
 
 class _Plan:

@@ -104,8 +104,13 @@ class Robot:
                                           description.torque_limits)
         self.q_ref = self._rest_on_ground(self._reduce_posture(full, model, q_posture))
 
+        selection = np.zeros((self.na, self.nv))
+        selection[:, FREE_FLYER_NV:] = np.eye(self.na)
+        selection.flags.writeable = False
+        self.joint_selection = selection  # S: picks the actuated joints out of v (read-only)
         self.cycle = 0
-        self._frame_cache: dict[tuple[str, int], np.ndarray] = {}
+        self._lower = np.tril_indices(self.nv, -1)
+        self._frame_cache: dict[tuple, np.ndarray] = {}
         self._a0 = np.zeros(self.nv)
         self.q = self.q_ref.copy()
         self.v = np.zeros(self.nv)
@@ -207,8 +212,8 @@ class Robot:
         pin.computeAllTerms(model, data, q, v)
         pin.updateFramePlacements(model, data)
         dh = pin.computeCentroidalMomentumTimeVariation(model, data)
-        M = data.M
-        M[np.tril_indices(self.nv, -1)] = M.T[np.tril_indices(self.nv, -1)]
+        M = data.M  # crba fills the upper triangle
+        M[self._lower] = M.T[self._lower]
         self.M = M
         self.h = data.nle
         self.com = data.com[0].copy()
@@ -267,16 +272,20 @@ class Robot:
     # ------------------------------------------------------------------ stacked contact terms
     def stacked_contact_jacobian(self, names: Sequence[str] | None = None) -> np.ndarray:
         """Contact Jacobians of ``names`` (default: all contacts) stacked row-wise."""
-        names = self.contact_names if names is None else names
-        if not names:
-            return np.zeros((0, self.nv))
-        return np.vstack([self.contact_jacobians[n] for n in names])
+        names = self.contact_names if names is None else tuple(names)
+        key = ("stacked J", names)
+        if key not in self._frame_cache:  # cached for the cycle: several tasks need it
+            self._frame_cache[key] = (np.vstack([self.contact_jacobians[n] for n in names])
+                                      if names else np.zeros((0, self.nv)))
+        return self._frame_cache[key]
 
     def stacked_contact_drift(self, names: Sequence[str] | None = None) -> np.ndarray:
-        names = self.contact_names if names is None else names
-        if not names:
-            return np.zeros(0)
-        return np.concatenate([self.contact_drifts[n] for n in names])
+        names = self.contact_names if names is None else tuple(names)
+        key = ("stacked drift", names)
+        if key not in self._frame_cache:
+            self._frame_cache[key] = (np.concatenate([self.contact_drifts[n] for n in names])
+                                      if names else np.zeros(0))
+        return self._frame_cache[key]
 
     # ------------------------------------------------------------------ helpers
     def torque_bounds(self, q=None) -> tuple[np.ndarray, np.ndarray]:

@@ -35,7 +35,8 @@ class TorqueLimits(Task):
 
     def rows(self, robot, variables):
         lo, hi = self.bounds(robot)
-        return TaskRows(qdd=None, lam=None, tau=np.eye(robot.na), lower=lo, upper=hi,
+        return TaskRows(qdd=None, lam=None, tau=robot.joint_selection[:, FREE_FLYER_NV:],
+                        lower=lo, upper=hi,
                         tau_identity=True)
 
 
@@ -75,6 +76,4 @@ class JointAccelerationLimits(Task):
 
     def rows(self, robot, variables):
         lo, hi = self.bounds(robot)
-        selection = np.zeros((robot.na, robot.nv))
-        selection[:, FREE_FLYER_NV:] = np.eye(robot.na)
-        return TaskRows(qdd=selection, lam=None, tau=None, lower=lo, upper=hi)
+        return TaskRows(qdd=robot.joint_selection, lam=None, tau=None, lower=lo, upper=hi)

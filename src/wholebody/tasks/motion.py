@@ -80,15 +80,15 @@ class PostureTask(Task):
         joint_acc = pd_acceleration(self.kp, self.kd, q_ref[FREE_FLYER_NQ:] - robot.q[FREE_FLYER_NQ:],
                                     -robot.v[n:])
         if not (self.base_kp or self.base_kd):
-            sel = np.zeros((robot.na, robot.nv))
-            sel[:, n:] = np.eye(robot.na)
-            return TaskRows(qdd=sel, lam=None, tau=None, target=joint_acc)
+            return TaskRows(qdd=robot.joint_selection, lam=None, tau=None, target=joint_acc)
         # base error in the local frame: log6 of the relative placement
         base = pin.XYZQUATToSE3(robot.q[:FREE_FLYER_NQ])
         base_ref = pin.XYZQUATToSE3(q_ref[:FREE_FLYER_NQ])
         err = pin.log6(base.actInv(base_ref)).vector
         base_acc = self.base_kp * err - self.base_kd * robot.v[:n]
-        return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None,
+        if getattr(self, "_identity", None) is None or self._identity.shape[0] != robot.nv:
+            self._identity = np.eye(robot.nv)
+        return TaskRows(qdd=self._identity, lam=None, tau=None,
                         target=np.concatenate([base_acc, joint_acc]))
 
 
