@@ -27,6 +27,8 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
+from ..tasks.momentum import centroidal_map, skew
+
 log = logging.getLogger(__name__)
 
 STATE_DIM = 9
@@ -38,11 +40,6 @@ DEFAULT_R_DIAG = np.array([0.1, 0.1, 0.01, 2.0, 2.0, 2.0])
 
 
 # ---------------------------------------------------------------------------------------- helpers
-def _skew(x: np.ndarray) -> np.ndarray:
-    """[x]x such that [x]x y = x × y."""
-    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
-
-
 def _vector(value, size: int, name: str) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
@@ -119,20 +116,6 @@ def _gravity_wrench(mass: float, gravity: float) -> np.ndarray:
     return np.array([0.0, 0.0, -mass * gravity, 0.0, 0.0, 0.0])
 
 
-def _momentum_map(contact_positions: np.ndarray, com: np.ndarray,
-                  dims: Sequence[int]) -> np.ndarray:
-    """The matrix of eq. 21 (same as :func:`wholebody.tasks.momentum.momentum_map`)."""
-    blocks = []
-    for x_i, d in zip(contact_positions, dims):
-        block = np.zeros((6, d))
-        block[:3, :3] = np.eye(3)
-        block[3:, :3] = _skew(x_i - com)
-        if d == 6:
-            block[3:, 3:] = np.eye(3)
-        blocks.append(block)
-    return np.hstack(blocks) if blocks else np.zeros((6, 0))
-
-
 def _contact_positions(value, name: str = "contact_positions") -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
@@ -173,7 +156,7 @@ def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | 
     n = sum(dims)
     W = np.eye(n) if weight is None else _square(weight, n, "weight", definite=True)
     hdot = np.zeros(6) if hdot is None else _vector(hdot, 6, "hdot")
-    G = _momentum_map(X, com, dims)
+    G = centroidal_map(X, com, dims)
     w = hdot - _gravity_wrench(mass, gravity)
     lam = _weighted_least_norm(G, w, W)
     residual = float(np.linalg.norm(G @ lam - w))
@@ -197,7 +180,7 @@ def centroidal_dynamics(s, lam, contact_positions, mass: float, dims: Sequence[i
     lam = _vector(lam, sum(dims), "lam")
     mass = _positive(mass, "mass")
     gravity = _positive(gravity, "gravity")
-    G = _momentum_map(X, s[:3], dims)
+    G = centroidal_map(X, s[:3], dims)
     return np.concatenate([s[3:6] / mass, G @ lam + _gravity_wrench(mass, gravity)])
 
 
@@ -275,13 +258,13 @@ def momentum_model(contact_positions, com, mass: float, nominal_forces=None,
         lam0 = balancing_forces(X, com, mass, dims, gravity)
     else:
         lam0 = _vector(nominal_forces, n, "nominal_forces")
-    G = _momentum_map(X, com, dims)
+    G = centroidal_map(X, com, dims)
     starts = np.cumsum((0,) + dims[:-1])
     F0 = np.sum([lam0[s:s + 3] for s in starts], axis=0)
 
     A = np.zeros((STATE_DIM, STATE_DIM))
     A[0:3, 3:6] = np.eye(3) / mass
-    A[6:9, 0:3] = _skew(F0)
+    A[6:9, 0:3] = skew(F0)
     B = np.zeros((STATE_DIM, n))
     B[3:9] = G
     s0 = np.concatenate([com, np.zeros(6)])

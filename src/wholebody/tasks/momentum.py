@@ -8,25 +8,31 @@ from .base import Task, TaskRows, contact_subset
 
 
 def skew(x: np.ndarray) -> np.ndarray:
+    """[x]x: the matrix with skew(x) @ y = x × y."""
     return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
 
 
-def momentum_map(robot, contacts) -> np.ndarray:
+def centroidal_map(contact_positions, com: np.ndarray, dims) -> np.ndarray:
     """The matrix of eq. 21 mapping stacked contact forces/wrenches to the momentum rate about the
     CoM: block [I 0; [x_i - x_cog]x I] per 6D contact, [I; [x_i - x_cog]x] per point contact."""
     blocks = []
-    for n in contacts:
-        c = robot.contact(n)
-        r = robot.data.oMf[c.frame_id].translation - robot.com
-        block = np.zeros((6, c.dim))
+    for x_i, d in zip(contact_positions, dims):
+        r = np.asarray(x_i, dtype=float) - com
+        block = np.zeros((6, d))
         block[:3, :3] = np.eye(3)
         block[3, 1], block[3, 2] = -r[2], r[1]
         block[4, 0], block[4, 2] = r[2], -r[0]
         block[5, 0], block[5, 1] = -r[1], r[0]
-        if c.dim == 6:
+        if d == 6:
             block[3:, 3:] = np.eye(3)
         blocks.append(block)
     return np.hstack(blocks) if blocks else np.zeros((6, 0))
+
+
+def momentum_map(robot, contacts) -> np.ndarray:
+    """:func:`centroidal_map` at the robot's cached contact positions and CoM."""
+    positions = [robot.data.oMf[robot.contact(n).frame_id].translation for n in contacts]
+    return centroidal_map(positions, robot.com, [robot.contact(n).dim for n in contacts])
 
 
 class MomentumPD(Task):
