@@ -161,11 +161,11 @@ def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | 
     lam = _weighted_least_norm(G, w, W)
     residual = float(np.linalg.norm(G @ lam - w))
     if residual > 1e-6 * max(1.0, float(np.linalg.norm(w))):
-        log.warning("balancing_forces: the contacts cannot balance the wrench %s exactly "
+        log.debug("balancing_forces: the contacts cannot balance the wrench %s exactly "
                     "(residual %.3g)", np.round(w, 3), residual)
     fz = [lam[s + 2] for s in np.cumsum((0,) + dims[:-1])]
     if min(fz) < 0.0:
-        log.warning("balancing_forces: negative normal force %s (CoM outside the support?)",
+        log.debug("balancing_forces: negative normal force %s (CoM outside the support?)",
                     np.round(fz, 3))
     return lam
 
