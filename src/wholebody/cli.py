@@ -77,6 +77,7 @@ def _cmd_run(args) -> int:
             raise ValueError(f"scenario '{scenario.name}' has no controller '{args.controller}'; "
                              f"controllers: {', '.join(scenario.controllers)}")
         robot = load_robot(args.robot or scenario.default_robot)
+        scenario.validate(robot, overrides)
     except (ValueError, FileNotFoundError) as exc:
         return _usage_error(exc)
     out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from .base import Parameter, Scenario, ScenarioResult
+from .push import SCENARIO as _PUSH
 from .stand import SCENARIO as _STAND
 
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (_STAND,)}
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (_STAND, _PUSH)}
 
 
 class UnknownScenarioError(ValueError):

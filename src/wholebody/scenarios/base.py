@@ -99,6 +99,14 @@ class Scenario:
     controllers: tuple[str, ...]
     default_robot: str
     run_function: RunFunction
+    validate_function: Callable[[Any, dict], None] | None = None
+
+    def validate(self, robot, overrides: dict[str, str] | None = None) -> dict[str, Any]:
+        """Parameters resolved and checked against ``robot`` (ValueError naming the problem)."""
+        params = self.resolve(overrides or {})
+        if self.validate_function is not None:
+            self.validate_function(robot, params)
+        return params
 
     def resolve(self, overrides: dict[str, str]) -> dict[str, Any]:
         """Defaults updated with ``--set`` strings; unknown names are an error listing the known."""
@@ -117,7 +125,7 @@ class Scenario:
         if controller not in self.controllers:
             raise ValueError(f"scenario '{self.name}' has no controller '{controller}'; "
                              f"controllers: {', '.join(self.controllers)}")
-        params = self.resolve(overrides or {})
+        params = self.validate(robot, overrides)
         start = time.perf_counter()
         result = self.run_function(robot, controller, params, out_dir, progress)
         result.wall_time_s = time.perf_counter() - start
