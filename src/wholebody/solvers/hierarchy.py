@@ -398,8 +398,9 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
             hC = np.concatenate((hC, Co))
             hlo = np.concatenate((hlo, lo - viol))
             hup = np.concatenate((hup, up + viol))
-        # ---- lock the directions of the weighted equality rows: Z_{r+1} = Z_r N_r (eq. 8)
-        if wB.shape[0]:
+        # ---- lock the directions of the weighted equality rows: Z_{r+1} = Z_r N_r (eq. 8);
+        # after the last level nobody needs the null space (saves a QR/SVD per cycle)
+        if wB.shape[0] and r < nl - 1:
             Z, z = _lock(Z, wB, rank_tol)
         zdims[r], times[r] = z, time.perf_counter() - tl
 
