@@ -139,6 +139,13 @@ def _positive(value, name: str) -> float:
     return out
 
 
+def _model_arguments(contact_positions, dims, com, mass, gravity):
+    """Validated (positions, dims, com, mass, gravity) of the centroidal model (eq. 21)."""
+    X = _contact_positions(contact_positions)
+    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
+    return X, dims, _vector(com, 3, "com"), _positive(mass, "mass"), _positive(gravity, "gravity")
+
+
 def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | None = None,
                      gravity: float = 9.81, weight=None, hdot=None) -> np.ndarray:
     """Contact forces that make eq. 21 give ``h' = hdot`` (default 0: gravity balanced).
@@ -148,11 +155,7 @@ def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | 
     distribution). If the wrench cannot be produced by these contacts (rank-deficient ``G``, e.g. a
     single point foot not below the CoM) the least-squares solution is returned and a warning logged.
     """
-    X = _contact_positions(contact_positions)
-    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
-    com = _vector(com, 3, "com")
-    mass = _positive(mass, "mass")
-    gravity = _positive(gravity, "gravity")
+    X, dims, com, mass, gravity = _model_arguments(contact_positions, dims, com, mass, gravity)
     n = sum(dims)
     W = np.eye(n) if weight is None else _square(weight, n, "weight", definite=True)
     hdot = np.zeros(6) if hdot is None else _vector(hdot, 6, "hdot")
@@ -248,11 +251,7 @@ def momentum_model(contact_positions, com, mass: float, nominal_forces=None,
     Moving the CoM by dx under unchanged contact forces changes the moment of those forces about
     the CoM by ``F0 × dx`` (e.g. dx = +y with F0 = +z m|g| gives ``h_ang_x' = -m|g| dy``).
     """
-    X = _contact_positions(contact_positions)
-    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
-    com = _vector(com, 3, "com")
-    mass = _positive(mass, "mass")
-    gravity = _positive(gravity, "gravity")
+    X, dims, com, mass, gravity = _model_arguments(contact_positions, dims, com, mass, gravity)
     n = sum(dims)
     if nominal_forces is None:
         lam0 = balancing_forces(X, com, mass, dims, gravity)
