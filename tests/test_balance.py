@@ -48,3 +48,24 @@ def test_push_scenario_recovers_and_detects_a_fall(robots):
     assert np.linalg.norm(robot.com - MomentumBalance(robot).com_ref) < 5e-3
     bad = push.run(robot, "pd", {"peak_force": "350", "start": "0.2", "duration": "2.5"})
     assert not bad.success
+
+
+def test_push_series_table_and_claim(robots, tmp_path):
+    """A one-point, one-force slice of the Sect. 5.2.2 protocol: both controllers run, Table 3 holds
+    the strongest survived push per controller and point, the LQR-vs-PD claim is measured."""
+    from wholebody.scenarios import get_scenario
+
+    robot = robots["talos14"]
+    series = get_scenario("push-series")
+    res = series.run(robot, None, {"locations": "front", "forces": "60", "duration": "2.0",
+                                   "q_angular": "10"}, out_dir=tmp_path)
+    m = res.metrics
+    assert m["trials"] == 2 and m["survived"] == {"pd": 1, "lqr": 1}
+    for key in ("pd/front", "lqr/front"):
+        row = m["table3"][key]
+        assert row["peak_force_N"] == 60.0
+        assert row["delta_v_mps"] == pytest.approx(row["impulse_Ns"] / robot.mass)
+    assert m["pairs_survived_by_both"] == 1 and m["lqr_cog_error_le_pd_fraction"] in (0.0, 1.0)
+    assert (tmp_path / "push_series.png").stat().st_size > 10_000
+    with pytest.raises(ValueError, match="locations"):
+        series.run(robot, None, {"locations": "nose"})

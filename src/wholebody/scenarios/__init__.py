@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from .base import Parameter, Scenario, ScenarioResult
 from .push import SCENARIO as _PUSH
+from .push_series import SCENARIO as _PUSH_SERIES
 from .stand import SCENARIO as _STAND
 
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (_STAND, _PUSH)}
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (_STAND, _PUSH, _PUSH_SERIES)}
 
 
 class UnknownScenarioError(ValueError):
