@@ -155,19 +155,17 @@ class CenterOfPressure(_PerContact):
     def rows(self, robot, variables):
         names = [n for n in contact_subset(variables, self.contacts)
                  if robot.contact(n).spec.type == "rectangle"]
-        blocks = {}
-        for n in names:
+        A = np.zeros((4 * len(names), variables.n_lambda))
+        for i, n in enumerate(names):
             c = robot.contact(n)
-            R = robot.data.oMf[c.frame_id].rotation
+            R = robot.data.oMf[c.frame_id].rotation  # columns: sole axes in world
             hx, hy = (1.0 - self.margin) * np.asarray(c.spec.half_size)
-            ex, ey, ez = R[:, 0], R[:, 1], R[:, 2]  # sole axes in world
-            blocks[n] = np.array([
-                np.concatenate([-hx * ez, -ey]),   # -tau_y - hx f_z <= 0
-                np.concatenate([-hx * ez, ey]),    #  tau_y - hx f_z <= 0
-                np.concatenate([-hy * ez, ex]),    #  tau_x - hy f_z <= 0
-                np.concatenate([-hy * ez, -ex]),   # -tau_x - hy f_z <= 0
-            ])
-        A = self._lambda_rows(variables, blocks)
+            f, t = variables.lambda_slices[n].start, variables.lambda_slices[n].start + 3
+            rows = A[4 * i:4 * i + 4]
+            rows[0, f:f + 3] = rows[1, f:f + 3] = -hx * R[:, 2]  # -hx f_z
+            rows[2, f:f + 3] = rows[3, f:f + 3] = -hy * R[:, 2]  # -hy f_z
+            rows[0, t:t + 3], rows[1, t:t + 3] = -R[:, 1], R[:, 1]  # -/+ tau_y
+            rows[2, t:t + 3], rows[3, t:t + 3] = R[:, 0], -R[:, 0]  # +/- tau_x
         return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
                         upper=np.zeros(A.shape[0]))
 
@@ -179,11 +177,20 @@ class ForceRegularizer(_PerContact):
     def __init__(self, name=None, weight=1.0, contacts=None, targets=None):
         super().__init__(name, weight, contacts)
         self.targets = dict(targets or {})  # contact name -> target force/wrench
+        self._key = None
+        self._A: np.ndarray | None = None
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
-        blocks = {n: np.eye(robot.contact(n).dim) for n in names}
-        A = self._lambda_rows(variables, blocks)
-        target = np.concatenate([np.asarray(self.targets.get(n, np.zeros(robot.contact(n).dim)),
-                                            dtype=float) for n in names]) if names else np.zeros(0)
-        return TaskRows(qdd=None, lam=A, tau=None, target=target)
+        key = (names, tuple(variables.lambda_slices[n].start for n in names), variables.n_lambda)
+        if self._key != key:  # the selection only changes with the contact set
+            self._A = self._lambda_rows(variables, {n: np.eye(robot.contact(n).dim) for n in names})
+            self._key = key
+        dims = [robot.contact(n).dim for n in names]
+        target = np.zeros(sum(dims))
+        start = 0
+        for n, d in zip(names, dims):
+            if n in self.targets:
+                target[start:start + d] = self.targets[n]
+            start += d
+        return TaskRows(qdd=None, lam=self._A, tau=None, target=target)
