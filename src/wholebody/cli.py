@@ -65,6 +65,22 @@ def _cmd_scenarios(args) -> int:
     return EXIT_OK
 
 
+def _print_metrics(metrics: dict, indent: int) -> None:
+    """Metrics one per line; nested tables indented, floats to 4 significant digits."""
+    pad = " " * indent
+    for key, value in metrics.items():
+        if isinstance(value, dict) and any(isinstance(v, dict) for v in value.values()):
+            print(f"{pad}{key}:")
+            _print_metrics(value, indent + 2)
+            continue
+        if isinstance(value, dict):
+            value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                              for k, v in value.items())
+        elif isinstance(value, float):
+            value = f"{value:.4g}"
+        print(f"{pad}{key}: {value}")
+
+
 def _cmd_run(args) -> int:
     from .robots import load_robot
     from .scenarios import get_scenario
@@ -86,10 +102,7 @@ def _cmd_run(args) -> int:
     status = "SUCCESS" if result.success else "FAILED"
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")
-    for key, value in result.summary()["metrics"].items():
-        if isinstance(value, float):
-            value = f"{value:.4g}"
-        print(f"  {key}: {value}")
+    _print_metrics(result.summary()["metrics"], indent=2)
     for note in result.notes:
         print(f"  note: {note}")
     print(f"wrote {out_dir / 'summary.json'}" +
