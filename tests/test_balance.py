@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from wholebody.control.balance import MomentumBalance
-from wholebody.sim.disturbance import Push
 from wholebody.sim.simulator import Simulator
 
 

@@ -41,7 +41,7 @@ class Mismatch:
             if getattr(self, name) < 0:
                 raise ValueError(f"mismatch.{name} must be >= 0, got {getattr(self, name)}")
         if self.torque_delay < 0 or int(self.torque_delay) != self.torque_delay:
-            raise ValueError(f"mismatch.torque_delay must be a whole number of steps >= 0")
+            raise ValueError("mismatch.torque_delay must be a whole number of steps >= 0")
 
     @property
     def is_exact(self) -> bool:

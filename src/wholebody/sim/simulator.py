@@ -13,9 +13,8 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
-import pinocchio as pin
 
-from ..robot import FREE_FLYER_NQ, Robot, check_vector
+from ..robot import Robot, check_vector
 from . import convert
 from .disturbance import Push
 from .environment import Environment
