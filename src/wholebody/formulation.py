@@ -175,6 +175,7 @@ class Formulation:
                                      "one uses NewtonEuler (tau is eliminated by eq. 14)")
             plan = self._plan = _Plan(key, stack, rows_now, self.size(variables))
         return plan.fill(self, variables, rows_now)
+
     # ------------------------------------------------------------------ analytic level 1
     @staticmethod
     def analytic_first_level(stack: Stack) -> bool:
