@@ -95,6 +95,7 @@ class Robot:
             Contact(spec, self._frame_id(spec.frame, f"contacts '{spec.name}'.frame"))
             for spec in description.contacts)
         self.contact_names = tuple(c.name for c in self.contacts)
+        self._contacts_by_name = {c.name: c for c in self.contacts}
         self.friction = description.friction
 
         self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
@@ -264,10 +265,11 @@ class Robot:
                                     pin.LOCAL_WORLD_ALIGNED).vector.copy()
 
     def contact(self, name: str) -> Contact:
-        for c in self.contacts:
-            if c.name == name:
-                return c
-        raise ValueError(f"contact: unknown contact '{name}'; have {list(self.contact_names)}")
+        try:  # called by several tasks every cycle: a dict, not a search
+            return self._contacts_by_name[name]
+        except KeyError:
+            raise ValueError(f"contact: unknown contact '{name}'; have "
+                             f"{list(self.contact_names)}") from None
 
     # ------------------------------------------------------------------ stacked contact terms
     def stacked_contact_jacobian(self, names: Sequence[str] | None = None) -> np.ndarray:
