@@ -1,0 +1,114 @@
+"""The trunk task of Fahmi et al. 2019 (seed 001, Sect. II-B): a desired wrench at the CoM.
+
+``W_com,d = K Δx + D Δv + ∇V_g + W_ff − W_ext`` (eq. 4): a Cartesian impedance on the CoM position
+and the trunk orientation, gravity compensation, a feed-forward ``M_com v̇_com,d`` and an optional
+external-wrench estimate. The contact forces realise it through ``W_com = J_st,comᵀ F`` (eq. 2):
+for point feet ``W_com = Σ_i [f_i; (p_i − c) × f_i]``, the contact wrench about the CoM.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .base import Task, TaskRows, contact_subset
+
+GRAVITY = 9.81
+
+
+def skew(a: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """[a]x, written into ``out`` (3x3) if given."""
+    out = np.zeros((3, 3)) if out is None else out
+    out[0, 1], out[0, 2] = -a[2], a[1]
+    out[1, 0], out[1, 2] = a[2], -a[0]
+    out[2, 0], out[2, 1] = -a[1], a[0]
+    return out
+
+
+@dataclass
+class TrunkReference:
+    """Desired trunk motion (world axes): CoM position/velocity/acceleration, trunk rotation
+    matrix, angular velocity/acceleration. Any object with these attributes works (e.g. the
+    planner's :class:`~wholebody.planning.trunk.TrunkState`)."""
+
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    angular_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    angular_acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+class TrunkImpedance:
+    """Eq. 4 of Fahmi et al. 2019 with diagonal gains (defaults: Sect. V, K_x = 2000, D_x = 400,
+    K_θ = 1000, D_θ = 200). The orientation error is log3(R_d Rᵀ) in world axes; ``feedforward``
+    switches W_ff off (Assumption 2 of the passivity analysis); ``external_wrench`` is W_ext."""
+
+    def __init__(self, K_x=2000.0, D_x=400.0, K_theta=1000.0, D_theta=200.0,
+                 feedforward: bool = True):
+        self.K_x, self.D_x = np.broadcast_to(K_x, 3).astype(float), np.broadcast_to(D_x, 3).astype(float)
+        self.K_theta = np.broadcast_to(K_theta, 3).astype(float)
+        self.D_theta = np.broadcast_to(D_theta, 3).astype(float)
+        self.feedforward = feedforward
+        self.external_wrench = np.zeros(6)
+        self.last_errors = np.zeros(12)  # [Δx, Δθ, Δv, Δω] of the last call, world axes
+
+    @staticmethod
+    def trunk_state(robot) -> tuple[np.ndarray, np.ndarray]:
+        """(rotation, world angular velocity) of the floating base at the robot's cached state."""
+        R = pin.Quaternion(robot.q[3:7]).normalized().toRotationMatrix()
+        return R, R @ robot.v[3:6]
+
+    def wrench(self, robot, ref, out: np.ndarray | None = None) -> np.ndarray:
+        """W_com,d (6,) = [force; moment about the CoM] for the robot's cached state."""
+        out = np.empty(6) if out is None else out
+        R, omega = self.trunk_state(robot)
+        e = self.last_errors
+        e[0:3] = ref.position - robot.com
+        e[3:6] = pin.log3(ref.rotation @ R.T)
+        e[6:9] = ref.velocity - robot.vcom
+        e[9:12] = ref.angular_velocity - omega
+        out[0:3] = self.K_x * e[0:3] + self.D_x * e[6:9]
+        out[3:6] = self.K_theta * e[3:6] + self.D_theta * e[9:12]
+        out[2] += robot.mass * GRAVITY  # ∇V_g: gravity compensation
+        if self.feedforward:  # W_ff = M_com v̇_com,d with the locked centroidal inertia
+            out[0:3] += robot.mass * np.asarray(ref.acceleration)
+            out[3:6] += robot.data.Ig.inertia @ np.asarray(ref.angular_acceleration)
+        out -= self.external_wrench
+        return out
+
+
+def contact_wrench_map(robot, contacts, out: np.ndarray | None = None) -> np.ndarray:
+    """J_st,comᵀ of eq. 2 for point contacts: the 6 x 3k map from stacked forces to the wrench about
+    the CoM, blocks [I; [p_i − c]x]."""
+    out = np.zeros((6, 3 * len(contacts))) if out is None else out
+    for i, name in enumerate(contacts):
+        c = robot.contact(name)
+        out[0:3, 3 * i:3 * i + 3] = np.eye(3)
+        skew(robot.data.oMf[c.frame_id].translation - robot.com, out[3:6, 3 * i:3 * i + 3])
+    return out
+
+
+class TrunkWrenchTask(Task):
+    """Σ_i [f_i; (p_i − c) × f_i] ≈ W_com,d (Fahmi et al. 2019, eqs. 2, 4, 7a-8) as equality rows over
+    the contact forces (point contacts). ``reference`` is a :class:`TrunkReference`-like object;
+    ``impedance`` a :class:`TrunkImpedance`; weights are per row (√ of the diagonal of Q)."""
+
+    def __init__(self, impedance: TrunkImpedance | None = None, name="trunk wrench", weight=1.0,
+                 contacts=None):
+        super().__init__(name, weight)
+        self.impedance = impedance or TrunkImpedance()
+        self.reference = TrunkReference()
+        self.contacts = None if contacts is None else tuple(contacts)
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        if any(robot.contact(n).dim != 3 for n in names):
+            raise ValueError("TrunkWrenchTask: point contacts (3D forces) only")
+        G = contact_wrench_map(robot, names)
+        A = np.zeros((6, variables.n_lambda))
+        for i, n in enumerate(names):
+            A[:, variables.lambda_slices[n]] = G[:, 3 * i:3 * i + 3]
+        return TaskRows(qdd=None, lam=A, tau=None, target=self.impedance.wrench(robot, self.reference))
