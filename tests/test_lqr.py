@@ -249,6 +249,8 @@ def test_momentum_force_projection(request, which, names, rng):
     for n in names:
         c = robot.contact(n)
         r = robot.data.oMf[c.frame_id].translation - robot.com
+        if c.dim == 3:  # point feet push at the bottom of the foot sphere
+            r = r - np.array([0.0, 0.0, c.spec.radius])
         b = np.zeros((6, c.dim))
         b[:3, :3] = np.eye(3)
         for j in range(3):

@@ -71,26 +71,48 @@ def _moving(robot, q, v, eps):
     return (pin.integrate(robot.model, q, -eps * v), pin.integrate(robot.model, q, eps * v))
 
 
+def _contact_offset(robot, name) -> np.ndarray:
+    """World offset from the contact frame to the contact point at the cached state (a sphere's
+    bottom for point feet with a radius, zero for sole frames)."""
+    c = robot.contact(name)
+    return (np.array([0.0, 0.0, -c.spec.radius]) if c.dim == 3 else np.zeros(3))
+
+
+def _material_point_velocity(robot, name, offset_local) -> np.ndarray:
+    """Velocity [linear(; angular)] of the point fixed in the contact frame at ``offset_local``."""
+    c = robot.contact(name)
+    twist = robot.frame_velocity(c.spec.frame)
+    R = robot.data.oMf[c.frame_id].rotation
+    out = twist.copy()
+    out[:3] += np.cross(twist[3:], R @ offset_local)
+    return out[:c.dim]
+
+
 @pytest.mark.parametrize("name", list(EXPECTED))
 def test_drifts_match_finite_differences(robots, name, rng):
     """Contact drifts J̇v, CoM drift and Ȧ_G v are the time derivatives, at zero acceleration, of the
-    contact-frame velocity, CoM velocity and centroidal momentum (central differences)."""
+    contact-point velocity (the material point under a foot sphere, the sole frame), CoM velocity
+    and centroidal momentum (central differences)."""
     robot = robots[name]
     eps = 1e-6
     q, v = robot.random_state(rng, velocity_scale=0.5)
     robot.update(q, v)
     drifts = {n: robot.contact_drifts[n].copy() for n in robot.contact_names}
+    local = {n: robot.data.oMf[robot.contact(n).frame_id].rotation.T @ _contact_offset(robot, n)
+             for n in robot.contact_names}
+    for n in robot.contact_names:  # the Jacobian maps v to that point's velocity
+        np.testing.assert_allclose(robot.contact_jacobians[n] @ v,
+                                   _material_point_velocity(robot, n, local[n]), atol=1e-10)
     com_drift, agdv, J_com = robot.com_drift.copy(), robot.A_G_dot_v.copy(), robot.J_com.copy()
     samples = []
     for qs in _moving(robot, q, v, eps):
         robot.update(qs, v)
-        samples.append(({n: robot.frame_velocity(robot.contact(n).spec.frame)
+        samples.append(({n: _material_point_velocity(robot, n, local[n])
                          for n in robot.contact_names}, robot.vcom.copy(), robot.h_G.copy()))
     (vel0, vcom0, hg0), (vel1, vcom1, hg1) = samples
     for n in robot.contact_names:
         fd = (vel1[n] - vel0[n]) / (2 * eps)
-        dim = robot.contact(n).dim
-        np.testing.assert_allclose(drifts[n], fd[:dim], rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(drifts[n], fd, rtol=1e-4, atol=1e-4)
     np.testing.assert_allclose(com_drift, (vcom1 - vcom0) / (2 * eps), rtol=1e-4, atol=1e-4)
     np.testing.assert_allclose(agdv, (hg1 - hg0) / (2 * eps), rtol=1e-4, atol=1e-3)
     robot.update(q, v)
@@ -108,7 +130,9 @@ def test_frame_cache_is_per_cycle(robots, rng):
     robot.update(q2, v2)
     J2 = robot.frame_jacobian("lf_foot")
     assert J2 is not J1 and not np.allclose(J1, J2)
-    np.testing.assert_allclose(J2[:3], robot.contact_jacobians["lf_foot"])
+    r = robot.contact("lf_foot").spec.radius  # the contact point is r below the frame origin
+    expected = J2[:3] + np.cross(J2[3:].T, np.array([0.0, 0.0, -r])).T
+    np.testing.assert_allclose(robot.contact_jacobians["lf_foot"], expected, atol=1e-12)
 
 
 @pytest.mark.parametrize("field,bad", [("q", "size"), ("q", "nan"), ("v", "size"), ("v", "inf")])

@@ -228,13 +228,42 @@ class Robot:
         self.contact_drifts = {c.name: self._contact_drift(c) for c in self.contacts}
 
     def _contact_jacobian(self, c: Contact) -> np.ndarray:
+        """Rectangles: the sole frame's 6D Jacobian. Points: the linear Jacobian of the material
+        point under the foot sphere's centre, d = (0, 0, -radius) below it in world axes (for a
+        rolling sphere that point is at rest while the centre moves): J_p = J_lin - [d]x J_ang."""
         J = pin.getFrameJacobian(self.model, self.data, c.frame_id, pin.LOCAL_WORLD_ALIGNED)
-        return J[:3] if c.dim == 3 else J
+        if c.dim == 6:
+            return J
+        if c.spec.radius == 0.0:
+            return J[:3]
+        r = c.spec.radius  # -[d]x J_ang with d = (0, 0, -r): rows (-r J_wy, r J_wx, 0)
+        Jp = J[:3].copy()
+        Jp[0] -= r * J[4]
+        Jp[1] += r * J[3]
+        return Jp
 
     def _contact_drift(self, c: Contact) -> np.ndarray:
+        """J̇v of the same point: a_f + α x d + ω x (ω x d) at zero joint acceleration."""
         acc = pin.getFrameClassicalAcceleration(self.model, self.data, c.frame_id,
                                                 pin.LOCAL_WORLD_ALIGNED)
-        return acc.linear.copy() if c.dim == 3 else acc.vector.copy()
+        if c.dim == 6:
+            return acc.vector.copy()
+        a = acc.linear.copy()
+        if c.spec.radius != 0.0:
+            d = np.array([0.0, 0.0, -c.spec.radius])
+            w = pin.getFrameVelocity(self.model, self.data, c.frame_id,
+                                     pin.LOCAL_WORLD_ALIGNED).angular
+            a += np.cross(acc.angular, d) + np.cross(w, np.cross(w, d))
+        return a
+
+    def contact_point(self, name: str) -> np.ndarray:
+        """World position of a contact's point: the sole frame origin, or the bottom of a foot
+        sphere (frame origin minus radius along world z)."""
+        c = self.contact(name)
+        p = self.data.oMf[c.frame_id].translation.copy()
+        if c.dim == 3:
+            p[2] -= c.spec.radius
+        return p
 
     def frame_jacobian(self, frame: str) -> np.ndarray:
         """6×nv Jacobian [linear; angular] of ``frame`` (LOCAL_WORLD_ALIGNED), cached per cycle."""

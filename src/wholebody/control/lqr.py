@@ -509,7 +509,7 @@ class MomentumLQR:
         """The linearised model (eq. 21) at the robot's current pose for ``contacts``."""
         names = self.contacts if contacts is None else self._check_contacts(robot, contacts)
         dims = tuple(robot.contact(n).dim for n in names)
-        X = np.array([robot.data.oMf[robot.contact(n).frame_id].translation for n in names])
+        X = np.array([robot.contact_point(n) for n in names])
         lam0 = balancing_forces(X, robot.com, robot.mass, dims, self.gravity,
                               weight=contact_cost(dims, self.R))
         return momentum_model(X, robot.com, robot.mass, lam0, self.gravity, dims)
@@ -551,8 +551,7 @@ class MomentumLQR:
         parts = gains.components or ((1.0, gains),)
         lam = np.zeros(gains.n_lambda)
         for w, g in parts:
-            X = np.array([robot.data.oMf[robot.contact(n).frame_id].translation
-                          for n in g.contacts])
+            X = np.array([robot.contact_point(n) for n in g.contacts])
             weight = g.weight if g.weight is not None else contact_cost(g.dims, self.R)
             lam_g = balancing_forces(X, com_ref, robot.mass, g.dims, self.gravity, weight=weight,
                                    hdot=hdot_ref)

@@ -144,6 +144,8 @@ class PassiveWBC:
         self._G = np.zeros((6, self.nf))
         self._normals = np.full((c, 3), np.nan)
         self._swing_targets = np.zeros((c, 3))
+        self._anchors = np.zeros((c, 3))  # stance task (eq. 32): contact points at touchdown
+        self._was_stance = np.zeros(c, dtype=bool)
         self._dual = None
         if single:
             for i in range(c):  # slack columns of the paired rows: row1 - eps <= b, row2 + eps >= b
@@ -202,14 +204,15 @@ class PassiveWBC:
         for i, name in enumerate(self.contacts):
             leg = self._leg[i]
             rf, rr, fi = self._r_feet + 3 * i, self._r_fric + 5 * i, nv + 3 * i
-            Ji = J[3 * i:3 * i + 3]
-            A[rf:rf + 3, :nv] = Ji
-            pos = robot.data.oMf[robot.contact(name).frame_id].translation
-            vel = Ji @ robot.v
             if stance[i]:
+                Ji = J[3 * i:3 * i + 3]  # the contact point (bottom of the foot sphere)
+                A[rf:rf + 3, :nv] = Ji
                 target = -drift[3 * i:3 * i + 3]
+                point = robot.contact_point(name)
+                if not self._was_stance[i]:  # touchdown: x̂_st of eq. 32
+                    self._anchors[i] = point
                 if self.K_st or self.D_st:  # eq. 32: hold the touchdown position
-                    target = target + self.K_st * (plan.touchdown_position[leg] - pos) - self.D_st * vel
+                    target = target + self.K_st * (self._anchors[i] - point) - self.D_st * (Ji @ robot.v)
                 up[n + rf:n + rf + 3] = lo[n + rf:n + rf + 3] = target
                 sense[n + rf:n + rf + 3] = _EQ
                 normal = plan.touchdown_normal[leg]
@@ -228,16 +231,22 @@ class PassiveWBC:
                     P = np.outer(t1, t1) + np.outer(t2, t2)
                     H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * P
             else:
-                # eq. 6: desired swing acceleration; eq. 12: J q̈ = v̇_d − J̇ v
+                # eq. 6: desired acceleration of the foot frame (the planner's swing trajectory);
+                # eq. 12: J q̈ = v̇_d − J̇ v
+                frame = robot.contact(name).spec.frame
+                Ji = robot.frame_jacobian(frame)[:3]
+                A[rf:rf + 3, :nv] = Ji
+                pos = robot.data.oMf[robot.contact(name).frame_id].translation
                 a_d = (plan.foot_acceleration[leg] + K_sw * (plan.foot_position[leg] - pos)
-                       + D_sw * (plan.foot_velocity[leg] - vel))
-                target = a_d - drift[3 * i:3 * i + 3]
+                       + D_sw * (plan.foot_velocity[leg] - Ji @ robot.v))
+                target = a_d - robot.frame_drift(frame)[:3]
                 self._swing_targets[i] = target
                 self._swing_row(i, rf, Ji, target, swing_rows, swing_targets)
                 up[n + rr:n + rr + 5], lo[n + rr:n + rr + 5] = _INF, -_INF
                 sense[n + rr:n + rr + 5] = _FREE
                 up[fi:fi + 3] = lo[fi:fi + 3] = 0.0  # no force on a swing foot
                 sense[fi:fi + 3] = _EQ
+        self._was_stance[:] = stance
         if swing_rows:  # per-direction slacks == weighted least squares (see module docstring)
             Jsw = np.vstack(swing_rows)
             H[:nv, :nv] += self.slack_weight * (Jsw.T @ Jsw)

@@ -31,7 +31,7 @@ def centroidal_map(contact_positions, com: np.ndarray, dims) -> np.ndarray:
 
 def momentum_map(robot, contacts) -> np.ndarray:
     """:func:`centroidal_map` at the robot's cached contact positions and CoM."""
-    positions = [robot.data.oMf[robot.contact(n).frame_id].translation for n in contacts]
+    positions = [robot.contact_point(n) for n in contacts]  # where the forces act
     return centroidal_map(positions, robot.com, [robot.contact(n).dim for n in contacts])
 
 

@@ -85,9 +85,8 @@ def contact_wrench_map(robot, contacts, out: np.ndarray | None = None) -> np.nda
     the CoM, blocks [I; [p_i − c]x]."""
     out = np.zeros((6, 3 * len(contacts))) if out is None else out
     for i, name in enumerate(contacts):
-        c = robot.contact(name)
         out[0:3, 3 * i:3 * i + 3] = np.eye(3)
-        skew(robot.data.oMf[c.frame_id].translation - robot.com, out[3:6, 3 * i:3 * i + 3])
+        skew(robot.contact_point(name) - robot.com, out[3:6, 3 * i:3 * i + 3])
     return out
 
 

@@ -1,0 +1,132 @@
+"""Quasi-static baseline of Fahmi et al. 2019 (their ref. [13], Focchi et al. 2017), Sect. V-E.
+
+The desired CoM wrench (the same trunk impedance, eq. 4) is distributed to the stance feet by a QP
+over the contact forces only — min ‖G F − W_com,d‖²_Q + ‖F‖²_R subject to the friction pyramid and
+normal-force bounds — and mapped to torques by τ = g_j(q) − J_st,jᵀ F: gravity compensation of the
+legs plus the static force map, with no joint accelerations and no leg dynamics. Swing legs follow a
+Cartesian impedance τ = g_j + J_swᵀ (K Δx + D Δv) (eq. 5 without its feed-forward). Same planner,
+same references, same limits clipping as :class:`~wholebody.control.passive.PassiveWBC`.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import daqp
+import numpy as np
+import pinocchio as pin
+
+from ..formulation import Solution, TaskReport
+from ..robot import Robot
+from ..tasks.contact import friction_faces, tangent_basis
+from ..tasks.limits import TorqueLimits
+from ..tasks.wrench import TrunkImpedance, contact_wrench_map
+from .passive import default_planner, measured_feet
+
+log = logging.getLogger(__name__)
+
+_EQ, _FREE = 5, 0
+
+
+class QuasiStaticController:
+    """Centroidal force distribution + static torque map: ``compute(q, v, t) -> Solution``.
+
+    ``swing_K``/``swing_D``: Cartesian swing-leg stiffness (N/m) and damping (N s/m).
+    """
+
+    def __init__(self, robot: Robot, planner=None, mu: float | None = None, f_min: float = 0.0,
+                 f_max: float = 2000.0, impedance: TrunkImpedance | None = None,
+                 Q=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), R_force: float = 1e-4,
+                 tangential_weight: float = 1e-3, swing_K: float = 2000.0, swing_D: float = 50.0,
+                 torque_limit_override: dict[str, float] | None = None):
+        if any(c.dim != 3 for c in robot.contacts):
+            raise ValueError(f"robot '{robot.name}': the quasi-static controller needs point feet")
+        self.robot = robot
+        self.contacts = robot.contact_names
+        self.planner = planner if planner is not None else default_planner(robot)
+        self._leg = [tuple(self.planner.legs).index(n) for n in self.contacts]
+        self.mu = robot.friction if mu is None else float(mu)
+        self.f_min, self.f_max = f_min, f_max
+        self.impedance = impedance or TrunkImpedance()
+        self.Q = np.broadcast_to(np.asarray(Q, dtype=float), 6).copy()
+        self.R_force, self.tangential_weight = R_force, tangential_weight
+        self.swing_K, self.swing_D = swing_K, swing_D
+        self.torque_limits = TorqueLimits(upper_override=torque_limit_override)
+        c = len(self.contacts)
+        self.nf = 3 * c
+        self.A = np.zeros((5 * c, self.nf))
+        self.H = np.zeros((self.nf, self.nf))
+        self.upper = np.zeros(self.nf + 5 * c)
+        self.lower = np.zeros(self.nf + 5 * c)
+        self.sense = np.zeros(self.nf + 5 * c, dtype=np.int32)
+        self._G = np.zeros((6, self.nf))
+        self.last_tau: np.ndarray | None = None
+        self.last_plan = None
+
+    def compute(self, q, v, t: float = 0.0) -> Solution:
+        robot = self.robot
+        robot.update(q, v)
+        plan = self.planner.update(t, feet=measured_feet(robot, self.planner.legs))
+        return self.solve(plan)
+
+    def solve(self, plan) -> Solution:
+        t0 = time.perf_counter()
+        self.last_plan = plan
+        robot, nf, n = self.robot, self.nf, self.nf
+        J = robot.stacked_contact_jacobian(self.contacts)
+        G = contact_wrench_map(robot, self.contacts, self._G)
+        W_d = self.impedance.wrench(robot, plan.trunk)
+        GQ = G.T * self.Q
+        H = self.H
+        H[:] = GQ @ G
+        H.flat[::nf + 1] += self.R_force
+        g = -GQ @ W_d
+        up, lo, sense = self.upper, self.lower, self.sense
+        stance = plan.contact[self._leg]
+        for i in range(len(self.contacts)):
+            leg, fi, rr = self._leg[i], 3 * i, 5 * i
+            if stance[i]:
+                normal = plan.touchdown_normal[leg]
+                t1, t2, nn = tangent_basis(normal)
+                self.A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, self.mu)
+                self.A[rr + 4, fi:fi + 3] = nn
+                up[n + rr:n + rr + 4], lo[n + rr:n + rr + 4] = 0.0, -np.inf
+                up[n + rr + 4], lo[n + rr + 4] = self.f_max, self.f_min
+                up[fi:fi + 3], lo[fi:fi + 3] = np.inf, -np.inf
+                sense[fi:fi + 3] = _FREE
+                H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * (np.outer(t1, t1) + np.outer(t2, t2))
+            else:
+                up[n + rr:n + rr + 5], lo[n + rr:n + rr + 5] = np.inf, -np.inf
+                up[fi:fi + 3] = lo[fi:fi + 3] = 0.0
+                sense[fi:fi + 3] = _EQ
+        x, _, flag, _ = daqp.solve(H, g, self.A, up, lo, sense)
+        t1 = time.perf_counter()
+        ok = flag in (1, 2) and np.all(np.isfinite(x))
+        F = np.array(x) if ok else np.zeros(nf)
+        gravity = pin.computeGeneralizedGravity(robot.model, robot.data, robot.q)[6:]
+        tau = gravity - J[:, 6:].T @ F
+        swing_errors = []
+        for i, name in enumerate(self.contacts):
+            if stance[i]:
+                continue
+            leg = self._leg[i]
+            Ji = robot.frame_jacobian(robot.contact(name).spec.frame)[:3]
+            pos = robot.data.oMf[robot.contact(name).frame_id].translation
+            error = plan.foot_position[leg] - pos
+            force = self.swing_K * error + self.swing_D * (plan.foot_velocity[leg] - Ji @ robot.v)
+            tau += Ji[:, 6:].T @ force  # eq. 5 (no feed-forward): only this leg's columns are nonzero
+            swing_errors.append(TaskReport(f"swing {name}", 1, "eq", 3, float(np.linalg.norm(error))))
+        lo_tau, hi_tau = self.torque_limits.bounds(robot)
+        status = "solved" if ok else f"daqp exit flag {flag}: zero forces"
+        if not ok:
+            log.warning("quasi-static cycle %d: %s", robot.cycle, status)
+        tau = np.clip(tau, lo_tau, hi_tau)
+        self.last_tau = tau
+        forces = {name: F[3 * i:3 * i + 3] for i, name in enumerate(self.contacts) if stance[i]}
+        wrench_error = G @ F - W_d
+        reports = [TaskReport("trunk wrench", 1, "eq", 6, float(np.linalg.norm(wrench_error))),
+                   *swing_errors]
+        return Solution(qdd=np.zeros(robot.nv), lam=F, tau=tau, forces=forces, ok=ok,
+                        status=status, level_costs=np.array([float(wrench_error @ wrench_error)]),
+                        tasks=reports, timings={"assemble": t1 - t0}, contacts=tuple(forces))

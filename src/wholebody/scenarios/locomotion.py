@@ -1,0 +1,176 @@
+"""Closed-loop quadruped locomotion runs shared by the scenarios of Fahmi et al. 2019 (seed 001, Sect. V).
+
+:func:`run_gait` builds a gait planner (crawl, trot or stand) with a velocity command, one of the
+two controllers (``passive``: :class:`~wholebody.control.passive.PassiveWBC`; ``quasi-static``: the
+baseline of Sect. V-E), and a MuJoCo twin with the given environment; it runs the WBC at
+``control_period`` (250 Hz, Sect. V) with the simulator at 1 kHz holding the last torque, and
+records a :class:`GaitLog`. Everything measured for success criteria (feet slip, fall, torques
+sent) comes from the simulator, not from the controller's own model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from ..control.passive import PassiveWBC
+from ..control.quasi_static import QuasiStaticController
+from ..planning.gait import crawl, stand, trot
+from ..planning.planner import GaitPlanner
+from ..planning.terrain import Terrain
+from ..planning.trunk import VelocityCommand
+from ..sim.environment import Environment
+from ..sim.simulator import Simulator
+from .loop import run_closed_loop
+
+CONTROLLERS = ("passive", "quasi-static")
+GAITS = ("crawl", "trot", "stand")
+FALL_HEIGHT = 0.3  # base closer than this to the planner's terrain under it (m): fallen
+FALL_TILT = np.radians(45.0)
+
+
+def make_schedule(gait: str, start: float = 1.0):
+    if gait == "crawl":
+        return crawl(start=start)
+    if gait == "trot":
+        return trot(start=start)
+    if gait == "stand":
+        return stand()
+    raise ValueError(f"gait: expected one of {GAITS}, got '{gait}'")
+
+
+def make_controller(robot, name: str, planner, **options):
+    if name == "passive":
+        return PassiveWBC(robot, planner, **options)
+    if name == "quasi-static":
+        return QuasiStaticController(robot, planner, **options)
+    raise ValueError(f"controller: expected one of {CONTROLLERS}, got '{name}'")
+
+
+@dataclass
+class GaitLog:
+    """One row per control cycle. Errors are reference minus measured (world axes): CoM position,
+    trunk orientation (log3(R_d Rᵀ)); ``feet`` are the simulator's foot-frame positions; ``stance``
+    the planner's contact flags; ``tau``/``tau_min``/``tau_max`` the command and its limits;
+    ``contact_speed`` the horizontal speed of each foot's material contact point (zero while a
+    foot sphere rolls, nonzero when it slips)."""
+
+    t: list = field(default_factory=list)
+    com_error: list = field(default_factory=list)
+    orientation_error: list = field(default_factory=list)
+    com: list = field(default_factory=list)
+    com_ref: list = field(default_factory=list)
+    feet: list = field(default_factory=list)
+    stance: list = field(default_factory=list)
+    tau: list = field(default_factory=list)
+    tau_min: list = field(default_factory=list)
+    tau_max: list = field(default_factory=list)
+    ok: list = field(default_factory=list)
+    swing_error: list = field(default_factory=list)
+    cycle_time: list = field(default_factory=list)
+    forces: list = field(default_factory=list)
+    contact_speed: list = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.asarray(v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class GaitRun:
+    log: dict[str, np.ndarray]
+    fell: bool
+    failures: int
+    distance: float
+    controller: object
+    sim: Simulator
+
+    def tracking(self, t_from: float = 0.0) -> dict[str, float]:
+        """l2 norms of the linear and angular trunk errors (Fig. 5): RMS and max over t ≥ t_from."""
+        sel = self.log["t"] >= t_from
+        ex = np.linalg.norm(self.log["com_error"][sel], axis=1)
+        eth = np.linalg.norm(self.log["orientation_error"][sel], axis=1)
+        return {"linear_rms_m": float(np.sqrt(np.mean(ex ** 2))), "linear_max_m": float(ex.max()),
+                "angular_rms_rad": float(np.sqrt(np.mean(eth ** 2))),
+                "angular_max_rad": float(eth.max())}
+
+    def stance_slip(self, skip: float = 0.02) -> np.ndarray:
+        """Per leg, the largest distance slipped during one stance phase: the integral of the
+        contact point's horizontal speed, from ``skip`` s after touchdown (the impact) to lift-off."""
+        t, speed, stance = self.log["t"], self.log["contact_speed"], self.log["stance"]
+        dt = np.diff(t, prepend=t[0])
+        worst = np.zeros(speed.shape[1])
+        for leg in range(speed.shape[1]):
+            slipped, since = 0.0, None
+            for k in range(len(t)):
+                if not stance[k, leg]:
+                    since, slipped = None, 0.0
+                    continue
+                since = t[k] if since is None else since
+                if t[k] - since >= skip:
+                    slipped += speed[k, leg] * dt[k]
+                    worst[leg] = max(worst[leg], slipped)
+        return worst
+
+
+def run_gait(robot, controller: str = "passive", gait: str = "crawl",
+             command: VelocityCommand | None = None, duration: float = 10.0,
+             environment: Environment | None = None, terrain: Terrain | None = None,
+             control_period: float = 0.004, controller_options: dict | None = None,
+             planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
+             on_cycle=None) -> GaitRun:
+    """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
+
+    ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
+    sees ``environment``. ``on_cycle(t, result, ctrl, sim)`` is called after every WBC cycle.
+    """
+    schedule = make_schedule(gait, start)
+    planner = GaitPlanner.for_robot(robot, schedule, command, terrain, t0=0.0,
+                                    **(planner_options or {}))
+    options = dict(controller_options or {})
+    if controller == "passive":
+        options.setdefault("control_period", control_period)
+    ctrl = make_controller(robot, controller, planner, **options)
+    sim = Simulator(robot, environment)
+    log = GaitLog()
+    base0 = sim.state()[0][:3].copy()
+    fell = False
+    legs = planner.legs
+    frame_ids = [robot.model.getFrameId(robot.contact(n).spec.frame) for n in legs]
+    pin_data = robot.model.createData()
+
+    def observe(t, result):
+        nonlocal fell
+        plan = ctrl.last_plan
+        q, v = sim.state()
+        pin.framesForwardKinematics(robot.model, pin_data, q)
+        imp = ctrl.impedance
+        log.t.append(t)
+        log.com_error.append(imp.last_errors[0:3].copy())
+        log.orientation_error.append(imp.last_errors[3:6].copy())
+        log.com.append(robot.com.copy())
+        log.com_ref.append(np.array(plan.trunk.position))
+        log.feet.append(np.array([pin_data.oMf[f].translation for f in frame_ids]))
+        log.stance.append(plan.contact.copy())
+        log.tau.append(result.tau.copy())
+        lo, hi = ctrl.torque_limits.bounds(robot)
+        log.tau_min.append(lo)
+        log.tau_max.append(hi)
+        log.ok.append(result.ok)
+        log.cycle_time.append(sum(result.timings.get(k, 0.0) for k in ("assemble", "solve")))
+        log.swing_error.append(max((r.error for r in result.tasks if r.name.startswith("swing")),
+                                   default=0.0))
+        log.forces.append(np.array(result.lam))
+        log.contact_speed.append([np.linalg.norm((robot.contact_jacobians[n] @ robot.v)[:2])
+                                  for n in legs])
+        tilt = np.arccos(np.clip(pin.Quaternion(q[3:7]).toRotationMatrix()[2, 2], -1, 1))
+        if q[2] - planner.terrain.height(q[0], q[1]) < FALL_HEIGHT or tilt > FALL_TILT:
+            fell = True
+        if on_cycle is not None:
+            on_cycle(t, result, ctrl, sim)
+
+    failures = run_closed_loop(sim, ctrl, duration, control_period=control_period,
+                               progress=progress, on_result=observe)
+    q, _ = sim.state()
+    return GaitRun(log.arrays(), fell, failures, float(q[0] - base0[0]), ctrl, sim)
