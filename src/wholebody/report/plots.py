@@ -40,3 +40,27 @@ def time_series_figure(path: Path, t: np.ndarray,
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def grouped_bar_figure(path: Path, groups: Sequence[str], series: dict[str, Sequence[float]],
+                       title: str = "", ylabel: str = "") -> Path:
+    """Grouped bars: one group per entry of ``groups``, one bar per ``series`` (label -> values)."""
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.4 * len(groups) + 2.0), 3.4))
+    width = 0.8 / max(1, len(series))
+    x = np.arange(len(groups))
+    for i, (label, values) in enumerate(series.items()):
+        bars = ax.bar(x + (i - (len(series) - 1) / 2) * width, values, width, label=label)
+        ax.bar_label(bars, fmt="%.0f", fontsize=7)
+    ax.set_xticks(x, groups)
+    if ylabel:
+        ax.set_ylabel(ylabel, fontsize=8)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
