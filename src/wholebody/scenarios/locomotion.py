@@ -119,15 +119,18 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              environment: Environment | None = None, terrain: Terrain | None = None,
              control_period: float = 0.004, controller_options: dict | None = None,
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
-             on_cycle=None) -> GaitRun:
+             on_cycle=None, planner=None) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
     sees ``environment``. ``on_cycle(t, result, ctrl, sim)`` is called after every WBC cycle.
+    ``planner``: a ready-made planner (e.g. with foothold adjustment or its own trunk terrain) used
+    instead of building one; ``gait``, ``command``, ``terrain``, ``planner_options`` and ``start``
+    are then ignored.
     """
-    schedule = make_schedule(gait, start)
-    planner = GaitPlanner.for_robot(robot, schedule, command, terrain, t0=0.0,
-                                    **(planner_options or {}))
+    if planner is None:
+        planner = GaitPlanner.for_robot(robot, make_schedule(gait, start), command, terrain,
+                                        t0=0.0, **(planner_options or {}))
     options = dict(controller_options or {})
     if controller == "passive":
         options.setdefault("control_period", control_period)
