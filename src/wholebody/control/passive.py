@@ -120,6 +120,9 @@ class PassiveWBC:
         self.joint_limits = JointAccelerationLimits(mode="braking", horizon=10 * control_period)
         self.control_period = control_period
         self._allocate()
+        self._R_diagonal = np.zeros(self.n)
+        self._R_diagonal[:robot.nv] = R_qdd
+        self._R_diagonal[robot.nv:robot.nv + self.nf] = R_force
         self.last_tau: np.ndarray | None = None
         self.last_plan = None
 
@@ -188,8 +191,7 @@ class PassiveWBC:
         sense[:n] = _FREE
         # cost: ‖u‖²_R, trunk wrench (eqs. 7a, 8), regulariser
         H[:] = 0.0
-        H.flat[::n + 1][:nv] = self.R_qdd
-        H.flat[::n + 1][nv:nv + nf] = self.R_force
+        H.flat[::n + 1] = self._R_diagonal  # (flat-iterator assignment writes in place)
         g[:] = 0.0
         G = contact_wrench_map(robot, self.contacts, self._G)
         W_d = self.impedance.wrench(robot, plan.trunk)
@@ -297,6 +299,7 @@ class PassiveWBC:
                 x, _, flag, info = daqp.solve(*args)
         else:
             x, _, flag, info = daqp.solve(*args)
+        self.last_x = x  # the raw QP solution (slack variables last in the single-slack layout)
         if flag in _DAQP_OK:
             self._dual = info["lam"]
         else:
@@ -336,3 +339,51 @@ class PassiveWBC:
         return Solution(qdd=qdd, lam=F, tau=tau, forces=forces, ok=ok, status=status,
                         level_costs=np.array([float(wrench_error @ (self.Q * wrench_error))]),
                         tasks=reports, timings=timings, contacts=tuple(forces))
+
+    # ------------------------------------------------------------------ the same problem as a stack
+    def as_stack(self, plan):
+        """The QP of :meth:`solve` for ``plan`` as a two-level stack of library tasks — hard
+        constraints, then the weighted objective — for ``Formulation.solve(method="weighted")``.
+        Returns (stack, variables). Needs a prior :meth:`solve` on the same plan (stance anchors).
+        The single-slack mode has no stack form (its cost is an ∞-norm, not a weighted task)."""
+        from ..formulation import Stack
+        from ..tasks import (ContactConstraint, ForceRegularizer, FrameTask, FrictionCone,
+                             NewtonEuler, NormalForceBounds)
+        from ..tasks.regularization import (AccelerationRegularizer, ContactTorqueRegularizer,
+                                            TangentialForceRegularizer)
+        from ..tasks.wrench import TrunkWrenchTask
+        from ..variables import Variables
+        if self.swing_slack == "single":
+            raise ValueError("swing_slack: 'single' has no two-level stack form")
+        robot = self.robot
+        stance = [n for i, n in enumerate(self.contacts) if plan.contact[self._leg[i]]]
+        swing = [(i, n) for i, n in enumerate(self.contacts) if not plan.contact[self._leg[i]]]
+        normals = {n: plan.touchdown_normal[self._leg[self.contacts.index(n)]] for n in stance}
+        contact = ContactConstraint(contacts=stance, kp=self.K_st, kd=self.D_st)
+        for n in stance:  # the task anchors frame origins; ours are the sphere bottoms
+            i = self.contacts.index(n)
+            contact.anchors[n] = self._anchors[i] + [0.0, 0.0, robot.contact(n).spec.radius]
+        hard = [NewtonEuler(), contact, FrictionCone(self.mu, contacts=stance, normals=normals),
+                NormalForceBounds(self.f_min, self.f_max, contacts=stance, normals=normals),
+                self.torque_limits, self.joint_limits]
+        wrench = TrunkWrenchTask(self.impedance, weight=np.sqrt(self.Q), contacts=stance)
+        wrench.reference = plan.trunk
+        objective = [wrench, AccelerationRegularizer(weight=np.sqrt(self.R_qdd)),
+                     ForceRegularizer(weight=np.sqrt(self.R_force), contacts=stance)]
+        if self.regularization == "torque":
+            objective.append(ContactTorqueRegularizer(weight=np.sqrt(self.torque_weights),
+                                                      contacts=stance))
+        elif self.tangential_weight:
+            objective.append(TangentialForceRegularizer(weight=np.sqrt(self.tangential_weight),
+                                                        contacts=stance, normals=normals))
+        for i, n in swing:
+            leg = self._leg[i]
+            task = FrameTask(robot.contact(n).spec.frame, kp=self.swing.K, kd=self.swing.D,
+                             mask="position", name=f"swing {n}",
+                             weight=1.0 if self.swing_slack == "none" else np.sqrt(self.slack_weight))
+            task.position = np.array(plan.foot_position[leg], dtype=float)
+            task.velocity[:3] = plan.foot_velocity[leg]
+            task.acceleration[:3] = plan.foot_acceleration[leg]
+            (hard if self.swing_slack == "none" else objective).append(task)
+        return Stack([hard, objective]), Variables(robot, stance)
+

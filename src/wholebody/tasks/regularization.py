@@ -1,0 +1,53 @@
+"""Regularisers of the decision vector: the ‖u‖²_R term of Fahmi et al. 2019, eq. 7a, and the two
+force-regularisation schemes of their Sect. V-D, as equality tasks toward zero."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..robot import FREE_FLYER_NV
+from .base import Task, TaskRows, contact_subset
+from .contact import WORLD_UP, tangent_basis
+
+
+class AccelerationRegularizer(Task):
+    """q̈ ≈ 0 (all nv rows, base included)."""
+
+    def rows(self, robot, variables):
+        return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None, target=np.zeros(robot.nv))
+
+
+class TangentialForceRegularizer(Task):
+    """Tangential components of point-contact forces ≈ 0: forces near the cone normals (Sect. V-D,
+    "robustness to uncertainties in the friction parameters"). 2 rows per contact."""
+
+    def __init__(self, name=None, weight=1.0, contacts=None, normals=None):
+        super().__init__(name, weight)
+        self.contacts = None if contacts is None else tuple(contacts)
+        self.normals = dict(normals or {})
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        A = np.zeros((2 * len(names), variables.n_lambda))
+        for i, n in enumerate(names):
+            t1, t2, _ = tangent_basis(np.asarray(self.normals.get(n, WORLD_UP), dtype=float))
+            sl = variables.lambda_slices[n]
+            A[2 * i, sl.start:sl.start + 3], A[2 * i + 1, sl.start:sl.start + 3] = t1, t2
+        return TaskRows(qdd=None, lam=A, tau=None, target=np.zeros(A.shape[0]))
+
+
+class ContactTorqueRegularizer(Task):
+    """Joint torques of the contact forces ≈ 0, per-joint weights (Sect. V-D, footnote 16:
+    R_F = J_st,j R_τ J_st,jᵀ): rows −J_st,jᵀ λ; ``weight`` is √R_τ per joint."""
+
+    def __init__(self, name=None, weight=1.0, contacts=None):
+        super().__init__(name, weight)
+        self.contacts = None if contacts is None else tuple(contacts)
+
+    def rows(self, robot, variables):
+        names = contact_subset(variables, self.contacts)
+        A = np.zeros((robot.na, variables.n_lambda))
+        for n in names:
+            sl = variables.lambda_slices[n]
+            A[:, sl] = -robot.contact_jacobians[n][:, FREE_FLYER_NV:].T
+        return TaskRows(qdd=None, lam=A, tau=None, target=np.zeros(robot.na))
