@@ -249,11 +249,14 @@ class Robot:
         if c.dim == 6:
             return acc.vector.copy()
         a = acc.linear.copy()
-        if c.spec.radius != 0.0:
-            d = np.array([0.0, 0.0, -c.spec.radius])
+        r = c.spec.radius
+        if r != 0.0:  # d = (0, 0, -r), written out (np.cross costs ~10 µs on 3-vectors)
+            al = acc.angular
             w = pin.getFrameVelocity(self.model, self.data, c.frame_id,
                                      pin.LOCAL_WORLD_ALIGNED).angular
-            a += np.cross(acc.angular, d) + np.cross(w, np.cross(w, d))
+            a[0] += -r * al[1] - r * w[0] * w[2]  # α x d + ω x (ω x d) = α x d + ω(ω·d) − d|ω|²
+            a[1] += r * al[0] - r * w[1] * w[2]
+            a[2] += r * (w[0] * w[0] + w[1] * w[1])
         return a
 
     def contact_point(self, name: str) -> np.ndarray:

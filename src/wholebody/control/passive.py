@@ -145,7 +145,9 @@ class PassiveWBC:
         self.lower = np.zeros(self.n + self.m)
         self.sense = np.zeros(self.n + self.m, dtype=np.int32)
         self._G = np.zeros((6, self.nf))
-        self._normals = np.full((c, 3), np.nan)
+        self._normals = np.full((c, 3), np.nan)  # friction rows are rebuilt when these change
+        self._mu = np.full(c, np.nan)
+        self._tangential = np.zeros((c, 3, 3))
         self._swing_targets = np.zeros((c, 3))
         self._anchors = np.zeros((c, 3))  # stance task (eq. 32): contact points at touchdown
         self._was_stance = np.zeros(c, dtype=bool)
@@ -182,7 +184,7 @@ class PassiveWBC:
         r = self._r_tau
         A[r:r + na, :nv] = M[6:]
         A[r:r + na, nv:nv + nf] = -J[:, 6:].T
-        tau_lo, tau_hi = self.torque_limits.bounds(robot)
+        tau_lo, tau_hi = self._tau_bounds = self.torque_limits.bounds(robot)
         up[n + r:n + r + na] = tau_hi - h[6:]
         lo[n + r:n + r + na] = tau_lo - h[6:]
         # eqs. 16-18: joint accelerations as simple bounds; base free
@@ -218,10 +220,12 @@ class PassiveWBC:
                 up[n + rf:n + rf + 3] = lo[n + rf:n + rf + 3] = target
                 sense[n + rf:n + rf + 3] = _EQ
                 normal = plan.touchdown_normal[leg]
-                if not np.array_equal(normal, self._normals[i]):
+                if not np.array_equal(normal, self._normals[i]) or self._mu[i] != self.mu:
                     A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, self.mu)
-                    A[rr + 4, fi:fi + 3] = tangent_basis(normal)[2]
-                    self._normals[i] = normal
+                    t1, t2, nn = tangent_basis(normal)
+                    A[rr + 4, fi:fi + 3] = nn
+                    self._tangential[i] = np.outer(t1, t1) + np.outer(t2, t2)
+                    self._normals[i], self._mu[i] = normal, self.mu
                 up[n + rr:n + rr + 4], lo[n + rr:n + rr + 4] = 0.0, -_INF
                 up[n + rr + 4], lo[n + rr + 4] = self.f_max, self.f_min
                 sense[n + rr:n + rr + 5] = _FREE
@@ -229,9 +233,7 @@ class PassiveWBC:
                 if self.swing_slack == "single":
                     self._no_slack(i)
                 if self.regularization == "force-normal":
-                    t1, t2, _ = tangent_basis(normal)
-                    P = np.outer(t1, t1) + np.outer(t2, t2)
-                    H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * P
+                    H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * self._tangential[i]
             else:
                 # eq. 6: desired acceleration of the foot frame (the planner's swing trajectory);
                 # eq. 12: J q̈ = v̇_d − J̇ v
@@ -308,7 +310,7 @@ class PassiveWBC:
 
     def _solution(self, x, flag, iterations, J, W_d, G, plan, timings) -> Solution:
         robot, nv, nf = self.robot, self.robot.nv, self.nf
-        tau_lo, tau_hi = self.torque_limits.bounds(robot)
+        tau_lo, tau_hi = self._tau_bounds
         ok = flag in _DAQP_OK and np.all(np.isfinite(x))
         if ok:
             qdd, F = x[:nv].copy(), x[nv:nv + nf].copy()

@@ -1,0 +1,108 @@
+"""Per-cycle time of the passive WBC (Fahmi et al. 2019 Sect. V-A: QP 90-110 µs, 120-150 µs with
+the swing slacks, C++ on an i5; issue target here: full cycle median <= 60 µs, slacks adding <= 10 %).
+
+States (q, v, plan) are recorded from closed-loop HyQ crawl and trot runs in the twin, then replayed:
+full cycle = Robot.update + assembly + DAQP solve + τ (eq. 19); the QP time is DAQP's own. Slack
+modes: per-direction (a weighted least-squares term, no variables), single (one slack variable per
+swing foot + 6 rows), none (hard swing equality). For reference the same QP through the generic
+two-level Formulation (``as_stack``, method "weighted"). A benchmark, not a test.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_passive.py [--cycles 1500] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import time  # noqa: E402
+from types import SimpleNamespace  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import wholebody as wb  # noqa: E402
+from wholebody.control.passive import PassiveWBC  # noqa: E402
+from wholebody.formulation import Formulation  # noqa: E402
+from wholebody.planning.trunk import VelocityCommand  # noqa: E402
+from wholebody.scenarios.locomotion import run_gait  # noqa: E402
+
+
+def record(robot, gait: str, cycles: int):
+    """(q, v, plan) of every WBC cycle of a closed-loop run (250 Hz)."""
+    states = []
+    command = (VelocityCommand.speed_ramp(0.04, 0.15, 1.0, 6.0) if gait == "crawl"
+               else VelocityCommand.speed_ramp(0.0, 0.3, 1.0, 4.0))
+
+    def keep(t, result, ctrl, sim):
+        q, v = sim.state()
+        states.append((q, v, ctrl.last_plan.copy()))
+
+    run_gait(robot, "passive", gait, command, duration=cycles * 0.004 + 0.004, on_cycle=keep)
+    return states[:cycles]
+
+
+def stats(us: np.ndarray) -> str:
+    return (f"median {np.median(us):6.0f}  p95 {np.percentile(us, 95):6.0f}  "
+            f"p99 {np.percentile(us, 99):6.0f}  max {us.max():6.0f} µs")
+
+
+def time_dedicated(robot, states, swing_slack: str):
+    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
+                     swing_slack=swing_slack)
+    full, qp, update = [], [], []
+    for q, v, plan in states:
+        t0 = time.perf_counter()
+        robot.update(q, v)
+        t1 = time.perf_counter()
+        sol = wbc.solve(plan)
+        t2 = time.perf_counter()
+        update.append(t1 - t0)
+        full.append(t2 - t0)
+        qp.append(sol.timings["solve"])
+    return np.array(update) * 1e6, np.array(full) * 1e6, np.array(qp) * 1e6
+
+
+def time_stack(robot, states):
+    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names))
+    formulation = Formulation(robot)
+    full = []
+    for q, v, plan in states:
+        robot.update(q, v)
+        wbc.solve(plan)  # anchors for the stance task
+        stack, variables = wbc.as_stack(plan)
+        t0 = time.perf_counter()
+        robot.update(q, v)
+        formulation.solve(stack, variables, method="weighted", backend="daqp", diagnostics=False)
+        full.append(time.perf_counter() - t0)
+    return np.array(full) * 1e6
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cycles", type=int, default=1500)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    robot = wb.load_robot("hyq")
+    for gait in ("crawl", "trot"):
+        states = record(robot, gait, args.cycles)
+        swinging = sum(not p.contact.all() for _, _, p in states)
+        print(f"\n== HyQ {gait}: {len(states)} cycles ({swinging} with a swing leg) ==")
+        medians = {}
+        for rep in range(args.repeat):
+            for mode in ("per-direction", "single", "none"):
+                update, full, qp = time_dedicated(robot, states, mode)
+                medians.setdefault(mode, []).append(np.median(full))
+                print(f"[{rep}] {mode:14s} full cycle {stats(full)} | QP {np.median(qp):5.0f}"
+                      f" | update {np.median(update):4.0f}")
+        base = np.median(medians["none"])
+        for mode, values in medians.items():
+            print(f"median of medians {mode:14s} {np.median(values):6.0f} µs "
+                  f"({np.median(values) / base:.2f}x hard swing)")
+        stack = time_stack(robot, states[:max(200, args.cycles // 5)])
+        print(f"generic Formulation, same QP (weighted) {stats(stack)}")
+
+
+if __name__ == "__main__":
+    main()
