@@ -15,6 +15,7 @@ Conventions (Pinocchio's, everywhere inside the library):
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -51,9 +52,10 @@ def check_vector(value, size: int, field: str) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if arr.ndim != 1 or arr.shape[0] != size:
         raise ValueError(f"{field}: expected a vector of size {size}, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not math.isfinite(arr.sum()):  # one reduction on the fast path (called every cycle)
         bad = np.flatnonzero(~np.isfinite(arr))
-        raise ValueError(f"{field}: contains NaN or inf at indices {bad.tolist()}")
+        if bad.size:  # (a finite vector whose sum overflows is accepted)
+            raise ValueError(f"{field}: contains NaN or inf at indices {bad.tolist()}")
     return arr
 
 
@@ -96,6 +98,10 @@ class Robot:
             for spec in description.contacts)
         self.contact_names = tuple(c.name for c in self.contacts)
         self._contacts_by_name = {c.name: c for c in self.contacts}
+        self._contact_index = {c.name: i for i, c in enumerate(self.contacts)}
+        starts = np.cumsum([0] + [c.dim for c in self.contacts])
+        self._contact_slices = [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:])]
+        self._contact_rows = int(starts[-1])
         self.friction = description.friction
 
         self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
@@ -201,7 +207,7 @@ class Robot:
         """
         q = check_vector(q, self.nq, "q")
         v = check_vector(v, self.nv, "v")
-        quat_norm = np.linalg.norm(q[3:7])
+        quat_norm = math.sqrt(q[3] * q[3] + q[4] * q[4] + q[5] * q[5] + q[6] * q[6])
         if abs(quat_norm - 1.0) > 1e-3:
             raise ValueError(f"q: base quaternion q[3:7] must be unit, has norm {quat_norm:.6f}")
         model, data = self.model, self.data
@@ -224,8 +230,27 @@ class Robot:
         self.h_G = data.hg.vector.copy()
         self.A_G_dot_v = dh.vector.copy()
         self.com_drift = self.A_G_dot_v[:3] / self.mass
-        self.contact_jacobians = {c.name: self._contact_jacobian(c) for c in self.contacts}
-        self.contact_drifts = {c.name: self._contact_drift(c) for c in self.contacts}
+        self._update_contacts()
+
+    def _update_contacts(self) -> None:
+        """Contact Jacobians, drifts and points of every contact, filled into one stacked array
+        per cycle (``contact_jacobians[name]`` are views of it, so stacking all contacts is free)."""
+        J = np.empty((self._contact_rows, self.nv))
+        drift = np.empty(self._contact_rows)
+        points = np.empty((len(self.contacts), 3))
+        for i, (c, rows) in enumerate(zip(self.contacts, self._contact_slices)):
+            J[rows] = self._contact_jacobian(c)
+            drift[rows] = self._contact_drift(c)
+            points[i] = self.data.oMf[c.frame_id].translation
+            if c.dim == 3:
+                points[i, 2] -= c.spec.radius
+        self.contact_jacobians = {c.name: J[rows] for c, rows in zip(self.contacts,
+                                                                    self._contact_slices)}
+        self.contact_drifts = {c.name: drift[rows] for c, rows in zip(self.contacts,
+                                                                     self._contact_slices)}
+        self.contact_points = points  # (n_contacts, 3), world: sole origins / sphere bottoms
+        self._frame_cache[("stacked J", self.contact_names)] = J
+        self._frame_cache[("stacked drift", self.contact_names)] = drift
 
     def _contact_jacobian(self, c: Contact) -> np.ndarray:
         """Rectangles: the sole frame's 6D Jacobian. Points: the linear Jacobian of the material
@@ -262,11 +287,8 @@ class Robot:
     def contact_point(self, name: str) -> np.ndarray:
         """World position of a contact's point: the sole frame origin, or the bottom of a foot
         sphere (frame origin minus radius along world z)."""
-        c = self.contact(name)
-        p = self.data.oMf[c.frame_id].translation.copy()
-        if c.dim == 3:
-            p[2] -= c.spec.radius
-        return p
+        self.contact(name)  # a clear error for unknown names
+        return self.contact_points[self._contact_index[name]].copy()
 
     def frame_jacobian(self, frame: str) -> np.ndarray:
         """6×nv Jacobian [linear; angular] of ``frame`` (LOCAL_WORLD_ALIGNED), cached per cycle."""

@@ -27,6 +27,7 @@ so its size never changes and the previous multipliers warm-start the next cycle
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass
 
@@ -101,7 +102,7 @@ class PassiveWBC:
         self.robot = robot
         self.contacts = robot.contact_names
         self.planner = planner if planner is not None else default_planner(robot)
-        self._leg = [tuple(self.planner.legs).index(n) for n in self.contacts]
+        self._leg = np.array([tuple(self.planner.legs).index(n) for n in self.contacts])
         self.mu = robot.friction if mu is None else float(mu)
         self.f_min, self.f_max = f_min, f_max
         self.impedance = impedance or TrunkImpedance()
@@ -146,12 +147,24 @@ class PassiveWBC:
         self.sense = np.zeros(self.n + self.m, dtype=np.int32)
         self._G = np.zeros((6, self.nf))
         self._normals = np.full((c, 3), np.nan)  # friction rows are rebuilt when these change
-        self._mu = np.full(c, np.nan)
-        self._tangential = np.zeros((c, 3, 3))
         self._swing_targets = np.zeros((c, 3))
         self._anchors = np.zeros((c, 3))  # stance task (eq. 32): contact points at touchdown
         self._was_stance = np.zeros(c, dtype=bool)
         self._dual = None
+        self._friction_key = None
+        self._tangential = np.zeros((self.nf, self.nf))
+        self._swing_names = [f"swing {name}" for name in self.contacts]
+        self._override_key = None
+        self._frames = [self.robot.contact(name).spec.frame for name in self.contacts]
+        self._frame_ids = [self.robot.contact(name).frame_id for name in self.contacts]
+        self._cols_force = slice(nv, nv + self.nf)
+        self._cols_slack = slice(nv + self.nf, self.n)
+        self._rows_feet = np.arange(self._r_feet, self._r_feet + 3 * c)
+        self._rows_fric = np.arange(self._r_fric, self._r_fric + 5 * c)
+        self._rows_single = np.arange(self._r_single, self.m)
+        n = self.n  # constant senses: dynamics rows are equalities, everything else inequalities
+        self.sense[n:n + 6] = _EQ
+        self.upper[:6], self.lower[:6] = _INF, -_INF  # the base accelerations are free
         if single:
             for i in range(c):  # slack columns of the paired rows: row1 - eps <= b, row2 + eps >= b
                 self.A[self._r_feet + 3 * i:self._r_feet + 3 * i + 3, nv + self.nf + i] = -1.0
@@ -169,129 +182,128 @@ class PassiveWBC:
         """One QP (eq. 7) at the robot's cached state for ``plan`` (a PlanState-like object)."""
         t0 = time.perf_counter()
         self.last_plan = plan
-        robot, nv, nf, na = self.robot, self.robot.nv, self.nf, self.robot.na
+        robot, nv, na = self.robot, self.robot.nv, self.robot.na
         A, H, g, up, lo, sense, n = self.A, self.H, self.g, self.upper, self.lower, self.sense, self.n
         M, h = robot.M, robot.h
         J = robot.stacked_contact_jacobian(self.contacts)
         drift = robot.stacked_contact_drift(self.contacts)
         stance = plan.contact[self._leg]
-        # eq. 9: floating-base rows  M_b q̈ − J_bᵀ F = −h_b
+        s3 = np.repeat(stance, 3)
+        F, feet, fric = self._cols_force, self._rows_feet, self._rows_fric
+        # eq. 9: floating-base rows  M_b q̈ − J_bᵀ F = −h_b  (equality senses set at allocation)
         A[0:6, :nv] = M[:6]
-        A[0:6, nv:nv + nf] = -J[:, :6].T
+        A[0:6, F] = -J[:, :6].T
         up[n:n + 6] = lo[n:n + 6] = -h[:6]
-        sense[n:n + 6] = _EQ
         # eq. 15: torque rows  M_j q̈ − J_jᵀ F  in  [τ_min − h_j, τ_max − h_j]
         r = self._r_tau
         A[r:r + na, :nv] = M[6:]
-        A[r:r + na, nv:nv + nf] = -J[:, 6:].T
-        tau_lo, tau_hi = self._tau_bounds = self.torque_limits.bounds(robot)
+        A[r:r + na, F] = -J[:, 6:].T
+        tau_lo, tau_hi = self._tau_bounds = self._torque_bounds()
         up[n + r:n + r + na] = tau_hi - h[6:]
         lo[n + r:n + r + na] = tau_lo - h[6:]
-        # eqs. 16-18: joint accelerations as simple bounds; base free
-        up[:6], lo[:6] = _INF, -_INF
+        # eqs. 16-18: joint accelerations as simple bounds (the base is free)
         lo[6:nv], up[6:nv] = self.joint_limits.bounds(robot)
-        sense[:n] = _FREE
-        # cost: ‖u‖²_R, trunk wrench (eqs. 7a, 8), regulariser
+        # stance feet, eq. 10 / 32, written for every foot (swing feet are overwritten below)
+        points = robot.contact_points  # the bottoms of the foot spheres (self.contacts order)
+        touchdown = stance & ~self._was_stance
+        self._anchors[touchdown] = points[touchdown]  # x̂_st of eq. 32
+        self._was_stance[:] = stance
+        A[feet, :nv] = J
+        target = -drift
+        if self.K_st or self.D_st:
+            target = target + self.K_st * (self._anchors - points).ravel() - self.D_st * (J @ robot.v)
+        up[n + feet] = np.where(s3, target, _INF)
+        lo[n + feet] = np.where(s3, target, -_INF)
+        sense[n + feet] = np.where(s3, _EQ, _FREE)
+        # eqs. 13-14: friction pyramid and normal-force bounds on stance feet; swing forces zero
+        normals = plan.touchdown_normal[self._leg]
+        key = (self.mu, self.f_min, self.f_max)
+        if key != self._friction_key or not np.array_equal(normals, self._normals):
+            self._build_friction(normals, key)
+        s5 = np.repeat(stance, 5)
+        up[n + fric] = np.where(s5, self._fric_upper, _INF)
+        lo[n + fric] = np.where(s5, self._fric_lower, -_INF)
+        up[F] = np.where(s3, _INF, 0.0)
+        lo[F] = np.where(s3, -_INF, 0.0)
+        sense[F] = np.where(s3, _FREE, _EQ)
+        # cost: ‖u‖²_R, the trunk wrench (eqs. 7a, 8), the force regulariser (Sect. V-D)
         H[:] = 0.0
         H.flat[::n + 1] = self._R_diagonal  # (flat-iterator assignment writes in place)
         g[:] = 0.0
-        G = contact_wrench_map(robot, self.contacts, self._G)
+        G = contact_wrench_map(robot, self.contacts, self._G, points)
         W_d = self.impedance.wrench(robot, plan.trunk)
         GQ = G.T * self.Q
-        H[nv:nv + nf, nv:nv + nf] += GQ @ G
-        g[nv:nv + nf] = -GQ @ W_d
-        if self.regularization == "torque":
-            JjT = J[:, 6:].T * np.sqrt(self.torque_weights)[:, None]  # footnote 16
-            H[nv:nv + nf, nv:nv + nf] += JjT.T @ JjT
-        swing_rows, swing_targets = [], []
-        K_sw, D_sw = self.swing.K, self.swing.D
-        for i, name in enumerate(self.contacts):
-            leg = self._leg[i]
-            rf, rr, fi = self._r_feet + 3 * i, self._r_fric + 5 * i, nv + 3 * i
-            if stance[i]:
-                Ji = J[3 * i:3 * i + 3]  # the contact point (bottom of the foot sphere)
-                A[rf:rf + 3, :nv] = Ji
-                target = -drift[3 * i:3 * i + 3]
-                point = robot.contact_point(name)
-                if not self._was_stance[i]:  # touchdown: x̂_st of eq. 32
-                    self._anchors[i] = point
-                if self.K_st or self.D_st:  # eq. 32: hold the touchdown position
-                    target = target + self.K_st * (self._anchors[i] - point) - self.D_st * (Ji @ robot.v)
-                up[n + rf:n + rf + 3] = lo[n + rf:n + rf + 3] = target
-                sense[n + rf:n + rf + 3] = _EQ
-                normal = plan.touchdown_normal[leg]
-                if not np.array_equal(normal, self._normals[i]) or self._mu[i] != self.mu:
-                    A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, self.mu)
-                    t1, t2, nn = tangent_basis(normal)
-                    A[rr + 4, fi:fi + 3] = nn
-                    self._tangential[i] = np.outer(t1, t1) + np.outer(t2, t2)
-                    self._normals[i], self._mu[i] = normal, self.mu
-                up[n + rr:n + rr + 4], lo[n + rr:n + rr + 4] = 0.0, -_INF
-                up[n + rr + 4], lo[n + rr + 4] = self.f_max, self.f_min
-                sense[n + rr:n + rr + 5] = _FREE
-                up[fi:fi + 3], lo[fi:fi + 3] = _INF, -_INF
-                if self.swing_slack == "single":
-                    self._no_slack(i)
-                if self.regularization == "force-normal":
-                    H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * self._tangential[i]
-            else:
-                # eq. 6: desired acceleration of the foot frame (the planner's swing trajectory);
-                # eq. 12: J q̈ = v̇_d − J̇ v
-                frame = robot.contact(name).spec.frame
-                Ji = robot.frame_jacobian(frame)[:3]
-                A[rf:rf + 3, :nv] = Ji
-                pos = robot.data.oMf[robot.contact(name).frame_id].translation
-                a_d = (plan.foot_acceleration[leg] + K_sw * (plan.foot_position[leg] - pos)
-                       + D_sw * (plan.foot_velocity[leg] - Ji @ robot.v))
-                target = a_d - robot.frame_drift(frame)[:3]
-                self._swing_targets[i] = target
-                self._swing_row(i, rf, Ji, target, swing_rows, swing_targets)
-                up[n + rr:n + rr + 5], lo[n + rr:n + rr + 5] = _INF, -_INF
-                sense[n + rr:n + rr + 5] = _FREE
-                up[fi:fi + 3] = lo[fi:fi + 3] = 0.0  # no force on a swing foot
-                sense[fi:fi + 3] = _EQ
-        self._was_stance[:] = stance
-        if swing_rows:  # per-direction slacks == weighted least squares (see module docstring)
-            Jsw = np.vstack(swing_rows)
-            H[:nv, :nv] += self.slack_weight * (Jsw.T @ Jsw)
-            g[:nv] -= self.slack_weight * (Jsw.T @ np.concatenate(swing_targets))
+        H[F, F] += GQ @ G
+        g[F] = -GQ @ W_d
+        if self.regularization == "torque":  # footnote 16: R_F = J_st,j R_τ J_st,jᵀ
+            JjT = J[:, 6:].T * np.sqrt(self.torque_weights)[:, None]
+            H[F, F] += JjT.T @ JjT
+        elif self.tangential_weight:
+            H[F, F] += self.tangential_weight * (self._tangential * s3[:, None])
+        if self.swing_slack == "single":
+            self._single_slack_layout(stance)
+        if not stance.all():
+            self._swing_rows(plan, stance)
         t1 = time.perf_counter()
         x, flag, iterations = self._solve_qp()
         t2 = time.perf_counter()
         return self._solution(x, flag, iterations, J, W_d, G, plan,
                               {"assemble": t1 - t0, "solve": t2 - t1})
 
-    def _swing_row(self, i, rf, Ji, target, swing_rows, swing_targets) -> None:
-        """Rows of swing foot i: hard (eq. 11), per-direction slack (LS term) or single slack."""
-        n, nv, nf = self.n, self.robot.nv, self.nf
-        up, lo, sense = self.upper, self.lower, self.sense
-        if self.swing_slack == "none":
-            up[n + rf:n + rf + 3] = lo[n + rf:n + rf + 3] = target
-            sense[n + rf:n + rf + 3] = _EQ
-        elif self.swing_slack == "per-direction":
-            up[n + rf:n + rf + 3], lo[n + rf:n + rf + 3] = _INF, -_INF
-            sense[n + rf:n + rf + 3] = _FREE
-            swing_rows.append(Ji)
-            swing_targets.append(target)
-        else:  # single: J q̈ − ε <= b and J q̈ + ε >= b, cost α ε²
-            rs = self._r_single + 3 * i
-            self.A[rs:rs + 3, :nv] = Ji
-            up[n + rf:n + rf + 3], lo[n + rf:n + rf + 3] = target, -_INF
-            up[n + rs:n + rs + 3], lo[n + rs:n + rs + 3] = _INF, target
-            sense[n + rf:n + rf + 3] = sense[n + rs:n + rs + 3] = _FREE
-            e = nv + nf + i
-            up[e], lo[e] = _INF, 0.0
-            self.H[e, e] += self.slack_weight
+    def _build_friction(self, normals: np.ndarray, key) -> None:
+        """Rows of eqs. 13-14 about each foot's terrain normal; rebuilt when a normal, μ or the
+        normal-force bounds change."""
+        nv = self.robot.nv
+        self._tangential[:] = 0.0
+        for i, normal in enumerate(normals):
+            rr, fi = self._r_fric + 5 * i, nv + 3 * i
+            self.A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, self.mu)
+            t1, t2, nn = tangent_basis(normal)
+            self.A[rr + 4, fi:fi + 3] = nn
+            self._tangential[3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.outer(t1, t1) + np.outer(t2, t2)
+        c = len(self.contacts)
+        self._fric_upper = np.tile([0.0, 0.0, 0.0, 0.0, self.f_max], c)
+        self._fric_lower = np.tile([-_INF, -_INF, -_INF, -_INF, self.f_min], c)
+        self._normals[:] = normals
+        self._friction_key = key
 
-    def _no_slack(self, i: int) -> None:
-        """Single-slack layout, stance foot i: its slack is fixed at 0 and its paired rows are free."""
-        n, nv, nf = self.n, self.robot.nv, self.nf
-        rs, e = self._r_single + 3 * i, nv + nf + i
-        self.upper[e] = self.lower[e] = 0.0
-        self.sense[e] = _EQ
-        self.upper[n + rs:n + rs + 3], self.lower[n + rs:n + rs + 3] = _INF, -_INF
-        self.sense[n + rs:n + rs + 3] = _FREE
-        self.H[e, e] += 1.0  # keeps H positive definite; the variable is pinned anyway
+    def _single_slack_layout(self, stance: np.ndarray) -> None:
+        """Single-slack layout: a stance foot's slack is pinned at 0 and its paired rows are free;
+        a swing foot's slack is in [0, inf) with cost α ε² (its rows are set in _swing_rows)."""
+        n, e, paired = self.n, self._cols_slack, self._rows_single
+        self.upper[e] = np.where(stance, 0.0, _INF)
+        self.lower[e] = 0.0
+        self.sense[e] = np.where(stance, _EQ, _FREE)
+        self.H[e, e] = np.where(stance, 1.0, self.slack_weight)  # 1: keeps H definite
+        self.upper[n + paired], self.lower[n + paired] = _INF, -_INF
+
+    def _swing_rows(self, plan, stance: np.ndarray) -> None:
+        """Swing feet: eq. 6 (desired foot acceleration) and eq. 12 rows J q̈ = v̇_d − J̇ v — hard
+        (eq. 11), a weighted least-squares term (per-direction slacks, eq. 33) or a single slack."""
+        robot, nv, n = self.robot, self.robot.nv, self.n
+        A, H, g, up, lo, sense = self.A, self.H, self.g, self.upper, self.lower, self.sense
+        K, D, alpha = self.swing.K, self.swing.D, self.slack_weight
+        for i in np.flatnonzero(~stance):
+            leg, rf = self._leg[i], self._r_feet + 3 * i
+            frame = self._frames[i]  # the planner's swing trajectory is the foot frame's
+            Ji = robot.frame_jacobian(frame)[:3]
+            A[rf:rf + 3, :nv] = Ji
+            pos = robot.data.oMf[self._frame_ids[i]].translation
+            a_d = (plan.foot_acceleration[leg] + K * (plan.foot_position[leg] - pos)
+                   + D * (plan.foot_velocity[leg] - Ji @ robot.v))
+            target = a_d - robot.frame_drift(frame)[:3]
+            self._swing_targets[i] = target
+            if self.swing_slack == "none":
+                up[n + rf:n + rf + 3] = lo[n + rf:n + rf + 3] = target
+                sense[n + rf:n + rf + 3] = _EQ
+            elif self.swing_slack == "per-direction":  # rows stay free: α‖J q̈ − b‖² in the cost
+                H[:nv, :nv] += alpha * (Ji.T @ Ji)
+                g[:nv] -= alpha * (Ji.T @ target)
+            else:  # single: J q̈ − ε <= b and J q̈ + ε >= b
+                rs = self._r_single + 3 * i
+                A[rs:rs + 3, :nv] = Ji
+                up[n + rf:n + rf + 3], lo[n + rf:n + rf + 3] = target, -_INF
+                up[n + rs:n + rs + 3], lo[n + rs:n + rs + 3] = _INF, target
 
     def _solve_qp(self):
         args = (self.H, self.g, self.A, self.upper, self.lower, self.sense)
@@ -308,18 +320,34 @@ class PassiveWBC:
             self._dual = None
         return x, flag, info.get("iterations", 0)
 
+    def _torque_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """τ_min(q), τ_max(q) of eq. 15 with the weak-joint overrides (indices cached)."""
+        limits, robot = self.torque_limits, self.robot
+        key = tuple(limits.upper_override.items())
+        if key != self._override_key:
+            limits.bounds(robot)  # validates the joint names
+            self._override_index = np.array([robot.joint_names.index(j) for j, _ in key], int)
+            self._override_value = np.array([value for _, value in key], float)
+            self._override_key = key
+        hi = robot.torque_limits.upper(robot.q[7:]) * limits.scale
+        if self._override_index.size:
+            hi[self._override_index] = np.minimum(hi[self._override_index], self._override_value)
+        return -hi, hi
+
     def _solution(self, x, flag, iterations, J, W_d, G, plan, timings) -> Solution:
         robot, nv, nf = self.robot, self.robot.nv, self.nf
         tau_lo, tau_hi = self._tau_bounds
-        ok = flag in _DAQP_OK and np.all(np.isfinite(x))
+        ok = flag in _DAQP_OK and math.isfinite(x.sum())
         if ok:
-            qdd, F = x[:nv].copy(), x[nv:nv + nf].copy()
+            qdd, F = x[:nv], x[nv:nv + nf]
             tau = robot.M[6:] @ qdd + robot.h[6:] - J[:, 6:].T @ F  # eq. 19
+            excess = max((tau - tau_hi).max(), (tau_lo - tau).max())
             status = "solved"
-            if np.any(tau > tau_hi + 1e-6) or np.any(tau < tau_lo - 1e-6):
-                status = "torque outside limits after solve; clipped"
-                log.debug(status)
-            tau = np.clip(tau, tau_lo, tau_hi)
+            if excess > 0.0:  # within DAQP's primal tolerance unless something is wrong
+                if excess > 1e-6:
+                    status = f"torque {excess:.2e} Nm outside limits after solve; clipped"
+                    log.debug(status)
+                tau = np.clip(tau, tau_lo, tau_hi)
         else:
             qdd, F = np.zeros(nv), np.zeros(nf)
             previous = self.last_tau if self.last_tau is not None else robot.h[6:]
@@ -328,18 +356,18 @@ class PassiveWBC:
             log.warning("PassiveWBC cycle %d: %s", robot.cycle, status)
         self.last_tau = tau
         wrench_error = G @ F - W_d
-        reports = [TaskReport("trunk wrench", 2, "eq", 6, float(np.linalg.norm(wrench_error)))]
-        for i, name in enumerate(self.contacts):
-            if not plan.contact[self._leg[i]] and ok:
+        reports = [TaskReport("trunk wrench", 2, "eq", 6, math.sqrt(wrench_error @ wrench_error))]
+        stance = plan.contact[self._leg]
+        if ok:
+            for i in np.flatnonzero(~stance):
                 rf = self._r_feet + 3 * i
                 residual = self.A[rf:rf + 3, :nv] @ qdd - self._swing_targets[i]
-                reports.append(TaskReport(f"swing {name}", 2, "eq", 3,
-                                          float(np.linalg.norm(residual))))
-        forces = {name: F[3 * i:3 * i + 3] for i, name in enumerate(self.contacts)
-                  if plan.contact[self._leg[i]]}
-        timings = dict(timings, iterations=iterations)
+                reports.append(TaskReport(self._swing_names[i], 2, "eq", 3,
+                                          math.sqrt(residual @ residual)))
+        forces = {self.contacts[i]: F[3 * i:3 * i + 3] for i in np.flatnonzero(stance)}
+        timings["iterations"] = iterations
         return Solution(qdd=qdd, lam=F, tau=tau, forces=forces, ok=ok, status=status,
-                        level_costs=np.array([float(wrench_error @ (self.Q * wrench_error))]),
+                        level_costs=np.array([wrench_error @ (self.Q * wrench_error)]),
                         tasks=reports, timings=timings, contacts=tuple(forces))
 
     # ------------------------------------------------------------------ the same problem as a stack

@@ -58,7 +58,7 @@ class TrunkImpedance:
     @staticmethod
     def trunk_state(robot) -> tuple[np.ndarray, np.ndarray]:
         """(rotation, world angular velocity) of the floating base at the robot's cached state."""
-        R = pin.Quaternion(robot.q[3:7]).normalized().toRotationMatrix()
+        R = robot.data.oMi[1].rotation  # the free-flyer joint, placed by Robot.update's kinematics
         return R, R @ robot.v[3:6]
 
     def wrench(self, robot, ref, out: np.ndarray | None = None) -> np.ndarray:
@@ -80,13 +80,20 @@ class TrunkImpedance:
         return out
 
 
-def contact_wrench_map(robot, contacts, out: np.ndarray | None = None) -> np.ndarray:
+def contact_wrench_map(robot, contacts, out: np.ndarray | None = None,
+                       points: np.ndarray | None = None) -> np.ndarray:
     """J_st,comᵀ of eq. 2 for point contacts: the 6 x 3k map from stacked forces to the wrench about
-    the CoM, blocks [I; [p_i − c]x]."""
+    the CoM, blocks [I; [p_i − c]x] (``points``: the contact points, default from the robot)."""
     out = np.zeros((6, 3 * len(contacts))) if out is None else out
-    for i, name in enumerate(contacts):
-        out[0:3, 3 * i:3 * i + 3] = np.eye(3)
-        skew(robot.contact_point(name) - robot.com, out[3:6, 3 * i:3 * i + 3])
+    if points is None:
+        points = np.array([robot.contact_point(name) for name in contacts])
+    r = points - robot.com
+    out[0:3] = 0.0
+    out[0, 0::3] = out[1, 1::3] = out[2, 2::3] = 1.0
+    out[3, 0::3] = out[4, 1::3] = out[5, 2::3] = 0.0
+    out[3, 1::3], out[3, 2::3] = -r[:, 2], r[:, 1]
+    out[4, 0::3], out[4, 2::3] = r[:, 2], -r[:, 0]
+    out[5, 0::3], out[5, 1::3] = -r[:, 1], r[:, 0]
     return out
 
 
