@@ -5,11 +5,24 @@ constraints, CoP, friction, joint acceleration limits, (3) momentum control + po
 regulariser. The momentum task is either the LQR force law projected into momentum space (eq. 24,
 gains from :class:`~wholebody.control.lqr.MomentumLQR` with the cost of eq. 26) or the PD law on
 the momentum rate (eq. 22). The hierarchy's torques are the only command: no joint PD.
+
+References. By default the CoG reference is constant (the CoM of the reference posture) and the
+momentum reference is zero, as in the push experiments (Sect. 5.2.2). A ``reference`` callable
+``(t, robot) -> BalanceReference`` makes them time-varying: it gives ``x_ref`` and optionally
+``h_ref`` and the feed-forward ``hdot_ref`` of eq. 22 (the LQR law of eq. 23 re-balances its
+feed-forward forces for the same ``hdot_ref``), and optionally a floating-base reference for the
+posture task. Two are provided: :class:`CoMSineReference` (the squat of Sect. 5.3) and
+:class:`SoleFrameReference` (CoG and base fixed in the frame of the soles, for the moving platform
+and tilting board of Sect. 5.2.3).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
 import numpy as np
+import pinocchio as pin
 
 from ..formulation import Formulation, Solution
 from ..robot import Robot
@@ -20,15 +33,149 @@ from .stacks import table2_stack
 GAINS = ("lqr", "pd")
 
 
+@dataclass
+class BalanceReference:
+    """References of one control cycle: ``com`` (x_ref), ``h`` (h_ref, [linear; angular] about the
+    CoM, world axes), ``hdot`` (the feed-forward of eq. 22), and ``base`` (XYZQUAT of the floating
+    base for the posture task; None keeps the preset's reference posture)."""
+
+    com: np.ndarray
+    h: np.ndarray | None = None
+    hdot: np.ndarray | None = None
+    base: np.ndarray | None = None
+
+
+def _smoothstep_terms(s: float, duration: float) -> tuple[float, float, float]:
+    """Quintic ramp 0 -> 1 over ``duration`` and its first two time derivatives at s = t/duration."""
+    if s <= 0.0 or duration <= 0.0:
+        return (0.0 if duration > 0.0 else 1.0), 0.0, 0.0
+    if s >= 1.0:
+        return 1.0, 0.0, 0.0
+    e = s ** 3 * (10 - 15 * s + 6 * s ** 2)
+    de = 30 * s ** 2 * (1 - s) ** 2 / duration
+    dde = 60 * s * (1 - s) * (1 - 2 * s) / duration ** 2
+    return e, de, dde
+
+
+class CoMSineReference:
+    """x_ref(t) = x0 + e(t) a sin(2 pi f t) per axis (Sect. 5.3's squat: 2 cm forward, 3 cm up, 0.3
+    or 0.5 Hz), with h_ref = m x_ref' and hdot_ref = [m x_ref''; 0] as feed-forward.
+
+    ``amplitude`` and ``frequency`` are 3-vectors (world x, y, z); the envelope ``e`` rises from 0 to 1
+    over ``ramp`` seconds (quintic) so that the reference starts at rest. ``x0`` defaults to the CoM
+    of the reference posture.
+
+    With ``move_base`` (default) the floating-base reference of the posture task is translated with
+    the CoG reference. Without it the posture task keeps pulling the base to its standing position
+    while the momentum task lowers the CoG; the compromise found by the level-3 weights is to bend
+    the torso, and on talos14 the torso pitch drifts cycle after cycle until it hits its joint limit
+    (measured: -0.26 to 0.78 rad over three 0.5 Hz periods).
+    """
+
+    def __init__(self, robot: Robot, amplitude, frequency, ramp: float = 1.0, x0=None,
+                 start: float = 0.0, move_base: bool = True):
+        self.amplitude = np.asarray(amplitude, dtype=float).reshape(3)
+        self.frequency = np.asarray(frequency, dtype=float).reshape(3)
+        self.ramp, self.start = float(ramp), float(start)
+        if x0 is None:
+            robot.update(robot.q_ref, np.zeros(robot.nv))
+            x0 = robot.com.copy()
+        self.x0 = np.asarray(x0, dtype=float).reshape(3)
+        self.mass = robot.mass
+        self.base0 = robot.q_ref[:7].copy() if move_base else None
+
+    def terms(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x_ref, x_ref', x_ref'') at time t."""
+        tau = t - self.start
+        if tau <= 0.0:
+            return self.x0.copy(), np.zeros(3), np.zeros(3)
+        e, de, dde = _smoothstep_terms(tau / self.ramp if self.ramp > 0 else 1.0, self.ramp)
+        w = 2 * np.pi * self.frequency
+        s, c = np.sin(w * tau), np.cos(w * tau)
+        a = self.amplitude
+        x = self.x0 + e * a * s
+        xd = a * (de * s + e * w * c)
+        xdd = a * (dde * s + 2 * de * w * c - e * w ** 2 * s)
+        return x, xd, xdd
+
+    def __call__(self, t: float, robot: Robot) -> BalanceReference:
+        x, xd, xdd = self.terms(t)
+        base = None
+        if self.base0 is not None:
+            base = self.base0.copy()
+            base[:3] += x - self.x0
+        return BalanceReference(x, np.concatenate([self.mass * xd, np.zeros(3)]),
+                                np.concatenate([self.mass * xdd, np.zeros(3)]), base)
+
+
+class SoleFrameReference:
+    """CoG and floating-base references fixed in the frame of the soles (Sect. 5.2.3).
+
+    The robot stands on a support that moves (rolling platform, tilting board); the controller knows
+    only its own state. The sole frame is measured every cycle from that state: origin at the mean
+    of the sole frames' positions, heading the mean yaw of the soles (roll and pitch ignored, so that
+    on a tilted board the CoG stays above the soles rather than leaning with the board). The CoG
+    reference keeps its offset from the reference posture in that frame, x_ref = p + R_z(psi) r0;
+    h_ref = [m x_ref'; I_G (0, 0, psi')] with x_ref' = p' + psi' e_z x R_z(psi) r0 from the soles'
+    measured velocities. The base reference (posture task) is carried along the same way.
+
+    ``support_acceleration`` (optional, ``t -> (3,)`` world): the measured acceleration of the
+    support under the soles (an IMU on the platform, as in Sect. 4.5), used as the feed-forward
+    hdot_ref = [m a; 0]. The paper's controller has no such term (hdot_ref = 0, contacts assumed
+    stationary); it is an option to measure what the missing feed-forward costs.
+    """
+
+    def __init__(self, robot: Robot, contacts: Sequence[str] | None = None,
+                 support_acceleration: Callable[[float], np.ndarray] | None = None):
+        self.contacts = tuple(contacts or robot.contact_names)
+        self.frames = [robot.contact(n).spec.frame for n in self.contacts]
+        robot.update(robot.q_ref, np.zeros(robot.nv))
+        p0, yaw0 = self._frame(robot)
+        Rz0 = pin.rpy.rpyToMatrix(0.0, 0.0, yaw0)
+        self.com_offset = Rz0.T @ (robot.com - p0)
+        base0 = pin.XYZQUATToSE3(robot.q_ref[:7])
+        self.base_offset = pin.SE3(Rz0, p0).actInv(base0)
+        self.mass = robot.mass
+        self.support_acceleration = support_acceleration
+
+    def _frame(self, robot: Robot) -> tuple[np.ndarray, float]:
+        poses = [robot.frame_placement(f) for f in self.frames]
+        p = np.mean([pos for pos, _ in poses], axis=0)
+        heading = np.sum([R[:2, 0] for _, R in poses], axis=0)
+        return p, float(np.arctan2(heading[1], heading[0]))
+
+    def __call__(self, t: float, robot: Robot) -> BalanceReference:
+        p, yaw = self._frame(robot)
+        Rz = pin.rpy.rpyToMatrix(0.0, 0.0, yaw)
+        vel = np.mean([robot.frame_velocity(f) for f in self.frames], axis=0)  # world [lin; ang]
+        r = Rz @ self.com_offset
+        yaw_rate = float(vel[5])
+        com_vel = vel[:3] + yaw_rate * np.array([-r[1], r[0], 0.0])
+        Izz = float(robot.data.Ig.inertia[2, 2])
+        h = np.concatenate([self.mass * com_vel, [0.0, 0.0, Izz * yaw_rate]])
+        base = pin.SE3ToXYZQUAT(pin.SE3(Rz, p) * self.base_offset)
+        hdot = None
+        if self.support_acceleration is not None:
+            a = np.asarray(self.support_acceleration(t), dtype=float).reshape(3)
+            hdot = np.concatenate([self.mass * a, np.zeros(3)])
+        return BalanceReference(p + r, h, hdot, base)
+
+
 class MomentumBalance:
     """Balance controller: ``compute(q, v, t) -> Solution`` (tau, contact forces, diagnostics).
 
     ``gains`` "lqr" (eq. 24, default) or "pd" (eq. 22 with diagonal ``P``/``D``). ``com_ref``
     defaults to the CoM of the reference posture. ``backend`` picks the QP solver of the cascade.
+    ``reference`` (optional) is called every cycle as ``reference(t, robot)`` after the robot
+    update and returns a :class:`BalanceReference`; it sets ``com_ref``, ``h_ref``, ``hdot_ref`` and
+    the posture task's base reference. ``cop_margin`` shrinks the admissible CoP region of every
+    sole (:class:`~wholebody.tasks.CenterOfPressure`'s margin; 0 = the whole sole).
     """
 
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
-                 P=None, D=None, Q=None, R=None, backend: str = "daqp"):
+                 P=None, D=None, Q=None, R=None, backend: str = "daqp",
+                 reference: Callable[[float, Robot], BalanceReference] | None = None,
+                 cop_margin: float = 0.0):
         if gains not in GAINS:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
         self.robot = robot
@@ -49,6 +196,11 @@ class MomentumBalance:
             com_ref = robot.com.copy()
         self.com_ref = np.asarray(com_ref, dtype=float)
         self.h_ref = np.zeros(6)
+        self.hdot_ref = np.zeros(6)
+        self.reference = reference
+        self.posture = self.stack.find("posture")
+        if cop_margin:
+            self.stack.find("center of pressure").margin = float(cop_margin)
         self.lqr = MomentumLQR(robot, self.contacts, Q=Q, R=R) if gains == "lqr" else None
         if self.lqr is not None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
@@ -58,11 +210,23 @@ class MomentumBalance:
         """Torques for the state (q, v) in Pinocchio convention."""
         robot = self.robot
         robot.update(q, v)
+        if self.reference is not None:
+            ref = self.reference(t, robot)
+            self.com_ref = np.asarray(ref.com, dtype=float)
+            self.h_ref = np.zeros(6) if ref.h is None else np.asarray(ref.h, dtype=float)
+            self.hdot_ref = np.zeros(6) if ref.hdot is None else np.asarray(ref.hdot, dtype=float)
+            if ref.base is not None:
+                q_ref = robot.q_ref.copy()
+                q_ref[:7] = ref.base
+                self.posture.q_ref = q_ref
         if self.lqr is not None:
-            K, k = self.lqr.feedback(robot, self.com_ref, self.h_ref, contacts=self.contacts)
+            hdot = self.hdot_ref if np.any(self.hdot_ref) else None
+            K, k = self.lqr.feedback(robot, self.com_ref, self.h_ref, contacts=self.contacts,
+                                     hdot_ref=hdot)
             self.momentum.K, self.momentum.k = K, k
         else:
             self.momentum.com_ref = self.com_ref
             self.momentum.h_ref = self.h_ref
+            self.momentum.hdot_ref = self.hdot_ref
         return self.formulation.solve(self.stack, self.variables, backend=self.backend,
                                       diagnostics=False)

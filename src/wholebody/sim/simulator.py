@@ -70,6 +70,8 @@ class Simulator:
         self._geom_to_contact = {g: i for i, c in enumerate(robot.contact_names)
                                  for g in self.twin.contact_geoms[c]}
         self._pin_data = robot.model.createData()
+        self._platform_body = (None if self.environment.platform is None else
+                               mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, "platform"))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -193,6 +195,16 @@ class Simulator:
         """Contact name -> 6D wrench on the robot [force; torque about the contact frame] (world axes)."""
         arr = self.contact_wrenches_array()
         return {n: arr[i] for i, n in enumerate(self.robot.contact_names)}
+
+    def support_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """(position, rotation) of the surface the robot starts on: the platform body (its frame is
+        the board's top-centre, see :class:`~wholebody.sim.environment.Platform`) if there is one,
+        else the floor (origin at ``ground_height``, world axes). Lets a scenario measure the feet
+        relative to a moving support (slip, tilt)."""
+        if self._platform_body is None:
+            return np.array([0.0, 0.0, self.environment.ground_height]), np.eye(3)
+        b = self._platform_body
+        return self.data.xpos[b].copy(), self.data.xmat[b].reshape(3, 3).copy()
 
     def contact_frame_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Contact name -> (position, rotation) of the contact frame in the simulator."""

@@ -1,0 +1,139 @@
+"""Balance experiments of Herzog et al. 2016 Sects. 5.2.3 and 5.3 (rolling platform, tilting board,
+squat) on talos14 in the MuJoCo twin, torques from the Table 2 hierarchy only.
+
+Closed-loop tests are short slices of the CLI scenarios; their assertions use the simulator's own
+state (forward kinematics of the logged q), contact wrenches and board geometry, not the
+controller's numbers.
+"""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from wholebody.control.balance import CoMSineReference, MomentumBalance, SoleFrameReference
+from wholebody.scenarios import get_scenario
+from wholebody.scenarios.platform import WaypointMotion, cop_in_sole
+from wholebody.scenarios.tilt_board import BoardMotion
+
+
+def fd(f, t, h=1e-5):
+    return (np.asarray(f(t + h)) - np.asarray(f(t - h))) / (2 * h)
+
+
+# ------------------------------------------------------------------------------ references
+def test_sine_reference_feedforward_is_the_derivative_of_the_reference(robots):
+    robot = robots["talos14"]
+    ref = CoMSineReference(robot, amplitude=(0.02, 0.0, 0.03), frequency=(0.5, 0.5, 0.3), ramp=1.0)
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    np.testing.assert_allclose(ref.terms(0.0)[0], robot.com, atol=1e-12)  # starts at the posture
+    np.testing.assert_allclose(ref.terms(0.0)[1], 0.0, atol=1e-12)  # ...and at rest
+    for t in (0.3, 0.99, 1.7, 3.2):
+        x, xd, xdd = ref.terms(t)
+        np.testing.assert_allclose(xd, fd(lambda s: ref.terms(s)[0], t), atol=1e-6)
+        np.testing.assert_allclose(xdd, fd(lambda s: ref.terms(s)[1], t), atol=1e-5)
+        r = ref(t, robot)
+        np.testing.assert_allclose(r.h[:3], robot.mass * xd)
+        np.testing.assert_allclose(r.hdot[:3], robot.mass * xdd)
+    x = ref.terms(2.5)[0]  # sin(2 pi 0.5 2.5) = 1, after the ramp: x at its crest
+    assert x[0] - ref.x0[0] == pytest.approx(0.02)
+
+
+def test_sole_frame_reference_moves_rigidly_with_the_feet(robots):
+    """Translate and yaw the whole robot: the CoG and base references follow rigidly; h_ref is the
+    momentum of the robot moving rigidly with its soles."""
+    robot = robots["talos14"]
+    ref = SoleFrameReference(robot)
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    r0 = ref(0.0, robot)
+    np.testing.assert_allclose(r0.com, robot.com, atol=1e-12)
+    np.testing.assert_allclose(r0.h, 0.0, atol=1e-12)
+    M = pin.SE3(pin.rpy.rpyToMatrix(0, 0, 0.4), np.array([0.3, -0.2, 0.05]))
+    q = robot.q_ref.copy()
+    q[:7] = pin.SE3ToXYZQUAT(M * pin.XYZQUATToSE3(robot.q_ref[:7]))
+    v = np.zeros(robot.nv)
+    base = pin.XYZQUATToSE3(q[:7])
+    twist = pin.Motion(np.array([0.2, 0.1, 0.0]), np.array([0.0, 0.0, 0.5]))  # world, at origin
+    v[:6] = base.actInv(twist).vector  # LOCAL base twist of the rigid motion
+    robot.update(q, v)
+    r = ref(0.0, robot)
+    np.testing.assert_allclose(r.com, M.act(r0.com), atol=1e-9)
+    np.testing.assert_allclose(r.base, q[:7], atol=1e-9)
+    np.testing.assert_allclose(r.h[:3], robot.h_G[:3], atol=1e-9)  # = m vcom of the rigid motion
+    assert r.h[5] == pytest.approx(robot.h_G[5], rel=1e-6)
+
+
+def test_board_geometry_matches_the_papers_numbers():
+    """[-2.8, 5.6] deg and 6.9 cm give the pivot distance; the soles' midpoint rises as asked."""
+    params = dict(min_angle=-2.8, max_angle=5.6, elevation=0.069, plane="sagittal", mode="tilt",
+                  move_time=1.0, start=0.0, swings=2, hold=0.0, drop_acceleration=1.0)
+    for plane in ("sagittal", "lateral"):
+        board = BoardMotion(dict(params, plane=plane))
+        assert board.lever == pytest.approx(0.4713, abs=1e-3)
+        top = lambda t: board(t)[0]  # noqa: E731  (offset of the point under the soles)
+        assert top(1.0)[2] - top(2.0)[2] == pytest.approx(0.069, abs=1e-9)
+        assert top(1.0)[2] == pytest.approx(board.lever * np.sin(np.radians(5.6)))
+    drop = BoardMotion(dict(params, mode="drop"))
+    t_fall = np.sqrt(2 * 0.069 / 9.81)
+    assert drop.impact - drop.release == pytest.approx(t_fall)
+    assert drop.theta(drop.impact + 1.0) == pytest.approx(np.radians(-2.8))
+    # free fall of the point under the soles right after the release
+    z = lambda t: drop(t)[0][2]  # noqa: E731
+    assert z(drop.release + 0.05) - z(drop.release) == pytest.approx(-0.5 * 9.81 * 0.05 ** 2,
+                                                                      rel=1e-6)
+
+
+def test_waypoint_motion_derivatives():
+    m = WaypointMotion([[0.0, 0.0], [0.15, 0.0], [0.0, 0.3]], move_time=0.8, start=0.5)
+    for t in (0.6, 0.9, 1.31, 1.7, 2.05):
+        np.testing.assert_allclose(m.rate(t), fd(m, t), atol=1e-6)
+        np.testing.assert_allclose(m.acceleration(t), fd(m.rate, t), atol=1e-4)
+    assert np.abs([m.acceleration(t)[0] for t in np.linspace(0.5, 1.3, 801)]).max() == \
+        pytest.approx(5.7735 * 0.15 / 0.8 ** 2, rel=1e-3)
+
+
+def test_cop_of_a_wrench_in_the_sole_axes():
+    R = pin.rpy.rpyToMatrix(0.0, 0.0, np.pi / 2)  # sole x along world y
+    cop = np.array([0.03, -0.01])  # in the sole
+    f = np.array([0.0, 0.0, 400.0])
+    r_world = R @ np.r_[cop, 0.0]
+    wrench = np.r_[f, np.cross(r_world, f)]
+    got, fz = cop_in_sole(wrench, R)
+    np.testing.assert_allclose(got, cop, atol=1e-12)
+    assert fz == pytest.approx(400.0)
+
+
+def test_balance_reference_is_backward_compatible(robots):
+    """Without a reference the controller keeps its constant CoG reference and zero momentum."""
+    robot = robots["talos14"]
+    ctrl = MomentumBalance(robot, gains="pd")
+    com_ref = ctrl.com_ref.copy()
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    ctrl.compute(robot.q_ref, np.zeros(robot.nv), 0.7)
+    np.testing.assert_allclose(ctrl.com_ref, com_ref)
+    np.testing.assert_allclose(ctrl.momentum.hdot_ref, 0.0)
+
+
+def test_simulator_support_pose_follows_the_platform(robots):
+    """Simulator.support_pose: the board's top-centre and rotation in the simulator (the frame the
+    scenarios measure slip and tilt in); the floor when there is no platform."""
+    from wholebody.sim.environment import Environment, Platform
+    from wholebody.sim.simulator import Simulator
+
+    robot = robots["talos14"]
+    p0, R0 = Simulator(robot, record=False).support_pose()
+    np.testing.assert_allclose(p0, 0.0)
+    np.testing.assert_allclose(R0, np.eye(3))
+
+    def motion(t):
+        return np.array([0.1 * t, 0.0, 0.0]), np.array([0.0, 0.0, 0.2 * t])
+
+    env = Environment(platform=Platform(half_size=(0.5, 0.5, 0.02), center=(0.0, 0.0, 0.1),
+                                        motion=motion))
+    sim = Simulator(robot, env, record=False)
+    for _ in range(50):
+        sim.step(np.zeros(robot.na))
+    p, R = sim.support_pose()
+    # the pose of the last step's start (the board is set from motion(t) before each step)
+    t = sim.t - sim.dt
+    np.testing.assert_allclose(p, [0.1 * t, 0.0, 0.1], atol=2e-4)
+    np.testing.assert_allclose(R, pin.rpy.rpyToMatrix(0.0, 0.0, 0.2 * t), atol=2e-4)
