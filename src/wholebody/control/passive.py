@@ -274,7 +274,8 @@ class PassiveWBC:
         self.upper[e] = np.where(stance, 0.0, _INF)
         self.lower[e] = 0.0
         self.sense[e] = np.where(stance, _EQ, _FREE)
-        self.H[e, e] = np.where(stance, 1.0, self.slack_weight)  # 1: keeps H definite
+        cols = np.arange(e.start, e.stop)  # H[e, e] = v with a slice would fill the whole block
+        self.H[cols, cols] = np.where(stance, 1.0, self.slack_weight)  # 1: keeps H definite
         self.upper[n + paired], self.lower[n + paired] = _INF, -_INF
 
     def _swing_rows(self, plan, stance: np.ndarray) -> None:
