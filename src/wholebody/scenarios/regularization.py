@@ -1,0 +1,216 @@
+"""``regularization``: the two force-regularisation schemes of the passive WBC (Fahmi et al. 2019,
+Sect. V-D, footnote 16; the ‖u‖²_R term of eq. 7a).
+
+* ``force-normal``: the tangential components of each stance force are penalised, so the ground
+  reaction forces stay close to the cone normals (robustness to a wrong friction estimate);
+* ``torque``: the joint torques produced by the contact forces are penalised with per-joint weights,
+  R_F = J_st,j R_τ J_st,jᵀ (footnote 16). The paper: "If we gradually increase the weight of the
+  Knee Flexion-Extension (KFE) joints, [...] the GRFs are no longer vertical. Indeed the GRFs start
+  to point toward the knee axis in order to reduce its torque command." (video only, no numbers).
+
+The robot stands on all four feet (or crawls, ``--set gait=crawl``) once with ``force-normal`` and
+then with ``torque`` for each KFE weight of the sweep (the other joints keep ``other_weight``). The
+internal forces (those that leave the trunk wrench unchanged) are what the regulariser selects.
+
+Measured on the simulator over the last ``window`` seconds of each run, averaged over the stance
+feet: the angle of the MuJoCo contact force from the vertical, the mean |τ| it applied to the KFE
+(and HFE) joints, and the angle between the contact force and the foot-to-knee-axis direction (the
+GRF "pointing toward the knee": 0 deg when its line of action passes through the knee axis, which
+zeroes the knee torque the force causes).
+
+Success: every cycle solved, no fall; over the torque-scheme sweep the mean GRF angle from the
+vertical grows and the mean |τ_KFE| drops from the smallest to the largest KFE weight; the
+force-normal scheme gives a GRF angle no larger than the torque scheme's at the largest weight.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ..planning.trunk import VelocityCommand
+from .base import Parameter, Scenario, ScenarioResult
+from .locomotion import run_gait
+
+log = logging.getLogger(__name__)
+
+PARAMETERS = (
+    Parameter("kfe_weights", "1e-4,1e-3,1e-2,3e-2,1e-1,1", "comma-separated KFE weights of R_tau"),
+    Parameter("other_weight", 1e-4, "R_tau weight of the HAA and HFE joints"),
+    Parameter("gait", "stand", "stand or crawl"),
+    Parameter("speed", 0.11, "crawl speed (m/s) when gait=crawl"),
+    Parameter("duration", 2.0, "simulated time per run (s)"),
+    Parameter("window", 0.5, "averaging window at the end of each run (s)"),
+)
+
+
+def parse_weights(text: str) -> list[float]:
+    try:
+        values = [float(x) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"--set kfe_weights: expected comma-separated numbers, got '{text}'") from None
+    if not values or any(not (np.isfinite(v) and v > 0) for v in values):
+        raise ValueError(f"--set kfe_weights: need positive numbers, got '{text}'")
+    return values
+
+
+def validate(robot, params: dict) -> None:
+    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
+        raise ValueError(f"robot '{robot.name}': regularization needs a quadruped with point feet")
+    if not any(j.endswith("kfe_joint") for j in robot.joint_names):
+        raise ValueError(f"robot '{robot.name}': no *_kfe_joint to weight")
+    parse_weights(params["kfe_weights"])
+    if params["gait"] not in ("stand", "crawl"):
+        raise ValueError(f"--set gait: expected stand or crawl, got '{params['gait']}'")
+    if not (params["other_weight"] > 0 and params["duration"] > params["window"] > 0):
+        raise ValueError("--set other_weight > 0 and duration > window > 0 required")
+
+
+def knee_joints(robot, contact: str) -> tuple[str, str]:
+    prefix = contact.split("_")[0]
+    return f"{prefix}_hfe_joint", f"{prefix}_kfe_joint"
+
+
+def grf_measures(run, robot, window: float) -> dict:
+    """Simulator-side averages over the last ``window`` s: per stance foot, the contact force's angle
+    from the vertical, its angle to the foot->knee-axis direction, and |τ| on HFE and KFE."""
+    sim = run.sim.log.arrays()
+    t, q = sim["t"], sim["q"]
+    sel = np.flatnonzero(t >= t[-1] - window)
+    data = robot.model.createData()
+    angles, to_knee, tau_kfe, tau_hfe = [], [], [], []
+    for k in sel[::10]:
+        pin.forwardKinematics(robot.model, data, q[k])
+        pin.updateFramePlacements(robot.model, data)
+        for ci, name in enumerate(robot.contact_names):
+            f = sim["contact_wrenches"][k, ci, :3]
+            if f[2] < 20.0:
+                continue
+            hfe, kfe = knee_joints(robot, name)
+            jid = robot.model.getJointId(kfe)
+            knee = data.oMi[jid]
+            axis = knee.rotation @ _joint_axis(robot, jid)
+            foot = data.oMf[robot.contact(name).frame_id].translation
+            lever = knee.translation - foot
+            lever -= axis * (axis @ lever)  # foot -> knee axis, perpendicular to the axis
+            fp = f - axis * (axis @ f)  # force in the plane normal to the knee axis
+            angles.append(np.degrees(np.arctan2(np.linalg.norm(f[:2]), f[2])))
+            to_knee.append(np.degrees(np.arccos(np.clip(
+                fp @ lever / (np.linalg.norm(fp) * np.linalg.norm(lever)), -1.0, 1.0))))
+            tau_kfe.append(abs(sim["tau_applied"][k, robot.joint_names.index(kfe)]))
+            tau_hfe.append(abs(sim["tau_applied"][k, robot.joint_names.index(hfe)]))
+    return {"grf_angle_from_vertical_deg": float(np.mean(angles)),
+            "grf_angle_to_knee_deg": float(np.mean(to_knee)),
+            "mean_abs_tau_kfe_Nm": float(np.mean(tau_kfe)),
+            "mean_abs_tau_hfe_Nm": float(np.mean(tau_hfe))}
+
+
+def _joint_axis(robot, jid: int) -> np.ndarray:
+    """Unit rotation axis of a revolute joint in its own frame (from its motion subspace)."""
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, pin.neutral(robot.model))
+    motion = np.asarray(data.joints[jid].S).reshape(6, -1)[:, 0]
+    return motion[3:] / np.linalg.norm(motion[3:])
+
+
+def regularization_run(robot, scheme: str, weights: np.ndarray | None, params: dict,
+                       progress: bool = False):
+    """One run with ``regularization=scheme`` (and ``torque_weights`` for the torque scheme)."""
+    options = {"regularization": scheme}
+    if weights is not None:
+        options["torque_weights"] = weights
+    command = VelocityCommand((0.0, 0.0), (params["speed"], 0.0), (1.0, 2.0)) \
+        if params["gait"] == "crawl" else None
+    return run_gait(robot, "passive", params["gait"], command, params["duration"],
+                    controller_options=options, progress=progress)
+
+
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+    p = params
+    kfe_weights = parse_weights(p["kfe_weights"])
+    kfe = np.array([j.endswith("kfe_joint") for j in robot.joint_names])
+    runs, metrics = {}, {}
+    runs["force-normal"] = regularization_run(robot, "force-normal", None, p, progress)
+    for w in kfe_weights:
+        weights = np.where(kfe, w, p["other_weight"])
+        runs[f"torque, w_kfe={w:g}"] = regularization_run(robot, "torque", weights, p, progress)
+    for name, r in runs.items():
+        metrics[name] = {"fell": r.fell, "failed_cycles": int(np.sum(~r.log["ok"].astype(bool))),
+                         **grf_measures(r, robot, p["window"]), **r.tracking(t_from=0.5)}
+    sweep = [metrics[f"torque, w_kfe={w:g}"] for w in kfe_weights]
+    angle = [m["grf_angle_from_vertical_deg"] for m in sweep]
+    tau = [m["mean_abs_tau_kfe_Nm"] for m in sweep]
+    metrics["sweep"] = {"kfe_weight": kfe_weights, "grf_angle_from_vertical_deg": angle,
+                        "mean_abs_tau_kfe_Nm": tau,
+                        "grf_angle_to_knee_deg": [m["grf_angle_to_knee_deg"] for m in sweep],
+                        "mean_abs_tau_hfe_Nm": [m["mean_abs_tau_hfe_Nm"] for m in sweep]}
+    solved = all(not m["fell"] and m["failed_cycles"] == 0
+                 for k, m in metrics.items() if k != "sweep")
+    fn = metrics["force-normal"]
+    metrics["claims"] = {
+        "GRF angle grows with the KFE weight": bool(angle[-1] > angle[0]),
+        "GRF angle monotone over the sweep (0.2 deg tolerance)":
+            bool(np.all(np.diff(angle) > -0.2)),
+        "KFE torque drops with the KFE weight": bool(tau[-1] < tau[0]),
+        "force-normal keeps the GRFs closest to vertical":
+            bool(fn["grf_angle_from_vertical_deg"] <= angle[-1]),
+    }
+    success = solved and angle[-1] > angle[0] and tau[-1] < tau[0] and \
+        fn["grf_angle_from_vertical_deg"] <= angle[-1]
+    notes = [f"force-normal: GRF {fn['grf_angle_from_vertical_deg']:.1f} deg from vertical, "
+             f"|tau_KFE| {fn['mean_abs_tau_kfe_Nm']:.1f} Nm"]
+    notes += [f"torque, w_KFE={w:g}: GRF {a:.1f} deg from vertical, {m['grf_angle_to_knee_deg']:.1f}"
+              f" deg from the knee direction, |tau_KFE| {tq:.1f} Nm, |tau_HFE| "
+              f"{m['mean_abs_tau_hfe_Nm']:.1f} Nm" for w, a, tq, m in zip(kfe_weights, angle, tau, sweep)]
+    figures = []
+    if out_dir is not None:
+        figures.append(str(_figure(Path(out_dir) / "regularization.png", kfe_weights, metrics,
+                                   p)))
+    return ScenarioResult("regularization", robot.name, controller, success, metrics, params,
+                          notes, figures=figures)
+
+
+def _figure(path: Path, weights, metrics, p) -> Path:
+    """GRF angle (from the vertical and from the knee direction) and mean joint torques against
+    the KFE weight (log axis); the force-normal scheme as horizontal lines."""
+    from ..report import plots as _plots  # noqa: F401  (selects the headless Agg backend)
+    import matplotlib.pyplot as plt
+
+    fn, s = metrics["force-normal"], metrics["sweep"]
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 5.6))
+    ax1.semilogx(weights, s["grf_angle_from_vertical_deg"], "o-", label="from vertical, torque")
+    ax1.semilogx(weights, s["grf_angle_to_knee_deg"], "s--", label="from knee direction, torque")
+    ax1.axhline(fn["grf_angle_from_vertical_deg"], color="k", lw=0.8,
+                label="from vertical, force-normal")
+    ax1.set_ylabel("GRF angle (deg)")
+    ax1.set_title("simulator contact forces, mean over the feet", fontsize=9)
+    ax2.semilogx(weights, s["mean_abs_tau_kfe_Nm"], "o-", label="KFE, torque")
+    ax2.semilogx(weights, s["mean_abs_tau_hfe_Nm"], "s-", label="HFE, torque")
+    ax2.axhline(fn["mean_abs_tau_kfe_Nm"], color="k", lw=0.8, label="KFE, force-normal")
+    ax2.set_ylabel("mean |tau| (Nm)")
+    ax2.set_xlabel("KFE weight of R_tau (other joints: %g)" % p["other_weight"])
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"HyQ {p['gait']}: torque regularisation (Sect. V-D, footnote 16)", fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+SCENARIO = Scenario(
+    name="regularization",
+    summary="Sect. V-D: force-normal vs torque-minimising regularisation; GRF angle and KFE torque "
+            "as the KFE weight of R_tau grows (HyQ standing or crawling)",
+    parameters=PARAMETERS,
+    controllers=("passive",),
+    default_robot="hyq",
+    run_function=run,
+    validate_function=validate,
+)
