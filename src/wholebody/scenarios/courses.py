@@ -173,11 +173,14 @@ class Course:
             if s.x1 < x_min or s.x0 > x_max:
                 continue
             a, b = max(s.x0, x_min), min(s.x1, x_max)
+            if zs[-1] == self._bottom:  # climbing out of a gap
+                xs.append(a)
+                zs.append(self._bottom)
             xs += [a, b]
             zs += [s.height(a), s.height(b)]
             if b < x_max and self.strip_at(b + 1e-9) is None:
-                xs += [b, b]
-                zs += [self._bottom, self._bottom]
+                xs.append(b)
+                zs.append(self._bottom)
         xs.append(x_max)
         zs.append(self.height(x_max))
         return np.array(xs), np.array(zs)

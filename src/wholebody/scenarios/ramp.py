@@ -240,7 +240,9 @@ def _side_view(path: Path, robot, gait_run, course: Course, p: dict, snapshots: 
     x_hi = float(L["feet"][:, :, 0].max()) + 0.3
     fig, ax = plt.subplots(figsize=(10, 3.8))
     xs, zs = course.profile(x_lo, x_hi)
-    ax.fill_between(xs, zs, min(zs.min(), -0.15) - 0.05, color="0.85", step=None)
+    surface = [course.height(x) for x in np.linspace(x_lo, x_hi, 400) if not course.in_gap(x)]
+    z_lo = min(surface) - 0.25  # holes are drawn down to here
+    ax.fill_between(xs, np.maximum(zs, z_lo), z_lo, color="0.85")
     ax.plot(xs, zs, color="0.3", linewidth=1.0)
     ax.plot(L["com"][:, 0], L["com"][:, 2], color="tab:green", linewidth=1.0, label="CoM")
     colors = {"lf": "tab:blue", "rf": "tab:orange", "lh": "tab:purple", "rh": "tab:red"}
@@ -269,7 +271,7 @@ def _side_view(path: Path, robot, gait_run, course: Course, p: dict, snapshots: 
                     ha="center", color=str(1 - shade))
     ax.set_aspect("equal")
     ax.set_xlim(x_lo, x_hi)
-    ax.set_ylim(min(zs.min(), -0.15) - 0.05, float(L["com"][:, 2].max()) + 0.2)
+    ax.set_ylim(z_lo, float(L["com"][:, 2].max()) + 0.2)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m)")
     ax.legend(fontsize=6, loc="upper left", ncol=5)
