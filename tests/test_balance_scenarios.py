@@ -137,3 +137,91 @@ def test_simulator_support_pose_follows_the_platform(robots):
     t = sim.t - sim.dt
     np.testing.assert_allclose(p, [0.1 * t, 0.0, 0.1], atol=2e-4)
     np.testing.assert_allclose(R, pin.rpy.rpyToMatrix(0.0, 0.0, 0.2 * t), atol=2e-4)
+
+
+# ------------------------------------------------------------------------------ closed loop
+def sole_poses(robot, q):
+    """(position, rotation) of every sole frame by forward kinematics of a logged q."""
+    robot.update(q, np.zeros(robot.nv))
+    return {n: robot.frame_placement(robot.contact(n).spec.frame) for n in robot.contact_names}
+
+
+def measured_cops(robot, log, skip=0.2):
+    """CoP of every loaded sole in its own axes, from the simulator's logged contact wrenches and
+    the forward kinematics of the logged state (rows after ``skip`` s)."""
+    out = []
+    for t, q, w in zip(log["t"], log["q"], log["contact_wrenches"]):
+        if t < skip:
+            continue
+        poses = sole_poses(robot, q)
+        for j, n in enumerate(robot.contact_names):
+            cop, fz = cop_in_sole(w[j], poses[n][1])
+            if fz > 50.0:
+                out.append(cop)
+    return np.array(out)
+
+
+def test_platform_feet_ride_the_moving_board_and_a_too_fast_board_is_a_failure(robots):
+    """Sect. 5.2.3, one move of the rolling platform (10 cm in 0.8 s, 0.9 m/s^2 peak): the soles
+    end 10 cm further with the board (simulator kinematics), the board's friction accelerated the
+    robot (simulator contact forces ~ m a), the measured CoP stayed in the soles. A board
+    accelerating at 2.9 m/s^2 (beyond g * 10.5 cm / 0.87 m ~ 1.2 m/s^2 with flat feet) is reported
+    as a failure."""
+    robot = robots["talos14"]
+    scenario = get_scenario("platform")
+    res = scenario.run(robot, "pd", {"moves": "1", "distance": "0.1", "move_time": "0.8",
+                                     "start": "0.2", "settle": "1.5"})
+    assert res.success, res.metrics
+    log = res.log.arrays()
+    start, end = sole_poses(robot, log["q"][0]), sole_poses(robot, log["q"][-1])
+    for n in robot.contact_names:
+        np.testing.assert_allclose(end[n][0] - start[n][0], [0.1, 0.0, 0.0], atol=3e-3)
+    horizontal = np.abs(log["contact_wrenches"][:, :, 0].sum(axis=1))
+    peak = robot.mass * 5.7735 * 0.1 / 0.8 ** 2
+    assert 0.6 * peak < horizontal[log["t"] > 0.2].max() < 1.6 * peak
+    cops = measured_cops(robot, log)
+    assert np.all(np.abs(cops) < robot.contact("left_sole").spec.half_size)
+    fast = scenario.run(robot, "pd", {"moves": "1", "distance": "0.15", "move_time": "0.55",
+                                      "start": "0.2", "settle": "0.3"})
+    assert not fast.success
+
+
+def test_tilt_board_feet_stay_flat_on_the_tilted_board(robots):
+    """Sect. 5.2.3, the board tilting to its highest slope (5.6 deg, sagittal): by the simulator's
+    kinematics the soles end tilted with the board by 5.6 deg and raised by lever * sin(5.6 deg)."""
+    robot = robots["talos14"]
+    res = get_scenario("tilt-board").run(robot, "pd", {"swings": "1", "move_time": "0.6",
+                                                        "start": "0.2", "settle": "0.8"})
+    assert res.success, res.metrics
+    log = res.log.arrays()
+    start, end = sole_poses(robot, log["q"][0]), sole_poses(robot, log["q"][-1])
+    lever = res.metrics["lever_m"]
+    for n in robot.contact_names:
+        slope = np.degrees(np.arccos(end[n][1][2, 2]))
+        assert slope == pytest.approx(5.6, abs=0.3)
+        assert end[n][0][2] - start[n][0][2] == pytest.approx(lever * np.sin(np.radians(5.6)),
+                                                               abs=3e-3)
+    assert res.metrics["final_cog_error_m"] < 5e-3
+
+
+def test_squat_tracks_the_cog_sine_with_flat_feet(robots):
+    """Sect. 5.3, one 0.5 Hz period of the squat (2 cm forward, 3 cm vertical): the CoM of the
+    simulated robot (forward kinematics of the logged state) moves by the commanded amplitudes and
+    stays within 5 mm of the reference; the soles do not tilt."""
+    robot = robots["talos14"]
+    res = get_scenario("squat").run(robot, "pd", {"periods": "1", "ramp": "0.5"})
+    assert res.success, res.metrics
+    log = res.log.arrays()
+    ref = CoMSineReference(robot, amplitude=(0.02, 0.0, 0.03), frequency=(0.5,) * 3, ramp=0.5)
+    com = []
+    for q in log["q"]:
+        robot.update(q, np.zeros(robot.nv))
+        com.append(robot.com.copy())
+    com = np.array(com)
+    target = np.array([ref.terms(t)[0] for t in log["t"]])
+    assert np.abs(com - target).max() < 5e-3
+    after = log["t"] > 0.5
+    assert np.ptp(com[after, 0]) == pytest.approx(0.04, abs=3e-3)
+    assert np.ptp(com[after, 2]) == pytest.approx(0.06, abs=3e-3)
+    for n, (_, R) in sole_poses(robot, log["q"][-1]).items():
+        assert np.degrees(np.arccos(R[2, 2])) < 2.0

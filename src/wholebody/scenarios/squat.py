@@ -134,6 +134,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
              ("CoG vertical velocity", "cm/s", {"desired": 100 * vel[:, 1, 2],
                                                 "actual": 100 * vel[:, 0, 2]}),
              ("CoG forward position", "cm", {"desired": 100 * ref[:, 0], "actual": 100 * com[:, 0]}),
+             ("joint deviation from the posture", "rad",
+              {metrics["max_deviation_joint"]: a["joints"][:, robot.joint_names.index(
+                  metrics["max_deviation_joint"])]}),
              (f"CoP x in the sole (admissible ±{100 * bounds[0, 0]:.1f} cm; grey: a CoP constraint "
               f"active)", "cm", cop)],
             title=f"squat {params['variant']} {f} Hz — {robot.name}, {controller} momentum gains",
