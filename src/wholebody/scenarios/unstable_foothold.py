@@ -187,6 +187,13 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
              f"{100 * dist['horizontal_max_m']:.1f} cm (undisturbed {100 * ref['horizontal_max_m']:.1f}"
              f" cm), max height error {100 * dist['height_max_m']:.1f} cm (undisturbed "
              f"{100 * ref['height_max_m']:.1f} cm); claim holds: {holds}"]
+    ratio = dist["horizontal_max_m"] / max(dist["height_max_m"], 1e-9)
+    metrics["claim"]["horizontal_over_height"] = ratio
+    if holds and ratio > 0.5:
+        notes.append(f"the contrast is weak: the horizontal error is {100 * ratio:.0f} % of the "
+                     "height error (Fig. 6 shows a clear height loss with the horizontal motion "
+                     "kept); our disturbance is one 'rolling' stone of the given size, not the "
+                     "paper's (unreported) one")
     if not happened:
         notes.append("the RF foot did not drop: the stone was not under it at the release")
     figures = []
