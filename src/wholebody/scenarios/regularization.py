@@ -165,6 +165,12 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     notes += [f"torque, w_KFE={w:g}: GRF {a:.1f} deg from vertical, {m['grf_angle_to_knee_deg']:.1f}"
               f" deg from the knee direction, |tau_KFE| {tq:.1f} Nm, |tau_HFE| "
               f"{m['mean_abs_tau_hfe_Nm']:.1f} Nm" for w, a, tq, m in zip(kfe_weights, angle, tau, sweep)]
+    notes.append("paper (Sect. V-D, video only): as the KFE weight grows the GRFs leave the "
+                 "vertical and point toward the knee axis to reduce its torque. Here: GRF angle "
+                 f"{angle[0]:.1f} -> {angle[-1]:.1f} deg from vertical, "
+                 f"{sweep[0]['grf_angle_to_knee_deg']:.1f} -> {sweep[-1]['grf_angle_to_knee_deg']:.1f}"
+                 f" deg from the foot-knee direction, |tau_KFE| {tau[0]:.1f} -> {tau[-1]:.1f} Nm "
+                 f"over KFE weights {kfe_weights[0]:g} -> {kfe_weights[-1]:g}")
     figures = []
     if out_dir is not None:
         figures.append(str(_figure(Path(out_dir) / "regularization.png", kfe_weights, metrics,
@@ -176,7 +182,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
 def _figure(path: Path, weights, metrics, p) -> Path:
     """GRF angle (from the vertical and from the knee direction) and mean joint torques against
     the KFE weight (log axis); the force-normal scheme as horizontal lines."""
-    from ..report import plots as _plots  # noqa: F401  (selects the headless Agg backend)
+    import matplotlib
+
+    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fn, s = metrics["force-normal"], metrics["sweep"]
