@@ -51,10 +51,12 @@ _DAQP_OK = (1, 2)
 
 @dataclass
 class SwingGains:
-    """Acceleration-level swing impedance of eq. 6 (Sect. V: K_sw = 2000, D_sw = 20)."""
+    """Acceleration-level swing impedance of eq. 6 (Sect. V: K_sw = 2000, D_sw = 20);
+    ``feedforward`` False drops v̇_sw,ff (Assumption 2 of the passivity analysis)."""
 
     K: float = 2000.0
     D: float = 20.0
+    feedforward: bool = True
 
 
 def measured_feet(robot: Robot, contacts) -> np.ndarray:
@@ -290,8 +292,9 @@ class PassiveWBC:
             Ji = robot.frame_jacobian(frame)[:3]
             A[rf:rf + 3, :nv] = Ji
             pos = robot.data.oMf[self._frame_ids[i]].translation
-            a_d = (plan.foot_acceleration[leg] + K * (plan.foot_position[leg] - pos)
-                   + D * (plan.foot_velocity[leg] - Ji @ robot.v))
+            a_d = K * (plan.foot_position[leg] - pos) + D * (plan.foot_velocity[leg] - Ji @ robot.v)
+            if self.swing.feedforward:
+                a_d += plan.foot_acceleration[leg]
             target = a_d - robot.frame_drift(frame)[:3]
             self._swing_targets[i] = target
             if self.swing_slack == "none":
