@@ -67,6 +67,10 @@ FINAL_COG_LIMIT_M, FINAL_LIN_MOM, FINAL_ANG_MOM = 5e-3, 1.0, 1.0
 
 
 # ------------------------------------------------------------------------- shared helpers
+def _mm(value) -> str:
+    return "n/a" if value is None else f"{1000 * value:.1f}"
+
+
 def min_jerk(s: float) -> tuple[float, float, float]:
     """Minimum-jerk profile 10 s^3 - 15 s^4 + 6 s^5 on [0, 1] and its 1st/2nd derivatives in s."""
     if s <= 0.0:
@@ -358,6 +362,14 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     notes.append("physical limit: keeping the feet flat under a board acceleration a needs the CoP "
                  "a z_cog / g ahead of the CoG: a <= g h_x / z_cog ~ 1.2 m/s^2 for talos14's 10.5 cm "
                  "half-sole and ~0.87 m CoG height (no angular momentum used)")
+    m = metrics
+    notes.append(f"paper (Fig. 8): CoG error bounded, momentum damped, feet stationary, predicted "
+                 f"CoPs approximately correct; measured: max CoG error {100 * m['max_cog_error_m']:.2f}"
+                 f" cm (RMS {100 * m['rms_cog_error_m']:.2f}), final momentum deviation "
+                 f"{m['final_linear_momentum_Ns']:.2f} N s / {m['final_angular_momentum_Nms']:.2f} "
+                 f"N m s, foot slip {1000 * m['max_foot_slip_m']:.1f} mm, tilt "
+                 f"{m['max_foot_tilt_deg']:.2f} deg, predicted-vs-measured CoP RMS "
+                 f"{_mm(m['cop_rms_error_m'])} mm at {m['peak_platform_acceleration_mps2']:.2f} m/s^2")
     result = ScenarioResult("platform", robot.name, controller, success, metrics, params, notes,
                             log=sim.log)
     if out_dir is not None:
