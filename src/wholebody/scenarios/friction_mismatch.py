@@ -13,7 +13,9 @@ Runs (all in the MuJoCo twin, whose floor has ``floor_mu``; elliptic friction co
 * ``corrected, inscribed``: controller mu = floor_mu / sqrt(2). The WBC's square pyramid with
   half-width mu (eq. 14, ``friction_faces``) circumscribes the true cone of the same mu: its corners
   allow |f_t| = sqrt(2) mu f_n. The inscribed pyramid is the one that lies inside the real cone;
-* ``corrected, fast``: the inscribed correction at ``fast_speed`` (0.16 m/s).
+* ``corrected, fast``: the inscribed correction at ``fast_speed`` (0.16 m/s);
+* ``reference: matched floor``: floor mu = controller mu = ``controller_mu`` (no mismatch), to
+  separate the effect of the mismatch from that of the pyramid's corners.
 
 Slip measurement (simulator state, not the controller's forces): the horizontal speed of each
 foot's material contact point (the bottom of the foot sphere; zero while the sphere rolls) at every
@@ -147,13 +149,15 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         "corrected mu": (p["floor_mu"], p["speed"], p["K_st"], p["D_st"]),
         "corrected, inscribed": (inscribed, p["speed"], p["K_st"], p["D_st"]),
         "corrected, fast": (inscribed, p["fast_speed"], p["K_st"], p["D_st"]),
+        "reference: matched floor": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"]),
     }
     runs, metrics = {}, {}
     for name, (mu, speed, K, D) in setups.items():
         log.info("friction-mismatch: run '%s' (controller mu %.3f, %.2f m/s, K_st %.0f)",
                  name, mu, speed, K)
-        runs[name] = crawl_run(robot, p["floor_mu"], mu, speed, p["duration"], K, D, progress)
-        metrics[name] = {"controller_mu": mu, "speed_m_s": speed, "K_st": K, "D_st": D,
+        floor = p["controller_mu"] if name.startswith("reference") else p["floor_mu"]
+        runs[name] = crawl_run(robot, floor, mu, speed, p["duration"], K, D, progress)
+        metrics[name] = {"floor_mu": floor, "controller_mu": mu, "speed_m_s": speed, "K_st": K, "D_st": D,
                          **slip_metrics(runs[name], p, _commanded(speed, p["duration"]))}
     m, free = metrics["mismatch"], metrics["mismatch, no stance task"]
     bounded = (not m["fell"]) and m["failed_cycles"] == 0 and m["max_stance_slip_m"] < p["slip_bound"]
@@ -181,6 +185,10 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         f"{metrics['corrected, inscribed']['slip_events']} slip events at {p['speed']} m/s, "
         f"{metrics['corrected, fast']['slip_events']} at {p['fast_speed']} m/s (worst slip "
         f"{metrics['corrected, fast']['max_stance_slip_m'] * 1e3:.1f} mm)",
+        f"reference, floor mu = WBC mu = {p['controller_mu']}: "
+        f"{metrics['reference: matched floor']['slip_events']} slip events, worst slip "
+        f"{metrics['reference: matched floor']['max_stance_slip_m'] * 1e3:.1f} mm (the same "
+        "pyramid-corner effect without any mismatch)",
     ]
     figures = []
     if out_dir is not None:
@@ -202,11 +210,12 @@ def _figure(path: Path, runs: dict, p: dict) -> Path:
         return np.where(mask, s, 0.0).max(axis=1)
 
     first = ("mismatch", "mismatch, no stance task")
-    rest = ("corrected mu", "corrected, inscribed", "corrected, fast")
+    rest = ("corrected mu", "corrected, inscribed", "corrected, fast", "reference: matched floor")
     panels = [
         (f"floor mu {p['floor_mu']}, WBC mu {p['controller_mu']}: stance task on/off (eq. 32)",
          "slip speed (m/s)", {k: np.minimum(stance_speed(runs[k]), 1.0) for k in first}),
-        ("WBC mu corrected", "slip speed (m/s)", {k: stance_speed(runs[k]) for k in rest}),
+        ("WBC mu corrected; matched-floor reference", "slip speed (m/s)",
+         {k: stance_speed(runs[k]) for k in rest}),
         ("CoM tracking error", "||e_x|| (m)",
          {k: np.minimum(np.linalg.norm(r.log["com_error"][:n], axis=1), 0.1)
           for k, r in runs.items()}),
