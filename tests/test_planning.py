@@ -425,7 +425,7 @@ def test_planner_crawl_on_hyq_flat(hyq):
     plans = run(planner, 0.6 + 3 * sch.period)
     assert check_swings_land_on_target(planner, plans, Terrain.flat()) == 12  # 3 cycles x 4 legs
     # the touchdown target is the Raibert foothold on the nominal trunk path (independent recompute)
-    fp = Footprint.from_robot(hyq)
+    fp = Footprint.from_robot(hyq).centered_on_com()  # the planner default
     for pl in plans:
         for i in np.flatnonzero(pl.lifted_off):
             t_td = pl.touchdown_time[i]

@@ -14,7 +14,7 @@ normal there is returned too (the friction cones of eq. 13 need it, footnote 17)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -113,6 +113,17 @@ class Footprint:
     def com_height(self) -> float:
         """Nominal CoM height above the ground."""
         return self.base_height + float(self.com[2])
+
+    def centered_on_com(self) -> "Footprint":
+        """The same stance shifted horizontally so that the feet's centroid lies under the CoM.
+
+        A trot stands on one diagonal at a time; no force on two point feet makes a moment about
+        the line between them, so a CoM off that line tips the trunk. HyQ's CoM is 3.9 cm ahead of
+        and 1.5 cm beside its feet's centroid in the standing posture: centring the footprint on the
+        CoM halved the trot's trunk-orientation error in the twin (0.15 -> 0.067 rad max)."""
+        feet = self.feet.copy()
+        feet[:, :2] += self.com[:2] - feet[:, :2].mean(axis=0)
+        return replace(self, feet=feet)
 
     def feet_from_com(self) -> np.ndarray:
         """(n, 2) horizontal nominal foot positions relative to the CoM, in the heading frame."""

@@ -133,12 +133,14 @@ class GaitPlanner:
                   clearance: float = 0.1, sway: str | CrawlSway | None = "auto",
                   sway_gain=(0.0, 1.0), sway_blend: float | None = None,
                   feedback_gain: float = 0.0, max_step: float | None = None,
-                  align_to_terrain: bool = True) -> "GaitPlanner":
+                  align_to_terrain: bool = True, center_on_com: bool = True) -> "GaitPlanner":
         """A planner for ``robot`` starting at time ``t0`` from configuration ``q`` (default: the
         standing posture ``robot.q_ref``), the trunk at its current CoM height above ``terrain``.
 
         ``sway="auto"`` adds a :class:`CrawlSway` when the schedule never swings two legs at once
         (a crawl); ``None`` disables it; a :class:`CrawlSway` instance is used as given.
+        ``center_on_com``: place the feet around the CoM rather than around the standing posture's
+        feet (see :meth:`Footprint.centered_on_com`).
         """
         q = robot.q_ref if q is None else np.asarray(q, dtype=float)
         legs = tuple(schedule.legs)
@@ -146,7 +148,9 @@ class GaitPlanner:
         R = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()
         base = q[:3]
         com0 = base + R @ footprint.com
-        feet = base + footprint.feet @ R.T
+        feet = base + footprint.feet @ R.T  # where the feet are now
+        if center_on_com:
+            footprint = footprint.centered_on_com()  # where they will be placed
         yaw0 = math.atan2(R[1, 0], R[0, 0])
         terrain = Terrain.flat() if terrain is None else terrain
         if isinstance(sway, str):
