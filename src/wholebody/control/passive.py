@@ -128,6 +128,7 @@ class PassiveWBC:
         self._R_diagonal[robot.nv:robot.nv + self.nf] = R_force
         self.last_tau: np.ndarray | None = None
         self.last_plan = None
+        self._failing = 0  # length of the current streak of failed cycles
 
     # ------------------------------------------------------------------ layout
     def _allocate(self) -> None:
@@ -357,7 +358,12 @@ class PassiveWBC:
             previous = self.last_tau if self.last_tau is not None else robot.h[6:]
             tau = np.clip(np.nan_to_num(previous), tau_lo, tau_hi)
             status = f"daqp exit flag {flag}: previous torque held (clipped to limits)"
-            log.warning("PassiveWBC cycle %d: %s", robot.cycle, status)
+            if self._failing == 0:  # one warning per streak of failed cycles, not one per cycle
+                log.warning("PassiveWBC cycle %d: %s", robot.cycle, status)
+        if ok and self._failing:
+            log.warning("PassiveWBC cycle %d: solved again after %d failed cycles", robot.cycle,
+                        self._failing)
+        self._failing = 0 if ok else self._failing + 1
         self.last_tau = tau
         wrench_error = G @ F - W_d
         reports = [TaskReport("trunk wrench", 2, "eq", 6, math.sqrt(wrench_error @ wrench_error))]
