@@ -1,4 +1,4 @@
-"""What every controller returns."""
+"""What every controller returns, and the loop shared by the quadruped controllers."""
 
 from __future__ import annotations
 
@@ -19,3 +19,19 @@ class ControlResult:
     contact_forces: dict[str, np.ndarray] = field(default_factory=dict)
     ok: bool = True
     status: str = "ok"
+
+
+class PlannedController:
+    """A controller driven by a gait planner: ``compute(q, v, t)`` updates the robot's cycle
+    cache, asks ``self.planner`` for the plan at ``t`` (with the measured foot-frame positions)
+    and returns ``self.solve(plan)``. Subclasses set ``robot`` and ``planner`` and define
+    ``solve``."""
+
+    def compute(self, q, v, t: float = 0.0):
+        """Torques for the state (q, v) (Pinocchio convention) at time ``t``."""
+        robot = self.robot
+        robot.update(q, v)
+        feet = np.array([robot.data.oMf[robot.contact(n).frame_id].translation
+                         for n in self.planner.legs])
+        return self.solve(self.planner.update(t, feet=feet))
+

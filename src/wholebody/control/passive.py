@@ -39,6 +39,7 @@ from ..robot import Robot
 from ..tasks.contact import friction_faces, tangent_basis
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import TrunkImpedance, contact_wrench_map
+from .base import PlannedController
 
 log = logging.getLogger(__name__)
 
@@ -59,11 +60,6 @@ class SwingGains:
     feedforward: bool = True
 
 
-def measured_feet(robot: Robot, contacts) -> np.ndarray:
-    """World positions (n, 3) of the contact frames at the robot's cached state."""
-    return np.array([robot.data.oMf[robot.contact(n).frame_id].translation for n in contacts])
-
-
 def default_planner(robot: Robot):
     """A planner that keeps every foot in stance under the standing posture."""
     from ..planning.gait import stand
@@ -71,7 +67,7 @@ def default_planner(robot: Robot):
     return GaitPlanner.for_robot(robot, stand(legs=robot.contact_names))
 
 
-class PassiveWBC:
+class PassiveWBC(PlannedController):
     """Passive whole-body controller: ``compute(q, v, t) -> Solution`` (Fahmi et al. 2019).
 
     ``planner`` (a :class:`~wholebody.planning.planner.GaitPlanner`, default: stand still) gives,
@@ -174,13 +170,6 @@ class PassiveWBC:
                 self.A[self._r_single + 3 * i:self._r_single + 3 * i + 3, nv + self.nf + i] = 1.0
 
     # ------------------------------------------------------------------ per cycle
-    def compute(self, q, v, t: float = 0.0) -> Solution:
-        """Torques for the state (q, v) (Pinocchio convention) at time ``t``."""
-        robot = self.robot
-        robot.update(q, v)
-        plan = self.planner.update(t, feet=measured_feet(robot, self.planner.legs))
-        return self.solve(plan)
-
     def solve(self, plan) -> Solution:
         """One QP (eq. 7) at the robot's cached state for ``plan`` (a PlanState-like object)."""
         t0 = time.perf_counter()

@@ -22,14 +22,15 @@ from ..robot import Robot
 from ..tasks.contact import friction_faces, tangent_basis
 from ..tasks.limits import TorqueLimits
 from ..tasks.wrench import TrunkImpedance, contact_wrench_map
-from .passive import default_planner, measured_feet
+from .base import PlannedController
+from .passive import default_planner
 
 log = logging.getLogger(__name__)
 
 _EQ, _FREE = 5, 0
 
 
-class QuasiStaticController:
+class QuasiStaticController(PlannedController):
     """Centroidal force distribution + static torque map: ``compute(q, v, t) -> Solution``.
 
     ``swing_K``/``swing_D``: Cartesian swing-leg stiffness (N/m) and damping (N s/m).
@@ -63,12 +64,6 @@ class QuasiStaticController:
         self._G = np.zeros((6, self.nf))
         self.last_tau: np.ndarray | None = None
         self.last_plan = None
-
-    def compute(self, q, v, t: float = 0.0) -> Solution:
-        robot = self.robot
-        robot.update(q, v)
-        plan = self.planner.update(t, feet=measured_feet(robot, self.planner.legs))
-        return self.solve(plan)
 
     def solve(self, plan) -> Solution:
         t0 = time.perf_counter()

@@ -12,6 +12,16 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
+def save_figure(fig, path) -> Path:
+    """Lay out ``fig``, save it as a PNG at ``path`` (parents created), close it; the path."""
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def time_series_figure(path: Path, t: np.ndarray,
                        panels: Sequence[tuple[str, str, dict[str, np.ndarray]]],
                        title: str = "", shaded: Sequence[tuple[float, float]] = ()) -> Path:
@@ -34,12 +44,7 @@ def time_series_figure(path: Path, t: np.ndarray,
     axes[-1, 0].set_xlabel("time (s)")
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def grouped_bar_figure(path: Path, groups: Sequence[str], series: dict[str, Sequence[float]],
@@ -58,9 +63,4 @@ def grouped_bar_figure(path: Path, groups: Sequence[str], series: dict[str, Sequ
     ax.legend(fontsize=7)
     if title:
         ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -197,7 +197,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
 
 def _ramp_figure(path: Path, t, desired, actual, com, course: Course, p: dict) -> Path:
     """Fig. 8 style: roll and pitch, desired vs actual, and the course under the CoM."""
-    from ..report.plots import plt  # the headless (Agg) pyplot
+    from ..report.plots import plt, save_figure  # the headless (Agg) pyplot
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5))
     for ax, k, name in ((axes[0], 0, "roll"), (axes[1], 1, "pitch")):
         ax.plot(t, desired[:, k], "k--", linewidth=1.0, label="desired")
@@ -216,11 +216,7 @@ def _ramp_figure(path: Path, t, desired, actual, com, course: Course, p: dict) -
     axes[2].legend(fontsize=7)
     fig.suptitle(f"HyQ {p['gait']} {p['speed']} m/s over a {p['angle']:.0f} deg ramp: roll and "
                  "pitch tracking (Fig. 8)", fontsize=10)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 LEG_JOINTS = {"lf": ("lf_hfe_joint", "lf_kfe_joint"), "rf": ("rf_hfe_joint", "rf_kfe_joint"),
@@ -230,7 +226,7 @@ LEG_JOINTS = {"lf": ("lf_hfe_joint", "lf_kfe_joint"), "rf": ("rf_hfe_joint", "rf
 def _side_view(path: Path, robot, gait_run, course: Course, p: dict, snapshots: int = 6) -> Path:
     """Fig. 7 style side view: the course, the CoM path, the feet paths and stick-figure
     snapshots of the robot (left legs solid, right legs dashed), all from the simulator."""
-    from ..report.plots import plt  # the headless (Agg) pyplot
+    from ..report.plots import plt, save_figure  # the headless (Agg) pyplot
     sim_log = gait_run.sim.log
     qs = np.asarray(sim_log.q)
     ts = np.asarray(sim_log.t)
@@ -279,11 +275,7 @@ def _side_view(path: Path, robot, gait_run, course: Course, p: dict, snapshots: 
             f"{p['gap'] * 100:.0f} cm gap + {p['step'] * 100:.0f} cm step")
     ax.set_title(f"HyQ {p['gait']} {p['speed']} m/s across a {what} (simulator; cf. Fig. 7)",
                  fontsize=9)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 SCENARIO = Scenario(

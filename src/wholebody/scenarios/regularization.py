@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..planning.trunk import VelocityCommand
+from ..report.plots import save_figure
 from .base import Parameter, Scenario, ScenarioResult
 from .locomotion import run_gait
 
@@ -204,12 +205,7 @@ def _figure(path: Path, weights, metrics, p) -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle(f"HyQ {p['gait']}: torque regularisation (Sect. V-D, footnote 16)", fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 SCENARIO = Scenario(

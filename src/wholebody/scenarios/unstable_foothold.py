@@ -207,7 +207,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
 def _figure(path: Path, disturbed, reference, sim: dict, leg: int, params: dict) -> Path:
     """Fig. 6 style: CoM x, y, z (reference and simulator), the disturbance shaded; plus the RF
     foot height and normal force."""
-    from ..report.plots import plt  # the headless (Agg) pyplot
+    from ..report.plots import plt, save_figure  # the headless (Agg) pyplot
     t = disturbed.log["t"]
     com, ref = disturbed.log["com"], disturbed.log["com_ref"]
     t_r = params["release_time"]
@@ -234,11 +234,7 @@ def _figure(path: Path, disturbed, reference, sim: dict, leg: int, params: dict)
         ax.legend(fontsize=7, loc="best")
     fig.suptitle(f"HyQ {params['gait']}: a {100 * params['depth']:.0f} cm stone rolls away under the "
                  f"RF foot at {t_r} s (cf. Fig. 6; red: disturbance window)", fontsize=10)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 SCENARIO = Scenario(
