@@ -10,7 +10,6 @@ import pytest
 
 from wholebody.scenarios import get_scenario
 from wholebody.scenarios.robust_push import NOMINAL, TrueCoM, mismatch_for, nominal_force
-from wholebody.sim.mismatch import Mismatch
 from wholebody.sim.simulator import Simulator
 
 
@@ -45,7 +44,8 @@ def test_push_at_70_percent_survives_a_mismatched_twin(robots, tmp_path):
     twin with link masses +-10 %, CoM offsets 1 cm, 1 ms torque delay and 1 Nm torque noise."""
     robot = robots["talos14"]
     res = get_scenario("robust-push").run(
-        robot, "pd", {"locations": "front", "seeds": "1", "duration": "2.8", "start": "0.8"},
+        robot, "pd", {"locations": "front", "seeds": "1", "duration": "2.8", "start": "0.8",
+                      "baseline": "false"},
         out_dir=tmp_path)
     front = res.metrics["per_location"]["front"]
     (run,) = front["runs"]
@@ -66,7 +66,7 @@ def test_push_far_above_nominal_is_reported_as_a_failure(robots):
     robot = robots["talos14"]
     res = get_scenario("robust-push").run(
         robot, "pd", {"locations": "front", "seeds": "1", "fraction": "2.5", "duration": "1.5",
-                      "start": "0.5"})
+                      "baseline": "false", "start": "0.5"})
     (run,) = res.metrics["per_location"]["front"]["runs"]
     assert not res.success and not run["survived"] and res.metrics["success_rate"] == 0.0
     assert run["max_foot_tilt_deg"] > 2.0 or run["max_cog_error_m"] > 0.05

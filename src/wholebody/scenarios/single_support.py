@@ -17,7 +17,8 @@ Phases:
    swing-foot task lifting the sole by ``lift`` metres;
 4. pushes in single support (``push_forces``, half-sine; the paper: up to 150 N, 4.5-5.8 Ns);
 5. leg swinging: the swing foot task is swapped for a joint-space task on the hip and knee flexion
-   joints of the swing leg tracking 0.25 Hz sines, and the robot is pushed at the hip from the front
+   joints of the swing leg tracking 0.25 Hz sines (the foot task fades out while the sine amplitude
+   ramps in), and the robot is pushed at the hip from the front
    during it (Fig. 11: knee tracking error, linear momentum, push force, stance CoP).
 
 Success: every cycle solved, the foot lifted, the CoG back within 5 mm of its reference within
@@ -192,7 +193,7 @@ class ContactSwitch:
         self.joint_task = JointTrajectoryTask(self.joints, kp=params.get("sine_kp", 100.0),
                                               kd=params.get("sine_kd", 20.0), name="swing joints")
         self.swinging = table4_stack(robot, [stance], [], lqr=lqr)
-        self.swinging.levels[2].insert(2, self.joint_task)
+        self.swinging.levels[2][2:2] = [self.joint_task, self.swing]  # swing fades out (handover)
         self.swing_posture = self.swinging.find("posture")
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_start = robot.com.copy()
@@ -278,17 +279,24 @@ class ContactSwitch:
                 idx = FREE_FLYER_NQ + np.array([robot.joint_names.index(j) for j in self.joints])
                 if self.sine_q0 is None:
                     self.sine_q0 = robot.q[idx].copy()
-                    # posture reference: the swing leg held where it is (hip/knee set below)
-                    self.swing_q_ref = robot.q_ref.copy()
                     leg = FREE_FLYER_NQ + np.array([
                         i for i, n in enumerate(robot.joint_names)
                         if n.startswith(self.joints[0].rsplit("_", 2)[0])])
-                    self.swing_q_ref[leg] = robot.q[leg]
+                    self.leg_held = (leg, robot.q[leg].copy())
                 qd, vd, ad = self.joint_reference(t)
                 self.joint_task.position, self.joint_task.velocity = qd, vd
                 self.joint_task.acceleration = ad
-                self.swing_q_ref[idx] = qd
-                self.swing_posture.q_ref = self.swing_q_ref
+                # handover over the amplitude ramp: the Cartesian foot task fades out and the
+                # posture reference of the swing leg moves from the standing posture to the
+                # lifted leg (hip/knee: to their sine references), so the torques stay continuous
+                ramp = max(p["sine_ramp"], 1e-6)
+                e = smootherstep((t - tl.sine_start) / ramp, ramp)[0]
+                self.swing.weight = 1.0 - e
+                q_post = robot.q_ref.copy()
+                leg, held = self.leg_held
+                q_post[leg] = (1.0 - e) * robot.q_ref[leg] + e * held
+                q_post[idx] = (1.0 - e) * robot.q_ref[idx] + e * qd
+                self.swing_posture.q_ref = q_post
                 stack = self.swinging
         self._set_momentum(stack, t, gains)
         sol = self.formulation.solve(stack, variables, diagnostics=False)
