@@ -142,8 +142,10 @@ def test_simulator_support_pose_follows_the_platform(robots):
 # ------------------------------------------------------------------------------ closed loop
 def sole_poses(robot, q):
     """(position, rotation) of every sole frame by forward kinematics of a logged q."""
-    robot.update(q, np.zeros(robot.nv))
-    return {n: robot.frame_placement(robot.contact(n).spec.frame) for n in robot.contact_names}
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    return {n: (data.oMf[robot.contact(n).frame_id].translation.copy(),
+                data.oMf[robot.contact(n).frame_id].rotation.copy()) for n in robot.contact_names}
 
 
 def measured_cops(robot, log, skip=0.2):
@@ -162,28 +164,28 @@ def measured_cops(robot, log, skip=0.2):
 
 
 def test_platform_feet_ride_the_moving_board_and_a_too_fast_board_is_a_failure(robots):
-    """Sect. 5.2.3, one move of the rolling platform (10 cm in 0.8 s, 0.9 m/s^2 peak): the soles
-    end 10 cm further with the board (simulator kinematics), the board's friction accelerated the
+    """Sect. 5.2.3, one move of the rolling platform (6 cm in 0.6 s, 0.96 m/s^2 peak): the soles
+    end 6 cm further with the board (simulator kinematics), the board's friction accelerated the
     robot (simulator contact forces ~ m a), the measured CoP stayed in the soles. A board
     accelerating at 2.9 m/s^2 (beyond g * 10.5 cm / 0.87 m ~ 1.2 m/s^2 with flat feet) is reported
     as a failure."""
     robot = robots["talos14"]
     scenario = get_scenario("platform")
-    res = scenario.run(robot, "pd", {"moves": "1", "distance": "0.1", "move_time": "0.8",
-                                     "start": "0.2", "settle": "1.5"})
+    res = scenario.run(robot, "pd", {"moves": "1", "distance": "0.06", "move_time": "0.6",
+                                     "start": "0.2", "settle": "1.2"})
     assert res.success, res.metrics
     log = res.log.arrays()
     start, end = sole_poses(robot, log["q"][0]), sole_poses(robot, log["q"][-1])
     for n in robot.contact_names:
-        np.testing.assert_allclose(end[n][0] - start[n][0], [0.1, 0.0, 0.0], atol=3e-3)
+        np.testing.assert_allclose(end[n][0] - start[n][0], [0.06, 0.0, 0.0], atol=3e-3)
     horizontal = np.abs(log["contact_wrenches"][:, :, 0].sum(axis=1))
-    peak = robot.mass * 5.7735 * 0.1 / 0.8 ** 2
+    peak = robot.mass * 5.7735 * 0.06 / 0.6 ** 2
     assert 0.6 * peak < horizontal[log["t"] > 0.2].max() < 1.6 * peak
     cops = measured_cops(robot, log)
     assert np.all(np.abs(cops) < robot.contact("left_sole").spec.half_size)
-    fast = scenario.run(robot, "pd", {"moves": "1", "distance": "0.15", "move_time": "0.55",
-                                      "start": "0.2", "settle": "0.3"})
-    assert not fast.success
+    fast = scenario.run(robot, "pd", {"moves": "1", "distance": "0.1", "move_time": "0.45",
+                                      "start": "0.1", "settle": "0.1"})
+    assert not fast.success and fast.metrics["max_foot_tilt_deg"] > 2.0
 
 
 def test_tilt_board_feet_stay_flat_on_the_tilted_board(robots):
@@ -213,11 +215,8 @@ def test_squat_tracks_the_cog_sine_with_flat_feet(robots):
     assert res.success, res.metrics
     log = res.log.arrays()
     ref = CoMSineReference(robot, amplitude=(0.02, 0.0, 0.03), frequency=(0.5,) * 3, ramp=0.5)
-    com = []
-    for q in log["q"]:
-        robot.update(q, np.zeros(robot.nv))
-        com.append(robot.com.copy())
-    com = np.array(com)
+    data = robot.model.createData()
+    com = np.array([pin.centerOfMass(robot.model, data, q).copy() for q in log["q"]])
     target = np.array([ref.terms(t)[0] for t in log["t"]])
     assert np.abs(com - target).max() < 5e-3
     after = log["t"] > 0.5
@@ -225,3 +224,21 @@ def test_squat_tracks_the_cog_sine_with_flat_feet(robots):
     assert np.ptp(com[after, 2]) == pytest.approx(0.06, abs=3e-3)
     for n, (_, R) in sole_poses(robot, log["q"][-1]).items():
         assert np.degrees(np.arccos(R[2, 2])) < 2.0
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "paper claim (Sect. 5.3, Fig. 10) not reproduced on talos14: once a CoP row of level 2 is "
+    "active the level-3 momentum residual (weight 1e4) is traded for ~180 rad/s^2 counter-"
+    "rotations of the torso yaw and the base (posture weight 1e-1 cannot hold them), and the "
+    "robot falls within ~1 s; see the squat scenario's summary notes"))
+def test_squat_with_active_cop_constraints_keeps_balance(robots):
+    """Fig. 10: with the admissible CoP region shrunk (cop-active variant) the CoP constraints
+    become active, the feet do not tilt and the CoG keeps tracking reasonably."""
+    robot = robots["talos14"]
+    res = get_scenario("squat").run(robot, "pd", {"variant": "cop-active", "periods": "0.5",
+                                                  "ramp": "0.5"})
+    assert res.metrics["cop_active_fraction"] > 0.05
+    log = res.log.arrays()
+    for n, (_, R) in sole_poses(robot, log["q"][-1]).items():
+        assert np.degrees(np.arccos(np.clip(R[2, 2], -1, 1))) < 2.0
+    assert res.success, res.metrics

@@ -35,7 +35,8 @@ Metrics (every control cycle, all from the simulator's state, poses and contact 
   (1 = on the sole's edge). The CoP statistics skip the first ``COP_SKIP`` s (the robot is placed
   on the support at t = 0 and lands on it within a few ms).
 - ``max_joint_deviation_rad`` / ``max_deviation_joint``: largest |q_j - q_ref,j| (the posture);
-  ``min_joint_limit_margin_rad``: smallest distance of a joint to its position limits.
+  ``min_joint_limit_margin_rad`` / ``closest_to_limit_joint``: smallest distance of a joint to its
+  position limits, and which joint.
 - ``cop_active_fraction``: fraction of cycles in which a CoP row of the QP solution is at its bound
   (predicted CoP within ``COP_ACTIVE_TOL`` of the admissible rectangle's edge).
 - Platform "IMU" (Sect. 4.5): ``peak_platform_acceleration_mps2`` (the board point under the soles)
@@ -190,12 +191,14 @@ class BalanceMonitor:
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(v) for k, v in self.rows.items()}
 
-    def joint_limit_margin(self, deviations: np.ndarray) -> float:
-        """Smallest distance of any joint to its position limits over the run (rad)."""
+    def joint_limit_margin(self, deviations: np.ndarray, name: bool = False):
+        """Smallest distance of any joint to its position limits over the run (rad), or with
+        ``name`` the joint where it occurs."""
         model = self.robot.model
         q = deviations + self.robot.q_ref[7:]
         lo, hi = model.lowerPositionLimit[7:], model.upperPositionLimit[7:]
-        return float(np.min(np.minimum(q - lo, hi - q)))
+        margin = np.minimum(q - lo, hi - q).min(axis=0)
+        return self.robot.joint_names[int(margin.argmin())] if name else float(margin.min())
 
     def support_imu(self, point_offset=None) -> tuple[np.ndarray, np.ndarray]:
         """(linear acceleration of a point fixed to the support, angular velocity), world axes, by
@@ -242,6 +245,7 @@ class BalanceMonitor:
             "max_deviation_joint": self.robot.joint_names[int(np.abs(a["joints"]).max(axis=0)
                                                               .argmax())],
             "min_joint_limit_margin_rad": self.joint_limit_margin(a["joints"]),
+            "closest_to_limit_joint": self.joint_limit_margin(a["joints"], name=True),
             "peak_platform_acceleration_mps2": float(np.linalg.norm(acc, axis=1).max()),
             "peak_platform_angular_velocity_radps": float(np.linalg.norm(omega, axis=1).max()),
         }
