@@ -72,6 +72,15 @@ def _mm(value) -> str:
     return "n/a" if value is None else f"{1000 * value:.1f}"
 
 
+def limit_notes(metrics: dict) -> list[str]:
+    """A note when a joint reached its position limit (the twin's limits are hard stops)."""
+    if metrics["min_joint_limit_margin_rad"] < 0.01:
+        return [f"{metrics['closest_to_limit_joint']} reached its position limit (margin "
+                f"{metrics['min_joint_limit_margin_rad']:.3f} rad); the controller has no "
+                f"joint-position limit task"]
+    return []
+
+
 def min_jerk(s: float) -> tuple[float, float, float]:
     """Minimum-jerk profile 10 s^3 - 15 s^4 + 6 s^5 on [0, 1] and its 1st/2nd derivatives in s."""
     if s <= 0.0:
@@ -374,6 +383,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                  f"N m s, foot slip {1000 * m['max_foot_slip_m']:.1f} mm, tilt "
                  f"{m['max_foot_tilt_deg']:.2f} deg, predicted-vs-measured CoP RMS "
                  f"{_mm(m['cop_rms_error_m'])} mm at {m['peak_platform_acceleration_mps2']:.2f} m/s^2")
+    notes += limit_notes(metrics)
     result = ScenarioResult("platform", robot.name, controller, success, metrics, params, notes,
                             log=sim.log)
     if out_dir is not None:

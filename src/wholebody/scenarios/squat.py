@@ -41,7 +41,8 @@ from ..report.plots import time_series_figure
 from ..sim.simulator import Simulator
 from .base import Parameter, Scenario, ScenarioResult
 from .loop import run_closed_loop
-from .platform import COP_SKIP, _mm, SLIP_LIMIT_M, TILT_LIMIT_DEG, BalanceMonitor, lqr_q, validate_biped
+from .platform import (COP_SKIP, SLIP_LIMIT_M, TILT_LIMIT_DEG, BalanceMonitor, _mm, limit_notes,
+                       lqr_q, validate_biped)
 
 VARIANTS = ("tracking", "cop-active")
 
@@ -133,6 +134,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     if controller == "lqr" and params["q_angular"] == 0.1:
         notes.append("eq. 26's Q (0.1 on angular momentum) leaves talos14's trunk poorly damped; "
                      "compare --set q_angular=10")
+    notes += limit_notes(metrics)
     result = ScenarioResult("squat", robot.name, controller, success, metrics, params, notes,
                             log=sim.log)
     if out_dir is not None:

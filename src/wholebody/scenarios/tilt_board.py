@@ -42,7 +42,8 @@ from ..sim.simulator import Simulator
 from .base import Parameter, Scenario, ScenarioResult
 from .loop import run_closed_loop
 from .platform import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, TILT_LIMIT_DEG,
-                       BalanceMonitor, WaypointMotion, _mm, lqr_q, sole_midpoint, validate_biped)
+                       BalanceMonitor, WaypointMotion, _mm, limit_notes, lqr_q, sole_midpoint,
+                       validate_biped)
 
 GRAVITY = 9.81
 
@@ -189,6 +190,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                      f"normal force down to {m['fall_min_total_normal_force_N']:.0f} N), feet flat "
                      f"again {m['feet_flat_again_after_impact_s']:.2f} s "
                      f"after it, recovered: {m['recovered']}; " + measured)
+    notes += limit_notes(metrics)
     result = ScenarioResult("tilt-board", robot.name, controller, success, metrics, params, notes,
                             log=sim.log)
     if out_dir is not None:
