@@ -309,6 +309,8 @@ PARAMETERS = (
     Parameter("feedforward", False, "feed the board's acceleration (an IMU on it) forward as "
                                     "hdot_ref = m a (not in the paper)"),
     Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)"),
+    Parameter("cop_margin", 0.0, "shrink the admissible CoP rectangle by this fraction (0: the "
+                                 "whole sole)"),
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)"),
 )
 
@@ -358,8 +360,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         support_acc = lambda t: np.r_[motion.acceleration(t)[:3]]  # noqa: E731
     reference = SoleFrameReference(robot, support_acceleration=support_acc)
     ctrl = MomentumBalance(robot, gains=controller, reference=reference,
-                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None)
-    monitor = BalanceMonitor(robot, sim, ctrl)
+                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
+                           cop_margin=params["cop_margin"])
+    monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=params["cop_margin"])
     duration = motion.end + params["settle"]
     failures = run_closed_loop(sim, ctrl, duration, progress=progress, on_result=monitor)
     metrics = monitor.metrics()
