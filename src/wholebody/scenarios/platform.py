@@ -36,7 +36,8 @@ Metrics (every control cycle, all from the simulator's state, poses and contact 
   on the support at t = 0 and lands on it within a few ms).
 - ``max_joint_deviation_rad`` / ``max_deviation_joint``: largest |q_j - q_ref,j| (the posture);
   ``min_joint_limit_margin_rad`` / ``closest_to_limit_joint``: smallest distance of a joint to its
-  position limits, and which joint.
+  position limits, and which joint. ``max_commanded_joint_acceleration_radps2`` /
+  ``max_commanded_acceleration_joint``: the largest joint acceleration of the QP solutions.
 - ``cop_active_fraction``: fraction of cycles in which a CoP row of the QP solution is at its bound
   (predicted CoP within ``COP_ACTIVE_TOL`` of the admissible rectangle's edge).
 - Platform "IMU" (Sect. 4.5): ``peak_platform_acceleration_mps2`` (the board point under the soles)
@@ -162,7 +163,7 @@ class BalanceMonitor:
         self.start = {n: R_s.T @ (poses[n][0] - p_s) for n in self.names}
         self.rows: dict[str, list] = {k: [] for k in (
             "t", "com", "com_ref", "cog_error", "dh", "tilt", "slip", "cop_pred", "cop_meas",
-            "fz_meas", "active", "support_p", "support_R", "joints")}
+            "fz_meas", "active", "support_p", "support_R", "joints", "qdd")}
 
     def __call__(self, t: float, sol) -> None:
         robot, sim, r = self.robot, self.sim, self.rows
@@ -196,6 +197,7 @@ class BalanceMonitor:
         r["support_p"].append(p_s)
         r["support_R"].append(R_s)
         r["joints"].append(robot.q[7:] - robot.q_ref[7:])
+        r["qdd"].append(np.asarray(sol.qdd)[6:])
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(v) for k, v in self.rows.items()}
@@ -255,6 +257,9 @@ class BalanceMonitor:
                                                               .argmax())],
             "min_joint_limit_margin_rad": self.joint_limit_margin(a["joints"]),
             "closest_to_limit_joint": self.joint_limit_margin(a["joints"], name=True),
+            "max_commanded_joint_acceleration_radps2": float(np.abs(a["qdd"]).max()),
+            "max_commanded_acceleration_joint": self.robot.joint_names[
+                int(np.abs(a["qdd"]).max(axis=0).argmax())],
             "peak_platform_acceleration_mps2": float(np.linalg.norm(acc, axis=1).max()),
             "peak_platform_angular_velocity_radps": float(np.linalg.norm(omega, axis=1).max()),
         }
