@@ -81,6 +81,8 @@ PARAMETERS = (
     Parameter("recovery_time", 3.0, "a push is recovered if the CoG is back within 5 mm of its "
                                     "reference this long after it (s)"),
     Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)"),
+    Parameter("lqr_blend", True, "LQR: blend the gains during the unloading (Sect. 3.2 remark); "
+                                 "false: switch them at the contact switch"),
     Parameter("max_torque_jump", 10.0, "largest cycle-to-cycle torque change counted as "
                                        "continuous, outside pushes (Nm)"),
 )
@@ -260,7 +262,7 @@ class ContactSwitch:
                 self.unload.weight = 1.0
                 self.alpha = smoothstep((t - p["shift_time"]) / p["unload_time"])
                 self.unload.targets[self.swing_contact] = (1.0 - self.alpha) * self.unload_start
-                if self.lqr:
+                if self.lqr and self.p.get("lqr_blend", True):
                     gains = self.lqr.blend(gains, self.lqr.gains(robot, (self.stance,)),
                                            self.alpha, contacts=self.double_contacts)
             stack, variables = self.double, self.double_vars
