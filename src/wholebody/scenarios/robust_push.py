@@ -235,6 +235,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
             "mean_max_cog_error_m": float(np.mean([m["max_cog_error_m"] for m in ms])),
             "max_final_cog_error_m": float(max(m["final_cog_error_m"] for m in ms)),
             "max_static_cog_offset_m": float(max(m["static_cog_offset_m"] for m in ms)),
+            "survivors_max_cog_error_m": float(max(
+                [m["max_cog_error_m"] for m in ms if m["survived"]] or [np.nan])),
             "runs": ms,
         }
     all_runs = [m for v in per_location.values() for m in v["runs"]]
@@ -293,8 +295,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         figures.append(grouped_bar_figure(
             Path(out_dir) / "robust_push_summary.png", locations,
             {"success rate (%)": [100 * per_location[loc]["success_rate"] for loc in locations],
-             "max CoG error (mm)": [1000 * per_location[loc]["max_cog_error_m"]
-                                    for loc in locations],
+             "max CoG error of the survivors (mm)": [
+                 np.nan_to_num(1000 * per_location[loc]["survivors_max_cog_error_m"])
+                 for loc in locations],
              "peak force (N / 10)": [per_location[loc]["peak_force_N"] / 10 for loc in locations]},
             title=f"robust push — {robot.name}, {controller}, {int(params['seeds'])} mismatch "
                   f"draws per point"))
