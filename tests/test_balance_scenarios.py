@@ -227,10 +227,10 @@ def test_squat_tracks_the_cog_sine_with_flat_feet(robots):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "paper claim (Sect. 5.3, Fig. 10) not reproduced on talos14: once a CoP row of level 2 is "
-    "active the level-3 momentum residual (weight 1e4) is traded for ~180 rad/s^2 counter-"
-    "rotations of the torso yaw and the base (posture weight 1e-1 cannot hold them), and the "
-    "robot falls within ~1 s; see the squat scenario's summary notes"))
+    "paper claim (Sect. 5.3, Fig. 10) not reproduced on talos14: when the CoP rows (level 2) "
+    "become active, 5 torque-limit rows (level 1) become active with them, the level-3 cost jumps "
+    "from ~7 to 1e8-1e10, the QP commands ~180 rad/s^2 on the torso joints and the robot falls "
+    "within ~1 s (PD and LQR, margins 0.6-0.8, daqp and quadprog alike)"))
 def test_squat_with_active_cop_constraints_keeps_balance(robots):
     """Fig. 10: with the admissible CoP region shrunk (cop-active variant) the CoP constraints
     become active, the feet do not tilt and the CoG keeps tracking reasonably."""
