@@ -66,10 +66,11 @@ class CoMSineReference:
     of the reference posture.
 
     With ``move_base`` (default) the floating-base reference of the posture task is translated with
-    the CoG reference. Without it the posture task keeps pulling the base to its standing position
-    while the momentum task lowers the CoG; the compromise found by the level-3 weights is to bend
-    the torso, and on talos14 the torso pitch drifts cycle after cycle until it hits its joint limit
-    (measured: -0.26 to 0.78 rad over three 0.5 Hz periods).
+    the CoG reference, so that the posture task does not pull the base back to its standing
+    position. Measured on talos14 (Table 2, PD): it changes nothing visible — the momentum task
+    (weight 1e4) leaves the posture task (1e-1) two directions of q'' and the base translation is
+    not among them — and in both cases the torso pitch swings with a growing amplitude (-0.26 rad
+    at 2.5 s, +0.78 rad at 7 s) until it hits its joint limit (0.733 rad) after three 0.5 Hz periods.
     """
 
     def __init__(self, robot: Robot, amplitude, frequency, ramp: float = 1.0, x0=None,
