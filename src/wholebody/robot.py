@@ -102,6 +102,14 @@ class Robot:
         starts = np.cumsum([0] + [c.dim for c in self.contacts])
         self._contact_slices = [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:])]
         self._contact_rows = int(starts[-1])
+        nc = len(self.contacts)
+        self._J6 = np.zeros((nc, 6, model.nv))  # per-cycle scratch of _update_contacts
+        self._acc6 = np.zeros((nc, 6))
+        self._omega = np.zeros((nc, 3))
+        self._points = np.zeros((nc, 3))
+        self._radii = np.array([c.spec.radius if c.dim == 3 else 0.0 for c in self.contacts])
+        self._spheres = self._radii > 0.0
+        self._all_points = bool(nc) and all(c.dim == 3 for c in self.contacts)
         self.friction = description.friction
 
         self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
@@ -234,54 +242,69 @@ class Robot:
 
     def _update_contacts(self) -> None:
         """Contact Jacobians, drifts and points of every contact, filled into one stacked array
-        per cycle (``contact_jacobians[name]`` are views of it, so stacking all contacts is free)."""
+        per cycle (``contact_jacobians[name]`` are views of it, so stacking all contacts is free).
+
+        Point contacts with a radius are the material point under the foot sphere's centre,
+        d = (0, 0, -r) in world axes (:meth:`_contact_jacobian`), computed for all feet at once."""
+        model, data, LWA = self.model, self.data, pin.LOCAL_WORLD_ALIGNED
+        J6, acc6, omega, points = self._J6, self._acc6, self._omega, self._points
+        for i, c in enumerate(self.contacts):
+            J6[i] = pin.getFrameJacobian(model, data, c.frame_id, LWA)
+            acc6[i] = pin.getFrameClassicalAcceleration(model, data, c.frame_id, LWA).vector
+            points[i] = data.oMf[c.frame_id].translation
+            if self._spheres[i]:
+                omega[i] = pin.getFrameVelocity(model, data, c.frame_id, LWA).angular
         J = np.empty((self._contact_rows, self.nv))
         drift = np.empty(self._contact_rows)
-        points = np.empty((len(self.contacts), 3))
-        for i, (c, rows) in enumerate(zip(self.contacts, self._contact_slices)):
-            J[rows] = self._contact_jacobian(c)
-            drift[rows] = self._contact_drift(c)
-            points[i] = self.data.oMf[c.frame_id].translation
-            if c.dim == 3:
-                points[i, 2] -= c.spec.radius
-        self.contact_jacobians = {c.name: J[rows] for c, rows in zip(self.contacts,
-                                                                    self._contact_slices)}
-        self.contact_drifts = {c.name: drift[rows] for c, rows in zip(self.contacts,
-                                                                     self._contact_slices)}
+        if self._all_points:  # one vectorised pass (quadrupeds)
+            r = self._radii[:, None]
+            Jp = J.reshape(len(self.contacts), 3, self.nv)
+            Jp[:] = J6[:, :3]
+            Jp[:, 0] -= r * J6[:, 4]  # -[d]x J_ang
+            Jp[:, 1] += r * J6[:, 3]
+            a = drift.reshape(-1, 3)
+            a[:] = acc6[:, :3]
+            al, w = acc6[:, 3:], omega
+            a[:, 0] -= r[:, 0] * (al[:, 1] + w[:, 0] * w[:, 2])  # α x d + ω x (ω x d)
+            a[:, 1] += r[:, 0] * (al[:, 0] - w[:, 1] * w[:, 2])
+            a[:, 2] += r[:, 0] * (w[:, 0] * w[:, 0] + w[:, 1] * w[:, 1])
+        else:
+            for i, (c, rows) in enumerate(zip(self.contacts, self._contact_slices)):
+                J[rows] = self._contact_jacobian(c, J6[i])
+                drift[rows] = self._contact_drift(c, acc6[i], omega[i])
+        points = points.copy()
+        points[:, 2] -= self._radii
+        self.contact_jacobians = dict(zip(self.contact_names, (J[rows] for rows in
+                                                               self._contact_slices)))
+        self.contact_drifts = dict(zip(self.contact_names, (drift[rows] for rows in
+                                                            self._contact_slices)))
         self.contact_points = points  # (n_contacts, 3), world: sole origins / sphere bottoms
         self._frame_cache[("stacked J", self.contact_names)] = J
         self._frame_cache[("stacked drift", self.contact_names)] = drift
 
-    def _contact_jacobian(self, c: Contact) -> np.ndarray:
-        """Rectangles: the sole frame's 6D Jacobian. Points: the linear Jacobian of the material
-        point under the foot sphere's centre, d = (0, 0, -radius) below it in world axes (for a
-        rolling sphere that point is at rest while the centre moves): J_p = J_lin - [d]x J_ang."""
-        J = pin.getFrameJacobian(self.model, self.data, c.frame_id, pin.LOCAL_WORLD_ALIGNED)
+    def _contact_jacobian(self, c: Contact, J: np.ndarray) -> np.ndarray:
+        """From the frame's 6D Jacobian ``J``: rectangles keep it; points take the linear Jacobian
+        of the material point under the foot sphere's centre, d = (0, 0, -radius) below it in
+        world axes (for a rolling sphere that point is at rest while the centre moves):
+        J_p = J_lin - [d]x J_ang."""
         if c.dim == 6:
             return J
-        if c.spec.radius == 0.0:
-            return J[:3]
-        r = c.spec.radius  # -[d]x J_ang with d = (0, 0, -r): rows (-r J_wy, r J_wx, 0)
         Jp = J[:3].copy()
+        r = c.spec.radius  # -[d]x J_ang with d = (0, 0, -r): rows (-r J_wy, r J_wx, 0)
         Jp[0] -= r * J[4]
         Jp[1] += r * J[3]
         return Jp
 
-    def _contact_drift(self, c: Contact) -> np.ndarray:
-        """J̇v of the same point: a_f + α x d + ω x (ω x d) at zero joint acceleration."""
-        acc = pin.getFrameClassicalAcceleration(self.model, self.data, c.frame_id,
-                                                pin.LOCAL_WORLD_ALIGNED)
+    def _contact_drift(self, c: Contact, acc: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """J̇v of the same point from the frame's classical acceleration ``acc`` (6) and angular
+        velocity ``omega``: a_f + α x d + ω x (ω x d) at zero joint acceleration."""
         if c.dim == 6:
-            return acc.vector.copy()
-        a = acc.linear.copy()
-        r = c.spec.radius
-        if r != 0.0:  # d = (0, 0, -r), written out (np.cross costs ~10 µs on 3-vectors)
-            al = acc.angular
-            w = pin.getFrameVelocity(self.model, self.data, c.frame_id,
-                                     pin.LOCAL_WORLD_ALIGNED).angular
-            a[0] += -r * al[1] - r * w[0] * w[2]  # α x d + ω x (ω x d) = α x d + ω(ω·d) − d|ω|²
-            a[1] += r * al[0] - r * w[1] * w[2]
-            a[2] += r * (w[0] * w[0] + w[1] * w[1])
+            return acc
+        a = acc[:3].copy()
+        r, al, w = c.spec.radius, acc[3:], omega
+        a[0] -= r * (al[1] + w[0] * w[2])  # α x d + ω(ω·d) − d|ω|², d = (0, 0, -r)
+        a[1] += r * (al[0] - w[1] * w[2])
+        a[2] += r * (w[0] * w[0] + w[1] * w[1])
         return a
 
     def contact_point(self, name: str) -> np.ndarray:

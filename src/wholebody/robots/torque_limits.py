@@ -51,6 +51,9 @@ class TorqueLimits:
             rows.append(index[joint])
         self._linkage_rows = np.asarray(rows, dtype=int)
         self._linkage = np.asarray(params, dtype=float).reshape(-1, 4)
+        a, b, force, q_peak = self._linkage.T  # constants of the profile, evaluated every cycle
+        self._ab, self._a2b2, self._force_ab = a * b, a * a + b * b, force * a * b
+        self._angle_offset = np.pi / 2 - q_peak
 
     @property
     def has_profile(self) -> bool:
@@ -61,11 +64,10 @@ class TorqueLimits:
         """tau_max(q) for the actuated joint positions ``q_joints``."""
         hi = self.constant.copy()
         if self.has_profile:
-            a, b, force, q_peak = self._linkage.T
-            t = np.pi / 2 + (np.asarray(q_joints)[self._linkage_rows] - q_peak)
-            lever = a * b * np.abs(np.sin(t)) / np.sqrt(a * a + b * b - 2 * a * b * np.cos(t))
-            hi[self._linkage_rows] = force * lever
-        return self.scale * hi
+            t = np.asarray(q_joints)[self._linkage_rows] + self._angle_offset
+            hi[self._linkage_rows] = (self._force_ab * np.abs(np.sin(t))
+                                      / np.sqrt(self._a2b2 - 2.0 * self._ab * np.cos(t)))
+        return self.scale * hi if self.scale != 1.0 else hi
 
     def bounds(self, q_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(tau_min(q), tau_max(q))."""
