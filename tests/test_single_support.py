@@ -38,7 +38,7 @@ def test_single_support_contact_switch(robots, controller):
     (Sect. 3.2 remark). The simulator's contact forces show the right sole unloaded before the
     switch and the left sole carrying m g after it; torques stay continuous."""
     robot = robots["talos14"]
-    res = get_scenario("single-support").run(robot, controller, {**NO_EXTRAS, "duration": "4.0"})
+    res = get_scenario("single-support").run(robot, controller, {**NO_EXTRAS, "duration": "3.5"})
     m = res.metrics
     assert res.success, m
     assert m["failed_cycles"] == 0 and m["swing_lift_m"] > 0.08
