@@ -444,7 +444,9 @@ def test_first_level_solution_flags_a_violated_frozen_row():
 # ----------------------------------------------------------------------------- failures are values
 def test_failing_backend_returns_flagged_solution_with_last_good_x(monkeypatch):
     lv = random_hierarchy(np.random.default_rng(42), n=10, n_levels=3)
-    lv = [Level(eq=(L.B, L.b), ineq=(np.eye(10), -np.ones(10), np.ones(10)), name=L.name) for L in lv]
+    # bounds that exclude x = 0, so that every level needs its QP (an unconstrained minimiser that
+    # satisfies all rows is accepted without calling the backend)
+    lv = [Level(eq=(L.B, L.b), ineq=(np.eye(10), np.ones(10), 2.0 * np.ones(10)), name=L.name) for L in lv]
     calls = {"n": 0}
     real = backends_mod.BACKENDS["quadprog"]
 

@@ -324,66 +324,88 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
     x = np.zeros(n)
     Z = None  # None stands for the identity: nothing locked yet
     z = n
-    # higher-priority inequality rows that still have freedom, with relaxed bounds (eq. 9)
-    hC, hlo, hup = np.zeros((0, n)), np.zeros(0), np.zeros(0)
+    # higher-priority inequality rows that still have freedom: (C, relaxed lower, relaxed upper
+    # (eq. 9), unprojected row norms), or None while there are none
+    high = None
+    HZ = hx = None
 
     for r, L in enumerate(levels):
         tl = time.perf_counter()
         B, C = _rows(L, n)
+        m = C.shape[0]
 
         if r == 0 and fls is not None:  # analytic first priority (§2.4, eq. 17), v*_1 = 0
             x, Z = fls[0].copy(), fls[1]
             z = Z.shape[1]
-            if C.shape[0]:
-                CZ1 = C @ Z if z else np.zeros((C.shape[0], 0))
-                hC, hlo, hup, _ = _drop_frozen(C, L.lower, L.upper, CZ1, x, drop_tol, feas_tol, L, warns)
+            if m:
+                CZ1 = C @ Z if z else np.zeros((m, 0))
+                high, _ = _drop_frozen((C, L.lower, L.upper, _row_norms(C)), CZ1, x, drop_tol,
+                                       feas_tol, L, warns)
             zdims[0], times[0] = z, time.perf_counter() - tl
             continue
         if z == 0:  # no freedom left: the level is only evaluated
             zdims[r], times[r] = 0, time.perf_counter() - tl
             continue
 
-        wB = L.w[:, None] * B
         # ---- higher rows: drop those without freedom, lock implicit equalities, loosen tight ones
-        if hC.shape[0]:
-            HZ = hC if Z is None else hC @ Z
-            hC, hlo, hup, HZ = _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns)
-            hx = hC @ x
-            imp = _implicit_equalities(HZ, hx, hlo, hup)
-            if imp.any():
-                Z, z = _lock(Z, hC[imp], rank_tol)
+        if high is not None:
+            high, HZ = _drop_frozen(high, high[0] if Z is None else high[0] @ Z, x, drop_tol,
+                                    feas_tol, L, warns)
+        if high is not None:
+            hx = high[0] @ x
+            imp = _implicit_equalities(HZ, hx, high[1], high[2])
+            if imp is not None:
+                Z, z = _lock(Z, high[0][imp], None, rank_tol)
                 keep = ~imp
-                hC, hlo, hup, hx = hC[keep], hlo[keep], hup[keep], hx[keep]
+                high = tuple(a[keep] for a in high) if keep.any() else None
                 if z == 0:
                     zdims[r], times[r] = 0, time.perf_counter() - tl
                     continue
-                HZ = hC @ Z
-                hC, hlo, hup, HZ = _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns)
-                hx = hC @ x
-            hlo, hup = _loosen_tight(hx, hlo, hup, relax_tol)
-        else:
-            HZ, hx = hC, np.zeros(0)
+                if high is not None:
+                    high, HZ = _drop_frozen(high, high[0] @ Z, x, drop_tol, feas_tol, L, warns)
+                    if high is not None:
+                        hx = high[0] @ x
+            if high is not None:
+                hlo, hup = _loosen_tight(hx, high[1], high[2], relax_tol)
+                high = (high[0], hlo, hup, high[3])
 
         # ---- project the level onto the remaining freedom x = x* + Z u (eq. 8)
+        wB = L.w[:, None] * B
         if Z is None:
-            M, CZ, zx = wB, C, x
+            M, zx = wB, x
         else:
-            M, CZ, zx = wB @ Z, C @ Z, Z.T @ x
-        e0 = wB @ x - L.w * L.b
-        if C.shape[0]:  # own rows without freedom keep their (fixed) violation: no slack
-            own = _row_norms(CZ) > drop_tol * _row_norms(C)
-            Co, CZo, lo, up, vw = C[own], CZ[own], L.lower[own], L.upper[own], L.v[own]
-        else:
-            Co, CZo, lo, up, vw = C, CZ, L.lower, L.upper, L.v
+            M, zx = wB @ Z, Z.T @ x
         Hu = M.T @ M
         Hu.flat[:: z + 1] += eps
-        gu = M.T @ e0 + eps * zx
+        gu = M.T @ (wB @ x - L.w * L.b)
+        gu += eps * zx
+        own = None  # own rows with freedom: (C, C Z, lower, upper, V, row norms of C)
+        if m:  # own rows without freedom keep their (fixed) violation: no slack
+            CZ = C if Z is None else C @ Z
+            nC = _row_norms(C)
+            free = _row_norms(CZ) > drop_tol * nC
+            if free.all():
+                own = (C, CZ, L.lower, L.upper, L.v, nC)
+            elif free.any():
+                own = (C[free], CZ[free], L.lower[free], L.upper[free], L.v[free], nC[free])
 
-        # ---- the QP of eqs. 10-11 (closed form when no inequality constrains it)
-        if Co.shape[0] == 0 and hC.shape[0] == 0:
-            u, ok, status = _unconstrained(Hu, gu)
-        else:
-            u, ok, status = _level_qp(Hu, gu, CZo, Co @ x, lo, up, vw, HZ, hx, hlo, hup, backend, opts)
+        # ---- the QP of eqs. 10-11. Its unconstrained minimiser (Cholesky) is tried first: if
+        # it satisfies the level's own rows and the relaxed higher rows, it is the QP's solution
+        # (the minimiser of a relaxation, feasible with zero slacks) and no QP is solved. A level
+        # of equalities below no inequality is always solved so: its QP (eq. 10) is exactly a
+        # regularised least-squares problem.
+        u, ok, status = _unconstrained(Hu, gu)
+        if ok and (own is not None or high is not None):
+            xt = x + (u if Z is None else Z @ u)
+            ok = ((own is None or _holds(own[0], own[2], own[3], xt))
+                  and (high is None or _holds(high[0], high[1], high[2], xt)))
+            if not ok:
+                empty = np.zeros(0)
+                own_qp = ((np.zeros((0, z)), empty, empty, empty, empty) if own is None
+                          else (own[1], own[0] @ x, own[2], own[3], own[4]))
+                high_qp = ((np.zeros((0, z)), empty, empty, empty) if high is None
+                           else (HZ, hx, high[1], high[2]))
+                u, ok, status = _level_qp(Hu, gu, *own_qp, *high_qp, backend, opts)
         if not ok:
             times[r] = time.perf_counter() - tl
             status = f"level {r} ({L.name!r}): {status}"
@@ -392,19 +414,28 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
         x = x + (u if Z is None else Z @ u)
 
         # ---- this level's free inequality rows join the higher ones, relaxed by v* (eq. 9)
-        if Co.shape[0]:
+        if own is not None:
+            Co, lo, up, nCo = own[0], own[2], own[3], own[5]
             cx = Co @ x
             viol = np.maximum(np.maximum(lo - cx, cx - up), 0.0)
-            hC = np.concatenate((hC, Co))
-            hlo = np.concatenate((hlo, lo - viol))
-            hup = np.concatenate((hup, up + viol))
+            if high is None:
+                high = (Co, lo - viol, up + viol, nCo)
+            else:
+                high = (np.concatenate((high[0], Co)), np.concatenate((high[1], lo - viol)),
+                        np.concatenate((high[2], up + viol)), np.concatenate((high[3], nCo)))
         # ---- lock the directions of the weighted equality rows: Z_{r+1} = Z_r N_r (eq. 8);
         # after the last level nobody needs the null space (saves a QR/SVD per cycle)
         if wB.shape[0] and r < nl - 1:
-            Z, z = _lock(Z, wB, rank_tol)
+            Z, z = _lock(Z, wB, M, rank_tol)
         zdims[r], times[r] = z, time.perf_counter() - tl
 
     return _finish(levels, x, "optimal", True, t0, times, "cascade", nl, zdims, warns)
+
+
+def _holds(C, lower, upper, x) -> bool:
+    """lower ≤ C x ≤ upper exactly (no tolerance)."""
+    cx = C @ x
+    return bool((cx >= lower).all() and (cx <= upper).all())
 
 
 def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
@@ -414,7 +445,7 @@ def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
     p = min(k, z)
     d = np.abs(qr.diagonal()[:p])
     rank = int(np.count_nonzero(d > tol))
-    if info != 0 or np.any((d > 1e-3 * tol) & (d < 1e3 * tol)):
+    if info != 0 or ((d > 1e-3 * tol) & (d < 1e3 * tol)).any():
         # |R_ii| near the threshold: let the singular values decide (exact rank measure)
         U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
         return U[:, int(np.count_nonzero(s > tol)):]
@@ -426,22 +457,25 @@ def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
     a[:, :p] = qr[:, :p]
     t = np.zeros(z)
     t[:p] = tau[:p]
-    q, _, info = lapack.dorgqr(a, t)
+    q, _, info = lapack.dorgqr(a, t, overwrite_a=True)
     if info != 0:
         U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
         return U[:, int(np.count_nonzero(s > tol)):]
     return q[:, rank:]
 
 
-def _lock(Z, rows, rank_tol):
-    """Restrict Z to the kernel of ``rows``: Z ← Z N (eq. 8). Returns (Z, z)."""
+def _lock(Z, rows, projected, rank_tol):
+    """Restrict Z to the kernel of ``rows``: Z ← Z N (eq. 8). ``projected`` is ``rows Z`` if
+    already computed (None: computed here). Returns (Z, z)."""
     z = rows.shape[1] if Z is None else Z.shape[1]
     if rows.shape[0] == 0 or z == 0:
         return Z, z
-    scale = float(np.max(_row_norms(rows)))
+    scale = float(_row_norms(rows).max())
     if scale == 0.0:
         return Z, z
-    N = _kernel(rows if Z is None else rows @ Z, rank_tol * scale)
+    if projected is None:
+        projected = rows if Z is None else rows @ Z
+    N = _kernel(projected, rank_tol * scale)
     if N.shape[1] == z:
         return Z, z
     Z = N if Z is None else Z @ N
@@ -455,18 +489,18 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
     an implicit equality of {d : g_j d ≥ 0} iff some y ≥ 0 with y_i > 0 has Σ y_j g_j = 0.
     Found by NNLS (min ‖Gᵀy‖ with Σy = 1 enforced by a heavy row); each dependency found is
     projected out and the search repeated. Purely geometric: a row that is tight only because
-    of the ε term is locked only if the geometry really pins it.
+    of the ε term is locked only if the geometry really pins it. Returns a mask, or None when
+    no row is an implicit equality.
     """
     m = HZ.shape[0]
-    out = np.zeros(m, dtype=bool)
     if m < 2:
-        return out
+        return None
     tol = tight_tol * (1.0 + np.abs(hx))
     tl = np.abs(hx - hlo) <= tol  # (a row violated at x — possible after §2.4 — is not tight)
     tu = np.abs(hup - hx) <= tol
     nt = int(np.count_nonzero(tl)) + int(np.count_nonzero(tu))
     if nt < 2:
-        return out
+        return None
     idx = np.concatenate((np.flatnonzero(tl), np.flatnonzero(tu)))
     G = np.concatenate((HZ[tl], -HZ[tu]))
     nrm = _row_norms(G)
@@ -475,13 +509,13 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
     # cheap certificate of NO dependency: a direction d with G d > 0 (Σ y_j g_j·d > 0 for y ≥ 0)
     d = G.sum(axis=0)
     if np.all(G @ d > dep_tol):
-        return out
+        return None
     GGt = G @ G.T
     GGt.flat[:: GGt.shape[0] + 1] += 1e-10 * GGt.shape[0]
     try:  # d = Gᵀ (G Gᵀ)⁻¹ 1, i.e. G d ≈ 1 when the rows are independent
         d = G.T @ np.linalg.solve(GGt, np.ones(G.shape[0]))
         if np.all(G @ d > dep_tol):
-            return out
+            return None
     except np.linalg.LinAlgError:
         pass
     found = np.zeros(idx.shape[0], dtype=bool)
@@ -505,6 +539,9 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
         found[rest[y > 1e-9 * y.max()]] = True
         Q, R = np.linalg.qr(G[found].T)
         P = Q[:, np.abs(R.diagonal()) > 1e-12]
+    if not found.any():
+        return None
+    out = np.zeros(m, dtype=bool)
     out[idx[found]] = True
     return out
 
@@ -523,13 +560,16 @@ def _loosen_tight(hx, hlo, hup, relax_tol):
     return hlo, hup
 
 
-def _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns):
-    """Drop higher rows with ‖C_i Z‖ ≤ drop_tol ‖C_i‖ (no freedom left), checking they still hold."""
-    if hC.shape[0] == 0:
-        return hC, hlo, hup, HZ
-    free = _row_norms(HZ) > drop_tol * _row_norms(hC)
+def _drop_frozen(high, HZ, x, drop_tol, feas_tol, L, warns):
+    """Drop higher rows with ‖C_i Z‖ ≤ drop_tol ‖C_i‖ (no freedom left), checking they still hold.
+
+    ``high = (C, lower, upper, row norms of C)``; returns ``(high, HZ)`` restricted to the rows
+    with freedom (``high`` None if there is none left).
+    """
+    free = _row_norms(HZ) > drop_tol * high[3]
     if free.all():
-        return hC, hlo, hup, HZ
+        return high, HZ
+    hC, hlo, hup, hn = high
     gone = ~free
     cx = hC[gone] @ x
     over = np.maximum(hlo[gone] - cx, cx - hup[gone])
@@ -539,18 +579,20 @@ def _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns):
                f"freedom violate their relaxed bounds by up to {float(over[bad].max()):.3g}")
         log.debug(msg)
         warns.append(msg)
-    return hC[free], hlo[free], hup[free], HZ[free]
+    if not free.any():
+        return None, None
+    return (hC[free], hlo[free], hup[free], hn[free]), HZ[free]
 
 
 def _unconstrained(Hu, gu):
-    try:
-        cf = np.linalg.cholesky(Hu)
-    except np.linalg.LinAlgError as exc:
-        return None, False, f"cholesky: {exc}"
-    u = -solve_triangular(cf.T, solve_triangular(cf, gu, lower=True, check_finite=False), check_finite=False)
-    if not np.all(np.isfinite(u)):
+    """u = −Hu⁻¹ gu by Cholesky (LAPACK dpotrf/dpotrs, no copies of the small arrays)."""
+    cf, info = lapack.dpotrf(Hu, lower=False, clean=False)
+    if info != 0:
+        return None, False, f"cholesky: matrix not positive definite (info {info})"
+    u, info = lapack.dpotrs(cf, gu, lower=False)
+    if info != 0 or not np.isfinite(u).all():
         return None, False, "cholesky: non-finite solution"
-    return u, True, "optimal"
+    return -u, True, "optimal"
 
 
 def _level_qp(Hu, gu, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
