@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg import lapack
 
 from .robot import FREE_FLYER_NV, Robot
 from .solvers import Level, solve_hierarchy
@@ -165,15 +166,20 @@ class Formulation:
         The level matrices are allocated once per stack structure and contact set (a plan) and
         refilled in place every cycle; the returned arrays are only valid until the next call.
         """
-        key = (id(stack), tuple(id(t) for t in stack.tasks()), variables.contacts, self.reduced)
-        rows_now = [[task.rows(self.robot, variables) for task in tasks] for tasks in stack.levels]
+        robot = self.robot
+        key = (id(stack), tuple(id(t) for tasks in stack.levels for t in tasks), variables.contacts,
+               self.reduced)
+        rows_now = [[task.rows(robot, variables) for task in tasks] for tasks in stack.levels]
         plan = self._plan
-        if plan is None or plan.key != key or not plan.matches(rows_now):
-            for task in stack.tasks():
-                if self.reduced and isinstance(task, FullDynamics):
-                    raise ValueError("FullDynamics belongs to the full formulation; the reduced "
-                                     "one uses NewtonEuler (tau is eliminated by eq. 14)")
-            plan = self._plan = _Plan(key, stack, rows_now, self.size(variables))
+        if plan is not None and plan.key == key:
+            filled = plan.fill(self, variables, rows_now)
+            if filled is not None:
+                return filled
+        for task in stack.tasks():
+            if self.reduced and isinstance(task, FullDynamics):
+                raise ValueError("FullDynamics belongs to the full formulation; the reduced "
+                                 "one uses NewtonEuler (tau is eliminated by eq. 14)")
+        plan = self._plan = _Plan(key, stack, rows_now, self.size(variables))
         return plan.fill(self, variables, rows_now)
 
     # ------------------------------------------------------------------ analytic level 1
@@ -189,14 +195,25 @@ class Formulation:
         """x1 = B^T (B B^T)^-1 b (least norm) and an orthonormal null-space basis Z1 of B (eq. 17).
 
         B has full row rank (the base part of M is positive definite), so the Gram matrix is SPD.
-        Z1 comes from a complete QR of B^T: its last n - k columns span null(B).
+        Both come from one complete QR of B^T = [Q1 Q2] [R; 0] (LAPACK dgeqrf/dorgqr): since
+        B B^T = R^T R, x1 = Q1 R^-T b, and Z1 = Q2 spans null(B).
         """
-        B = level.B * level.w[:, None]
-        b = level.b * level.w
-        gram = B @ B.T
-        x1 = B.T @ np.linalg.solve(gram, b)
-        Q, _ = np.linalg.qr(B.T, mode="complete")
-        return x1, Q[:, B.shape[0]:]
+        w = level.w
+        k = w.shape[0]
+        Bt = np.array((level.B * w[:, None]).T, order="F")
+        qr, tau, _, info = lapack.dgeqrf(Bt, overwrite_a=True)
+        if info == 0:
+            q = np.zeros((Bt.shape[0], Bt.shape[0]), order="F")
+            q[:, :k] = qr
+            Q, _, info = lapack.dorgqr(q, tau, overwrite_a=True)
+            if info == 0:  # R^T y = b with R the upper triangle of qr (dtrtrs reads only that)
+                y, info = lapack.dtrtrs(qr[:k], level.b * w, lower=0, trans=1)
+        if info != 0 or not np.isfinite(y).all():  # rank-deficient B: the plain formulas
+            B = level.B * w[:, None]
+            x1 = B.T @ np.linalg.lstsq(B @ B.T, level.b * w, rcond=None)[0]
+            Q, _ = np.linalg.qr(B.T, mode="complete")
+            return x1, Q[:, k:]
+        return Q[:, :k] @ y, Q[:, k:]
 
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
@@ -280,50 +297,65 @@ class Formulation:
         return reports
 
 
+def _signature(r: TaskRows) -> tuple:
+    """What the preallocated layout depends on: row count, kind and which blocks are present."""
+    block = r.qdd if r.qdd is not None else r.lam if r.lam is not None else r.tau
+    return (0 if block is None else block.shape[0], r.target is not None,
+            r.qdd is None, r.lam is None, r.tau is None)
+
+
 class _LevelPlan:
-    """Preallocated arrays of one level and where each task's rows go."""
+    """Preallocated arrays of one level, where each task's rows go, and the solver Level over them."""
 
     def __init__(self, rank: int, tasks: Sequence[Task], rows: Sequence[TaskRows], n: int):
         self.rank = rank
-        self.slots = []  # (index of the task in the level, task, kind, start, stop)
+        self.slots = []  # (index of the task in the level, task, is_eq, start, stop, signature)
         k = m = 0
         for i, (task, r) in enumerate(zip(tasks, rows)):
             if r.m == 0:
                 continue
             if r.is_equality:
-                self.slots.append((i, task, "eq", k, k + r.m))
+                self.slots.append((i, task, True, k, k + r.m, _signature(r)))
                 k += r.m
             else:
-                self.slots.append((i, task, "ineq", m, m + r.m))
+                self.slots.append((i, task, False, m, m + r.m, _signature(r)))
                 m += r.m
         self.E, self.e, self.w = np.zeros((k, n)), np.zeros(k), np.ones(k)
         self.C, self.lo, self.up, self.vw = np.zeros((m, n)), np.zeros(m), np.zeros(m), np.ones(m)
-        self.signature = [(r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
-                          for r in rows]
+        self.signature = [_signature(r) for r in rows]
+        # the arrays are refilled in place every cycle: the views, the diagnostics entries and the
+        # solver Level are made once
+        self.meta = [(task, "eq", self.E[a:b], self.e[a:b], None) if eq else
+                     (task, "ineq", self.C[a:b], self.lo[a:b], self.up[a:b])
+                     for _, task, eq, a, b, _ in self.slots]
+        self.level = Level.trusted(self.E, self.e, self.w, self.C, self.lo, self.up, self.vw,
+                                   name=f"level {rank}")
 
     def check(self) -> None:
         """The boundary check of the refilled arrays: finite rows, lower <= upper, valid weights.
 
         A NaN reference or gain set on a task ends here as a ValueError naming the level and task.
+        One reduction per array: a sum is non-finite iff some entry is NaN/inf (or it overflows,
+        which is as bad); NaN bounds fail the comparison.
         """
-        everything = slice(None)
-        if self._valid(everything, "eq") and self._valid(everything, "ineq"):
+        E, C, w, vw = self.E, self.C, self.w, self.vw
+        if (np.isfinite(E.sum() + self.e.sum() + C.sum() + w.sum() + vw.sum())
+                and (not w.shape[0] or w.min() >= 0) and (not vw.shape[0] or vw.min() > 0)
+                and (self.lo <= self.up).all()):
             return
-        for _, task, kind, a, b in self.slots:
-            if not self._valid(slice(a, b), kind):
+        for _, task, eq, a, b, _ in self.slots:
+            if not self._valid(slice(a, b), eq):
                 raise ValueError(f"level {self.rank}: task '{task.name}' produced NaN/inf rows, "
                                  f"lower > upper or a bad weight")
 
-    def _valid(self, rows: slice, kind: str) -> bool:
-        # one reduction per array: a sum is non-finite iff some entry is NaN/inf (or it overflows,
-        # which is as bad)
-        if kind == "eq":
+    def _valid(self, rows: slice, eq: bool) -> bool:
+        if eq:
             w = self.w[rows]
             return bool(np.isfinite(self.E[rows].sum() + self.e[rows].sum() + w.sum())
                         and (w >= 0).all())
         lo, up, vw = self.lo[rows], self.up[rows], self.vw[rows]
         return bool(np.isfinite(self.C[rows].sum() + vw.sum()) and (vw > 0).all()
-                    and (lo <= up).all())  # NaN bounds fail the comparison
+                    and (lo <= up).all())
 
 
 class _Plan:
@@ -335,33 +367,65 @@ class _Plan:
                        for rank, (tasks, level_rows) in enumerate(zip(stack.levels, rows), start=1)]
 
     def matches(self, rows: list[list[TaskRows]]) -> bool:
-        return all(lp.signature == [(r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
-                                    for r in level_rows]
+        return all(lp.signature == [_signature(r) for r in level_rows]
                    for lp, level_rows in zip(self.levels, rows))
 
     def fill(self, formulation: "Formulation", variables: Variables, rows: list[list[TaskRows]]):
-        scale_tail = formulation.scales(variables)[variables.nv:]
-        nv = variables.nv
-        out, meta = [], []
+        """Refill the level arrays in place; None if a task's rows no longer fit the layout."""
+        robot, nv, nl = formulation.robot, variables.nv, variables.n_lambda
+        lam_cols, tau_cols = slice(nv, nv + nl), slice(nv + nl, None)
+        scale_tail = formulation.scales(variables)[nv:]
+        reduced = formulation.reduced
+        eq14 = None  # (M_u, -J_u^T, h_u) of eq. 14, made on first use
         for lp, level_rows in zip(self.levels, rows):
-            level_meta = []
-            for i, task, kind, a, b in lp.slots:
+            E, C = lp.E, lp.C
+            for i, task, eq, a, b, sig in lp.slots:
                 r = level_rows[i]
-                if kind == "eq":
-                    _, offset = formulation.map_rows(r, variables, lp.E[a:b])
-                    np.subtract(r.target, offset, out=lp.e[a:b])
+                if _signature(r) != sig:
+                    return None
+                A = E[a:b] if eq else C[a:b]
+                if r.qdd is not None:
+                    A[:, :nv] = r.qdd
+                if r.lam is not None:
+                    A[:, lam_cols] = r.lam
+                offset = None
+                if r.tau is not None:
+                    if reduced:  # eq. 14: tau = M_u qdd + h_u - J_u^T lambda
+                        if eq14 is None:
+                            J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
+                            eq14 = (robot.M[FREE_FLYER_NV:], -J_u.T, robot.h[FREE_FLYER_NV:])
+                        M_u, mJ_uT, h_u = eq14
+                        if r.tau_identity:
+                            tau_qdd, tau_lam, offset = M_u, mJ_uT, h_u
+                        else:
+                            tau_qdd, tau_lam, offset = r.tau @ M_u, r.tau @ mJ_uT, r.tau @ h_u
+                        if r.qdd is None:
+                            A[:, :nv] = tau_qdd
+                        else:
+                            A[:, :nv] += tau_qdd
+                        if r.lam is None:
+                            A[:, lam_cols] = tau_lam
+                        else:
+                            A[:, lam_cols] += tau_lam
+                    else:
+                        A[:, tau_cols] = r.tau
+                if eq:
+                    if offset is None:
+                        lp.e[a:b] = r.target
+                    else:
+                        np.subtract(r.target, offset, out=lp.e[a:b])
                     lp.w[a:b] = task.weight
-                    level_meta.append((task, "eq", lp.E[a:b], lp.e[a:b], None))
                 else:
-                    _, offset = formulation.map_rows(r, variables, lp.C[a:b])
-                    np.subtract(r.lower, offset, out=lp.lo[a:b])
-                    np.subtract(r.upper, offset, out=lp.up[a:b])
+                    if offset is None:
+                        lp.lo[a:b] = r.lower
+                        lp.up[a:b] = r.upper
+                    else:
+                        np.subtract(r.lower, offset, out=lp.lo[a:b])
+                        np.subtract(r.upper, offset, out=lp.up[a:b])
                     lp.vw[a:b] = task.weight
-                    level_meta.append((task, "ineq", lp.C[a:b], lp.lo[a:b], lp.up[a:b]))
-            lp.E[:, nv:] *= scale_tail
-            lp.C[:, nv:] *= scale_tail
+            if E.shape[0]:
+                E[:, nv:] *= scale_tail
+            if C.shape[0]:
+                C[:, nv:] *= scale_tail
             lp.check()
-            out.append(Level.trusted(lp.E, lp.e, lp.w, lp.C, lp.lo, lp.up, lp.vw,
-                                     name=f"level {lp.rank}"))
-            meta.append(level_meta)
-        return out, meta
+        return [lp.level for lp in self.levels], [lp.meta for lp in self.levels]

@@ -194,11 +194,10 @@ def evaluate_levels(levels, x):
     """Per-level costs, weighted residuals and weighted slacks at x (eq. 5 without ε)."""
     costs = np.empty(len(levels))
     res, vio = [], []
+    empty = np.zeros(0)
     for i, L in enumerate(levels):
-        if L.n is None:
-            r, s = np.zeros(0), np.zeros(0)
-        else:
-            r, s = L.eq_residual(x), L.ineq_violation(x)
+        r = L.eq_residual(x) if L.n is not None and L.B.shape[0] else empty
+        s = L.ineq_violation(x) if L.n is not None and L.C.shape[0] else empty
         res.append(r)
         vio.append(s)
         costs[i] = r @ r + s @ s
@@ -300,15 +299,15 @@ def _check_first_level(fls):
     Z1 = np.asarray(fls[1], dtype=float)
     if Z1.ndim != 2 or Z1.shape[0] != x1.shape[0]:
         raise ValueError(f"first_level_solution: Z1 has shape {Z1.shape}, expected ({x1.shape[0]}, z)")
-    if not np.all(np.isfinite(x1)):
+    if not np.isfinite(x1.sum()) and not np.isfinite(x1).all():
         raise ValueError("first_level_solution: x1 contains NaN or inf")
-    if not np.all(np.isfinite(Z1)):
-        raise ValueError("first_level_solution: Z1 contains NaN or inf")
     z = Z1.shape[1]
+    G = Z1.T @ Z1  # (also the finiteness check of Z1: a NaN/inf entry spreads into G)
+    if not np.isfinite(G.sum()) and not np.isfinite(Z1).all():
+        raise ValueError("first_level_solution: Z1 contains NaN or inf")
     if z:
-        G = Z1.T @ Z1
         G.flat[:: z + 1] -= 1.0
-        if np.abs(G).max() > 1e-10:  # not orthonormal: an orthonormal basis of the same range
+        if not np.abs(G).max() <= 1e-10:  # not orthonormal: an orthonormal basis of the same range
             U, s, _ = np.linalg.svd(Z1, full_matrices=False)
             Z1 = U[:, s > 1e-12 * max(1.0, s[0])]
     return x1, np.ascontiguousarray(Z1)
