@@ -305,9 +305,9 @@ def _signature(r: TaskRows) -> tuple:
 
 
 class _LevelPlan:
-    """Preallocated arrays of one level, where each task's rows go, and the solver Level over them."""
+    """Where each task's rows go in one level (views into the plan's buffers) and its solver Level."""
 
-    def __init__(self, rank: int, tasks: Sequence[Task], rows: Sequence[TaskRows], n: int):
+    def __init__(self, rank: int, tasks: Sequence[Task], rows: Sequence[TaskRows], start: int, n: int):
         self.rank = rank
         self.slots = []  # (index of the task in the level, task, is_eq, start, stop, signature)
         k = m = 0
@@ -320,29 +320,24 @@ class _LevelPlan:
             else:
                 self.slots.append((i, task, False, m, m + r.m, _signature(r)))
                 m += r.m
-        self.E, self.e, self.w = np.zeros((k, n)), np.zeros(k), np.ones(k)
-        self.C, self.lo, self.up, self.vw = np.zeros((m, n)), np.zeros(m), np.zeros(m), np.ones(m)
+        self.start, self.k, self.m = start, k, m  # equality rows at start, inequality rows after
         self.signature = [_signature(r) for r in rows]
-        # the arrays are refilled in place every cycle: the views, the diagnostics entries and the
-        # solver Level are made once
+
+    def bind(self, mat: np.ndarray, vec: np.ndarray, lo: np.ndarray, up: np.ndarray) -> None:
+        """Take views of the plan's buffers: rows [E; C] of ``mat``, [e; w | 0; vw] of ``vec``."""
+        s, k, m = self.start, self.k, self.m
+        self.E, self.C = mat[s:s + k], mat[s + k:s + k + m]
+        self.e, self.w = vec[0, s:s + k], vec[1, s:s + k]
+        self.vw = vec[1, s + k:s + k + m]
+        self.lo, self.up = lo[s + k:s + k + m], up[s + k:s + k + m]
         self.meta = [(task, "eq", self.E[a:b], self.e[a:b], None) if eq else
                      (task, "ineq", self.C[a:b], self.lo[a:b], self.up[a:b])
                      for _, task, eq, a, b, _ in self.slots]
         self.level = Level.trusted(self.E, self.e, self.w, self.C, self.lo, self.up, self.vw,
-                                   name=f"level {rank}")
+                                   name=f"level {self.rank}")
 
-    def check(self) -> None:
-        """The boundary check of the refilled arrays: finite rows, lower <= upper, valid weights.
-
-        A NaN reference or gain set on a task ends here as a ValueError naming the level and task.
-        One reduction per array: a sum is non-finite iff some entry is NaN/inf (or it overflows,
-        which is as bad); NaN bounds fail the comparison.
-        """
-        E, C, w, vw = self.E, self.C, self.w, self.vw
-        if (np.isfinite(E.sum() + self.e.sum() + C.sum() + w.sum() + vw.sum())
-                and (not w.shape[0] or w.min() >= 0) and (not vw.shape[0] or vw.min() > 0)
-                and (self.lo <= self.up).all()):
-            return
+    def raise_invalid(self) -> None:
+        """Name the task whose rows are NaN/inf, whose bounds cross or whose weight is bad."""
         for _, task, eq, a, b, _ in self.slots:
             if not self._valid(slice(a, b), eq):
                 raise ValueError(f"level {self.rank}: task '{task.name}' produced NaN/inf rows, "
@@ -363,8 +358,37 @@ class _Plan:
 
     def __init__(self, key, stack: Stack, rows: list[list[TaskRows]], n: int):
         self.key = key
-        self.levels = [_LevelPlan(rank, tasks, level_rows, n)
-                       for rank, (tasks, level_rows) in enumerate(zip(stack.levels, rows), start=1)]
+        self.levels, start = [], 0
+        for rank, (tasks, level_rows) in enumerate(zip(stack.levels, rows), start=1):
+            lp = _LevelPlan(rank, tasks, level_rows, start, n)
+            self.levels.append(lp)
+            start += lp.k + lp.m
+        # one buffer for all levels' rows (and one per vector kind): the per-cycle column scaling
+        # and the boundary check are then a few whole-buffer operations, not a few per level
+        self.mat = np.zeros((start, n))
+        self.vec = np.ones((2, start))  # [targets e (eq rows; 0 for ineq rows); weights w | V]
+        self.vec[0] = 0.0
+        self.lo, self.up = np.zeros(start), np.zeros(start)
+        for lp in self.levels:
+            lp.bind(self.mat, self.vec, self.lo, self.up)
+        # weights must be >= 0 (equality rows) and > 0 (inequality rows): w >= w_min
+        self.w_min = np.zeros(start)
+        for lp in self.levels:
+            self.w_min[lp.start + lp.k:lp.start + lp.k + lp.m] = np.nextafter(0.0, 1.0)
+
+    def check(self) -> None:
+        """The boundary check of the refilled arrays: finite rows, lower <= upper, valid weights.
+
+        A NaN reference or gain set on a task ends here as a ValueError naming the level and task.
+        A sum is non-finite iff some entry is NaN/inf (or it overflows, which is as bad); NaN
+        bounds and weights fail the comparisons.
+        """
+        vec = self.vec
+        if (np.isfinite(self.mat.sum() + vec.sum()) and (self.lo <= self.up).all()
+                and (vec[1] >= self.w_min).all()):
+            return
+        for lp in self.levels:
+            lp.raise_invalid()
 
     def matches(self, rows: list[list[TaskRows]]) -> bool:
         return all(lp.signature == [_signature(r) for r in level_rows]
@@ -423,9 +447,6 @@ class _Plan:
                         np.subtract(r.lower, offset, out=lp.lo[a:b])
                         np.subtract(r.upper, offset, out=lp.up[a:b])
                     lp.vw[a:b] = task.weight
-            if E.shape[0]:
-                E[:, nv:] *= scale_tail
-            if C.shape[0]:
-                C[:, nv:] *= scale_tail
-            lp.check()
+        self.mat[:, nv:] *= scale_tail
+        self.check()
         return [lp.level for lp in self.levels], [lp.meta for lp in self.levels]
