@@ -131,6 +131,7 @@ log = logging.getLogger(__name__)
 
 _METHODS = ("cascade", "daqp", "weighted")
 _DAQP_RHO = 1e-8  # per-row soft weight for the daqp method (its own hierarchical default)
+_TIGHT_TOL = 1e-8  # a higher row is tight at x when |C x - bound| <= _TIGHT_TOL (1 + |C x|)
 
 
 @dataclass
@@ -352,7 +353,11 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
                                     feas_tol, L, warns)
         if high is not None:
             hx = high[0] @ x
-            imp = _implicit_equalities(HZ, hx, high[1], high[2])
+            gap = np.minimum(np.abs(hx - high[1]), np.abs(high[2] - hx))
+            if (gap > max(_TIGHT_TOL, relax_tol) * (1.0 + np.abs(hx))).all():
+                imp, tight = None, False  # no row is tight: nothing to lock, nothing to loosen
+            else:
+                imp, tight = _implicit_equalities(HZ, hx, high[1], high[2]), True
             if imp is not None:
                 Z, z = _lock(Z, high[0][imp], None, rank_tol)
                 keep = ~imp
@@ -364,7 +369,7 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
                     high, HZ = _drop_frozen(high, high[0] @ Z, x, drop_tol, feas_tol, L, warns)
                     if high is not None:
                         hx = high[0] @ x
-            if high is not None:
+            if high is not None and tight:
                 hlo, hup = _loosen_tight(hx, high[1], high[2], relax_tol)
                 high = (high[0], hlo, hup, high[3])
 
@@ -481,7 +486,7 @@ def _lock(Z, rows, projected, rank_tol):
     return Z, Z.shape[1]
 
 
-def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
+def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=_TIGHT_TOL, dep_tol=1e-7):
     """Rows tight at x whose signed, projected, normalised normals are positively dependent.
 
     With g_i = ±C_i Z oriented so that staying feasible near x means g_i d ≥ 0, a tight row i is
@@ -511,12 +516,12 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
         return None
     GGt = G @ G.T
     GGt.flat[:: GGt.shape[0] + 1] += 1e-10 * GGt.shape[0]
-    try:  # d = Gᵀ (G Gᵀ)⁻¹ 1, i.e. G d ≈ 1 when the rows are independent
-        d = G.T @ np.linalg.solve(GGt, np.ones(G.shape[0]))
-        if np.all(G @ d > dep_tol):
+    # d = Gᵀ (G Gᵀ)⁻¹ 1, i.e. G d ≈ 1 when the rows are independent (G Gᵀ SPD then: Cholesky)
+    _, y, info = lapack.dposv(GGt, np.ones(G.shape[0]))
+    if info == 0:
+        d = G.T @ y
+        if (G @ d > dep_tol).all():
             return None
-    except np.linalg.LinAlgError:
-        pass
     found = np.zeros(idx.shape[0], dtype=bool)
     P = None  # orthonormal basis of the span of the rows found so far
     while idx.shape[0] - np.count_nonzero(found) >= 2:
@@ -536,13 +541,24 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
         if ys <= 0.0 or np.linalg.norm(Gr.T @ y) > dep_tol * ys:
             break
         found[rest[y > 1e-9 * y.max()]] = True
-        Q, R = np.linalg.qr(G[found].T)
-        P = Q[:, np.abs(R.diagonal()) > 1e-12]
+        P = _range_basis(G[found].T)
     if not found.any():
         return None
     out = np.zeros(m, dtype=bool)
     out[idx[found]] = True
     return out
+
+
+def _range_basis(A):
+    """Orthonormal columns spanning range(A) for A with more rows than columns (economy QR;
+    columns whose |R_ii| ≤ 1e-12 are left out)."""
+    qr, tau, _, info = lapack.dgeqrf(A)
+    if info != 0 or A.shape[1] > A.shape[0]:
+        Q, R = np.linalg.qr(A)
+        return Q[:, np.abs(R.diagonal()) > 1e-12]
+    keep = np.abs(qr.diagonal()) > 1e-12
+    Q, _, info = lapack.dorgqr(qr, tau, overwrite_a=True)
+    return Q[:, keep]
 
 
 def _loosen_tight(hx, hlo, hup, relax_tol):
