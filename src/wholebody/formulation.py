@@ -241,9 +241,15 @@ class Formulation:
         if use_analytic and not self.analytic_first_level(stack):
             raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque limits")
         fls = self.first_level_solution(levels[0]) if use_analytic and method == "cascade" else None
+        # the cascade retries a failed level QP with the fallback backend itself (one QP, not
+        # the whole cascade again); other methods are re-solved as a cascade below
         result = solve_hierarchy(levels, method=method, backend=backend,
-                                 regularization=regularization, first_level_solution=fls)
+                                 regularization=regularization, first_level_solution=fls,
+                                 fallback_backend=fallback_backend if method == "cascade" else None)
         status = result.status
+        retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
+        if result.ok and retried:
+            status = f"optimal ({fallback_backend} after {backend}: {'; '.join(retried)})"
         if not result.ok and fallback_backend and fallback_backend != backend:
             retry = solve_hierarchy(levels, method="cascade", backend=fallback_backend,
                                     regularization=regularization, first_level_solution=fls)

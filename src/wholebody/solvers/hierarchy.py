@@ -229,6 +229,7 @@ def solve_hierarchy(
     feas_tol: float = 1e-6,
     backend_options: dict | None = None,
     daqp_native_weights: bool = False,
+    fallback_backend: str | None = None,
 ) -> HierarchySolution:
     """Lexicographic optimum of a list of :class:`Level` (Herzog et al. 2016, eqs. 5-11).
 
@@ -254,6 +255,10 @@ def solve_hierarchy(
         DAQP settings for ``daqp`` and the daqp method).
     daqp_native_weights : method ``daqp`` only — use DAQP's native (row-normalised) soft
         penalty instead of uniform per-row weights (which give eq. 5's Σ s² trade-off).
+    fallback_backend : cascade only — a level QP that ``backend`` fails on is solved again with
+        this backend (same QP, so the same optimum), recorded in ``warnings``. Cheaper than
+        re-solving the whole cascade: each backend has rare failures of its own on these
+        ill-conditioned QPs (DAQP: cycling/infeasible verdicts on ~10-20 % of Table 1 cycles).
 
     Bad input (NaN/inf in data, inconsistent column counts, unknown names) raises ValueError
     naming the level and field. Numerical failures never raise: the solution is flagged
@@ -265,6 +270,10 @@ def solve_hierarchy(
         raise ValueError(f"unknown method {method!r}; choose from {_METHODS}")
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; choose from {sorted(BACKENDS)}")
+    if fallback_backend is not None and fallback_backend not in BACKENDS:
+        raise ValueError(f"unknown fallback_backend {fallback_backend!r}; choose from {sorted(BACKENDS)}")
+    if fallback_backend == backend:
+        fallback_backend = None
     if not (np.isfinite(regularization) and regularization > 0):
         raise ValueError(f"regularization must be finite and > 0, got {regularization!r}")
     n_hint = None
@@ -287,10 +296,11 @@ def solve_hierarchy(
             return sol
         warn = "weighted: hard level infeasible or the single QP failed; result of the cascade"
         log.debug(warn)
-        sol = _solve_cascade(levels, n, backend, regularization, None, tols, opts, t0)
+        sol = _solve_cascade(levels, n, backend, regularization, None, tols, opts, t0, fallback_backend)
         sol.warnings = (warn,) + sol.warnings
         return sol
-    return _solve_cascade(levels, n, backend, regularization, first_level_solution, tols, opts, t0)
+    return _solve_cascade(levels, n, backend, regularization, first_level_solution, tols, opts, t0,
+                          fallback_backend)
 
 
 def _check_first_level(fls):
@@ -315,7 +325,7 @@ def _check_first_level(fls):
 
 
 # ---------------------------------------------------------------------------- cascade
-def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
+def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
     rank_tol, drop_tol, relax_tol, feas_tol = tols
     nl = len(levels)
     times = np.zeros(nl)
@@ -405,7 +415,16 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
                       else (own[1], own[0] @ x, own[2], own[3], own[4]))
             high_qp = ((np.zeros((0, z)), empty, empty, empty) if high is None
                        else (HZ, hx, high[1], high[2]))
-            u, ok, status = _level_qp_after(Hu, gu, own_qp, high_qp, u if ok else None, backend, opts)
+            u0 = u if ok else None
+            u, ok, status = _level_qp_after(Hu, gu, own_qp, high_qp, u0, backend, opts)
+            if not ok and fallback is not None:
+                u, ok, status2 = _level_qp_after(Hu, gu, own_qp, high_qp, u0, fallback, {})
+                if ok:
+                    msg = f"level {r} ({L.name!r}): {status}; solved with {fallback}"
+                    log.debug(msg)
+                    warns.append(msg)
+                else:
+                    status = f"{status}; {status2}"
         if not ok:
             times[r] = time.perf_counter() - tl
             status = f"level {r} ({L.name!r}): {status}"
