@@ -236,10 +236,13 @@ class Formulation:
         t0 = time.perf_counter()
         levels, meta = self.levels(stack, variables)
         t_rows = time.perf_counter()
-        use_analytic = (self.analytic_first_level(stack) if analytic_first_level is None
-                        else analytic_first_level)
-        if use_analytic and not self.analytic_first_level(stack):
-            raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque limits")
+        if analytic_first_level is None:
+            use_analytic = self.analytic_first_level(stack)
+        else:
+            use_analytic = analytic_first_level
+            if use_analytic and not self.analytic_first_level(stack):
+                raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque "
+                                 "limits")
         fls = self.first_level_solution(levels[0]) if use_analytic and method == "cascade" else None
         # the cascade retries a failed level QP with the fallback backend itself (one QP, not
         # the whole cascade again); other methods are re-solved as a cascade below
@@ -275,9 +278,9 @@ class Formulation:
         else:
             tau = x[nv + nl:].copy()
         lo, hi = robot.torque_bounds()
-        if not np.all(np.isfinite(tau)):
+        if not np.isfinite(tau).all():
             ok, status, tau = False, f"{status}; non-finite torque replaced by zero", np.zeros(robot.na)
-        outside = np.any(tau < lo - 1e-6) | np.any(tau > hi + 1e-6)
+        outside = bool(((tau < lo - 1e-6) | (tau > hi + 1e-6)).any())
         if not ok or outside:
             if outside and ok:
                 ok, status = False, "torque outside limits after solve; clipped"
