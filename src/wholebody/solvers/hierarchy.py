@@ -596,14 +596,17 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=_TIGHT_TOL, dep_tol=1e-7):
 
 
 def _range_basis(A):
-    """Orthonormal columns spanning range(A) for A with more rows than columns (economy QR;
-    columns whose |R_ii| ≤ 1e-12 are left out)."""
+    """Orthonormal columns spanning range(A) (A is z × k): Q of a QR of A (LAPACK dgeqrf/dorgqr)
+    without the columns whose |R_ii| ≤ 1e-12."""
+    z, k = A.shape
+    p = min(z, k)
     qr, tau, _, info = lapack.dgeqrf(A)
-    if info != 0 or A.shape[1] > A.shape[0]:
+    if info == 0:
+        keep = np.abs(qr.diagonal()[:p]) > 1e-12
+        Q, _, info = lapack.dorgqr(qr[:, :p], tau[:p], overwrite_a=True)
+    if info != 0:
         Q, R = np.linalg.qr(A)
-        return Q[:, np.abs(R.diagonal()) > 1e-12]
-    keep = np.abs(qr.diagonal()) > 1e-12
-    Q, _, info = lapack.dorgqr(qr, tau, overwrite_a=True)
+        keep = np.abs(R.diagonal()) > 1e-12
     return Q[:, keep]
 
 
