@@ -488,44 +488,30 @@ def _level_qp_after(Hu, gu, own_qp, high_qp, u0, backend, opts):
     return _level_qp(Hu, gu, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts)
 
 
-def _kernel(RZ: np.ndarray, tol: float, Z=None) -> np.ndarray:
-    """``Z N`` with N an orthonormal basis of ker(RZ) (k×z) — N itself if Z is None.
-
-    QR with column pivoting of RZᵀ = Q R (LAPACK dgeqp3): N = Q[:, rank:]. With Z given, the
-    Householder reflectors are applied to Z directly (dormqr: Z Q, then its last columns), which
-    saves forming Q. An SVD decides when some |R_ii| is within three decades of the threshold.
-    """
+def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
+    """Orthonormal basis of ker(RZ) (k×z): QR with column pivoting of RZᵀ, SVD if ambiguous."""
     k, z = RZ.shape
     qr, _, tau, _, info = lapack.dgeqp3(np.array(RZ.T, order="F"))
     p = min(k, z)
     d = np.abs(qr.diagonal()[:p])
-    if info != 0 or ((d > 1e-3 * tol) & (d < 1e3 * tol)).any():
-        return _kernel_svd(RZ, tol, Z)
     rank = int(np.count_nonzero(d > tol))
+    if info != 0 or ((d > 1e-3 * tol) & (d < 1e3 * tol)).any():
+        # |R_ii| near the threshold: let the singular values decide (exact rank measure)
+        U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
+        return U[:, int(np.count_nonzero(s > tol)):]
     if rank == 0:
-        return np.eye(z) if Z is None else Z
+        return np.eye(z)
     if rank >= z:
-        return np.zeros((z if Z is None else Z.shape[0], 0))
-    if Z is not None:
-        ZQ, _, info = lapack.dormqr("R", "N", qr[:, :p], tau[:p], Z, max(1, 64 * Z.shape[0]))
-        if info != 0:
-            return _kernel_svd(RZ, tol, Z)
-        return ZQ[:, rank:]
+        return np.zeros((z, 0))
     a = np.zeros((z, z), order="F")
     a[:, :p] = qr[:, :p]
     t = np.zeros(z)
     t[:p] = tau[:p]
     q, _, info = lapack.dorgqr(a, t, overwrite_a=True)
     if info != 0:
-        return _kernel_svd(RZ, tol, Z)
+        U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
+        return U[:, int(np.count_nonzero(s > tol)):]
     return q[:, rank:]
-
-
-def _kernel_svd(RZ, tol, Z):
-    """``Z N`` (or N) from an SVD of RZ: the exact rank measure (the paper's choice)."""
-    U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
-    N = U[:, int(np.count_nonzero(s > tol)):]
-    return N if Z is None else Z @ N
 
 
 def _lock(Z, rows, projected, rank_tol):
@@ -539,7 +525,10 @@ def _lock(Z, rows, projected, rank_tol):
         return Z, z
     if projected is None:
         projected = rows if Z is None else rows @ Z
-    Z = _kernel(projected, rank_tol * scale, Z)
+    N = _kernel(projected, rank_tol * scale)
+    if N.shape[1] == z:
+        return Z, z
+    Z = N if Z is None else Z @ N
     return Z, Z.shape[1]
 
 
