@@ -32,7 +32,10 @@ Methods
     the backend is not called; otherwise the QP of eqs. 10-11 is solved. A level of equalities
     only, below no inequality, is thus exactly the least-squares problem its QP is. On the
     Table 2 stack (talos14) no QP is needed in ~98 % of the cycles; on Table 1 (talos) levels
-    3-5 still need ~1.8 QPs per cycle. Seed 000 solves a QP per level; the optimum is the same.
+    3-5 still need ~1.7 QPs per cycle. Seed 000 solves a QP per level; the optimum is the same.
+    (Solving the QP on a growing working set of its rows — exact as well — was measured slower
+    on Table 1: the set grew from 4 to ~20 rows over 2-3 QPs.) The implicit equalities below
+    are looked for only when a QP is needed.
 
     Two numerical devices keep the QPs well posed without changing the optimal set by more
     than round-off:
@@ -351,7 +354,7 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
     # higher-priority inequality rows that still have freedom: (C, relaxed lower, relaxed upper
     # (eq. 9), drop_tol² ‖C_i‖²), or None while there are none
     high = None
-    HZ = hx = None
+    HZ = hx = hb = None
 
     for r, L in enumerate(levels):
         tl = time.perf_counter()
@@ -371,17 +374,31 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
             zdims[r], times[r] = 0, time.perf_counter() - tl
             continue
 
-        # ---- higher rows: drop those without freedom, lock implicit equalities, loosen tight ones
+        # ---- higher rows: drop those without freedom; rows tight at x* get a margin (loosened)
+        tight = False
         if high is not None:
             high, HZ = _drop_frozen(high, high[0] if Z is None else high[0] @ Z, x, feas_tol, L,
                                     warns)
         if high is not None:
             hx = high[0] @ x
             gap = np.minimum(np.abs(hx - high[1]), np.abs(high[2] - hx))
-            if (gap > max(_TIGHT_TOL, relax_tol) * (1.0 + np.abs(hx))).all():
-                imp, tight = None, False  # no row is tight: nothing to lock, nothing to loosen
-            else:
-                imp, tight = _implicit_equalities(HZ, hx, high[1], high[2]), True
+            tight = not (gap > max(_TIGHT_TOL, relax_tol) * (1.0 + np.abs(hx))).all()
+            hb = _loosen_tight(hx, high[1], high[2], relax_tol) if tight else high[1:3]
+
+        # ---- project the level onto the remaining freedom x = x* + Z u (eq. 8); its
+        # unconstrained minimiser (Cholesky) is tried first: if it satisfies the level's own rows
+        # and the relaxed higher rows, it is the QP's solution (the minimiser of a relaxation,
+        # feasible with zero slacks) and no QP is solved. A level of equalities below no
+        # inequality is always solved so: its QP (eq. 10) is exactly a regularised least-squares
+        # problem.
+        wB, M, Hu, gu, own = _project_level(L, B, C, Z, z, x, eps, drop2)
+        u, ok, status = _unconstrained(Hu, gu)
+        rows = _qp_rows(own, high, HZ, hx, hb, x, z) if (own is not None or high is not None) else None
+        solved = ok and (rows is None or not _violated(rows, u))
+        if not solved and tight:
+            # implicit equalities (module docstring) keep the QP well posed: looked for only when
+            # a QP is solved — the optimal set is the same with or without locking them
+            imp = _implicit_equalities(HZ, hx, high[1], high[2])
             if imp is not None:
                 Z, z = _lock(Z, high[0][imp], None, rank_tol)
                 keep = ~imp
@@ -393,52 +410,24 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
                     high, HZ = _drop_frozen(high, high[0] @ Z, x, feas_tol, L, warns)
                     if high is not None:
                         hx = high[0] @ x
-            if high is not None and tight:
-                hlo, hup = _loosen_tight(hx, high[1], high[2], relax_tol)
-                high = (high[0], hlo, hup, high[3])
-
-        # ---- project the level onto the remaining freedom x = x* + Z u (eq. 8)
-        wB = L.w[:, None] * B
-        if Z is None:
-            M, zx = wB, x
-        else:
-            M, zx = wB @ Z, Z.T @ x
-        Hu = M.T @ M
-        Hu.flat[:: z + 1] += eps
-        gu = M.T @ (wB @ x - L.w * L.b)
-        gu += eps * zx
-        own = None  # own rows with freedom: (C, C Z, lower, upper, V, row norms of C)
-        if m:  # own rows without freedom keep their (fixed) violation: no slack
-            CZ = C if Z is None else C @ Z
-            nC = drop2 * _sq_norms(C)
-            free = _sq_norms(CZ) > nC
-            if free.all():
-                own = (C, CZ, L.lower, L.upper, L.v, nC)
-            elif free.any():
-                own = (C[free], CZ[free], L.lower[free], L.upper[free], L.v[free], nC[free])
-
-        # ---- the QP of eqs. 10-11. Its unconstrained minimiser (Cholesky) is tried first: if
-        # it satisfies the level's own rows and the relaxed higher rows, it is the QP's solution
-        # (the minimiser of a relaxation, feasible with zero slacks) and no QP is solved. A level
-        # of equalities below no inequality is always solved so: its QP (eq. 10) is exactly a
-        # regularised least-squares problem.
-        u, ok, status = _unconstrained(Hu, gu)
-        if own is not None or high is not None:
-            empty = np.zeros(0)
-            own_qp = ((np.zeros((0, z)), empty, empty, empty, empty) if own is None
-                      else (own[1], own[0] @ x, own[2], own[3], own[4]))
-            high_qp = ((np.zeros((0, z)), empty, empty, empty) if high is None
-                       else (HZ, hx, high[1], high[2]))
-            u0 = u if ok else None
-            u, ok, status = _level_qp_after(Hu, gu, own_qp, high_qp, u0, backend, opts)
+                        hb = _loosen_tight(hx, high[1], high[2], relax_tol)
+                wB, M, Hu, gu, own = _project_level(L, B, C, Z, z, x, eps, drop2)
+                u, ok, status = _unconstrained(Hu, gu)
+                rows = (_qp_rows(own, high, HZ, hx, hb, x, z)
+                        if (own is not None or high is not None) else None)
+                solved = ok and (rows is None or not _violated(rows, u))
+        if not solved and rows is not None:
+            u, ok, status = _level_qp(Hu, gu, *rows, backend, opts)
             if not ok and fallback is not None:
-                u, ok, status2 = _level_qp_after(Hu, gu, own_qp, high_qp, u0, fallback, {})
+                u, ok, status2 = _level_qp(Hu, gu, *rows, fallback, {})
                 if ok:
                     msg = f"level {r} ({L.name!r}): {status}; solved with {fallback}"
                     log.debug(msg)
                     warns.append(msg)
                 else:
                     status = f"{status}; {status2}"
+        if high is not None:  # the margins stay for the lower levels
+            high = (high[0], hb[0], hb[1], high[3])
         if not ok:
             times[r] = time.perf_counter() - tl
             status = f"level {r} ({L.name!r}): {status}"
@@ -465,27 +454,52 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
     return _finish(levels, x, "optimal", True, t0, times, "cascade", nl, zdims, warns)
 
 
+def _project_level(L, B, C, Z, z, x, eps, drop2):
+    """The level over x = x* + Z u (eq. 8): weighted rows W B, M = W B Z, the Hessian and gradient
+    of ½‖M u + W(B x* − b)‖² + ε/2 ‖x* + Z u‖², and its own inequality rows that still have
+    freedom: (C, C Z, lower, upper, V, drop_tol² ‖C_i‖²), or None."""
+    wB = L.w[:, None] * B
+    if Z is None:
+        M, zx = wB, x
+    else:
+        M, zx = wB @ Z, Z.T @ x
+    Hu = M.T @ M
+    Hu.flat[:: z + 1] += eps
+    gu = M.T @ (wB @ x - L.w * L.b)
+    gu += eps * zx
+    own = None
+    if C.shape[0]:  # own rows without freedom keep their (fixed) violation: no slack
+        CZ = C if Z is None else C @ Z
+        nC = drop2 * _sq_norms(C)
+        free = _sq_norms(CZ) > nC
+        if free.all():
+            own = (C, CZ, L.lower, L.upper, L.v, nC)
+        elif free.any():
+            own = (C[free], CZ[free], L.lower[free], L.upper[free], L.v[free], nC[free])
+    return wB, M, Hu, gu, own
+
+
+def _qp_rows(own, high, HZ, hx, hb, x, z):
+    """The rows of the level QP in u: own (C Z, C x*, lower, upper, V), higher (H Z, H x*,
+    relaxed lower, relaxed upper) — the argument list of :func:`_level_qp` after (Hu, gu)."""
+    empty = np.zeros(0)
+    own_qp = ((np.zeros((0, z)), empty, empty, empty, empty) if own is None
+              else (own[1], own[0] @ x, own[2], own[3], own[4]))
+    high_qp = ((np.zeros((0, z)), empty, empty, empty) if high is None else (HZ, hx, hb[0], hb[1]))
+    return own_qp + high_qp
+
+
+def _violated(rows, u) -> bool:
+    """Some own or higher row of the level QP is violated at u (exactly, no tolerance)."""
+    CZ, c0, lo, up, _, HZ, h0, hlo, hup = rows
+    return bool(_outside(CZ, c0, lo, up, u).any() or _outside(HZ, h0, hlo, hup, u).any())
+
+
 def _outside(A, a0, lower, upper, u):
     """Mask of the rows with A u + a0 outside [lower, upper] (exactly, no tolerance)."""
     v = A @ u
     v += a0
     return (v < lower) | (v > upper)
-
-
-def _level_qp_after(Hu, gu, own_qp, high_qp, u0, backend, opts):
-    """The level QP of eqs. 10-11, unless the unconstrained minimiser ``u0`` solves it.
-
-    ``u0`` (None if the Cholesky failed) minimises the level's relaxation without rows: if it
-    satisfies every row (own rows with zero slack), it is the QP's solution. Otherwise the QP
-    is solved over all rows. (Solving it on a growing working set of rows instead — exact as
-    well — was measured slower on the Table 1 stack: the set grew 4 → ~20 rows in 2-3 QPs.)
-    """
-    CZ, c0, lo, up, vw = own_qp
-    HZ, h0, hlo, hup = high_qp
-    if u0 is not None and not (_outside(CZ, c0, lo, up, u0).any()
-                               or _outside(HZ, h0, hlo, hup, u0).any()):
-        return u0, True, "optimal"
-    return _level_qp(Hu, gu, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts)
 
 
 def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
