@@ -24,6 +24,7 @@ from scipy.linalg import lapack
 
 from .robot import FREE_FLYER_NV, Robot
 from .solvers import Level, solve_hierarchy
+from .solvers.hierarchy import FirstLevelSolution
 from .tasks.base import Task, TaskRows
 from .tasks.dynamics import FullDynamics, NewtonEuler
 from .tasks.limits import TorqueLimits
@@ -213,7 +214,7 @@ class Formulation:
             x1 = B.T @ np.linalg.lstsq(B @ B.T, level.b * w, rcond=None)[0]
             Q, _ = np.linalg.qr(B.T, mode="complete")
             return x1, Q[:, k:]
-        return Q[:, :k] @ y, Q[:, k:]
+        return FirstLevelSolution(Q[:, :k] @ y, Q[:, k:])  # orthonormal by construction
 
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",

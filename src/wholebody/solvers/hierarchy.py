@@ -129,6 +129,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import lapack, solve_triangular
@@ -137,7 +138,8 @@ from scipy.optimize import nnls
 from .backends import BACKENDS, solve_qp
 from .level import Level
 
-__all__ = ["HierarchySolution", "solve_hierarchy", "evaluate_levels", "row_normalised"]
+__all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
+           "row_normalised"]
 
 log = logging.getLogger(__name__)
 
@@ -319,7 +321,18 @@ def solve_hierarchy(
                           fallback_backend)
 
 
+class FirstLevelSolution(NamedTuple):
+    """``first_level_solution`` from a caller that guarantees ``x1`` finite and ``Z1`` finite
+    with orthonormal columns (e.g. from a QR, as :class:`~wholebody.formulation.Formulation`
+    does every cycle): the checks of a plain ``(x1, Z1)`` pair are skipped."""
+
+    x1: np.ndarray
+    Z1: np.ndarray
+
+
 def _check_first_level(fls):
+    if isinstance(fls, FirstLevelSolution):
+        return fls.x1, fls.Z1
     if not isinstance(fls, (tuple, list)) or len(fls) != 2:
         raise ValueError("first_level_solution must be a pair (x1, Z1)")
     x1 = np.asarray(fls[0], dtype=float).reshape(-1)
