@@ -331,7 +331,7 @@ class _LevelPlan:
                 self.slots.append((i, task, False, m, m + r.m, _signature(r)))
                 m += r.m
         self.start, self.k, self.m = start, k, m  # equality rows at start, inequality rows after
-        self.signature = [_signature(r) for r in rows]
+        self.empty = [i for i, r in enumerate(rows) if r.m == 0]  # tasks without rows (for now)
 
     def bind(self, mat: np.ndarray, vec: np.ndarray, lo: np.ndarray, up: np.ndarray) -> None:
         """Take views of the plan's buffers: rows [E; C] of ``mat``, [e; w | 0; vw] of ``vec``."""
@@ -400,10 +400,6 @@ class _Plan:
         for lp in self.levels:
             lp.raise_invalid()
 
-    def matches(self, rows: list[list[TaskRows]]) -> bool:
-        return all(lp.signature == [_signature(r) for r in level_rows]
-                   for lp, level_rows in zip(self.levels, rows))
-
     def fill(self, formulation: "Formulation", variables: Variables, rows: list[list[TaskRows]]):
         """Refill the level arrays in place; None if a task's rows no longer fit the layout."""
         robot, nv, nl = formulation.robot, variables.nv, variables.n_lambda
@@ -413,6 +409,9 @@ class _Plan:
         eq14 = None  # (M_u, -J_u^T, h_u) of eq. 14, made on first use
         for lp, level_rows in zip(self.levels, rows):
             E, C = lp.E, lp.C
+            for i in lp.empty:
+                if level_rows[i].m:
+                    return None
             for i, task, eq, a, b, sig in lp.slots:
                 r = level_rows[i]
                 if _signature(r) != sig:
