@@ -284,3 +284,31 @@ def test_backends_agree_on_robots(robots, name, rng):
     assert a.ok and b.ok
     np.testing.assert_allclose(a.level_costs, b.level_costs, rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(a.tau, b.tau, rtol=1e-4, atol=1e-3)
+
+
+def test_task_whose_rows_change_shape_is_replanned(robots):
+    """The preallocated layout follows a task whose row count changes (0 -> 1 -> 2 rows)."""
+    from wholebody.tasks import Task, TaskRows
+
+    class Toggle(Task):
+        def __init__(self):
+            super().__init__("toggle")
+            self.joints = []
+
+        def rows(self, robot, variables):
+            A = np.zeros((len(self.joints), robot.nv))
+            A[np.arange(len(self.joints)), [6 + j for j in self.joints]] = 1.0
+            return TaskRows(qdd=A, lam=None, tau=None, target=np.full(len(self.joints), 3.0))
+
+    robot = robots["talos14"]
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    toggle = Toggle()
+    stack = Stack([[NewtonEuler(), TorqueLimits()], [toggle], [PostureTask(weight=0.1)]])
+    f, variables = Formulation(robot), Variables(robot)
+    assert f.solve(stack, variables).ok
+    for joints in ([0], [0, 1]):
+        toggle.joints = joints
+        sol = f.solve(stack, variables)
+        assert sol.ok
+        np.testing.assert_allclose(sol.qdd[[6 + j for j in joints]], 3.0, atol=1e-4)  # eps
+        assert [t.rows for t in sol.tasks if t.name == "toggle"] == [len(joints)]

@@ -444,7 +444,9 @@ def test_first_level_solution_flags_a_violated_frozen_row():
 # ----------------------------------------------------------------------------- failures are values
 def test_failing_backend_returns_flagged_solution_with_last_good_x(monkeypatch):
     lv = random_hierarchy(np.random.default_rng(42), n=10, n_levels=3)
-    lv = [Level(eq=(L.B, L.b), ineq=(np.eye(10), -np.ones(10), np.ones(10)), name=L.name) for L in lv]
+    # bounds that exclude x = 0, so that every level needs its QP (an unconstrained minimiser that
+    # satisfies all rows is accepted without calling the backend)
+    lv = [Level(eq=(L.B, L.b), ineq=(np.eye(10), np.ones(10), 2.0 * np.ones(10)), name=L.name) for L in lv]
     calls = {"n": 0}
     real = backends_mod.BACKENDS["quadprog"]
 
@@ -463,6 +465,22 @@ def test_failing_backend_returns_flagged_solution_with_last_good_x(monkeypatch):
     first = solve_hierarchy(lv[:1])
     np.testing.assert_allclose(sol.x, first.x)
     assert np.all(np.isfinite(sol.costs))
+
+
+def test_fallback_backend_solves_the_failed_level_qp(monkeypatch):
+    """A level QP the backend fails on is solved by the fallback: same optimum, noted in warnings."""
+    lv = random_hierarchy(np.random.default_rng(42), n=10, n_levels=3)
+    lv = [Level(eq=(L.B, L.b), ineq=(np.eye(10), np.ones(10), 2.0 * np.ones(10)), name=L.name) for L in lv]
+    reference = solve_hierarchy(lv, backend="quadprog")
+
+    def failing(*args, **kw):
+        return None, "daqp: cycling (-2)", False
+
+    monkeypatch.setitem(backends_mod.BACKENDS, "daqp", failing)
+    assert not solve_hierarchy(lv, backend="daqp").ok
+    sol = solve_hierarchy(lv, backend="daqp", fallback_backend="quadprog")
+    assert sol.ok and any("solved with quadprog" in w for w in sol.warnings)
+    np.testing.assert_allclose(sol.costs, reference.costs, rtol=1e-9, atol=1e-12)
 
 
 def test_backend_that_raises_is_caught(monkeypatch):

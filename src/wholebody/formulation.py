@@ -20,9 +20,11 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg import lapack
 
 from .robot import FREE_FLYER_NV, Robot
 from .solvers import Level, solve_hierarchy
+from .solvers.hierarchy import FirstLevelSolution
 from .tasks.base import Task, TaskRows
 from .tasks.dynamics import FullDynamics, NewtonEuler
 from .tasks.limits import TorqueLimits
@@ -165,15 +167,20 @@ class Formulation:
         The level matrices are allocated once per stack structure and contact set (a plan) and
         refilled in place every cycle; the returned arrays are only valid until the next call.
         """
-        key = (id(stack), tuple(id(t) for t in stack.tasks()), variables.contacts, self.reduced)
-        rows_now = [[task.rows(self.robot, variables) for task in tasks] for tasks in stack.levels]
+        robot = self.robot
+        key = (id(stack), tuple(id(t) for tasks in stack.levels for t in tasks), variables.contacts,
+               self.reduced)
+        rows_now = [[task.rows(robot, variables) for task in tasks] for tasks in stack.levels]
         plan = self._plan
-        if plan is None or plan.key != key or not plan.matches(rows_now):
-            for task in stack.tasks():
-                if self.reduced and isinstance(task, FullDynamics):
-                    raise ValueError("FullDynamics belongs to the full formulation; the reduced "
-                                     "one uses NewtonEuler (tau is eliminated by eq. 14)")
-            plan = self._plan = _Plan(key, stack, rows_now, self.size(variables))
+        if plan is not None and plan.key == key:
+            filled = plan.fill(self, variables, rows_now)
+            if filled is not None:
+                return filled
+        for task in stack.tasks():
+            if self.reduced and isinstance(task, FullDynamics):
+                raise ValueError("FullDynamics belongs to the full formulation; the reduced "
+                                 "one uses NewtonEuler (tau is eliminated by eq. 14)")
+        plan = self._plan = _Plan(key, stack, rows_now, self.size(variables))
         return plan.fill(self, variables, rows_now)
 
     # ------------------------------------------------------------------ analytic level 1
@@ -189,14 +196,25 @@ class Formulation:
         """x1 = B^T (B B^T)^-1 b (least norm) and an orthonormal null-space basis Z1 of B (eq. 17).
 
         B has full row rank (the base part of M is positive definite), so the Gram matrix is SPD.
-        Z1 comes from a complete QR of B^T: its last n - k columns span null(B).
+        Both come from one complete QR of B^T = [Q1 Q2] [R; 0] (LAPACK dgeqrf/dorgqr): since
+        B B^T = R^T R, x1 = Q1 R^-T b, and Z1 = Q2 spans null(B).
         """
-        B = level.B * level.w[:, None]
-        b = level.b * level.w
-        gram = B @ B.T
-        x1 = B.T @ np.linalg.solve(gram, b)
-        Q, _ = np.linalg.qr(B.T, mode="complete")
-        return x1, Q[:, B.shape[0]:]
+        w = level.w
+        k = w.shape[0]
+        Bt = np.array((level.B * w[:, None]).T, order="F")
+        qr, tau, _, info = lapack.dgeqrf(Bt, overwrite_a=True)
+        if info == 0:
+            q = np.zeros((Bt.shape[0], Bt.shape[0]), order="F")
+            q[:, :k] = qr
+            Q, _, info = lapack.dorgqr(q, tau, overwrite_a=True)
+            if info == 0:  # R^T y = b with R the upper triangle of qr (dtrtrs reads only that)
+                y, info = lapack.dtrtrs(qr[:k], level.b * w, lower=0, trans=1)
+        if info != 0 or not np.isfinite(y).all():  # rank-deficient B: the plain formulas
+            B = level.B * w[:, None]
+            x1 = B.T @ np.linalg.lstsq(B @ B.T, level.b * w, rcond=None)[0]
+            Q, _ = np.linalg.qr(B.T, mode="complete")
+            return x1, Q[:, k:]
+        return FirstLevelSolution(Q[:, :k] @ y, Q[:, k:])  # orthonormal by construction
 
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
@@ -219,14 +237,23 @@ class Formulation:
         t0 = time.perf_counter()
         levels, meta = self.levels(stack, variables)
         t_rows = time.perf_counter()
-        use_analytic = (self.analytic_first_level(stack) if analytic_first_level is None
-                        else analytic_first_level)
-        if use_analytic and not self.analytic_first_level(stack):
-            raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque limits")
+        if analytic_first_level is None:
+            use_analytic = self.analytic_first_level(stack)
+        else:
+            use_analytic = analytic_first_level
+            if use_analytic and not self.analytic_first_level(stack):
+                raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque "
+                                 "limits")
         fls = self.first_level_solution(levels[0]) if use_analytic and method == "cascade" else None
+        # the cascade retries a failed level QP with the fallback backend itself (one QP, not
+        # the whole cascade again); other methods are re-solved as a cascade below
         result = solve_hierarchy(levels, method=method, backend=backend,
-                                 regularization=regularization, first_level_solution=fls)
+                                 regularization=regularization, first_level_solution=fls,
+                                 fallback_backend=fallback_backend if method == "cascade" else None)
         status = result.status
+        retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
+        if result.ok and retried:
+            status = f"optimal ({fallback_backend} after {backend}: {'; '.join(retried)})"
         if not result.ok and fallback_backend and fallback_backend != backend:
             retry = solve_hierarchy(levels, method="cascade", backend=fallback_backend,
                                     regularization=regularization, first_level_solution=fls)
@@ -252,9 +279,9 @@ class Formulation:
         else:
             tau = x[nv + nl:].copy()
         lo, hi = robot.torque_bounds()
-        if not np.all(np.isfinite(tau)):
+        if not np.isfinite(tau).all():
             ok, status, tau = False, f"{status}; non-finite torque replaced by zero", np.zeros(robot.na)
-        outside = np.any(tau < lo - 1e-6) | np.any(tau > hi + 1e-6)
+        outside = bool(((tau < lo - 1e-6) | (tau > hi + 1e-6)).any())
         if not ok or outside:
             if outside and ok:
                 ok, status = False, "torque outside limits after solve; clipped"
@@ -280,50 +307,60 @@ class Formulation:
         return reports
 
 
-class _LevelPlan:
-    """Preallocated arrays of one level and where each task's rows go."""
+def _signature(r: TaskRows) -> tuple:
+    """What the preallocated layout depends on: row count, kind and which blocks are present."""
+    block = r.qdd if r.qdd is not None else r.lam if r.lam is not None else r.tau
+    return (0 if block is None else block.shape[0], r.target is not None,
+            r.qdd is None, r.lam is None, r.tau is None)
 
-    def __init__(self, rank: int, tasks: Sequence[Task], rows: Sequence[TaskRows], n: int):
+
+class _LevelPlan:
+    """Where each task's rows go in one level (views into the plan's buffers) and its solver Level."""
+
+    def __init__(self, rank: int, tasks: Sequence[Task], rows: Sequence[TaskRows], start: int, n: int):
         self.rank = rank
-        self.slots = []  # (index of the task in the level, task, kind, start, stop)
+        self.slots = []  # (index of the task in the level, task, is_eq, start, stop, signature)
         k = m = 0
         for i, (task, r) in enumerate(zip(tasks, rows)):
             if r.m == 0:
                 continue
             if r.is_equality:
-                self.slots.append((i, task, "eq", k, k + r.m))
+                self.slots.append((i, task, True, k, k + r.m, _signature(r)))
                 k += r.m
             else:
-                self.slots.append((i, task, "ineq", m, m + r.m))
+                self.slots.append((i, task, False, m, m + r.m, _signature(r)))
                 m += r.m
-        self.E, self.e, self.w = np.zeros((k, n)), np.zeros(k), np.ones(k)
-        self.C, self.lo, self.up, self.vw = np.zeros((m, n)), np.zeros(m), np.zeros(m), np.ones(m)
-        self.signature = [(r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
-                          for r in rows]
+        self.start, self.k, self.m = start, k, m  # equality rows at start, inequality rows after
+        self.empty = [i for i, r in enumerate(rows) if r.m == 0]  # tasks without rows (for now)
 
-    def check(self) -> None:
-        """The boundary check of the refilled arrays: finite rows, lower <= upper, valid weights.
+    def bind(self, mat: np.ndarray, vec: np.ndarray, lo: np.ndarray, up: np.ndarray) -> None:
+        """Take views of the plan's buffers: rows [E; C] of ``mat``, [e; w | 0; vw] of ``vec``."""
+        s, k, m = self.start, self.k, self.m
+        self.E, self.C = mat[s:s + k], mat[s + k:s + k + m]
+        self.e, self.w = vec[0, s:s + k], vec[1, s:s + k]
+        self.vw = vec[1, s + k:s + k + m]
+        self.lo, self.up = lo[s + k:s + k + m], up[s + k:s + k + m]
+        self.meta = [(task, "eq", self.E[a:b], self.e[a:b], None) if eq else
+                     (task, "ineq", self.C[a:b], self.lo[a:b], self.up[a:b])
+                     for _, task, eq, a, b, _ in self.slots]
+        self.level = Level.trusted(self.E, self.e, self.w, self.C, self.lo, self.up, self.vw,
+                                   name=f"level {self.rank}")
 
-        A NaN reference or gain set on a task ends here as a ValueError naming the level and task.
-        """
-        everything = slice(None)
-        if self._valid(everything, "eq") and self._valid(everything, "ineq"):
-            return
-        for _, task, kind, a, b in self.slots:
-            if not self._valid(slice(a, b), kind):
+    def raise_invalid(self) -> None:
+        """Name the task whose rows are NaN/inf, whose bounds cross or whose weight is bad."""
+        for _, task, eq, a, b, _ in self.slots:
+            if not self._valid(slice(a, b), eq):
                 raise ValueError(f"level {self.rank}: task '{task.name}' produced NaN/inf rows, "
                                  f"lower > upper or a bad weight")
 
-    def _valid(self, rows: slice, kind: str) -> bool:
-        # one reduction per array: a sum is non-finite iff some entry is NaN/inf (or it overflows,
-        # which is as bad)
-        if kind == "eq":
+    def _valid(self, rows: slice, eq: bool) -> bool:
+        if eq:
             w = self.w[rows]
             return bool(np.isfinite(self.E[rows].sum() + self.e[rows].sum() + w.sum())
                         and (w >= 0).all())
         lo, up, vw = self.lo[rows], self.up[rows], self.vw[rows]
         return bool(np.isfinite(self.C[rows].sum() + vw.sum()) and (vw > 0).all()
-                    and (lo <= up).all())  # NaN bounds fail the comparison
+                    and (lo <= up).all())
 
 
 class _Plan:
@@ -331,37 +368,94 @@ class _Plan:
 
     def __init__(self, key, stack: Stack, rows: list[list[TaskRows]], n: int):
         self.key = key
-        self.levels = [_LevelPlan(rank, tasks, level_rows, n)
-                       for rank, (tasks, level_rows) in enumerate(zip(stack.levels, rows), start=1)]
+        self.levels, start = [], 0
+        for rank, (tasks, level_rows) in enumerate(zip(stack.levels, rows), start=1):
+            lp = _LevelPlan(rank, tasks, level_rows, start, n)
+            self.levels.append(lp)
+            start += lp.k + lp.m
+        # one buffer for all levels' rows (and one per vector kind): the per-cycle column scaling
+        # and the boundary check are then a few whole-buffer operations, not a few per level
+        self.mat = np.zeros((start, n))
+        self.vec = np.ones((2, start))  # [targets e (eq rows; 0 for ineq rows); weights w | V]
+        self.vec[0] = 0.0
+        self.lo, self.up = np.zeros(start), np.zeros(start)
+        for lp in self.levels:
+            lp.bind(self.mat, self.vec, self.lo, self.up)
+        # weights must be >= 0 (equality rows) and > 0 (inequality rows): w >= w_min
+        self.w_min = np.zeros(start)
+        for lp in self.levels:
+            self.w_min[lp.start + lp.k:lp.start + lp.k + lp.m] = np.nextafter(0.0, 1.0)
 
-    def matches(self, rows: list[list[TaskRows]]) -> bool:
-        return all(lp.signature == [(r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
-                                    for r in level_rows]
-                   for lp, level_rows in zip(self.levels, rows))
+    def check(self) -> None:
+        """The boundary check of the refilled arrays: finite rows, lower <= upper, valid weights.
+
+        A NaN reference or gain set on a task ends here as a ValueError naming the level and task.
+        A sum is non-finite iff some entry is NaN/inf (or it overflows, which is as bad); NaN
+        bounds and weights fail the comparisons.
+        """
+        vec = self.vec
+        if (np.isfinite(self.mat.sum() + vec.sum()) and (self.lo <= self.up).all()
+                and (vec[1] >= self.w_min).all()):
+            return
+        for lp in self.levels:
+            lp.raise_invalid()
 
     def fill(self, formulation: "Formulation", variables: Variables, rows: list[list[TaskRows]]):
-        scale_tail = formulation.scales(variables)[variables.nv:]
-        nv = variables.nv
-        out, meta = [], []
+        """Refill the level arrays in place; None if a task's rows no longer fit the layout."""
+        robot, nv, nl = formulation.robot, variables.nv, variables.n_lambda
+        lam_cols, tau_cols = slice(nv, nv + nl), slice(nv + nl, None)
+        scale_tail = formulation.scales(variables)[nv:]
+        reduced = formulation.reduced
+        eq14 = None  # (M_u, -J_u^T, h_u) of eq. 14, made on first use
         for lp, level_rows in zip(self.levels, rows):
-            level_meta = []
-            for i, task, kind, a, b in lp.slots:
+            E, C = lp.E, lp.C
+            for i in lp.empty:
+                if level_rows[i].m:
+                    return None
+            for i, task, eq, a, b, sig in lp.slots:
                 r = level_rows[i]
-                if kind == "eq":
-                    _, offset = formulation.map_rows(r, variables, lp.E[a:b])
-                    np.subtract(r.target, offset, out=lp.e[a:b])
+                if _signature(r) != sig:
+                    return None
+                A = E[a:b] if eq else C[a:b]
+                if r.qdd is not None:
+                    A[:, :nv] = r.qdd
+                if r.lam is not None:
+                    A[:, lam_cols] = r.lam
+                offset = None
+                if r.tau is not None:
+                    if reduced:  # eq. 14: tau = M_u qdd + h_u - J_u^T lambda
+                        if eq14 is None:
+                            J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
+                            eq14 = (robot.M[FREE_FLYER_NV:], -J_u.T, robot.h[FREE_FLYER_NV:])
+                        M_u, mJ_uT, h_u = eq14
+                        if r.tau_identity:
+                            tau_qdd, tau_lam, offset = M_u, mJ_uT, h_u
+                        else:
+                            tau_qdd, tau_lam, offset = r.tau @ M_u, r.tau @ mJ_uT, r.tau @ h_u
+                        if r.qdd is None:
+                            A[:, :nv] = tau_qdd
+                        else:
+                            A[:, :nv] += tau_qdd
+                        if r.lam is None:
+                            A[:, lam_cols] = tau_lam
+                        else:
+                            A[:, lam_cols] += tau_lam
+                    else:
+                        A[:, tau_cols] = r.tau
+                if eq:
+                    if offset is None:
+                        lp.e[a:b] = r.target
+                    else:
+                        np.subtract(r.target, offset, out=lp.e[a:b])
                     lp.w[a:b] = task.weight
-                    level_meta.append((task, "eq", lp.E[a:b], lp.e[a:b], None))
                 else:
-                    _, offset = formulation.map_rows(r, variables, lp.C[a:b])
-                    np.subtract(r.lower, offset, out=lp.lo[a:b])
-                    np.subtract(r.upper, offset, out=lp.up[a:b])
+                    if offset is None:
+                        lp.lo[a:b] = r.lower
+                        lp.up[a:b] = r.upper
+                    else:
+                        np.subtract(r.lower, offset, out=lp.lo[a:b])
+                        np.subtract(r.upper, offset, out=lp.up[a:b])
                     lp.vw[a:b] = task.weight
-                    level_meta.append((task, "ineq", lp.C[a:b], lp.lo[a:b], lp.up[a:b]))
-            lp.E[:, nv:] *= scale_tail
-            lp.C[:, nv:] *= scale_tail
-            lp.check()
-            out.append(Level.trusted(lp.E, lp.e, lp.w, lp.C, lp.lo, lp.up, lp.vw,
-                                     name=f"level {lp.rank}"))
-            meta.append(level_meta)
-        return out, meta
+        self.mat[:, nv:] *= scale_tail
+        self.check()
+        return [lp.level for lp in self.levels], [lp.meta for lp in self.levels]

@@ -23,8 +23,19 @@ Methods
     they cannot be satisfied (their residual is what is kept). Inequality rows with
     ``‖C_i Z‖ ≤ drop_tol ‖C_i‖`` have no freedom left: they are dropped from the QP (their value
     can no longer change) and checked to still hold within ``feas_tol``; a level with
-    ``Z`` empty is only evaluated; a level QP without any inequality row is solved in closed
-    form (Cholesky) instead of calling the backend.
+    ``Z`` empty is only evaluated.
+
+    Closed form first. Every level's QP is first solved without its rows: the minimiser of
+    ``½‖M u + e‖² + ε/2‖x* + Z u‖²`` by Cholesky of ``MᵀM + εI`` (a regularised least-squares
+    problem). If it satisfies the level's own inequality rows and the relaxed higher rows, it
+    is the QP's solution (the minimiser of a relaxation that is feasible, with zero slacks) and
+    the backend is not called; otherwise the QP of eqs. 10-11 is solved. A level of equalities
+    only, below no inequality, is thus exactly the least-squares problem its QP is. On the
+    Table 2 stack (talos14) no QP is needed in ~98 % of the cycles; on Table 1 (talos) levels
+    3-5 still need ~1.7 QPs per cycle. Seed 000 solves a QP per level; the optimum is the same.
+    (Solving the QP on a growing working set of its rows — exact as well — was measured slower
+    on Table 1: the set grew from 4 to ~20 rows over 2-3 QPs.) The implicit equalities below
+    are looked for only when a QP is needed.
 
     Two numerical devices keep the QPs well posed without changing the optimal set by more
     than round-off:
@@ -115,8 +126,10 @@ Methods
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import lapack, solve_triangular
@@ -125,12 +138,14 @@ from scipy.optimize import nnls
 from .backends import BACKENDS, solve_qp
 from .level import Level
 
-__all__ = ["HierarchySolution", "solve_hierarchy", "evaluate_levels", "row_normalised"]
+__all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
+           "row_normalised"]
 
 log = logging.getLogger(__name__)
 
 _METHODS = ("cascade", "daqp", "weighted")
 _DAQP_RHO = 1e-8  # per-row soft weight for the daqp method (its own hierarchical default)
+_TIGHT_TOL = 1e-8  # a higher row is tight at x when |C x - bound| <= _TIGHT_TOL (1 + |C x|)
 
 
 @dataclass
@@ -190,15 +205,18 @@ def _row_norms(A: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->i", A, A))
 
 
+def _sq_norms(A: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", A, A)
+
+
 def evaluate_levels(levels, x):
     """Per-level costs, weighted residuals and weighted slacks at x (eq. 5 without ε)."""
     costs = np.empty(len(levels))
     res, vio = [], []
+    empty = np.zeros(0)
     for i, L in enumerate(levels):
-        if L.n is None:
-            r, s = np.zeros(0), np.zeros(0)
-        else:
-            r, s = L.eq_residual(x), L.ineq_violation(x)
+        r = L.eq_residual(x) if L.n is not None and L.B.shape[0] else empty
+        s = L.ineq_violation(x) if L.n is not None and L.C.shape[0] else empty
         res.append(r)
         vio.append(s)
         costs[i] = r @ r + s @ s
@@ -229,6 +247,7 @@ def solve_hierarchy(
     feas_tol: float = 1e-6,
     backend_options: dict | None = None,
     daqp_native_weights: bool = False,
+    fallback_backend: str | None = None,
 ) -> HierarchySolution:
     """Lexicographic optimum of a list of :class:`Level` (Herzog et al. 2016, eqs. 5-11).
 
@@ -254,6 +273,10 @@ def solve_hierarchy(
         DAQP settings for ``daqp`` and the daqp method).
     daqp_native_weights : method ``daqp`` only — use DAQP's native (row-normalised) soft
         penalty instead of uniform per-row weights (which give eq. 5's Σ s² trade-off).
+    fallback_backend : cascade only — a level QP that ``backend`` fails on is solved again with
+        this backend (same QP, so the same optimum), recorded in ``warnings``. Cheaper than
+        re-solving the whole cascade: each backend has rare failures of its own on these
+        ill-conditioned QPs (DAQP: cycling/infeasible verdicts on ~10-20 % of Table 1 cycles).
 
     Bad input (NaN/inf in data, inconsistent column counts, unknown names) raises ValueError
     naming the level and field. Numerical failures never raise: the solution is flagged
@@ -265,6 +288,10 @@ def solve_hierarchy(
         raise ValueError(f"unknown method {method!r}; choose from {_METHODS}")
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; choose from {sorted(BACKENDS)}")
+    if fallback_backend is not None and fallback_backend not in BACKENDS:
+        raise ValueError(f"unknown fallback_backend {fallback_backend!r}; choose from {sorted(BACKENDS)}")
+    if fallback_backend == backend:
+        fallback_backend = None
     if not (np.isfinite(regularization) and regularization > 0):
         raise ValueError(f"regularization must be finite and > 0, got {regularization!r}")
     n_hint = None
@@ -287,36 +314,49 @@ def solve_hierarchy(
             return sol
         warn = "weighted: hard level infeasible or the single QP failed; result of the cascade"
         log.debug(warn)
-        sol = _solve_cascade(levels, n, backend, regularization, None, tols, opts, t0)
+        sol = _solve_cascade(levels, n, backend, regularization, None, tols, opts, t0, fallback_backend)
         sol.warnings = (warn,) + sol.warnings
         return sol
-    return _solve_cascade(levels, n, backend, regularization, first_level_solution, tols, opts, t0)
+    return _solve_cascade(levels, n, backend, regularization, first_level_solution, tols, opts, t0,
+                          fallback_backend)
+
+
+class FirstLevelSolution(NamedTuple):
+    """``first_level_solution`` from a caller that guarantees ``x1`` finite and ``Z1`` finite
+    with orthonormal columns (e.g. from a QR, as :class:`~wholebody.formulation.Formulation`
+    does every cycle): the checks of a plain ``(x1, Z1)`` pair are skipped."""
+
+    x1: np.ndarray
+    Z1: np.ndarray
 
 
 def _check_first_level(fls):
+    if isinstance(fls, FirstLevelSolution):
+        return fls.x1, fls.Z1
     if not isinstance(fls, (tuple, list)) or len(fls) != 2:
         raise ValueError("first_level_solution must be a pair (x1, Z1)")
     x1 = np.asarray(fls[0], dtype=float).reshape(-1)
     Z1 = np.asarray(fls[1], dtype=float)
     if Z1.ndim != 2 or Z1.shape[0] != x1.shape[0]:
         raise ValueError(f"first_level_solution: Z1 has shape {Z1.shape}, expected ({x1.shape[0]}, z)")
-    if not np.all(np.isfinite(x1)):
+    if not np.isfinite(x1.sum()) and not np.isfinite(x1).all():
         raise ValueError("first_level_solution: x1 contains NaN or inf")
-    if not np.all(np.isfinite(Z1)):
-        raise ValueError("first_level_solution: Z1 contains NaN or inf")
     z = Z1.shape[1]
+    G = Z1.T @ Z1  # (also the finiteness check of Z1: a NaN/inf entry spreads into G)
+    if not np.isfinite(G.sum()) and not np.isfinite(Z1).all():
+        raise ValueError("first_level_solution: Z1 contains NaN or inf")
     if z:
-        G = Z1.T @ Z1
         G.flat[:: z + 1] -= 1.0
-        if np.abs(G).max() > 1e-10:  # not orthonormal: an orthonormal basis of the same range
+        if not np.abs(G).max() <= 1e-10:  # not orthonormal: an orthonormal basis of the same range
             U, s, _ = np.linalg.svd(Z1, full_matrices=False)
             Z1 = U[:, s > 1e-12 * max(1.0, s[0])]
     return x1, np.ascontiguousarray(Z1)
 
 
 # ---------------------------------------------------------------------------- cascade
-def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
+def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
     rank_tol, drop_tol, relax_tol, feas_tol = tols
+    drop2 = drop_tol * drop_tol  # freedom tests on squared norms: ‖C_i Z‖² > drop_tol² ‖C_i‖²
     nl = len(levels)
     times = np.zeros(nl)
     zdims = np.zeros(nl, dtype=int)
@@ -324,66 +364,83 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
     x = np.zeros(n)
     Z = None  # None stands for the identity: nothing locked yet
     z = n
-    # higher-priority inequality rows that still have freedom, with relaxed bounds (eq. 9)
-    hC, hlo, hup = np.zeros((0, n)), np.zeros(0), np.zeros(0)
+    # higher-priority inequality rows that still have freedom: (C, relaxed lower, relaxed upper
+    # (eq. 9), drop_tol² ‖C_i‖²), or None while there are none
+    high = None
+    HZ = hx = hb = None
 
     for r, L in enumerate(levels):
         tl = time.perf_counter()
         B, C = _rows(L, n)
+        m = C.shape[0]
 
         if r == 0 and fls is not None:  # analytic first priority (§2.4, eq. 17), v*_1 = 0
             x, Z = fls[0].copy(), fls[1]
             z = Z.shape[1]
-            if C.shape[0]:
-                CZ1 = C @ Z if z else np.zeros((C.shape[0], 0))
-                hC, hlo, hup, _ = _drop_frozen(C, L.lower, L.upper, CZ1, x, drop_tol, feas_tol, L, warns)
+            if m:
+                CZ1 = C @ Z if z else np.zeros((m, 0))
+                high, _ = _drop_frozen((C, L.lower, L.upper, drop2 * _sq_norms(C)), CZ1, x,
+                                       feas_tol, L, warns)
             zdims[0], times[0] = z, time.perf_counter() - tl
             continue
         if z == 0:  # no freedom left: the level is only evaluated
             zdims[r], times[r] = 0, time.perf_counter() - tl
             continue
 
-        wB = L.w[:, None] * B
-        # ---- higher rows: drop those without freedom, lock implicit equalities, loosen tight ones
-        if hC.shape[0]:
-            HZ = hC if Z is None else hC @ Z
-            hC, hlo, hup, HZ = _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns)
-            hx = hC @ x
-            imp = _implicit_equalities(HZ, hx, hlo, hup)
-            if imp.any():
-                Z, z = _lock(Z, hC[imp], rank_tol)
+        # ---- higher rows: drop those without freedom; rows tight at x* get a margin (loosened)
+        tight = False
+        if high is not None:
+            high, HZ = _drop_frozen(high, high[0] if Z is None else high[0] @ Z, x, feas_tol, L,
+                                    warns)
+        if high is not None:
+            hx = high[0] @ x
+            gap = np.minimum(np.abs(hx - high[1]), np.abs(high[2] - hx))
+            tight = not (gap > max(_TIGHT_TOL, relax_tol) * (1.0 + np.abs(hx))).all()
+            hb = _loosen_tight(hx, high[1], high[2], relax_tol) if tight else high[1:3]
+
+        # ---- project the level onto the remaining freedom x = x* + Z u (eq. 8); its
+        # unconstrained minimiser (Cholesky) is tried first: if it satisfies the level's own rows
+        # and the relaxed higher rows, it is the QP's solution (the minimiser of a relaxation,
+        # feasible with zero slacks) and no QP is solved. A level of equalities below no
+        # inequality is always solved so: its QP (eq. 10) is exactly a regularised least-squares
+        # problem.
+        wB, M, Hu, gu, own = _project_level(L, B, C, Z, z, x, eps, drop2)
+        u, ok, status = _unconstrained(Hu, gu)
+        rows = _qp_rows(own, high, HZ, hx, hb, x, z) if (own is not None or high is not None) else None
+        solved = ok and (rows is None or not _violated(rows, u))
+        if not solved and tight:
+            # implicit equalities (module docstring) keep the QP well posed: looked for only when
+            # a QP is solved — the optimal set is the same with or without locking them
+            imp = _implicit_equalities(HZ, hx, high[1], high[2])
+            if imp is not None:
+                Z, z = _lock(Z, high[0][imp], None, rank_tol)
                 keep = ~imp
-                hC, hlo, hup, hx = hC[keep], hlo[keep], hup[keep], hx[keep]
+                high = tuple(a[keep] for a in high) if keep.any() else None
                 if z == 0:
                     zdims[r], times[r] = 0, time.perf_counter() - tl
                     continue
-                HZ = hC @ Z
-                hC, hlo, hup, HZ = _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns)
-                hx = hC @ x
-            hlo, hup = _loosen_tight(hx, hlo, hup, relax_tol)
-        else:
-            HZ, hx = hC, np.zeros(0)
-
-        # ---- project the level onto the remaining freedom x = x* + Z u (eq. 8)
-        if Z is None:
-            M, CZ, zx = wB, C, x
-        else:
-            M, CZ, zx = wB @ Z, C @ Z, Z.T @ x
-        e0 = wB @ x - L.w * L.b
-        if C.shape[0]:  # own rows without freedom keep their (fixed) violation: no slack
-            own = _row_norms(CZ) > drop_tol * _row_norms(C)
-            Co, CZo, lo, up, vw = C[own], CZ[own], L.lower[own], L.upper[own], L.v[own]
-        else:
-            Co, CZo, lo, up, vw = C, CZ, L.lower, L.upper, L.v
-        Hu = M.T @ M
-        Hu.flat[:: z + 1] += eps
-        gu = M.T @ e0 + eps * zx
-
-        # ---- the QP of eqs. 10-11 (closed form when no inequality constrains it)
-        if Co.shape[0] == 0 and hC.shape[0] == 0:
-            u, ok, status = _unconstrained(Hu, gu)
-        else:
-            u, ok, status = _level_qp(Hu, gu, CZo, Co @ x, lo, up, vw, HZ, hx, hlo, hup, backend, opts)
+                if high is not None:
+                    high, HZ = _drop_frozen(high, high[0] @ Z, x, feas_tol, L, warns)
+                    if high is not None:
+                        hx = high[0] @ x
+                        hb = _loosen_tight(hx, high[1], high[2], relax_tol)
+                wB, M, Hu, gu, own = _project_level(L, B, C, Z, z, x, eps, drop2)
+                u, ok, status = _unconstrained(Hu, gu)
+                rows = (_qp_rows(own, high, HZ, hx, hb, x, z)
+                        if (own is not None or high is not None) else None)
+                solved = ok and (rows is None or not _violated(rows, u))
+        if not solved and rows is not None:
+            u, ok, status = _level_qp(Hu, gu, *rows, backend, opts)
+            if not ok and fallback is not None:
+                u, ok, status2 = _level_qp(Hu, gu, *rows, fallback, {})
+                if ok:
+                    msg = f"level {r} ({L.name!r}): {status}; solved with {fallback}"
+                    log.debug(msg)
+                    warns.append(msg)
+                else:
+                    status = f"{status}; {status2}"
+        if high is not None:  # the margins stay for the lower levels
+            high = (high[0], hb[0], hb[1], high[3])
         if not ok:
             times[r] = time.perf_counter() - tl
             status = f"level {r} ({L.name!r}): {status}"
@@ -392,19 +449,70 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0):
         x = x + (u if Z is None else Z @ u)
 
         # ---- this level's free inequality rows join the higher ones, relaxed by v* (eq. 9)
-        if Co.shape[0]:
+        if own is not None:
+            Co, lo, up, nCo = own[0], own[2], own[3], own[5]
             cx = Co @ x
             viol = np.maximum(np.maximum(lo - cx, cx - up), 0.0)
-            hC = np.concatenate((hC, Co))
-            hlo = np.concatenate((hlo, lo - viol))
-            hup = np.concatenate((hup, up + viol))
+            if high is None:
+                high = (Co, lo - viol, up + viol, nCo)
+            else:
+                high = (np.concatenate((high[0], Co)), np.concatenate((high[1], lo - viol)),
+                        np.concatenate((high[2], up + viol)), np.concatenate((high[3], nCo)))
         # ---- lock the directions of the weighted equality rows: Z_{r+1} = Z_r N_r (eq. 8);
         # after the last level nobody needs the null space (saves a QR/SVD per cycle)
         if wB.shape[0] and r < nl - 1:
-            Z, z = _lock(Z, wB, rank_tol)
+            Z, z = _lock(Z, wB, M, rank_tol)
         zdims[r], times[r] = z, time.perf_counter() - tl
 
     return _finish(levels, x, "optimal", True, t0, times, "cascade", nl, zdims, warns)
+
+
+def _project_level(L, B, C, Z, z, x, eps, drop2):
+    """The level over x = x* + Z u (eq. 8): weighted rows W B, M = W B Z, the Hessian and gradient
+    of ½‖M u + W(B x* − b)‖² + ε/2 ‖x* + Z u‖², and its own inequality rows that still have
+    freedom: (C, C Z, lower, upper, V, drop_tol² ‖C_i‖²), or None."""
+    wB = L.w[:, None] * B
+    if Z is None:
+        M, zx = wB, x
+    else:
+        M, zx = wB @ Z, Z.T @ x
+    Hu = M.T @ M
+    Hu.flat[:: z + 1] += eps
+    gu = M.T @ (wB @ x - L.w * L.b)
+    gu += eps * zx
+    own = None
+    if C.shape[0]:  # own rows without freedom keep their (fixed) violation: no slack
+        CZ = C if Z is None else C @ Z
+        nC = drop2 * _sq_norms(C)
+        free = _sq_norms(CZ) > nC
+        if free.all():
+            own = (C, CZ, L.lower, L.upper, L.v, nC)
+        elif free.any():
+            own = (C[free], CZ[free], L.lower[free], L.upper[free], L.v[free], nC[free])
+    return wB, M, Hu, gu, own
+
+
+def _qp_rows(own, high, HZ, hx, hb, x, z):
+    """The rows of the level QP in u: own (C Z, C x*, lower, upper, V), higher (H Z, H x*,
+    relaxed lower, relaxed upper) — the argument list of :func:`_level_qp` after (Hu, gu)."""
+    empty = np.zeros(0)
+    own_qp = ((np.zeros((0, z)), empty, empty, empty, empty) if own is None
+              else (own[1], own[0] @ x, own[2], own[3], own[4]))
+    high_qp = ((np.zeros((0, z)), empty, empty, empty) if high is None else (HZ, hx, hb[0], hb[1]))
+    return own_qp + high_qp
+
+
+def _violated(rows, u) -> bool:
+    """Some own or higher row of the level QP is violated at u (exactly, no tolerance)."""
+    CZ, c0, lo, up, _, HZ, h0, hlo, hup = rows
+    return bool(_outside(CZ, c0, lo, up, u).any() or _outside(HZ, h0, hlo, hup, u).any())
+
+
+def _outside(A, a0, lower, upper, u):
+    """Mask of the rows with A u + a0 outside [lower, upper] (exactly, no tolerance)."""
+    v = A @ u
+    v += a0
+    return (v < lower) | (v > upper)
 
 
 def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
@@ -414,7 +522,7 @@ def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
     p = min(k, z)
     d = np.abs(qr.diagonal()[:p])
     rank = int(np.count_nonzero(d > tol))
-    if info != 0 or np.any((d > 1e-3 * tol) & (d < 1e3 * tol)):
+    if info != 0 or ((d > 1e-3 * tol) & (d < 1e3 * tol)).any():
         # |R_ii| near the threshold: let the singular values decide (exact rank measure)
         U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
         return U[:, int(np.count_nonzero(s > tol)):]
@@ -426,47 +534,50 @@ def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
     a[:, :p] = qr[:, :p]
     t = np.zeros(z)
     t[:p] = tau[:p]
-    q, _, info = lapack.dorgqr(a, t)
+    q, _, info = lapack.dorgqr(a, t, overwrite_a=True)
     if info != 0:
         U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
         return U[:, int(np.count_nonzero(s > tol)):]
     return q[:, rank:]
 
 
-def _lock(Z, rows, rank_tol):
-    """Restrict Z to the kernel of ``rows``: Z ← Z N (eq. 8). Returns (Z, z)."""
+def _lock(Z, rows, projected, rank_tol):
+    """Restrict Z to the kernel of ``rows``: Z ← Z N (eq. 8). ``projected`` is ``rows Z`` if
+    already computed (None: computed here). Returns (Z, z)."""
     z = rows.shape[1] if Z is None else Z.shape[1]
     if rows.shape[0] == 0 or z == 0:
         return Z, z
-    scale = float(np.max(_row_norms(rows)))
+    scale = math.sqrt(float(_sq_norms(rows).max()))
     if scale == 0.0:
         return Z, z
-    N = _kernel(rows if Z is None else rows @ Z, rank_tol * scale)
+    if projected is None:
+        projected = rows if Z is None else rows @ Z
+    N = _kernel(projected, rank_tol * scale)
     if N.shape[1] == z:
         return Z, z
     Z = N if Z is None else Z @ N
     return Z, Z.shape[1]
 
 
-def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
+def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=_TIGHT_TOL, dep_tol=1e-7):
     """Rows tight at x whose signed, projected, normalised normals are positively dependent.
 
     With g_i = ±C_i Z oriented so that staying feasible near x means g_i d ≥ 0, a tight row i is
     an implicit equality of {d : g_j d ≥ 0} iff some y ≥ 0 with y_i > 0 has Σ y_j g_j = 0.
     Found by NNLS (min ‖Gᵀy‖ with Σy = 1 enforced by a heavy row); each dependency found is
     projected out and the search repeated. Purely geometric: a row that is tight only because
-    of the ε term is locked only if the geometry really pins it.
+    of the ε term is locked only if the geometry really pins it. Returns a mask, or None when
+    no row is an implicit equality.
     """
     m = HZ.shape[0]
-    out = np.zeros(m, dtype=bool)
     if m < 2:
-        return out
+        return None
     tol = tight_tol * (1.0 + np.abs(hx))
     tl = np.abs(hx - hlo) <= tol  # (a row violated at x — possible after §2.4 — is not tight)
     tu = np.abs(hup - hx) <= tol
     nt = int(np.count_nonzero(tl)) + int(np.count_nonzero(tu))
     if nt < 2:
-        return out
+        return None
     idx = np.concatenate((np.flatnonzero(tl), np.flatnonzero(tu)))
     G = np.concatenate((HZ[tl], -HZ[tu]))
     nrm = _row_norms(G)
@@ -475,15 +586,15 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
     # cheap certificate of NO dependency: a direction d with G d > 0 (Σ y_j g_j·d > 0 for y ≥ 0)
     d = G.sum(axis=0)
     if np.all(G @ d > dep_tol):
-        return out
+        return None
     GGt = G @ G.T
     GGt.flat[:: GGt.shape[0] + 1] += 1e-10 * GGt.shape[0]
-    try:  # d = Gᵀ (G Gᵀ)⁻¹ 1, i.e. G d ≈ 1 when the rows are independent
-        d = G.T @ np.linalg.solve(GGt, np.ones(G.shape[0]))
-        if np.all(G @ d > dep_tol):
-            return out
-    except np.linalg.LinAlgError:
-        pass
+    # d = Gᵀ (G Gᵀ)⁻¹ 1, i.e. G d ≈ 1 when the rows are independent (G Gᵀ SPD then: Cholesky)
+    _, y, info = lapack.dposv(GGt, np.ones(G.shape[0]))
+    if info == 0:
+        d = G.T @ y
+        if (G @ d > dep_tol).all():
+            return None
     found = np.zeros(idx.shape[0], dtype=bool)
     P = None  # orthonormal basis of the span of the rows found so far
     while idx.shape[0] - np.count_nonzero(found) >= 2:
@@ -503,10 +614,27 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=1e-8, dep_tol=1e-7):
         if ys <= 0.0 or np.linalg.norm(Gr.T @ y) > dep_tol * ys:
             break
         found[rest[y > 1e-9 * y.max()]] = True
-        Q, R = np.linalg.qr(G[found].T)
-        P = Q[:, np.abs(R.diagonal()) > 1e-12]
+        P = _range_basis(G[found].T)
+    if not found.any():
+        return None
+    out = np.zeros(m, dtype=bool)
     out[idx[found]] = True
     return out
+
+
+def _range_basis(A):
+    """Orthonormal columns spanning range(A) (A is z × k): Q of a QR of A (LAPACK dgeqrf/dorgqr)
+    without the columns whose |R_ii| ≤ 1e-12."""
+    z, k = A.shape
+    p = min(z, k)
+    qr, tau, _, info = lapack.dgeqrf(A)
+    if info == 0:
+        keep = np.abs(qr.diagonal()[:p]) > 1e-12
+        Q, _, info = lapack.dorgqr(qr[:, :p], tau[:p], overwrite_a=True)
+    if info != 0:
+        Q, R = np.linalg.qr(A)
+        keep = np.abs(R.diagonal()) > 1e-12
+    return Q[:, keep]
 
 
 def _loosen_tight(hx, hlo, hup, relax_tol):
@@ -523,13 +651,16 @@ def _loosen_tight(hx, hlo, hup, relax_tol):
     return hlo, hup
 
 
-def _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns):
-    """Drop higher rows with ‖C_i Z‖ ≤ drop_tol ‖C_i‖ (no freedom left), checking they still hold."""
-    if hC.shape[0] == 0:
-        return hC, hlo, hup, HZ
-    free = _row_norms(HZ) > drop_tol * _row_norms(hC)
+def _drop_frozen(high, HZ, x, feas_tol, L, warns):
+    """Drop higher rows with ‖C_i Z‖ ≤ drop_tol ‖C_i‖ (no freedom left), checking they still hold.
+
+    ``high = (C, lower, upper, drop_tol² ‖C_i‖²)``; returns ``(high, HZ)`` restricted to the rows
+    with freedom (``high`` None if there is none left).
+    """
+    free = _sq_norms(HZ) > high[3]
     if free.all():
-        return hC, hlo, hup, HZ
+        return high, HZ
+    hC, hlo, hup, hn = high
     gone = ~free
     cx = hC[gone] @ x
     over = np.maximum(hlo[gone] - cx, cx - hup[gone])
@@ -539,18 +670,20 @@ def _drop_frozen(hC, hlo, hup, HZ, x, drop_tol, feas_tol, L, warns):
                f"freedom violate their relaxed bounds by up to {float(over[bad].max()):.3g}")
         log.debug(msg)
         warns.append(msg)
-    return hC[free], hlo[free], hup[free], HZ[free]
+    if not free.any():
+        return None, None
+    return (hC[free], hlo[free], hup[free], hn[free]), HZ[free]
 
 
 def _unconstrained(Hu, gu):
-    try:
-        cf = np.linalg.cholesky(Hu)
-    except np.linalg.LinAlgError as exc:
-        return None, False, f"cholesky: {exc}"
-    u = -solve_triangular(cf.T, solve_triangular(cf, gu, lower=True, check_finite=False), check_finite=False)
-    if not np.all(np.isfinite(u)):
+    """u = −Hu⁻¹ gu by Cholesky (LAPACK dpotrf/dpotrs, no copies of the small arrays)."""
+    cf, info = lapack.dpotrf(Hu, lower=False, clean=False)
+    if info != 0:
+        return None, False, f"cholesky: matrix not positive definite (info {info})"
+    u, info = lapack.dpotrs(cf, gu, lower=False)
+    if info != 0 or not np.isfinite(u).all():
         return None, False, "cholesky: non-finite solution"
-    return u, True, "optimal"
+    return -u, True, "optimal"
 
 
 def _level_qp(Hu, gu, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):

@@ -151,21 +151,39 @@ class CenterOfPressure(_PerContact):
     def __init__(self, name=None, weight=1.0, contacts=None, margin: float = 0.0):
         super().__init__(name, weight, contacts)
         self.margin = margin
+        self._key = None
+        self._maps: list = []
+
+    @staticmethod
+    def block(R: np.ndarray, hx: float, hy: float) -> np.ndarray:
+        """The 4 x 6 rows over one wrench [f; tau] for a sole with axes R (columns, in world)."""
+        rows = np.zeros((4, 6))
+        rows[0, :3] = rows[1, :3] = -hx * R[:, 2]  # -hx f_z
+        rows[2, :3] = rows[3, :3] = -hy * R[:, 2]  # -hy f_z
+        rows[0, 3:], rows[1, 3:] = -R[:, 1], R[:, 1]  # -/+ tau_y
+        rows[2, 3:], rows[3, 3:] = R[:, 0], -R[:, 0]  # +/- tau_x
+        return rows
 
     def rows(self, robot, variables):
-        names = [n for n in contact_subset(variables, self.contacts)
-                 if robot.contact(n).spec.type == "rectangle"]
-        A = np.zeros((4 * len(names), variables.n_lambda))
-        for i, n in enumerate(names):
-            c = robot.contact(n)
-            R = robot.data.oMf[c.frame_id].rotation  # columns: sole axes in world
-            hx, hy = (1.0 - self.margin) * np.asarray(c.spec.half_size)
-            f, t = variables.lambda_slices[n].start, variables.lambda_slices[n].start + 3
-            rows = A[4 * i:4 * i + 4]
-            rows[0, f:f + 3] = rows[1, f:f + 3] = -hx * R[:, 2]  # -hx f_z
-            rows[2, f:f + 3] = rows[3, f:f + 3] = -hy * R[:, 2]  # -hy f_z
-            rows[0, t:t + 3], rows[1, t:t + 3] = -R[:, 1], R[:, 1]  # -/+ tau_y
-            rows[2, t:t + 3], rows[3, t:t + 3] = R[:, 0], -R[:, 0]  # +/- tau_x
+        names = contact_subset(variables, self.contacts)
+        key = (names, variables.n_lambda, self.margin)
+        if self._key != key:
+            # the rows are linear in the sole rotation R: block = K vec(R), K (24 x 9) built once
+            # from the unit matrices, so a cycle costs one small product per sole
+            self._maps = []
+            for n in names:
+                c = robot.contact(n)
+                if c.spec.type != "rectangle":
+                    continue
+                hx, hy = (1.0 - self.margin) * np.asarray(c.spec.half_size)
+                K = np.column_stack([self.block(np.eye(9)[j].reshape(3, 3), hx, hy).ravel()
+                                     for j in range(9)])
+                self._maps.append((c.frame_id, variables.lambda_slices[n].start, K))
+            self._key = key
+        A = np.zeros((4 * len(self._maps), variables.n_lambda))
+        oMf = robot.data.oMf
+        for i, (frame_id, f, K) in enumerate(self._maps):
+            A[4 * i:4 * i + 4, f:f + 6] = (K @ oMf[frame_id].rotation.ravel()).reshape(4, 6)
         return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
                         upper=np.zeros(A.shape[0]))
 
