@@ -108,8 +108,8 @@ def test_leg_swinging_tracks_the_sines_while_pushed_at_the_hip(robots, tmp_path)
     log, the leg really moves, the stance foot stays flat and the lifted foot in the air."""
     robot = robots["talos14"]
     res = get_scenario("single-support").run(
-        robot, "pd", {"push_forces": "", "push_start": "0.2", "sine_time": "3.3",
-                      "sine_push_at": "2.0", "sine_push_force": "150", "settle": "0"},
+        robot, "pd", {"push_forces": "", "push_start": "0.2", "sine_time": "2.6",
+                      "sine_push_at": "1.3", "sine_push_force": "150", "settle": "0"},
         out_dir=tmp_path)
     m = res.metrics
     assert res.success, m
