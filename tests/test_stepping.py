@@ -1,0 +1,55 @@
+"""stepping scenario (Herzog et al. 2016 Sect. 5.1, Table 1, Fig. 5): 32-DoF talos in the twin.
+
+The lift is checked on the simulator's own record (contact wrenches, sole poses), and the reduced
+formulation (Sect. 2.3, eq. 14) against the full one on the same states. Timing is measured by the
+scenario but deliberately not asserted: benchmarks are not tests.
+"""
+
+import numpy as np
+
+from wholebody.scenarios import get_scenario
+from wholebody.scenarios.loop import run_closed_loop
+from wholebody.scenarios.stepping import Stepping
+from wholebody.sim.simulator import Simulator
+
+SHORT = {"steps": "1", "shift_time": "1.0", "unload_time": "0.3", "lift_time": "0.4",
+         "reload_time": "0.1", "lift": "0.02"}
+
+
+def test_stepping_lifts_the_right_sole_and_formulations_agree(robots):
+    robot = robots["talos"]
+    params = get_scenario("stepping").validate(robot, SHORT)
+    reduced, full = Stepping(robot, params, reduced=True), Stepping(robot, params, reduced=False)
+    pairs = []
+
+    class Paired:
+        """The reduced controller drives; the full one is evaluated on the same first states."""
+
+        def compute(self, q, v, t):
+            sol = reduced.compute(q, v, t)
+            if len(pairs) < 5:
+                pairs.append((sol.tau.copy(), full.compute(q, v, t).tau.copy()))
+            return sol
+
+    lift_off = next(ph for ph in reduced.phases if ph.kind == "single")
+    sim = Simulator(robot)
+    z0 = sim.contact_frame_poses()["right_sole"][0][2]
+    heights = []
+    failures = run_closed_loop(sim, Paired(), lift_off.end,
+                               on_result=lambda t, s: heights.append(
+                                   sim.contact_frame_poses()["right_sole"][0][2] - z0))
+    assert failures == 0
+    for tau_r, tau_f in pairs:  # eq. 14 eliminates tau without changing the solution
+        assert np.linalg.norm(tau_r - tau_f) <= 1e-6 * np.linalg.norm(tau_f)
+    t = sim.log.arrays()["t"]
+    wrenches = sim.log.arrays()["contact_wrenches"]
+    k_right = robot.contact_names.index("right_sole")
+    k_left = robot.contact_names.index("left_sole")
+    half = 0.5 * params["lift_time"]
+    up = (t > lift_off.start + half) & (t < lift_off.end - half)
+    assert up.sum() > 100
+    assert np.all(wrenches[up, k_right, 2] == 0.0)  # the simulator: no contact on the right sole
+    assert np.all(wrenches[up, k_left, 2] > 0.8 * robot.mass * 9.81)  # the left one carries it
+    assert max(heights) > 0.8 * params["lift"]
+    left_R = sim.contact_frame_poses()["left_sole"][1]
+    assert np.degrees(np.arccos(min(1.0, left_R[2, 2]))) < 2.0  # stance sole flat
