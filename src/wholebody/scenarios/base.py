@@ -86,6 +86,17 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def parse_list(text, kind, name: str) -> list:
+    """A comma-separated ``--set`` value as a list of ``kind``; ValueError naming ``name``."""
+    try:
+        values = [kind(x.strip()) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"--set {name}: expected a comma-separated list, got '{text}'") from None
+    if not values:
+        raise ValueError(f"--set {name}: empty list")
+    return values
+
+
 RunFunction = Callable[..., ScenarioResult]
 
 

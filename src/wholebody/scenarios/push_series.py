@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from .base import Parameter, Scenario, ScenarioResult  # noqa: E402
+from .base import Parameter, Scenario, ScenarioResult, parse_list  # noqa: E402
 from .push import LOCATIONS, run as run_push, validate as validate_push  # noqa: E402
 
 PARAMETERS = (
@@ -33,21 +33,11 @@ PARAMETERS = (
 CONTROLLERS = ("pd", "lqr")
 
 
-def _list(text: str, kind, name: str) -> list:
-    try:
-        values = [kind(x.strip()) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise ValueError(f"--set {name}: expected a comma-separated list, got '{text}'") from None
-    if not values:
-        raise ValueError(f"--set {name}: empty list")
-    return values
-
-
 def validate(robot, params: dict) -> None:
-    for location in _list(params["locations"], str, "locations"):
+    for location in parse_list(params["locations"], str, "locations"):
         if location not in LOCATIONS:
             raise ValueError(f"--set locations: '{location}' is not one of {', '.join(LOCATIONS)}")
-    forces = _list(params["forces"], float, "forces")
+    forces = parse_list(params["forces"], float, "forces")
     if any(f <= 0 for f in forces):
         raise ValueError("--set forces: peak forces must be > 0")
     validate_push(robot, {"location": "front", "angle": 0.0, "height": 0.1,
@@ -64,8 +54,8 @@ def _one(robot, controller, location, force, params):
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
-    locations = _list(params["locations"], str, "locations")
-    forces = sorted(_list(params["forces"], float, "forces"))
+    locations = parse_list(params["locations"], str, "locations")
+    forces = sorted(parse_list(params["forces"], float, "forces"))
     trials = []  # (controller, location, force, survived, metrics)
     jobs = [(c, loc, f) for c in CONTROLLERS for loc in locations for f in forces]
     for c, loc, f in tqdm(jobs, disable=not progress, desc="pushes", leave=False):

@@ -32,7 +32,7 @@ from ..control.balance import MomentumBalance
 from ..report.plots import grouped_bar_figure, time_series_figure
 from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
-from .base import Parameter, Scenario, ScenarioResult
+from .base import Parameter, Scenario, ScenarioResult, parse_list
 from .loop import run_closed_loop
 from .push import LOCATIONS, make_push, validate as validate_push
 
@@ -95,16 +95,6 @@ class TrueCoM:
         return self.data.subtree_com[self.root].copy()
 
 
-def _list(text, kind, name: str) -> list:
-    try:
-        values = [kind(x.strip()) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise ValueError(f"--set {name}: expected a comma-separated list, got '{text}'") from None
-    if not values:
-        raise ValueError(f"--set {name}: empty list")
-    return values
-
-
 def nominal_force(controller: str, location: str, params: dict) -> float:
     """The nominal largest survived peak force: ``--set nominal_force`` or the measured default."""
     if params["nominal_force"] > 0:
@@ -119,14 +109,14 @@ def nominal_force(controller: str, location: str, params: dict) -> float:
 
 def mismatch_for(params: dict, i: int) -> Mismatch:
     """The i-th mismatch draw (seed ``first_seed + i``, delays cycled)."""
-    delays = _list(params["torque_delay"], int, "torque_delay")
+    delays = parse_list(params["torque_delay"], int, "torque_delay")
     return Mismatch(mass_noise=params["mass_noise"], com_offset=params["com_offset"],
                     torque_delay=delays[i % len(delays)], torque_noise=params["torque_noise"],
                     seed=int(params["first_seed"]) + i)
 
 
 def validate(robot, params: dict) -> None:
-    for location in _list(params["locations"], str, "locations"):
+    for location in parse_list(params["locations"], str, "locations"):
         if location not in LOCATIONS:
             raise ValueError(f"--set locations: '{location}' is not one of {', '.join(LOCATIONS)}")
     if not 0 < params["fraction"]:
@@ -207,7 +197,7 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
-    locations = _list(params["locations"], str, "locations")
+    locations = parse_list(params["locations"], str, "locations")
     jobs = [(loc, i) for loc in locations for i in range(int(params["seeds"]))]
     runs: dict[str, list[dict]] = {loc: [] for loc in locations}
     for loc, i in tqdm(jobs, disable=not progress, desc="mismatch runs", leave=False):
