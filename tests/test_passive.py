@@ -10,10 +10,9 @@ import pytest
 import quadprog
 
 from wholebody.control.passive import PassiveWBC
-from wholebody.control.quasi_static import QuasiStaticController
 from wholebody.formulation import Formulation
 from wholebody.tasks.contact import friction_faces
-from wholebody.tasks.wrench import TrunkReference
+from wholebody.planning.trunk import TrunkState
 
 
 def make_plan(robot, rng, stance, normal=(0.0, 0.0, 1.0)):
@@ -22,7 +21,7 @@ def make_plan(robot, rng, stance, normal=(0.0, 0.0, 1.0)):
     legs = robot.contact_names
     feet = np.array([robot.data.oMf[robot.contact(n).frame_id].translation for n in legs])
     R = pin.Quaternion(robot.q[3:7]).normalized().toRotationMatrix()
-    trunk = TrunkReference(position=robot.com + rng.normal(scale=0.01, size=3),
+    trunk = TrunkState(position=robot.com + rng.normal(scale=0.01, size=3),
                            velocity=rng.normal(scale=0.05, size=3),
                            acceleration=rng.normal(scale=0.2, size=3),
                            rotation=R @ pin.exp3(rng.normal(scale=0.02, size=3)),

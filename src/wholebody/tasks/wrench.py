@@ -8,37 +8,13 @@ for point feet ``W_com = Σ_i [f_i; (p_i − c) × f_i]``, the contact wrench ab
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 import pinocchio as pin
 
+from ..planning.trunk import TrunkState
 from .base import Task, TaskRows, contact_subset
 
 GRAVITY = 9.81
-
-
-def skew(a: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """[a]x, written into ``out`` (3x3) if given."""
-    out = np.zeros((3, 3)) if out is None else out
-    out[0, 1], out[0, 2] = -a[2], a[1]
-    out[1, 0], out[1, 2] = a[2], -a[0]
-    out[2, 0], out[2, 1] = -a[1], a[0]
-    return out
-
-
-@dataclass
-class TrunkReference:
-    """Desired trunk motion (world axes): CoM position/velocity/acceleration, trunk rotation
-    matrix, angular velocity/acceleration. Any object with these attributes works (e.g. the
-    planner's :class:`~wholebody.planning.trunk.TrunkState`)."""
-
-    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
-    angular_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    angular_acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 class TrunkImpedance:
@@ -99,14 +75,15 @@ def contact_wrench_map(robot, contacts, out: np.ndarray | None = None,
 
 class TrunkWrenchTask(Task):
     """Σ_i [f_i; (p_i − c) × f_i] ≈ W_com,d (Fahmi et al. 2019, eqs. 2, 4, 7a-8) as equality rows over
-    the contact forces (point contacts). ``reference`` is a :class:`TrunkReference`-like object;
+    the contact forces (point contacts). ``reference`` is a trunk sample (:class:`~wholebody.planning.trunk.TrunkState`: CoM position/velocity/
+    acceleration, rotation, angular velocity/acceleration, world axes);
     ``impedance`` a :class:`TrunkImpedance`; weights are per row (√ of the diagonal of Q)."""
 
     def __init__(self, impedance: TrunkImpedance | None = None, name="trunk wrench", weight=1.0,
                  contacts=None):
         super().__init__(name, weight)
         self.impedance = impedance or TrunkImpedance()
-        self.reference = TrunkReference()
+        self.reference = TrunkState()
         self.contacts = None if contacts is None else tuple(contacts)
 
     def rows(self, robot, variables):
