@@ -103,13 +103,14 @@ class Robot:
         self._contact_slices = [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:])]
         self._contact_rows = int(starts[-1])
         nc = len(self.contacts)
-        self._J6 = np.zeros((nc, 6, model.nv))  # per-cycle scratch of _update_contacts
-        self._acc6 = np.zeros((nc, 6))
-        self._omega = np.zeros((nc, 3))
-        self._points = np.zeros((nc, 3))
+        self._contact_frame_ids = tuple(c.frame_id for c in self.contacts)
         self._radii = np.array([c.spec.radius if c.dim == 3 else 0.0 for c in self.contacts])
-        self._spheres = self._radii > 0.0
+        # -[d]x with d = (0, 0, -r) (world axes) for each contact: maps angular to point terms
+        self._offset_skew = np.zeros((nc, 3, 3))
+        self._offset_skew[:, 0, 1] = -self._radii
+        self._offset_skew[:, 1, 0] = self._radii
         self._all_points = bool(nc) and all(c.dim == 3 for c in self.contacts)
+        self._all_rectangles = bool(nc) and all(c.dim == 6 for c in self.contacts)
         self.friction = description.friction
 
         self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
@@ -124,7 +125,9 @@ class Robot:
         selection.flags.writeable = False
         self.joint_selection = selection  # S: picks the actuated joints out of v (read-only)
         self.cycle = 0
-        self._lower = np.tril_indices(self.nv, -1)
+        lower = np.tril_indices(self.nv, -1)  # flat indices of M's strict lower triangle and mirror
+        self._lower_flat = np.ravel_multi_index(lower, (self.nv, self.nv))
+        self._upper_flat = np.ravel_multi_index(lower[::-1], (self.nv, self.nv))
         self._frame_cache: dict[tuple, np.ndarray] = {}
         self._a0 = np.zeros(self.nv)
         self.q = self.q_ref.copy()
@@ -215,7 +218,8 @@ class Robot:
         """
         q = check_vector(q, self.nq, "q")
         v = check_vector(v, self.nv, "v")
-        quat_norm = math.sqrt(q[3] * q[3] + q[4] * q[4] + q[5] * q[5] + q[6] * q[6])
+        quat = q[3:7]
+        quat_norm = math.sqrt(float(quat @ quat))
         if abs(quat_norm - 1.0) > 1e-3:
             raise ValueError(f"q: base quaternion q[3:7] must be unit, has norm {quat_norm:.6f}")
         model, data = self.model, self.data
@@ -228,7 +232,8 @@ class Robot:
         pin.updateFramePlacements(model, data)
         dh = pin.computeCentroidalMomentumTimeVariation(model, data)
         M = data.M  # crba fills the upper triangle
-        M[self._lower] = M.T[self._lower]
+        flat = M.reshape(-1)
+        flat[self._lower_flat] = flat[self._upper_flat]
         self.M = M
         self.h = data.nle
         self.com = data.com[0].copy()
@@ -245,40 +250,44 @@ class Robot:
         per cycle (``contact_jacobians[name]`` are views of it, so stacking all contacts is free).
 
         Point contacts with a radius are the material point under the foot sphere's centre,
-        d = (0, 0, -r) in world axes (:meth:`_contact_jacobian`), computed for all feet at once."""
+        d = (0, 0, -r) in world axes (:meth:`_contact_jacobian`); robots whose contacts are all
+        points (or all rectangles) are handled in one vectorised pass."""
         model, data, LWA = self.model, self.data, pin.LOCAL_WORLD_ALIGNED
-        J6, acc6, omega, points = self._J6, self._acc6, self._omega, self._points
-        for i, c in enumerate(self.contacts):
-            J6[i] = pin.getFrameJacobian(model, data, c.frame_id, LWA)
-            acc6[i] = pin.getFrameClassicalAcceleration(model, data, c.frame_id, LWA).vector
-            points[i] = data.oMf[c.frame_id].translation
-            if self._spheres[i]:
-                omega[i] = pin.getFrameVelocity(model, data, c.frame_id, LWA).angular
-        J = np.empty((self._contact_rows, self.nv))
-        drift = np.empty(self._contact_rows)
-        if self._all_points:  # one vectorised pass (quadrupeds)
-            r = self._radii[:, None]
-            Jp = J.reshape(len(self.contacts), 3, self.nv)
-            Jp[:] = J6[:, :3]
-            Jp[:, 0] -= r * J6[:, 4]  # -[d]x J_ang
-            Jp[:, 1] += r * J6[:, 3]
-            a = drift.reshape(-1, 3)
-            a[:] = acc6[:, :3]
-            al, w = acc6[:, 3:], omega
-            a[:, 0] -= r[:, 0] * (al[:, 1] + w[:, 0] * w[:, 2])  # α x d + ω x (ω x d)
-            a[:, 1] += r[:, 0] * (al[:, 0] - w[:, 1] * w[:, 2])
-            a[:, 2] += r[:, 0] * (w[:, 0] * w[:, 0] + w[:, 1] * w[:, 1])
+        ids = self._contact_frame_ids
+        J6, acc6 = np.empty((len(ids), 6, self.nv)), np.empty((len(ids), 6))
+        oMf, points = data.oMf, np.empty((len(ids), 3))
+        for i, fid in enumerate(ids):
+            J6[i] = pin.getFrameJacobian(model, data, fid, LWA)
+            acc6[i] = pin.getFrameClassicalAcceleration(model, data, fid, LWA).vector
+            points[i] = oMf[fid].translation
+        if self._all_points:
+            J_ang = J6[:, 3:]
+            J = (J6[:, :3] + self._offset_skew @ J_ang).reshape(-1, self.nv)  # J_lin - [d]x J_ang
+            w = J_ang @ self.v  # angular velocities (world axes)
+            # α x d + ω x (ω x d) = -[d]x α + r (ẑ |ω|² - ω_z ω)  for d = (0, 0, -r)
+            rot = w * -w[:, 2:3]
+            rot[:, 2] += np.einsum("ij,ij->i", w, w)
+            rot *= self._radii[:, None]
+            rot += acc6[:, :3]
+            rot += (self._offset_skew @ acc6[:, 3:, None])[:, :, 0]
+            drift = rot.reshape(-1)
+        elif self._all_rectangles:
+            J = J6.reshape(-1, self.nv).copy()
+            drift = acc6.reshape(-1).copy()
         else:
+            J = np.empty((self._contact_rows, self.nv))
+            drift = np.empty(self._contact_rows)
             for i, (c, rows) in enumerate(zip(self.contacts, self._contact_slices)):
+                omega = J6[i, 3:] @ self.v
                 J[rows] = self._contact_jacobian(c, J6[i])
-                drift[rows] = self._contact_drift(c, acc6[i], omega[i])
-        points = points.copy()
+                drift[rows] = self._contact_drift(c, acc6[i], omega)
         points[:, 2] -= self._radii
-        self.contact_jacobians = dict(zip(self.contact_names, (J[rows] for rows in
-                                                               self._contact_slices)))
-        self.contact_drifts = dict(zip(self.contact_names, (drift[rows] for rows in
-                                                            self._contact_slices)))
+        slices = self._contact_slices
+        self.contact_jacobians = {n: J[rows] for n, rows in zip(self.contact_names, slices)}
+        self.contact_drifts = {n: drift[rows] for n, rows in zip(self.contact_names, slices)}
         self.contact_points = points  # (n_contacts, 3), world: sole origins / sphere bottoms
+        self.contact_frame_jacobians = J6  # (n_contacts, 6, nv): the contact frames' origins
+        self.contact_frame_drifts = acc6  # (n_contacts, 6): their classical accelerations
         self._frame_cache[("stacked J", self.contact_names)] = J
         self._frame_cache[("stacked drift", self.contact_names)] = drift
 

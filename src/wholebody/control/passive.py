@@ -50,6 +50,24 @@ _INF = np.inf
 _DAQP_OK = (1, 2)
 
 
+@dataclass(frozen=True)
+class _Pattern:
+    """What depends only on the stance/swing split of one cycle (see PassiveWBC._pattern)."""
+
+    s3: np.ndarray  # stance mask per force component
+    swing: np.ndarray  # indices (controller order) of the swing feet
+    all_stance: bool
+    swing_feet_rows: np.ndarray  # A rows of the swing feet's eq. 12
+    swing_single_rows: np.ndarray  # their paired rows (single-slack layout)
+    feet_sense: np.ndarray
+    force_upper: np.ndarray
+    force_lower: np.ndarray
+    force_sense: np.ndarray
+    fric_upper: np.ndarray
+    fric_lower: np.ndarray
+    tangential: np.ndarray  # tangential-force regulariser of the stance feet (unweighted)
+
+
 @dataclass
 class SwingGains:
     """Acceleration-level swing impedance of eq. 6 (Sect. V: K_sw = 2000, D_sw = 20);
@@ -132,11 +150,12 @@ class PassiveWBC(PlannedController):
         self.nf = 3 * c
         single = self.swing_slack == "single"
         self.n = nv + self.nf + (c if single else 0)
-        # rows: dynamics 6 | feet 3c | friction 5c | torque na | (single: second swing rows 3c)
-        self._r_feet = 6
+        # rows: dynamics 6 and torques na (together the nv rows M q̈ − Jᵀ F) | feet 3c |
+        # friction 5c | (single slack: the paired swing rows 3c)
+        self._r_tau = 6
+        self._r_feet = nv
         self._r_fric = self._r_feet + 3 * c
-        self._r_tau = self._r_fric + 5 * c
-        self._r_single = self._r_tau + self.robot.na
+        self._r_single = self._r_fric + 5 * c
         self.m = self._r_single + (3 * c if single else 0)
         self.A = np.zeros((self.m, self.n))
         self.H = np.zeros((self.n, self.n))
@@ -152,15 +171,13 @@ class PassiveWBC(PlannedController):
         self._dual = None
         self._friction_key = None
         self._tangential = np.zeros((self.nf, self.nf))
+        self._patterns: dict[bytes, _Pattern] = {}  # per stance/swing split, see _pattern
         self._swing_names = [f"swing {name}" for name in self.contacts]
         self._override_key = None
-        self._frames = [self.robot.contact(name).spec.frame for name in self.contacts]
-        self._frame_ids = [self.robot.contact(name).frame_id for name in self.contacts]
+        self._radii = np.array([self.robot.contact(name).spec.radius for name in self.contacts])
+        self._contact_order = np.array([self.robot.contact_names.index(n) for n in self.contacts])
         self._cols_force = slice(nv, nv + self.nf)
         self._cols_slack = slice(nv + self.nf, self.n)
-        self._rows_feet = np.arange(self._r_feet, self._r_feet + 3 * c)
-        self._rows_fric = np.arange(self._r_fric, self._r_fric + 5 * c)
-        self._rows_single = np.arange(self._r_single, self.m)
         n = self.n  # constant senses: dynamics rows are equalities, everything else inequalities
         self.sense[n:n + 6] = _EQ
         self.upper[:6], self.lower[:6] = _INF, -_INF  # the base accelerations are free
@@ -169,55 +186,75 @@ class PassiveWBC(PlannedController):
                 self.A[self._r_feet + 3 * i:self._r_feet + 3 * i + 3, nv + self.nf + i] = -1.0
                 self.A[self._r_single + 3 * i:self._r_single + 3 * i + 3, nv + self.nf + i] = 1.0
 
+    def _pattern(self, stance: np.ndarray) -> "_Pattern":
+        """Masks and bounds that depend only on which feet are in stance (cached per split; the
+        cache is emptied when the friction rows change)."""
+        key = stance.tobytes()
+        pattern = self._patterns.get(key)
+        if pattern is None:
+            s3, s5 = np.repeat(stance, 3), np.repeat(stance, 5)
+            swing = np.flatnonzero(~stance)
+            feet_rows = self._r_feet + 3 * swing[:, None] + np.arange(3)
+            pattern = _Pattern(
+                s3=s3, swing=swing, all_stance=bool(stance.all()),
+                swing_feet_rows=feet_rows.ravel(),
+                swing_single_rows=(feet_rows + self._r_single - self._r_feet).ravel(),
+                feet_sense=np.where(s3, _EQ, _FREE).astype(np.int32),
+                force_upper=np.where(s3, _INF, 0.0), force_lower=np.where(s3, -_INF, 0.0),
+                force_sense=np.where(s3, _FREE, _EQ).astype(np.int32),
+                fric_upper=np.where(s5, self._fric_upper, _INF),
+                fric_lower=np.where(s5, self._fric_lower, -_INF),
+                tangential=self._tangential * s3[:, None])
+            self._patterns[key] = pattern
+        return pattern
+
     # ------------------------------------------------------------------ per cycle
     def solve(self, plan) -> Solution:
         """One QP (eq. 7) at the robot's cached state for ``plan`` (a PlanState-like object)."""
         t0 = time.perf_counter()
         self.last_plan = plan
-        robot, nv, na = self.robot, self.robot.nv, self.robot.na
-        A, H, g, up, lo, sense, n = self.A, self.H, self.g, self.upper, self.lower, self.sense, self.n
+        robot, nv = self.robot, self.robot.nv
+        A, H, g, up, lo, n = self.A, self.H, self.g, self.upper, self.lower, self.n
         M, h = robot.M, robot.h
         J = robot.stacked_contact_jacobian(self.contacts)
-        drift = robot.stacked_contact_drift(self.contacts)
         stance = plan.contact[self._leg]
-        s3 = np.repeat(stance, 3)
-        F, feet, fric = self._cols_force, self._rows_feet, self._rows_fric
-        # eq. 9: floating-base rows  M_b q̈ − J_bᵀ F = −h_b  (equality senses set at allocation)
-        A[0:6, :nv] = M[:6]
-        A[0:6, F] = -J[:, :6].T
-        up[n:n + 6] = lo[n:n + 6] = -h[:6]
-        # eq. 15: torque rows  M_j q̈ − J_jᵀ F  in  [τ_min − h_j, τ_max − h_j]
-        r = self._r_tau
-        A[r:r + na, :nv] = M[6:]
-        A[r:r + na, F] = -J[:, 6:].T
-        tau_lo, tau_hi = self._tau_bounds = self._torque_bounds()
-        up[n + r:n + r + na] = tau_hi - h[6:]
-        lo[n + r:n + r + na] = tau_lo - h[6:]
-        # eqs. 16-18: joint accelerations as simple bounds (the base is free)
-        lo[6:nv], up[6:nv] = self.joint_limits.bounds(robot)
-        # stance feet, eq. 10 / 32, written for every foot (swing feet are overwritten below)
-        points = robot.contact_points  # the bottoms of the foot spheres (self.contacts order)
-        touchdown = stance & ~self._was_stance
-        self._anchors[touchdown] = points[touchdown]  # x̂_st of eq. 32
-        self._was_stance[:] = stance
-        A[feet, :nv] = J
-        target = -drift
-        if self.K_st or self.D_st:
-            target = target + self.K_st * (self._anchors - points).ravel() - self.D_st * (J @ robot.v)
-        up[n + feet] = np.where(s3, target, _INF)
-        lo[n + feet] = np.where(s3, target, -_INF)
-        sense[n + feet] = np.where(s3, _EQ, _FREE)
-        # eqs. 13-14: friction pyramid and normal-force bounds on stance feet; swing forces zero
         normals = plan.touchdown_normal[self._leg]
         key = (self.mu, self.f_min, self.f_max)
         if key != self._friction_key or not np.array_equal(normals, self._normals):
             self._build_friction(normals, key)
-        s5 = np.repeat(stance, 5)
-        up[n + fric] = np.where(s5, self._fric_upper, _INF)
-        lo[n + fric] = np.where(s5, self._fric_lower, -_INF)
-        up[F] = np.where(s3, _INF, 0.0)
-        lo[F] = np.where(s3, -_INF, 0.0)
-        sense[F] = np.where(s3, _FREE, _EQ)
+        pat = self._pattern(stance)
+        F, rf, rq = self._cols_force, self._r_feet, self._r_fric
+        # eq. 9 and eq. 15 in one block: M q̈ − Jᵀ F = −h on the base rows, in [τ_min − h_j,
+        # τ_max − h_j] on the joint rows (equality senses of the base rows set at allocation)
+        A[:nv, :nv] = M
+        A[:nv, F] = -J.T
+        tau_lo, tau_hi = self._tau_bounds = self._torque_bounds()
+        np.negative(h, out=up[n:n + nv])
+        lo[n:n + nv] = up[n:n + nv]
+        up[n + 6:n + nv] += tau_hi
+        lo[n + 6:n + nv] += tau_lo
+        # eqs. 16-18: joint accelerations as simple bounds (the base is free)
+        lo[6:nv], up[6:nv] = self.joint_limits.bounds(robot)
+        # stance feet, eq. 10 / 32, written for every foot (swing feet are overwritten below)
+        points = robot.contact_points[self._contact_order]  # the bottoms of the foot spheres
+        touchdown = stance & ~self._was_stance
+        if touchdown.any():
+            self._anchors[touchdown] = points[touchdown]  # x̂_st of eq. 32
+        self._was_stance[:] = stance
+        A[rf:rq, :nv] = J
+        target = -robot.stacked_contact_drift(self.contacts)
+        if self.K_st or self.D_st:
+            target += self.K_st * (self._anchors - points).ravel()
+            target -= self.D_st * (J @ robot.v)
+        up[n + rf:n + rq] = lo[n + rf:n + rq] = target
+        self.sense[n + rf:n + rq] = pat.feet_sense
+        if not pat.all_stance:
+            up[n + pat.swing_feet_rows] = _INF
+            lo[n + pat.swing_feet_rows] = -_INF
+        # eqs. 13-14: friction pyramid and normal-force bounds on stance feet; swing forces zero
+        rs = self._r_single
+        up[n + rq:n + rs], lo[n + rq:n + rs] = pat.fric_upper, pat.fric_lower
+        up[F], lo[F], self.sense[F] = pat.force_upper, pat.force_lower, pat.force_sense
         # cost: ‖u‖²_R, the trunk wrench (eqs. 7a, 8), the force regulariser (Sect. V-D)
         H[:] = 0.0
         H.flat[::n + 1] = self._R_diagonal  # (flat-iterator assignment writes in place)
@@ -225,21 +262,22 @@ class PassiveWBC(PlannedController):
         G = contact_wrench_map(robot, self.contacts, self._G, points)
         W_d = self.impedance.wrench(robot, plan.trunk)
         GQ = G.T * self.Q
-        H[F, F] += GQ @ G
+        HF = GQ @ G
         g[F] = -GQ @ W_d
         if self.regularization == "torque":  # footnote 16: R_F = J_st,j R_τ J_st,jᵀ
             JjT = J[:, 6:].T * np.sqrt(self.torque_weights)[:, None]
-            H[F, F] += JjT.T @ JjT
+            HF += JjT.T @ JjT
         elif self.tangential_weight:
-            H[F, F] += self.tangential_weight * (self._tangential * s3[:, None])
+            HF += self.tangential_weight * pat.tangential
+        H[F, F] += HF
         if self.swing_slack == "single":
             self._single_slack_layout(stance)
-        if not stance.all():
-            self._swing_rows(plan, stance)
+        if not pat.all_stance:
+            self._swing_rows(plan, pat)
         t1 = time.perf_counter()
         x, flag, iterations = self._solve_qp()
         t2 = time.perf_counter()
-        return self._solution(x, flag, iterations, J, W_d, G, plan,
+        return self._solution(x, flag, iterations, J, W_d, G, pat,
                               {"assemble": t1 - t0, "solve": t2 - t1})
 
     def _build_friction(self, normals: np.ndarray, key) -> None:
@@ -258,46 +296,51 @@ class PassiveWBC(PlannedController):
         self._fric_lower = np.tile([-_INF, -_INF, -_INF, -_INF, self.f_min], c)
         self._normals[:] = normals
         self._friction_key = key
+        self._patterns.clear()
 
     def _single_slack_layout(self, stance: np.ndarray) -> None:
         """Single-slack layout: a stance foot's slack is pinned at 0 and its paired rows are free;
         a swing foot's slack is in [0, inf) with cost α ε² (its rows are set in _swing_rows)."""
-        n, e, paired = self.n, self._cols_slack, self._rows_single
+        n, e, rs = self.n, self._cols_slack, self._r_single
         self.upper[e] = np.where(stance, 0.0, _INF)
         self.lower[e] = 0.0
         self.sense[e] = np.where(stance, _EQ, _FREE)
         cols = np.arange(e.start, e.stop)  # H[e, e] = v with a slice would fill the whole block
         self.H[cols, cols] = np.where(stance, 1.0, self.slack_weight)  # 1: keeps H definite
-        self.upper[n + paired], self.lower[n + paired] = _INF, -_INF
+        self.upper[n + rs:n + self.m], self.lower[n + rs:n + self.m] = _INF, -_INF
 
-    def _swing_rows(self, plan, stance: np.ndarray) -> None:
+    def _swing_rows(self, plan, pat: "_Pattern") -> None:
         """Swing feet: eq. 6 (desired foot acceleration) and eq. 12 rows J q̈ = v̇_d − J̇ v — hard
-        (eq. 11), a weighted least-squares term (per-direction slacks, eq. 33) or a single slack."""
+        (eq. 11), a weighted least-squares term (per-direction slacks, eq. 33) or a single slack.
+        All swing feet at once; the planner's swing trajectory is the foot frame's."""
         robot, nv, n = self.robot, self.robot.nv, self.n
-        A, H, g, up, lo, sense = self.A, self.H, self.g, self.upper, self.lower, self.sense
-        K, D, alpha = self.swing.K, self.swing.D, self.slack_weight
-        for i in np.flatnonzero(~stance):
-            leg, rf = self._leg[i], self._r_feet + 3 * i
-            frame = self._frames[i]  # the planner's swing trajectory is the foot frame's
-            Ji = robot.frame_jacobian(frame)[:3]
-            A[rf:rf + 3, :nv] = Ji
-            pos = robot.data.oMf[self._frame_ids[i]].translation
-            a_d = K * (plan.foot_position[leg] - pos) + D * (plan.foot_velocity[leg] - Ji @ robot.v)
-            if self.swing.feedforward:
-                a_d += plan.foot_acceleration[leg]
-            target = a_d - robot.frame_drift(frame)[:3]
-            self._swing_targets[i] = target
-            if self.swing_slack == "none":
-                up[n + rf:n + rf + 3] = lo[n + rf:n + rf + 3] = target
-                sense[n + rf:n + rf + 3] = _EQ
-            elif self.swing_slack == "per-direction":  # rows stay free: α‖J q̈ − b‖² in the cost
-                H[:nv, :nv] += alpha * (Ji.T @ Ji)
-                g[:nv] -= alpha * (Ji.T @ target)
-            else:  # single: J q̈ − ε <= b and J q̈ + ε >= b
-                rs = self._r_single + 3 * i
-                A[rs:rs + 3, :nv] = Ji
-                up[n + rf:n + rf + 3], lo[n + rf:n + rf + 3] = target, -_INF
-                up[n + rs:n + rs + 3], lo[n + rs:n + rs + 3] = _INF, target
+        sw = pat.swing
+        idx = self._contact_order[sw]
+        legs = self._leg[sw]
+        Jsw = robot.contact_frame_jacobians[idx, :3]  # (k, 3, nv), frame origins (sphere centres)
+        pos = robot.contact_points[idx]
+        pos[:, 2] += self._radii[sw]
+        a_d = self.swing.K * (plan.foot_position[legs] - pos)
+        a_d += self.swing.D * (plan.foot_velocity[legs] - Jsw @ robot.v)
+        if self.swing.feedforward:
+            a_d += plan.foot_acceleration[legs]
+        target = a_d - robot.contact_frame_drifts[idx, :3]
+        self._swing_targets[sw] = target
+        Jrows, b = Jsw.reshape(-1, nv), target.reshape(-1)
+        rows = n + pat.swing_feet_rows
+        if self.swing_slack == "per-direction":  # rows stay free: α‖J q̈ − b‖² in the cost
+            alpha = self.slack_weight
+            self.H[:nv, :nv] += alpha * (Jrows.T @ Jrows)
+            self.g[:nv] -= alpha * (Jrows.T @ b)
+            return
+        self.A[pat.swing_feet_rows, :nv] = Jrows
+        if self.swing_slack == "none":
+            self.upper[rows] = self.lower[rows] = b
+            self.sense[rows] = _EQ
+        else:  # single: J q̈ − ε <= b and J q̈ + ε >= b
+            self.A[pat.swing_single_rows, :nv] = Jrows
+            self.upper[rows] = b
+            self.lower[n + pat.swing_single_rows] = b
 
     def _solve_qp(self):
         args = (self.H, self.g, self.A, self.upper, self.lower, self.sense)
@@ -328,7 +371,7 @@ class PassiveWBC(PlannedController):
             hi[self._override_index] = np.minimum(hi[self._override_index], self._override_value)
         return -hi, hi
 
-    def _solution(self, x, flag, iterations, J, W_d, G, plan, timings) -> Solution:
+    def _solution(self, x, flag, iterations, J, W_d, G, pat, timings) -> Solution:
         robot, nv, nf = self.robot, self.robot.nv, self.nf
         tau_lo, tau_hi = self._tau_bounds
         ok = flag in _DAQP_OK and math.isfinite(x.sum())
@@ -356,14 +399,13 @@ class PassiveWBC(PlannedController):
         self.last_tau = tau
         wrench_error = G @ F - W_d
         reports = [TaskReport("trunk wrench", 2, "eq", 6, math.sqrt(wrench_error @ wrench_error))]
-        stance = plan.contact[self._leg]
-        if ok:
-            for i in np.flatnonzero(~stance):
-                rf = self._r_feet + 3 * i
-                residual = self.A[rf:rf + 3, :nv] @ qdd - self._swing_targets[i]
-                reports.append(TaskReport(self._swing_names[i], 2, "eq", 3,
-                                          math.sqrt(residual @ residual)))
-        forces = {self.contacts[i]: F[3 * i:3 * i + 3] for i in np.flatnonzero(stance)}
+        if ok and not pat.all_stance:
+            residuals = (robot.contact_frame_jacobians[self._contact_order[pat.swing], :3] @ qdd
+                         - self._swing_targets[pat.swing])
+            reports += [TaskReport(self._swing_names[i], 2, "eq", 3, float(np.sqrt(r @ r)))
+                        for i, r in zip(pat.swing, residuals)]
+        stance = pat.s3[::3]
+        forces = {name: F[3 * i:3 * i + 3] for i, name in enumerate(self.contacts) if stance[i]}
         timings["iterations"] = iterations
         return Solution(qdd=qdd, lam=F, tau=tau, forces=forces, ok=ok, status=status,
                         level_costs=np.array([wrench_error @ (self.Q * wrench_error)]),
