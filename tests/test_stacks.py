@@ -103,3 +103,12 @@ def test_table2_hierarchy_stands_in_twin(robots, name):
     assert np.linalg.norm(q[:3] - q0[:3]) < 5e-3 and np.abs(v).max() < 0.05
     normal = sim.log.arrays()["contact_wrenches"][500:, :, 2].sum(axis=1)
     np.testing.assert_allclose(normal, robot.mass * 9.81, rtol=0.02)
+
+
+def test_table2_momentum_rows_weights(robots):
+    """Linear momentum rows 1e4, angular rows 1e-4 by default; one weight 1e4 on request."""
+    robot = robots["talos14"]
+    w = table2_stack(robot).find("momentum").weight
+    np.testing.assert_array_equal(w, [1e4] * 3 + [1e-4] * 3)
+    w = table2_stack(robot, lqr=True, angular_weight=1e4).find("momentum").weight
+    np.testing.assert_array_equal(w, [1e4] * 6)

@@ -28,7 +28,7 @@ from ..formulation import Formulation, Solution
 from ..robot import Robot
 from ..variables import Variables
 from .lqr import MomentumLQR
-from .stacks import table2_stack
+from .stacks import ANGULAR_MOMENTUM_WEIGHT, table2_stack
 
 GAINS = ("lqr", "pd")
 
@@ -171,19 +171,22 @@ class MomentumBalance:
     update and returns a :class:`BalanceReference`; it sets ``com_ref``, ``h_ref``, ``hdot_ref`` and
     the posture task's base reference. ``cop_margin`` shrinks the admissible CoP region of every
     sole (:class:`~wholebody.tasks.CenterOfPressure`'s margin; 0 = the whole sole).
+    ``angular_weight``: weight of the momentum task's angular rows (see
+    :func:`~wholebody.control.stacks.table2_stack`; 1e4 = the paper's single weight).
     """
 
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
                  P=None, D=None, Q=None, R=None, backend: str = "daqp",
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
-                 cop_margin: float = 0.0):
+                 cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT):
         if gains not in GAINS:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
         self.robot = robot
         self.gains = gains
         self.contacts = tuple(contacts or robot.contact_names)
         self.variables = Variables(robot, self.contacts)
-        self.stack = table2_stack(robot, self.contacts, lqr=(gains == "lqr"))
+        self.stack = table2_stack(robot, self.contacts, lqr=(gains == "lqr"),
+                                  angular_weight=angular_weight)
         self.momentum = self.stack.find("momentum")
         if gains == "pd":
             if P is not None:

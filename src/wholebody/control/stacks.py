@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import numpy as np
+
 from ..formulation import Stack
 from ..robot import Robot
 from ..tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
@@ -31,23 +33,46 @@ def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None)
     return rows
 
 
-def momentum_task(lqr: bool):
-    """The momentum task of level 3: LQR force law (eq. 24) or diagonal PD (eq. 22)."""
+#: Weight of the angular rows of Table 2's momentum task (see :func:`table2_stack`). The paper's
+#: single weight for the whole task is ``1e4`` (``angular_weight=1e4`` restores it).
+ANGULAR_MOMENTUM_WEIGHT = 1e-4
+
+
+def momentum_task(lqr: bool, angular_weight: float = 1e4):
+    """The momentum task of level 3: LQR force law (eq. 24) or diagonal PD (eq. 22). Its six rows
+    are [linear; angular] (momentum rates, or forces and moments for eq. 24); the linear rows weigh
+    1e4, the angular rows ``angular_weight``."""
+    weight = np.array([1e4] * 3 + [float(angular_weight)] * 3)
     if lqr:
-        return MomentumForce(name="momentum", weight=1e4)
-    return MomentumPD(name="momentum", weight=1e4)
+        return MomentumForce(name="momentum", weight=weight)
+    return MomentumPD(name="momentum", weight=weight)
 
 
 def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool = False,
-                 full: bool = False, mu: float | None = None) -> Stack:
+                 full: bool = False, mu: float | None = None,
+                 angular_weight: float = ANGULAR_MOMENTUM_WEIGHT) -> Stack:
     """Table 2, double support: (1) Newton-Euler + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) momentum control, posture (joints + base), GRF
-    regulariser."""
+    regulariser.
+
+    Weights of level 3 (rows are scaled by them, so costs go with their squares): linear momentum
+    1e4, posture 1e-1, GRF regulariser 1e-4, and the angular-momentum rows ``angular_weight``
+    (default 1e-4; the paper gives the whole momentum task one weight, 1e4). Why: with both feet
+    locked, 8 of the 20 DoF are free; momentum takes 6 and the posture is meant to trade off against
+    it on the same level (Sect. 5.2.1). Eq. 22 has no stiffness on the angular part (P [m e; 0]),
+    nor has the LQR state an orientation, so the trunk orientation is held only by the posture's
+    base rows. An angular-momentum row costs about I_G (~15 kg m^2 on talos14) per rad/s^2, so at
+    1e4 against the posture's 1e-1 the posture has no say in those 3 directions: a bias torque from
+    model errors (1 cm link CoM offsets: ~ m g x 1 cm ~ 10 Nm) then drives the pelvis away at a
+    constant rate and the robot falls without any push (robust-push seeds 2 and 3). The posture
+    (base kp 50) holds the trunk only if the angular rows weigh less than the posture's by more
+    than I_G, i.e. 1e-4 among the paper's {1e4, 1, 1e-1, 1e-4}; the angular momentum is then damped
+    through the posture's base damping instead of eq. 22's D."""
     contacts = tuple(contacts or robot.contact_names)
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=contacts)] + _contact_conditions(robot, contacts, mu),
-        [momentum_task(lqr),
+        [momentum_task(lqr, angular_weight),
          PostureTask(name="posture", weight=1e-1, kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0),
          ForceRegularizer(name="force regularizer", weight=1e-4, contacts=contacts)],
     ])
