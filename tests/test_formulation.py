@@ -134,6 +134,28 @@ def test_friction_cone_rows_match_geometry(robots):
     assert np.any(rows.lam @ outside > rows.upper)
 
 
+def test_friction_cone_torsion_bounds_the_disc_friction_moment(robots):
+    """torsion=True: a sole may carry a yaw moment about its normal up to the friction moment of
+    its inscribed disc under uniform pressure — computed here by integrating mu p r over the disc —
+    and not beyond; without torsion the yaw moment is free (the papers' 4 rows)."""
+    robot = robots["talos14"]
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    variables = Variables(robot, ["left_sole"])
+    mu, fn = 0.6, 400.0
+    normal = np.array([0.1, 0.2, 1.0]) / np.linalg.norm([0.1, 0.2, 1.0])
+    rho = min(robot.contact("left_sole").spec.half_size)
+    r = np.linspace(0.0, rho, 20001)  # uniform pressure p = fn / (pi rho^2) on the disc
+    moment = np.trapezoid(mu * fn / (np.pi * rho ** 2) * r * 2 * np.pi * r, r)
+    assert moment == pytest.approx(2.0 / 3.0 * mu * rho * fn, rel=1e-6)
+    with_torsion = FrictionCone(mu, normals={"left_sole": normal}, torsion=True).rows(robot, variables)
+    plain = FrictionCone(mu, normals={"left_sole": normal}).rows(robot, variables)
+    assert with_torsion.lam.shape[0] == 6 and plain.lam.shape[0] == 4
+    for scale, holds in ((0.99, True), (1.01, False), (-0.99, True), (-1.01, False)):
+        wrench = np.concatenate([fn * normal, scale * moment * normal])
+        assert bool(np.all(with_torsion.lam @ wrench <= with_torsion.upper)) == holds
+        assert np.all(plain.lam @ wrench <= plain.upper)
+
+
 def test_center_of_pressure_rows_match_geometry(robots):
     """A vertical force applied at a point of the sole gives a wrench about the sole frame whose CoP
     rows hold iff the point lies in the rectangle."""

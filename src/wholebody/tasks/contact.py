@@ -87,27 +87,49 @@ class ContactConstraint(_PerContact):
 
 class FrictionCone(_PerContact):
     """Linearised friction cone: |f.t1| <= mu f.n and |f.t2| <= mu f.n, 4 rows per contact
-    (Herzog et al. 2016 Sect. 2.1; Fahmi et al. 2019 eqs. 13-14), about each contact's normal."""
+    (Herzog et al. 2016 Sect. 2.1; Fahmi et al. 2019 eqs. 13-14), about each contact's normal.
+
+    ``torsion=True`` adds, for rectangle contacts (6D wrenches), the torsional friction bound
+    |tau.n| <= c mu f.n (2 rows), c = 2/3 of the sole's smaller half-size: the largest friction
+    moment of the inscribed disc under uniform pressure, inside the rectangle's exact bound
+    (Caron et al. 2015, "Stability of surface contacts for humanoid robots": mu (X + Y) f.n when
+    the tangential force and the tilting moments vanish). Off by default, as in the papers'
+    tables (4 rows per contact). Without it nothing in Tables 1/2/4 bounds the yaw moments:
+    in the cop-active squat the cascade put opposite yaw moments of 100 Nm (hip-yaw torque
+    limits) and up to 2500 Nm on the two soles as soon as the CoP rows became active (those rows,
+    written in the measured sole axes, couple to yaw moments through a fraction of a degree of
+    tilt); with the bound they stay at its ~16 Nm (that robot still falls, for another reason).
+    """
 
     kind = "ineq"
 
-    def __init__(self, mu: float, name=None, weight=1.0, contacts=None, normals=None):
+    def __init__(self, mu: float, name=None, weight=1.0, contacts=None, normals=None,
+                 torsion: bool = False):
         super().__init__(name, weight, contacts, normals)
         if not mu > 0:
             raise ValueError(f"mu: must be > 0, got {mu}")
         self.mu = mu
+        self.torsion = torsion
         self._cache_key = None
         self._cache: TaskRows | None = None
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
         key = (names, tuple(variables.lambda_slices[n].start for n in names), variables.n_lambda,
-               self.mu, tuple(tuple(self.normal(n)) for n in names))
+               self.mu, self.torsion, tuple(tuple(self.normal(n)) for n in names))
         if self._cache_key != key:  # the rows only change with mu, normals or the contact set
             blocks = {}
             for n in names:
-                block = np.zeros((4, robot.contact(n).dim))
-                block[:, :3] = friction_faces(self.normal(n), self.mu)
+                spec = robot.contact(n).spec
+                twist = self.torsion and spec.dim == 6
+                block = np.zeros((6 if twist else 4, spec.dim))
+                normal = self.normal(n)
+                block[:4, :3] = friction_faces(normal, self.mu)
+                if twist:  # +-tau.n - c mu f.n <= 0
+                    nn = tangent_basis(normal)[2]
+                    c = 2.0 / 3.0 * min(spec.half_size)
+                    block[4:, :3] = -c * self.mu * nn
+                    block[4, 3:], block[5, 3:] = nn, -nn
                 blocks[n] = block
             A = self._lambda_rows(variables, blocks)
             self._cache = TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
