@@ -4,8 +4,9 @@ its momentum gains."""
 
 from .base import ControlResult
 from .lqr import MomentumLQR, lqr_gains, momentum_model
+from .observer import MomentumObserver
 from .stacks import table1_stack, table2_stack, table4_stack
 from .standing import StandingController
 
-__all__ = ["ControlResult", "MomentumLQR", "lqr_gains", "momentum_model", "StandingController",
+__all__ = ["ControlResult", "MomentumLQR", "MomentumObserver", "lqr_gains", "momentum_model", "StandingController",
            "table1_stack", "table2_stack", "table4_stack"]

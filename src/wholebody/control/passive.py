@@ -95,7 +95,10 @@ class PassiveWBC(PlannedController):
     Weights: ``Q`` (6, trunk wrench, N² / (Nm)²), ``slack_weight`` α of eq. 33, ``R_qdd`` and
     ``R_force`` (the ‖u‖²_R term), ``tangential_weight`` (force-normal scheme) or
     ``torque_weights`` (per joint, torque scheme). ``torque_limit_override`` lowers named joints'
-    limits (e.g. the weak knee of Sect. V-C). ``control_period`` sets Δt = 10 dt of eq. 18.
+    limits (e.g. the weak knee of Sect. V-C). ``control_period`` sets Δt = 10 dt of eq. 18 and
+    the observer's time step. ``observer`` (a :class:`~wholebody.control.observer.MomentumObserver`,
+    default none) estimates W_ext of eq. 4 every cycle from the centroidal momentum and the contact
+    wrench commanded the cycle before, and writes it into ``impedance.external_wrench``.
     """
 
     def __init__(self, robot: Robot, planner=None, mu: float | None = None, f_min: float = 0.0,
@@ -105,7 +108,7 @@ class PassiveWBC(PlannedController):
                  Q=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), R_qdd: float = 1e-4, R_force: float = 1e-4,
                  regularization: str = "force-normal", tangential_weight: float = 1e-3,
                  torque_weights=None, torque_limit_override: dict[str, float] | None = None,
-                 control_period: float = 0.004):
+                 control_period: float = 0.004, observer=None):
         if any(c.dim != 3 for c in robot.contacts):
             raise ValueError(f"robot '{robot.name}': PassiveWBC needs point contacts (3D forces)")
         if swing_slack not in SLACKS:
@@ -143,6 +146,8 @@ class PassiveWBC(PlannedController):
         self.last_tau: np.ndarray | None = None
         self.last_plan = None
         self._failing = 0  # length of the current streak of failed cycles
+        self.observer = observer
+        self._commanded_wrench: np.ndarray | None = None  # G F of the last solved cycle
 
     # ------------------------------------------------------------------ layout
     def _allocate(self) -> None:
@@ -260,6 +265,9 @@ class PassiveWBC(PlannedController):
         H.flat[::n + 1] = self._R_diagonal  # (flat-iterator assignment writes in place)
         g[:] = 0.0
         G = contact_wrench_map(robot, self.contacts, self._G, points)
+        if self.observer is not None and self._commanded_wrench is not None:
+            self.impedance.external_wrench = self.observer.update(
+                robot.h_G, self._commanded_wrench, robot.mass, self.control_period)
         W_d = self.impedance.wrench(robot, plan.trunk)
         GQ = G.T * self.Q
         HF = GQ @ G
@@ -397,7 +405,11 @@ class PassiveWBC(PlannedController):
                         self._failing)
         self._failing = 0 if ok else self._failing + 1
         self.last_tau = tau
-        wrench_error = G @ F - W_d
+        commanded = G @ F
+        self._commanded_wrench = commanded if ok else None
+        if not ok and self.observer is not None:  # the applied wrench is unknown: start afresh
+            self.observer.reset()
+        wrench_error = commanded - W_d
         reports = [TaskReport("trunk wrench", 2, "eq", 6, math.sqrt(wrench_error @ wrench_error))]
         if ok and not pat.all_stance:
             residuals = (robot.contact_frame_jacobians[self._contact_order[pat.swing], :3] @ qdd
