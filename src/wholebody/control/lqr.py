@@ -13,15 +13,16 @@ cost of eq. 26 is solved, and the result is the force law of eq. 23,
 task projects into momentum space (eq. 24). Gains are computed once per contact configuration and
 interpolated during contact transitions (Remark at the end of Sect. 3.2).
 
-Integral action (OUR EXTENSION, not in the paper; off by default). With ``q_integral`` the state of
-eq. 21 is augmented with the integral of the CoG error, ``z' = x_cog - x_ref`` (3), the same
-infinite-horizon Riccati equation is solved for the augmented system (LQI) with
+Integral action (OUR EXTENSION, not in the paper; off by default). The LQR of Herzog et al. 2016,
+eq. 21-26, has no integral term; everything about ``q_integral`` is ours. With ``q_integral`` the
+state of eq. 21 is augmented with the integral of the CoG error, ``z' = x_cog - x_ref`` (3), the
+same infinite-horizon Riccati equation is solved for the augmented system (LQI) with
 ``Q_aug = blockdiag(Q, diag(q_integral))``, and the force law becomes
 ``lambda = -K [x_cog - x_ref; h - h_ref; z] + lambda_ff``. Its purpose: a constant unknown force
 bias (e.g. a robot heavier or lighter than the model: ``Delta m g`` on the vertical rows) gives the
-paper's law a steady CoG offset ``bias / stiffness``, and with eq. 26's Q/R the CoG stiffness is only
-~100 N/m on talos14; the integral removes the offset of the regulated (model) CoG. The integral
-is clamped elementwise to ``+-integral_limit`` (anti-windup).
+paper's law a steady CoG offset ``bias / stiffness``, and with eq. 26's Q/R the vertical CoG
+stiffness is only ~100 N/m on talos14; the integral removes the offset of the regulated (model)
+CoG. The integral is clamped elementwise to ``+-integral_limit`` (anti-windup).
 
 Conventions (those of :mod:`wholebody.robot` and :func:`~wholebody.tasks.momentum.momentum_map`):
 a point contact has a 3D force ``f`` (world axes); a rectangle contact a 6D wrench ``[f; tau]`` about
