@@ -69,3 +69,37 @@ def test_push_series_table_and_claim(robots, tmp_path):
     with pytest.raises(ValueError, match="locations"):
         series.run(robot, None, {"locations": "nose"})
 
+
+
+def test_integral_action_is_accumulated_clamped_and_off_by_default(robots):
+    """MomentumBalance(q_integral=...) (LQI, our extension; LQR only): the CoG-error integral grows
+    by dt (com - com_ref) per compute() call, enters the force law as -K_integral z, and is clamped
+    to +-integral_limit; without q_integral nothing is integrated (the paper's law)."""
+    robot = robots["talos14"]
+    with pytest.raises(ValueError, match="^q_integral"):
+        MomentumBalance(robot, gains="pd", q_integral=1e6)
+    q = robot.q_ref.copy()
+    q[2] += 0.004  # base (and CoM) 4 mm above the reference
+    v = np.zeros(robot.nv)
+    plain = MomentumBalance(robot, gains="lqr")
+    plain.compute(q, v, 0.0)
+    plain.compute(q, v, 0.5)
+    assert not plain.lqr.integral and np.all(plain.cog_integral == 0.0)
+    k_plain = plain.momentum.k.copy()
+
+    ctrl = MomentumBalance(robot, gains="lqr", q_integral=1e6, integral_limit=0.01)
+    ctrl.compute(q, v, 0.0)  # first call: dt = 0
+    assert np.all(ctrl.cog_integral == 0.0)
+    k0 = ctrl.momentum.k.copy()
+    ctrl.compute(q, v, 0.5)
+    err = robot.com - ctrl.com_ref
+    assert err[2] == pytest.approx(0.004, abs=1e-6)
+    np.testing.assert_allclose(ctrl.cog_integral, 0.5 * err, atol=1e-12)
+    Ki = ctrl.lqr.gains(robot).K_integral
+    np.testing.assert_allclose(ctrl.momentum.k, k0 - Ki @ ctrl.cog_integral, atol=1e-9)
+    ctrl.compute(q, v, 10.5)  # 10 s more: 0.042 m s, clamped
+    assert ctrl.cog_integral[2] == pytest.approx(0.01)
+    ctrl.reset_integral()
+    ctrl.compute(q, v, 11.0)
+    assert np.all(ctrl.cog_integral == 0.0)
+    assert np.abs(k0 - k_plain).max() > 1e-3  # the integral design also changes the state gains

@@ -348,3 +348,128 @@ def test_errors_name_the_argument(talos):
         with pytest.raises(ValueError, match=f"^{name}:"):
             call()
     assert isinstance(ds, ContactGains)
+
+
+# ------------------------------------------------- integral action (LQI; our extension, not eq. 23)
+Q_TALOS = np.diag([30, 30, 50, .5, .5, .5, 10, 10, 10])
+
+
+@pytest.mark.parametrize("which,names", CONFIGS)
+def test_integral_augmented_riccati_and_stable(request, which, names):
+    """The augmented system built here (A, B of eq. 21, checked against finite differences of the
+    model written in this file, plus z' = x_cog) satisfies the Riccati equation with the returned
+    P and K, and its closed loop [A - B K_s, -B K_z; S, 0] is Hurwitz."""
+    robot = get_robot(request, which)
+    pos, dims = contact_setup(robot, names)
+    ctl = MomentumLQR(robot, names, q_integral=1e5)
+    model = ctl.model(robot)
+    pos = model.contact_positions  # the contact points (hyq: the foot centre, not the frame)
+    s0 = np.concatenate([robot.com, np.zeros(6)])
+    A = fd_jacobian(lambda s: centroidal_rhs(s, model.lambda0, pos, dims, robot.mass), s0)
+    B = fd_jacobian(lambda u: centroidal_rhs(s0, u, pos, dims, robot.mass), model.lambda0)
+    np.testing.assert_allclose(A, model.A, atol=1e-6)
+    np.testing.assert_allclose(B, model.B, atol=1e-6)
+    A, B = model.A, model.B  # exact (FD round-off is amplified by P ~ 1e5 in the residual)
+    Aa = np.block([[A, np.zeros((9, 3))], [np.eye(3), np.zeros((3, 9))]])
+    Ba = np.vstack([B, np.zeros((3, B.shape[1]))])
+    Qa = np.diag(np.r_[np.diag(DEFAULT_Q := np.diag([30, 30, 50, .5, .5, .5, .1, .1, .1])),
+                       [1e5] * 3])
+    R = contact_cost(model.dims)
+    K, P = lqr_gains(model, DEFAULT_Q, R, q_integral=1e5, full_output=True)
+    assert K.shape == (model.n_lambda, 12) and P.shape == (12, 12)
+    residual = Aa.T @ P + P @ Aa - P @ Ba @ np.linalg.solve(R, Ba.T @ P) + Qa
+    assert np.abs(residual).max() < 1e-6 * max(1.0, np.abs(P).max())
+    np.testing.assert_allclose(K, np.linalg.solve(R, Ba.T @ P), atol=1e-6 * np.abs(K).max())
+    poles = np.linalg.eigvals(Aa - Ba @ K)
+    assert poles.real.max() < -1e-3
+    # the class splits K into the state part and the integral part and reports the same poles
+    g = ctl.gains(robot)
+    np.testing.assert_allclose(np.hstack([g.K, g.K_integral]), K, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.sort_complex(g.poles), np.sort_complex(poles), atol=1e-6)
+    # off by default: the paper's gains, unchanged
+    g0 = MomentumLQR(robot, names).gains(robot)
+    assert g0.K_integral is None
+    np.testing.assert_allclose(g0.K, lqr_gains(model, DEFAULT_Q, R), rtol=1e-12, atol=1e-12)
+    assert np.abs(g.K - g0.K).max() > 1e-3  # the integral changes the state feedback too
+
+
+def test_integral_zero_weight_axis_is_not_augmented(talos):
+    model = MomentumLQR(talos, TALOS_DS).model(talos)
+    K = lqr_gains(model, Q_TALOS, q_integral=[0.0, 0.0, 1e5])
+    assert np.all(K[:, 9:11] == 0.0) and np.abs(K[:, 11]).max() > 1.0
+    assert lqr_gains(model, Q_TALOS, q_integral=0.0).shape == (model.n_lambda, 9)
+    with pytest.raises(ValueError, match="^q_integral"):
+        lqr_gains(model, Q_TALOS, q_integral=-1.0)
+
+
+def simulate_biased(ctl, robot, pos, dims, true_mass, t_end, integral: bool):
+    """Eq. 21 written in this file, for a robot whose true mass differs from the controller's
+    model (gravity m_true g and x_cog' = h_lin / m_true): a constant unknown vertical force bias.
+    The controller's force law is taken from ``ctl.feedback`` every evaluation; the integral z of
+    (x_cog - x_ref) is the ODE's 10th-12th state, clamped as the controller clamps it."""
+    com_ref = robot.com.copy()
+
+    def rhs(_t, y):
+        s, z = y[:9], y[9:]
+        K, k = ctl.feedback(robot, com_ref, integral=z if integral else None)
+        dz = s[:3] - com_ref
+        zc = ctl.clamp_integral(z) if integral else z
+        dz = np.where(np.abs(z - zc) > 0, 0.0, dz)  # no further growth past the clamp
+        return np.concatenate([centroidal_rhs(s, k - K @ s, pos, dims, true_mass), dz])
+
+    y0 = np.concatenate([com_ref, np.zeros(9)])
+    sol = solve_ivp(rhs, (0.0, t_end), y0, method="LSODA", rtol=1e-8, atol=1e-10,
+                    dense_output=True)
+    assert sol.success
+    return sol, com_ref
+
+
+def test_integral_removes_cog_offset_of_a_mass_error(talos):
+    """True robot 3 % heavier than the model (2.7 kg, 27 N of unknown vertical bias): the paper's
+    LQR (Q of eq. 26 with q_angular=10) lets the CoG sink towards bias / stiffness (~0.27 m, pole
+    0.11 rad/s: > 3 cm after 10 s); with the integral the CoG error goes to zero (< 0.1 mm after
+    10 s) and the integral settles at bias / integral gain."""
+    pos, dims = contact_setup(talos, TALOS_DS)
+    true_mass = 1.03 * talos.mass
+    bias = (true_mass - talos.mass) * G0
+    plain = MomentumLQR(talos, TALOS_DS, Q=Q_TALOS)
+    lqi = MomentumLQR(talos, TALOS_DS, Q=Q_TALOS, q_integral=1e6)
+    sol0, com_ref = simulate_biased(plain, talos, pos, dims, true_mass, 10.0, integral=False)
+    sol1, _ = simulate_biased(lqi, talos, pos, dims, true_mass, 10.0, integral=True)
+    e0 = sol0.y[:3, -1] - com_ref
+    e1 = sol1.y[:3, -1] - com_ref
+    assert e0[2] < -0.03, e0  # sinks (heavier robot), still going
+    assert np.abs(e1).max() < 1e-4, e1
+    assert np.abs(sol1.sol(np.linspace(0.0, 10.0, 201))[2] - com_ref[2]).max() < 5e-3
+    # at rest the integral's forces carry the bias: the total vertical force equals m_true g
+    K, k = lqi.feedback(talos, com_ref, integral=sol1.y[9:, -1])
+    np.testing.assert_allclose(vertical_force(k - K @ sol1.y[:9, -1], dims), true_mass * G0,
+                               rtol=1e-5)
+
+
+def test_integral_clamp_limits_the_correction(talos):
+    """Anti-windup: with the clamp below what the bias needs, the integral stops at the limit and a
+    residual offset remains (the clamp is effective); with the default limit it does not."""
+    pos, dims = contact_setup(talos, TALOS_DS)
+    true_mass = 1.03 * talos.mass
+    small = MomentumLQR(talos, TALOS_DS, Q=Q_TALOS, q_integral=1e6, integral_limit=5e-4)
+    sol, com_ref = simulate_biased(small, talos, pos, dims, true_mass, 10.0, integral=True)
+    assert sol.y[11, -1] == pytest.approx(-5e-4, abs=1e-9)
+    assert sol.y[2, -1] - com_ref[2] < -1e-3
+    np.testing.assert_allclose(small.clamp_integral([1.0, -1.0, 1e-4]), [5e-4, -5e-4, 1e-4])
+
+
+def test_integral_gains_blend_and_feedback(talos):
+    ctl = MomentumLQR(talos, TALOS_DS, q_integral=1e5)
+    g_ds, g_ss = ctl.gains(talos, TALOS_DS), ctl.gains(talos, TALOS_SS)
+    mid = blend_gains(g_ds, g_ss, 0.25)
+    np.testing.assert_allclose(mid.K_integral[:6], 0.75 * g_ds.K_integral[:6]
+                               + 0.25 * g_ss.K_integral[:6])
+    np.testing.assert_allclose(mid.K_integral[6:], 0.75 * g_ds.K_integral[6:])
+    z = np.array([1e-3, -2e-3, 3e-3])
+    K0, k0 = ctl.feedback(talos, talos.com)
+    K1, k1 = ctl.feedback(talos, talos.com, integral=z)
+    np.testing.assert_allclose(K1, K0)
+    np.testing.assert_allclose(k1, k0 - g_ds.K_integral @ z)
+    with pytest.raises(ValueError, match="^integral"):
+        MomentumLQR(talos, TALOS_DS).feedback(talos, talos.com, integral=z)

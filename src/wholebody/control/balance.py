@@ -27,7 +27,7 @@ import pinocchio as pin
 from ..formulation import Formulation, Solution
 from ..robot import Robot
 from ..variables import Variables
-from .lqr import MomentumLQR
+from .lqr import DEFAULT_INTEGRAL_LIMIT, MomentumLQR
 from .stacks import ANGULAR_MOMENTUM_WEIGHT, table2_stack
 
 GAINS = ("lqr", "pd")
@@ -173,14 +173,22 @@ class MomentumBalance:
     sole (:class:`~wholebody.tasks.CenterOfPressure`'s margin; 0 = the whole sole).
     ``angular_weight``: weight of the momentum task's angular rows (see
     :func:`~wholebody.control.stacks.table2_stack`; 1e4 = the paper's single weight).
+    ``q_integral`` (LQR only; None/0 = off, the default and the paper's controller): weight of the
+    integral of the CoG error ``robot.com - com_ref`` in the augmented LQR cost — integral action,
+    our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
+    accumulated here, one step per :meth:`compute` call with ``dt`` the time since the previous
+    call, clamped to ``+-integral_limit`` (m s, anti-windup); :meth:`reset_integral` zeroes it.
     """
 
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
                  P=None, D=None, Q=None, R=None, backend: str = "daqp",
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
-                 cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT):
+                 cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
+                 q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT):
         if gains not in GAINS:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
+        if gains != "lqr" and q_integral is not None and np.any(np.asarray(q_integral) != 0):
+            raise ValueError("q_integral: integral action is only available with gains='lqr'")
         self.robot = robot
         self.gains = gains
         self.contacts = tuple(contacts or robot.contact_names)
@@ -205,10 +213,18 @@ class MomentumBalance:
         self.posture = self.stack.find("posture")
         if cop_margin:
             self.stack.find("center of pressure").margin = float(cop_margin)
-        self.lqr = MomentumLQR(robot, self.contacts, Q=Q, R=R) if gains == "lqr" else None
+        self.lqr = (MomentumLQR(robot, self.contacts, Q=Q, R=R, q_integral=q_integral,
+                                integral_limit=integral_limit) if gains == "lqr" else None)
+        self.cog_integral = np.zeros(3)
+        self._t_last: float | None = None
         if self.lqr is not None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             self.lqr.gains(robot, self.contacts)  # gains at the reference pose (Sect. 3.2 remark)
+
+    def reset_integral(self) -> None:
+        """Zero the CoG-error integral (integral action only) and forget the last call's time."""
+        self.cog_integral = np.zeros(3)
+        self._t_last = None
 
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) in Pinocchio convention."""
@@ -225,8 +241,15 @@ class MomentumBalance:
                 self.posture.q_ref = q_ref
         if self.lqr is not None:
             hdot = self.hdot_ref if np.any(self.hdot_ref) else None
+            integral = None
+            if self.lqr.integral:
+                dt = 0.0 if self._t_last is None else max(float(t) - self._t_last, 0.0)
+                self.cog_integral = self.lqr.clamp_integral(
+                    self.cog_integral + dt * (robot.com - self.com_ref))
+                integral = self.cog_integral
+            self._t_last = float(t)
             K, k = self.lqr.feedback(robot, self.com_ref, self.h_ref, contacts=self.contacts,
-                                     hdot_ref=hdot)
+                                     hdot_ref=hdot, integral=integral)
             self.momentum.K, self.momentum.k = K, k
         else:
             self.momentum.com_ref = self.com_ref

@@ -13,6 +13,17 @@ cost of eq. 26 is solved, and the result is the force law of eq. 23,
 task projects into momentum space (eq. 24). Gains are computed once per contact configuration and
 interpolated during contact transitions (Remark at the end of Sect. 3.2).
 
+Integral action (OUR EXTENSION, not in the paper; off by default). The LQR of Herzog et al. 2016,
+eq. 21-26, has no integral term; everything about ``q_integral`` is ours. With ``q_integral`` the
+state of eq. 21 is augmented with the integral of the CoG error, ``z' = x_cog - x_ref`` (3), the
+same infinite-horizon Riccati equation is solved for the augmented system (LQI) with
+``Q_aug = blockdiag(Q, diag(q_integral))``, and the force law becomes
+``lambda = -K [x_cog - x_ref; h - h_ref; z] + lambda_ff``. Its purpose: a constant unknown force
+bias (e.g. a robot heavier or lighter than the model: ``Delta m g`` on the vertical rows) gives the
+paper's law a steady CoG offset ``bias / stiffness``, and with eq. 26's Q/R the vertical CoG
+stiffness is only ~100 N/m on talos14; the integral removes the offset of the regulated (model)
+CoG. The integral is clamped elementwise to ``+-integral_limit`` (anti-windup).
+
 Conventions (those of :mod:`wholebody.robot` and :func:`~wholebody.tasks.momentum.momentum_map`):
 a point contact has a 3D force ``f`` (world axes); a rectangle contact a 6D wrench ``[f; tau]`` about
 the contact frame origin ``x_i`` (world axes). Gravity is ``g = (0, 0, -gravity)``.
@@ -37,6 +48,12 @@ DEFAULT_Q_DIAG = np.array([30.0, 30.0, 50.0, 0.5, 0.5, 0.5, 0.1, 0.1, 0.1])
 #: Herzog et al. 2016, Sect. 5.2.2 (eq. 26): input cost of one contact wrench [f; tau]; a point
 #: contact (3D force) uses the first three entries.
 DEFAULT_R_DIAG = np.array([0.1, 0.1, 0.01, 2.0, 2.0, 2.0])
+#: Anti-windup bound (m s) of each component of the CoG-error integral (our extension, see the
+#: module docstring); only used when integral action is on. On talos14 with ``q_integral=1e6``
+#: (integral gain ~1.4e4 N per m s on the total vertical force) 0.01 m s caps the integral's force
+#: at ~140 N (~16 % of m g), six times the bias of a 2.3 kg mass error; a 3 cm CoG error during a
+#: push reaches the cap in 0.3 s.
+DEFAULT_INTEGRAL_LIMIT = 0.01
 
 
 # ---------------------------------------------------------------------------------------- helpers
@@ -287,7 +304,47 @@ def _check_stabilizable(A: np.ndarray, B: np.ndarray) -> None:
                     f"(e.g. a single point contact)")
 
 
-def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool = False):
+def _integral_weight(q_integral) -> np.ndarray | None:
+    """``q_integral`` (None, 0, a number or a 3-vector, all >= 0) as a 3-vector, None if off."""
+    if q_integral is None:
+        return None
+    try:
+        arr = np.asarray(q_integral, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"q_integral: expected a number or a 3-vector >= 0, got {q_integral!r}") \
+            from exc
+    if arr.ndim == 0:
+        arr = np.full(3, float(arr))
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
+        raise ValueError(f"q_integral: expected a number or a 3-vector >= 0, got {q_integral!r}")
+    return arr if np.any(arr > 0.0) else None
+
+
+def integral_augmented(A: np.ndarray, B: np.ndarray, Q: np.ndarray, q_integral
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The model of eq. 21 augmented with ``z' = x_cog - x_ref`` (our extension, not the paper's).
+
+    State ``[s; z_a]``: ``A_aug = [[A, 0], [S, 0]]`` with ``S`` the rows of ``[I 0 0]`` (picks
+    x_cog) of the axes ``a`` whose weight is > 0 (an integral with zero weight would be an
+    undetectable integrator: no stabilising Riccati solution), ``B_aug = [B; 0]``,
+    ``Q_aug = blockdiag(Q, diag(q_integral[a]))``. In deviation coordinates about the reference (an
+    equilibrium), ``x_ref`` drops out. Returns ``(A_aug, B_aug, Q_aug, axes)``.
+    """
+    qi = _integral_weight(q_integral)
+    if qi is None:
+        raise ValueError("q_integral: integral action needs a weight > 0")
+    axes = np.flatnonzero(qi > 0.0)
+    n, m, na = A.shape[0], B.shape[1], len(axes)
+    Aa = np.zeros((n + na, n + na))
+    Aa[:n, :n] = A
+    Aa[n:, :3] = np.eye(3)[axes]
+    Ba = np.vstack([B, np.zeros((na, m))])
+    Qa = scipy.linalg.block_diag(Q, np.diag(qi[axes]))
+    return Aa, Ba, Qa, axes
+
+
+def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool = False,
+              q_integral=None):
     """Infinite-horizon LQR gain ``K`` for the linearised model: ``u = u0 - K (s - s_ref)``.
 
     Minimises the cost of eq. 26, ``sum/integral of s^T Q s + lambda^T R lambda`` (in deviation
@@ -308,8 +365,13 @@ def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool 
         contact ``diag(.1, .1, .01, 2, 2, 2)`` (first 3 entries for a point contact).
     dt : None (continuous) or the control period for a discrete-time design.
     full_output : also return the Riccati solution ``P``.
+    q_integral : None/0 (default: the paper's LQR) or the weight (number or 3-vector, on x, y, z)
+        of the CoG-error integral: the design is then done for the augmented model of
+        :func:`integral_augmented` (LQI; our extension, not the paper's) and ``K`` has 3 more
+        columns, ``[K_s, K_z]``, acting on ``z = integral of (x_cog - x_ref)`` (a column is zero
+        for an axis of weight 0; ``P`` is then that of the augmented system without those axes).
 
-    Returns ``K`` (n_lambda x 9), or ``(K, P)`` with ``full_output``.
+    Returns ``K`` (n_lambda x 9, or x 12 with ``q_integral``), or ``(K, P)`` with ``full_output``.
     """
     if isinstance(model, MomentumModel):
         A, B = model.A, model.B
@@ -335,6 +397,13 @@ def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool 
             raise ValueError("R: no default without contact dims; pass R or a MomentumModel")
         R = contact_cost(model.dims)
     R = _square(R, m, "R", definite=True)
+    axes = None
+    if _integral_weight(q_integral) is not None:
+        if n < 3:
+            raise ValueError("q_integral: the state must start with x_cog (3)")
+        n_state = n
+        A, B, Q, axes = integral_augmented(A, B, Q, q_integral)
+        n = A.shape[0]
     _check_stabilizable(A, B)
     try:
         if dt is None:
@@ -352,6 +421,11 @@ def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool 
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ValueError(f"model: the Riccati equation has no stabilising solution ({exc})") from exc
     P = 0.5 * (P + P.T)
+    if axes is not None:  # [K_s, K_z] with a zero column for every axis without integral
+        K_full = np.zeros((m, n_state + 3))
+        K_full[:, :n_state] = K[:, :n_state]
+        K_full[:, n_state + axes] = K[:, n_state:]
+        K = K_full
     return (K, P) if full_output else K
 
 
@@ -362,8 +436,10 @@ class ContactGains:
 
     ``K`` (n_lambda x 9) and ``lambda0`` (n_lambda) are ordered as ``contacts`` with ``dims``
     entries each. ``com0`` is the CoM the model was linearised at; ``P`` and ``poles`` (closed-loop
-    eigenvalues of ``A - B K``) are None for blended gains. ``components`` lists ``(weight,
-    ContactGains)`` of the configurations a blend is made of (empty for a plain configuration).
+    eigenvalues of ``A - B K``, of the augmented system with integral action) are None for blended
+    gains. ``components`` lists ``(weight, ContactGains)`` of the configurations a blend is made of
+    (empty for a plain configuration). ``K_integral`` (n_lambda x 3): the gain on the CoG-error
+    integral (our extension; None without integral action).
     """
 
     contacts: tuple[str, ...]
@@ -375,6 +451,7 @@ class ContactGains:
     P: np.ndarray | None = None
     poles: np.ndarray | None = None
     components: tuple = field(default=(), repr=False)
+    K_integral: np.ndarray | None = None
 
     @property
     def n_lambda(self) -> int:
@@ -446,9 +523,14 @@ def blend_gains(gains_a: ContactGains, gains_b: ContactGains, alpha: float,
     lam0 = (1.0 - alpha) * _embed(gains_a, order, dims, gains_a.lambda0) \
         + alpha * _embed(gains_b, order, dims, gains_b.lambda0)
     com0 = (1.0 - alpha) * gains_a.com0 + alpha * gains_b.com0
+    K_integral = None
+    if gains_a.K_integral is not None or gains_b.K_integral is not None:
+        K_integral = sum(w * _embed(g, order, dims, g.K_integral)
+                         for w, g in ((1.0 - alpha, gains_a), (alpha, gains_b))
+                         if g.K_integral is not None)
     components = tuple((w * cw, cg) for w, g in ((1.0 - alpha, gains_a), (alpha, gains_b))
                        for cw, cg in (g.components or ((1.0, g),)) if w * cw > 0.0)
-    return ContactGains(order, dims, K, lam0, com0, components=components)
+    return ContactGains(order, dims, K, lam0, com0, components=components, K_integral=K_integral)
 
 
 # ----------------------------------------------------------------------------- the controller
@@ -466,10 +548,16 @@ class MomentumLQR:
         nominal force distribution ``lambda0`` (least ``lambda^T R lambda`` balancing gravity).
     dt : None for the continuous-time design (default), or the control period (discrete design).
     gravity : magnitude of g (default: from the Pinocchio model).
+    q_integral : None or 0 (default, the paper's controller) or the weight (number, or 3-vector on
+        x, y, z) of the CoG-error integral in the augmented LQR cost (LQI, see the module
+        docstring). This integral action is our extension, not part of Herzog et al. 2016.
+    integral_limit : anti-windup bound (m s), each component of the integral passed to
+        :meth:`feedback` is clamped to ``+-integral_limit`` (:meth:`clamp_integral`).
     """
 
     def __init__(self, robot, contacts: Sequence[str], Q=None, R=None, dt: float | None = None,
-                 gravity: float | None = None):
+                 gravity: float | None = None, q_integral=None,
+                 integral_limit: float = DEFAULT_INTEGRAL_LIMIT):
         self.contacts = self._check_contacts(robot, contacts)
         self.Q = _square(DEFAULT_Q_DIAG if Q is None else Q, STATE_DIM, "Q", definite=False)
         self.R = _square(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
@@ -477,7 +565,18 @@ class MomentumLQR:
         if gravity is None:
             gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self.gravity = _positive(gravity, "gravity")
+        self.q_integral = _integral_weight(q_integral)
+        self.integral_limit = _positive(integral_limit, "integral_limit")
         self._cache: dict[tuple[str, ...], ContactGains] = {}
+
+    @property
+    def integral(self) -> bool:
+        """True if the gains include integral action on the CoG error (our extension)."""
+        return self.q_integral is not None
+
+    def clamp_integral(self, z) -> np.ndarray:
+        """The CoG-error integral clamped elementwise to ``+-integral_limit`` (anti-windup)."""
+        return np.clip(_vector(z, 3, "integral"), -self.integral_limit, self.integral_limit)
 
     @staticmethod
     def _check_contacts(robot, contacts) -> tuple[str, ...]:
@@ -528,11 +627,18 @@ class MomentumLQR:
             return self._cache[names]
         model = self.model(robot, names)
         R = contact_cost(model.dims, self.R)
-        K, P = lqr_gains(model, self.Q, R, dt=self.dt, full_output=True)
+        K, P = lqr_gains(model, self.Q, R, dt=self.dt, full_output=True,
+                         q_integral=self.q_integral)
         # continuous-time closed-loop poles (for a discrete design: of the same K in continuous time)
-        poles = np.linalg.eigvals(model.A - model.B @ K)
+        if self.integral:
+            Aa, Ba, _, axes = integral_augmented(model.A, model.B, self.Q, self.q_integral)
+            poles = np.linalg.eigvals(Aa - Ba @ K[:, np.r_[0:STATE_DIM, STATE_DIM + axes]])
+            K, K_integral = K[:, :STATE_DIM], K[:, STATE_DIM:]
+        else:
+            poles = np.linalg.eigvals(model.A - model.B @ K)
+            K_integral = None
         g = ContactGains(names, model.dims, K, model.lambda0, model.com0.copy(), weight=R, P=P,
-                         poles=poles)
+                         poles=poles, K_integral=K_integral)
         log.debug("MomentumLQR: gains for %s, slowest closed-loop pole %.3f rad/s", list(names),
                   float(np.max(poles.real)))
         self._cache[names] = g
@@ -559,8 +665,8 @@ class MomentumLQR:
         return lam
 
     def feedback(self, robot, com_ref, h_ref=None, *, contacts: Sequence[str] | None = None,
-                 gains: ContactGains | None = None, hdot_ref=None, rebalance: bool = True
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 gains: ContactGains | None = None, hdot_ref=None, rebalance: bool = True,
+                 integral=None) -> tuple[np.ndarray, np.ndarray]:
         """``(K, k)`` of the force law eq. 23, ``lambda = -K [x_cog; h] + k``, for eq. 24.
 
         ``k = lambda_ff + K [com_ref; h_ref]``, i.e. ``lambda = lambda_ff - K (s - s_ref)``.
@@ -589,4 +695,9 @@ class MomentumLQR:
             lam_ff = gains.lambda0
         s_ref = np.concatenate([com_ref, h_ref])
         K = gains.K.copy()
-        return K, lam_ff + K @ s_ref
+        k = lam_ff + K @ s_ref
+        if integral is not None:
+            if gains.K_integral is None:
+                raise ValueError("integral: these gains have no integral action (q_integral)")
+            k = k - gains.K_integral @ self.clamp_integral(integral)
+        return K, k

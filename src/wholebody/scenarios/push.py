@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..control.balance import MomentumBalance
+from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
 from ..report.plots import time_series_figure
 from ..sim.disturbance import Push
@@ -45,7 +46,26 @@ PARAMETERS = (
     Parameter("angular_weight", ANGULAR_MOMENTUM_WEIGHT,
               "weight of the momentum task's angular rows in Table 2 (1e4: the paper's single "
               "momentum weight, which lets the pelvis drift under model errors)"),
+    Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error integral (LQI; our extension, "
+                                 "not the paper's); 0 = off, the paper's controller"),
+    Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
+              "LQR integral action: anti-windup clamp of each integral component (m s)"),
 )
+
+
+def controller_options(controller: str, params: dict) -> dict:
+    """Keyword arguments of :class:`MomentumBalance` from the scenario parameters (``q_angular``,
+    ``angular_weight``, and for LQR the integral action ``q_integral``/``integral_limit``;
+    missing keys take the defaults above)."""
+    defaults = {p.name: p.default for p in PARAMETERS}
+    get = lambda key: params.get(key, defaults[key])  # noqa: E731
+    opts = {"angular_weight": get("angular_weight")}
+    if controller == "lqr":
+        opts["Q"] = np.diag([30, 30, 50, .5, .5, .5] + [get("q_angular")] * 3)
+        if get("q_integral") > 0:
+            opts["q_integral"] = get("q_integral")
+            opts["integral_limit"] = get("integral_limit")
+    return opts
 
 
 def make_push(params: dict) -> Push:
@@ -74,9 +94,7 @@ def validate(robot, params: dict) -> None:
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     push = make_push(params)
-    Q = np.diag([30, 30, 50, .5, .5, .5] + [params["q_angular"]] * 3)
-    ctrl = MomentumBalance(robot, gains=controller, Q=Q if controller == "lqr" else None,
-                           angular_weight=params["angular_weight"])
+    ctrl = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
     sim = Simulator(robot)
     sim.add_push(push)
     start_feet = sim.contact_frame_poses()
@@ -117,6 +135,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     success = (recovered and metrics["max_foot_tilt_deg"] < 2.0
                and metrics["max_foot_slip_m"] < 0.01)
     notes = []
+    if controller != "lqr" and params.get("q_integral", 0.0) > 0:
+        notes.append("q_integral is an LQR option; ignored with the PD gains")
     if controller == "lqr" and params["q_angular"] == 0.1:
         notes.append("eq. 26's Q weighs angular momentum by 0.1; on talos14 (heavy upper body) "
                      "this leaves the trunk rotation nearly undamped — try --set q_angular=10")

@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from ..control.lqr import DEFAULT_INTEGRAL_LIMIT  # noqa: E402
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT  # noqa: E402
 from .base import Parameter, Scenario, ScenarioResult, parse_list  # noqa: E402
 from .push import LOCATIONS, run as run_push, validate as validate_push  # noqa: E402
@@ -31,6 +32,10 @@ PARAMETERS = (
     Parameter("angular_weight", ANGULAR_MOMENTUM_WEIGHT,
               "weight of the momentum task's angular rows in Table 2 (1e4: the paper's single "
               "momentum weight)"),
+    Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error integral (our extension); 0 = "
+                                 "off"),
+    Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
+              "LQR integral action: anti-windup clamp of each integral component (m s)"),
     Parameter("bisection", False, "also find the largest survivable peak force per point"),
     Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)"),
 )
@@ -52,7 +57,8 @@ def validate(robot, params: dict) -> None:
 def _one(robot, controller, location, force, params):
     p = {"location": location, "angle": 0.0, "height": 0.1, "peak_force": force,
          "push_duration": params["push_duration"], "start": 0.5, "duration": params["duration"],
-         "q_angular": params["q_angular"], "angular_weight": params["angular_weight"]}
+         "q_angular": params["q_angular"], "angular_weight": params["angular_weight"],
+         "q_integral": params["q_integral"], "integral_limit": params["integral_limit"]}
     res = run_push(robot, controller, p, None, False)
     return res.success, res.metrics
 
