@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from wholebody.scenarios import get_scenario
-from wholebody.scenarios.robust_push import NOMINAL, TrueCoM, mismatch_for, nominal_force
+from wholebody.scenarios.robust_push import NOMINAL, mismatch_for, nominal_force
 from wholebody.sim.simulator import Simulator
+from wholebody.sim.true_com import TrueCoM
 
 
 def test_true_com_is_the_simulated_robots_com(robots):

@@ -10,7 +10,7 @@ draw of that robot. The push is ``fraction`` (70 %) of the nominal largest peak 
 exact twin, per location and controller (half-sine, 0.1 s, measured: ``NOMINAL``).
 
 Everything judged is measured on the simulator: the CoG is the simulated (mismatched) robot's own
-CoM (:class:`TrueCoM`, from the MuJoCo model), not the controller's estimate, and the feet are the
+CoM (:class:`~wholebody.sim.true_com.TrueCoM`, from the MuJoCo model), not the controller's estimate, and the feet are the
 simulator's sole poses. Because the controller regulates its own (wrong) CoM estimate, the true CoG
 settles at a static offset from the reference; the push error is measured from the true CoG before
 the push (``pre-push``), and the static offset is reported separately.
@@ -24,7 +24,6 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import mujoco
 import numpy as np
 from tqdm import tqdm
 
@@ -34,6 +33,7 @@ from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
 from ..report.plots import grouped_bar_figure, time_series_figure
 from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
+from ..sim.true_com import TrueCoM
 from .base import Parameter, Scenario, ScenarioResult, parse_list
 from .loop import run_closed_loop
 from .push import LOCATIONS, controller_options, make_push, validate as validate_push
@@ -89,29 +89,6 @@ PARAMETERS = (
 
 COG_TOLERANCE, RECOVERY_WINDOW = 5e-3, 3.0
 MAX_TILT_DEG, MAX_SLIP = 2.0, 0.01
-
-
-class TrueCoM:
-    """The simulated robot's centre of mass from the twin's own (possibly mismatched) MuJoCo model.
-
-    Uses a private ``MjData`` so that the simulator's data are not touched: positions copied from
-    the simulator, forward kinematics, then ``subtree_com`` of the robot's root body.
-    """
-
-    def __init__(self, sim: Simulator):
-        self.sim = sim
-        self.data = mujoco.MjData(sim.model)
-        self.root = sim.twin.joint_bodies[sim.robot.model.names[1]]
-
-    @property
-    def mass(self) -> float:
-        return float(self.sim.model.body_subtreemass[self.root])
-
-    def __call__(self) -> np.ndarray:
-        self.data.qpos[:] = self.sim.data.qpos
-        mujoco.mj_kinematics(self.sim.model, self.data)
-        mujoco.mj_comPos(self.sim.model, self.data)
-        return self.data.subtree_com[self.root].copy()
 
 
 def nominal_force(controller: str, location: str, params: dict) -> float:
