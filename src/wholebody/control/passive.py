@@ -22,6 +22,10 @@ two-level stack, see :meth:`PassiveWBC.as_stack`, but costs ~10x more per cycle)
 
 The QP is solved by DAQP with a fixed layout (swing-foot forces bounded to zero, unused rows free),
 so its size never changes and the previous multipliers warm-start the next cycle.
+
+``engine="native"`` runs the same cycle — rigid-body terms, assembly, eq. 19 — in the compiled
+``wholebody._passive_cycle`` (src/wholebody/native/passive_cycle.cpp, Pinocchio's C++ templates),
+writing into the very arrays DAQP is called with; this Python assembly is its tested reference.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from .base import PlannedController
 log = logging.getLogger(__name__)
 
 SLACKS = ("per-direction", "single", "none")
+ENGINES = ("python", "native")
 REGULARIZATIONS = ("force-normal", "torque")
 _EQ, _FREE = 5, 0  # DAQP constraint senses
 _INF = np.inf
@@ -99,6 +104,13 @@ class PassiveWBC(PlannedController):
     the observer's time step. ``observer`` (a :class:`~wholebody.control.observer.MomentumObserver`,
     default none) estimates W_ext of eq. 4 every cycle from the centroidal momentum and the contact
     wrench commanded the cycle before, and writes it into ``impedance.external_wrench``.
+
+    ``engine="native"`` computes each cycle in compiled code (about 5x faster, see
+    benchmarks/bench_passive.py) with the same results; it supports the "per-direction" and "none"
+    swing slacks. It keeps its own rigid-body terms: ``compute``/``cycle`` do not refresh
+    ``robot``'s Python cache (``robot.M``, ``robot.com``... stay those of the last
+    ``robot.update``). Its weights, gains and limits are copied when it is built: after changing
+    any of them call :meth:`configure`.
     """
 
     def __init__(self, robot: Robot, planner=None, mu: float | None = None, f_min: float = 0.0,
@@ -108,7 +120,7 @@ class PassiveWBC(PlannedController):
                  Q=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), R_qdd: float = 1e-4, R_force: float = 1e-4,
                  regularization: str = "force-normal", tangential_weight: float = 1e-3,
                  torque_weights=None, torque_limit_override: dict[str, float] | None = None,
-                 control_period: float = 0.004, observer=None):
+                 control_period: float = 0.004, observer=None, engine: str = "python"):
         if any(c.dim != 3 for c in robot.contacts):
             raise ValueError(f"robot '{robot.name}': PassiveWBC needs point contacts (3D forces)")
         if swing_slack not in SLACKS:
@@ -116,6 +128,11 @@ class PassiveWBC(PlannedController):
         if regularization not in REGULARIZATIONS:
             raise ValueError(f"regularization: expected one of {REGULARIZATIONS}, "
                              f"got '{regularization}'")
+        if engine not in ENGINES:
+            raise ValueError(f"engine: expected one of {ENGINES}, got '{engine}'")
+        if engine == "native" and swing_slack == "single":
+            raise ValueError("engine: 'native' supports swing_slack 'per-direction' and 'none', "
+                             "not 'single'")
         if not f_max > f_min >= 0.0:
             raise ValueError(f"f_min, f_max: need 0 <= f_min < f_max, got {f_min}, {f_max}")
         self.robot = robot
@@ -148,6 +165,10 @@ class PassiveWBC(PlannedController):
         self._failing = 0  # length of the current streak of failed cycles
         self.observer = observer
         self._commanded_wrench: np.ndarray | None = None  # G F of the last solved cycle
+        self.engine = engine
+        self._native = None
+        if engine == "native":
+            self._native = self._build_native()
 
     # ------------------------------------------------------------------ layout
     def _allocate(self) -> None:
@@ -216,6 +237,9 @@ class PassiveWBC(PlannedController):
     # ------------------------------------------------------------------ per cycle
     def solve(self, plan) -> Solution:
         """One QP (eq. 7) at the robot's cached state for ``plan`` (a PlanState-like object)."""
+        if self._native is not None:
+            self._native.update(self.robot.q, self.robot.v)
+            return self._solve_native(plan)
         t0 = time.perf_counter()
         self.last_plan = plan
         robot, nv = self.robot, self.robot.nv
@@ -383,45 +407,197 @@ class PassiveWBC(PlannedController):
         robot, nv, nf = self.robot, self.robot.nv, self.nf
         tau_lo, tau_hi = self._tau_bounds
         ok = flag in _DAQP_OK and math.isfinite(x.sum())
+        swing_errors = None
         if ok:
             qdd, F = x[:nv], x[nv:nv + nf]
             tau = robot.M[6:] @ qdd + robot.h[6:] - J[:, 6:].T @ F  # eq. 19
             excess = max((tau - tau_hi).max(), (tau_lo - tau).max())
-            status = "solved"
+            status = self._excess_status(excess)
             if excess > 0.0:  # within DAQP's primal tolerance unless something is wrong
-                if excess > 1e-6:
-                    status = f"torque {excess:.2e} Nm outside limits after solve; clipped"
-                    log.debug(status)
                 tau = np.clip(tau, tau_lo, tau_hi)
+            if not pat.all_stance:
+                swing_errors = np.zeros(len(self.contacts))
+                residuals = (robot.contact_frame_jacobians[self._contact_order[pat.swing], :3] @ qdd
+                             - self._swing_targets[pat.swing])
+                swing_errors[pat.swing] = np.sqrt(np.einsum("ij,ij->i", residuals, residuals))
         else:
-            qdd, F = np.zeros(nv), np.zeros(nf)
-            previous = self.last_tau if self.last_tau is not None else robot.h[6:]
-            tau = np.clip(np.nan_to_num(previous), tau_lo, tau_hi)
-            status = f"daqp exit flag {flag}: previous torque held (clipped to limits)"
-            if self._failing == 0:  # one warning per streak of failed cycles, not one per cycle
-                log.warning("PassiveWBC cycle %d: %s", robot.cycle, status)
+            qdd, F, tau, status = self._failed(flag, robot.h[6:])
+        timings["iterations"] = iterations
+        return self._report(ok, qdd, F, tau, status, G @ F, W_d, pat.s3[::3], swing_errors,
+                            timings)
+
+    @staticmethod
+    def _excess_status(excess: float) -> str:
+        if excess > 1e-6:  # torques beyond DAQP's primal tolerance: reported, then clipped
+            status = f"torque {excess:.2e} Nm outside limits after solve; clipped"
+            log.debug(status)
+            return status
+        return "solved"
+
+    def _failed(self, flag, gravity_torque):
+        """A failed solve: hold the previous torque (or the nonlinear effects), clipped."""
+        tau_lo, tau_hi = self._tau_bounds
+        previous = self.last_tau if self.last_tau is not None else gravity_torque
+        tau = np.clip(np.nan_to_num(previous), tau_lo, tau_hi)
+        status = f"daqp exit flag {flag}: previous torque held (clipped to limits)"
+        if self._failing == 0:  # one warning per streak of failed cycles, not one per cycle
+            log.warning("PassiveWBC cycle %d: %s", self.robot.cycle, status)
+        return np.zeros(self.robot.nv), np.zeros(self.nf), tau, status
+
+    def _report(self, ok, qdd, F, tau, status, commanded, W_d, stance, swing_errors,
+                timings) -> Solution:
+        """The Solution of one cycle (both engines): failure streaks, the observer's input, task
+        reports (trunk wrench; swing feet when the solve succeeded)."""
         if ok and self._failing:
-            log.warning("PassiveWBC cycle %d: solved again after %d failed cycles", robot.cycle,
-                        self._failing)
+            log.warning("PassiveWBC cycle %d: solved again after %d failed cycles",
+                        self.robot.cycle, self._failing)
         self._failing = 0 if ok else self._failing + 1
         self.last_tau = tau
-        commanded = G @ F
         self._commanded_wrench = commanded if ok else None
         if not ok and self.observer is not None:  # the applied wrench is unknown: start afresh
             self.observer.reset()
         wrench_error = commanded - W_d
         reports = [TaskReport("trunk wrench", 2, "eq", 6, math.sqrt(wrench_error @ wrench_error))]
-        if ok and not pat.all_stance:
-            residuals = (robot.contact_frame_jacobians[self._contact_order[pat.swing], :3] @ qdd
-                         - self._swing_targets[pat.swing])
-            reports += [TaskReport(self._swing_names[i], 2, "eq", 3, float(np.sqrt(r @ r)))
-                        for i, r in zip(pat.swing, residuals)]
-        stance = pat.s3[::3]
-        forces = {name: F[3 * i:3 * i + 3] for i, name in enumerate(self.contacts) if stance[i]}
-        timings["iterations"] = iterations
+        in_stance = stance.tolist()  # Python bools: iterating a numpy array is slow per item
+        if swing_errors is not None:
+            errors = swing_errors.tolist()
+            reports += [TaskReport(self._swing_names[i], 2, "eq", 3, errors[i])
+                        for i, st in enumerate(in_stance) if not st]
+        per_foot = F.reshape(-1, 3)
+        forces = {name: per_foot[i] for i, name in enumerate(self.contacts) if in_stance[i]}
         return Solution(qdd=qdd, lam=F, tau=tau, forces=forces, ok=ok, status=status,
                         level_costs=np.array([wrench_error @ (self.Q * wrench_error)]),
                         tasks=reports, timings=timings, contacts=tuple(forces))
+
+    # ------------------------------------------------------------------ native engine
+    def _build_native(self):
+        try:
+            from .. import _passive_cycle
+        except ImportError as exc:
+            raise RuntimeError(
+                "engine: 'native' needs the compiled cycle wholebody._passive_cycle, which was not "
+                "built with this install (it needs a C++17 compiler at 'pip install' time; "
+                "WHOLEBODY_NO_NATIVE=1 skips it); use engine='python'") from exc
+        cycle = _passive_cycle.PassiveCycle(self._native_spec())
+        robot, c = self.robot, len(self.contacts)
+        self._nb = {  # the arrays the compiled cycle writes (the QP's are this object's own)
+            "H": self.H, "g": self.g, "A": self.A, "upper": self.upper, "lower": self.lower,
+            "sense": self.sense, "feet": np.zeros((len(self.planner.legs), 3)),
+            "tau": np.zeros(robot.na), "tau_lo": np.zeros(robot.na), "tau_hi": np.zeros(robot.na),
+            "h": np.zeros(robot.nv), "h_G": np.zeros(6), "wrench_d": np.zeros(6),
+            "commanded": np.zeros(6), "errors": self.impedance.last_errors,
+            "swing_residual": np.zeros(c), "qdd": np.zeros(robot.nv), "forces": np.zeros(self.nf)}
+        cycle.bind(self._nb)
+        self._compact_views: dict[tuple[int, int], tuple] = {}
+        return cycle
+
+    def _compact_qp(self, k: int, rows: int) -> tuple:
+        """Views of the bound arrays holding the compiled cycle's compact QP (k variables, rows
+        rows: the swing feet's forces and the free rows left out, see passive_cycle.cpp)."""
+        return (self.H.reshape(-1)[:k * k].reshape(k, k), self.g[:k],
+                self.A.reshape(-1)[:rows * k].reshape(rows, k), self.upper[:k + rows],
+                self.lower[:k + rows], self.sense[:k + rows])
+
+    def _native_spec(self) -> dict:
+        """Model, contacts, weights, gains and limits for the compiled cycle (copied, not shared)."""
+        robot, model = self.robot, self.robot.model
+        joints = range(1, model.njoints)
+        frames = [model.frames[robot.contact(n).frame_id] for n in self.contacts]
+        limits = robot.torque_limits
+        cap = np.full(robot.na, np.inf)
+        for joint, value in self.torque_limits.upper_override.items():
+            if joint not in robot.joint_names:
+                raise ValueError(f"upper_override: unknown joint '{joint}'")
+            i = robot.joint_names.index(joint)
+            cap[i] = min(cap[i], float(value))
+        imp, lim = self.impedance, self.joint_limits
+        return {
+            "parents": [int(model.parents[j]) for j in joints],
+            "kinds": [model.joints[j].shortname() for j in joints],
+            "placements": np.array([model.jointPlacements[j].homogeneous for j in joints]),
+            "masses": np.array([model.inertias[j].mass for j in joints]),
+            "levers": np.array([model.inertias[j].lever for j in joints]),
+            "inertias": np.array([model.inertias[j].inertia for j in joints]),
+            "armature": np.asarray(model.armature, float),
+            "contact_joints": [int(f.parentJoint) for f in frames],
+            "contact_placements": np.array([f.placement.homogeneous for f in frames]),
+            "radii": self._radii, "leg": [int(i) for i in self._leg],
+            "n_legs": len(self.planner.legs), "q_min": robot.q_min, "q_max": robot.q_max,
+            "torque_constant": limits.constant, "linkage_rows": [int(i) for i in limits._linkage_rows],
+            "linkage_params": limits._linkage.ravel(),
+            "torque_scale": limits.scale * self.torque_limits.scale, "torque_cap": cap,
+            "swing_slack": self.swing_slack, "slack_weight": self.slack_weight,
+            "K_st": float(self.K_st), "D_st": float(self.D_st), "Q": self.Q,
+            "R_qdd": float(self.R_qdd), "R_force": float(self.R_force),
+            "regularization": self.regularization,
+            "tangential_weight": float(self.tangential_weight),
+            "torque_weights": self.torque_weights, "mu": self.mu, "f_min": float(self.f_min),
+            "f_max": float(self.f_max), "swing_K": float(self.swing.K),
+            "swing_D": float(self.swing.D), "swing_feedforward": bool(self.swing.feedforward),
+            "K_x": imp.K_x, "D_x": imp.D_x, "K_theta": imp.K_theta, "D_theta": imp.D_theta,
+            "trunk_feedforward": bool(imp.feedforward), "mass": robot.mass,
+            "limits_mode": lim.mode, "horizon": float(lim.horizon), "a_max": float(lim.a_max),
+            "steepness": float(lim.steepness)}
+
+    def configure(self) -> None:
+        """Hand changed weights, gains or limits to the native engine (no-op for "python")."""
+        if self._native is not None:
+            self._native.configure(self._native_spec())
+            if self._nb["errors"] is not self.impedance.last_errors:  # a new impedance object
+                self._nb["errors"] = self.impedance.last_errors
+                self._native.bind(self._nb)
+
+    def compute(self, q, v, t: float = 0.0) -> Solution:
+        """Torques for the state (q, v) at time ``t`` (see PlannedController.compute)."""
+        if self._native is None:
+            return super().compute(q, v, t)
+        self._native.update(q, v)
+        return self._solve_native(self.planner.update(t, feet=self._nb["feet"].copy()))
+
+    def cycle(self, q, v, plan) -> Solution:
+        """One cycle at the state (q, v) for a given ``plan``: update + QP + torques."""
+        if self._native is None:
+            self.robot.update(q, v)
+            return self.solve(plan)
+        self._native.update(q, v)
+        return self._solve_native(plan)
+
+    def _solve_native(self, plan) -> Solution:
+        t0 = time.perf_counter()
+        self.last_plan = plan
+        nb, trunk = self._nb, plan.trunk
+        if self.observer is not None and self._commanded_wrench is not None:
+            self.impedance.external_wrench = self.observer.update(
+                nb["h_G"], self._commanded_wrench, self.robot.mass, self.control_period)
+        shape = self._native.assemble(plan.contact, plan.touchdown_normal, plan.foot_position,
+                              plan.foot_velocity, plan.foot_acceleration, trunk.position,
+                              trunk.velocity, trunk.acceleration, trunk.rotation,
+                              trunk.angular_velocity, trunk.angular_acceleration,
+                              self.impedance.external_wrench)
+        t1 = time.perf_counter()
+        qp = self._compact_views.get(shape)
+        if qp is None:
+            qp = self._compact_views[shape] = self._compact_qp(*shape)
+        x, _, flag, info = daqp.solve(*qp)
+        self.last_x = x
+        t2 = time.perf_counter()
+        iterations = info.get("iterations", 0)
+        self._tau_bounds = nb["tau_lo"], nb["tau_hi"]
+        ok = flag in _DAQP_OK
+        excess = self._native.finish(x) if ok else math.nan
+        ok = ok and excess == excess  # NaN: x not finite
+        if ok:
+            qdd, F, tau = nb["qdd"].copy(), nb["forces"].copy(), nb["tau"].copy()
+            status = self._excess_status(excess)
+            commanded = nb["commanded"].copy()
+        else:
+            qdd, F, tau, status = self._failed(flag, nb["h"][6:])
+            commanded = np.zeros(6)
+        stance = plan.contact[self._leg]
+        swing_errors = nb["swing_residual"] if ok else None
+        return self._report(ok, qdd, F, tau, status, commanded, nb["wrench_d"].copy(), stance,
+                            swing_errors, {"assemble": t1 - t0, "solve": t2 - t1,
+                                           "iterations": iterations})
 
     # ------------------------------------------------------------------ the same problem as a stack
     def as_stack(self, plan):

@@ -147,6 +147,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         nonlocal fell
         plan = ctrl.last_plan
         q, v = sim.state()
+        if not (np.array_equal(robot.q, q) and np.array_equal(robot.v, v)):
+            robot.update(q, v)  # controllers that keep their own terms (PassiveWBC engine="native")
         pin.framesForwardKinematics(robot.model, pin_data, q)
         imp = ctrl.impedance
         log.t.append(t)

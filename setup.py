@@ -1,0 +1,51 @@
+"""Builds the optional compiled cycle of the passive WBC (src/wholebody/native); the rest of the
+package metadata is in pyproject.toml.
+
+Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
+and ``cmeel-eigen``), so the extension links no Pinocchio library and needs no run-time path.
+The extension is optional: without a C++ compiler (or with WHOLEBODY_NO_NATIVE=1) the package
+installs without it and ``PassiveWBC(engine="native")`` raises a clear error; the Python engine is
+always there.
+"""
+
+import os
+import sys
+from pathlib import Path
+
+from setuptools import Extension, setup
+
+
+def cmeel_include() -> Path | None:
+    """The cmeel prefix's include folder that holds both Pinocchio's headers and Eigen's."""
+    for entry in sys.path:
+        include = Path(entry) / "cmeel.prefix" / "include"
+        if (include / "pinocchio").is_dir() and (include / "eigen3").is_dir():
+            return include
+    return None
+
+
+def extensions() -> list[Extension]:
+    if os.environ.get("WHOLEBODY_NO_NATIVE"):
+        return []
+    include = cmeel_include()
+    if include is None:
+        print("wholebody: Pinocchio/Eigen headers not found; building without the native cycle",
+              file=sys.stderr)
+        return []
+    import pybind11
+
+    return [Extension(
+        "wholebody._passive_cycle",
+        sources=["src/wholebody/native/passive_cycle.cpp"],
+        include_dirs=[str(include), str(include / "eigen3"), pybind11.get_include()],
+        # Pinocchio's joint variants need larger Boost.MPL limits (Pinocchio's CMake exports these)
+        define_macros=[("BOOST_MPL_LIMIT_LIST_SIZE", "30"), ("BOOST_MPL_LIMIT_VECTOR_SIZE", "30"),
+                       ("BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", None),
+                       ("BOOST_FUSION_INVOKE_MAX_ARITY", "12"), ("NDEBUG", None)],
+        extra_compile_args=["-std=c++17", "-O2", "-g0", "-fvisibility=hidden"],
+        language="c++",
+        optional=True,
+    )]
+
+
+setup(ext_modules=extensions())

@@ -1,0 +1,56 @@
+// A Pinocchio model restricted to the joints of legged robots (free flyer, revolute and
+// prismatic about the joint axes), so that every algorithm is instantiated for 10 joint types
+// instead of Pinocchio's 25: the native cycle compiles in under a minute instead of ~2.5 min.
+// Pinocchio 4 needs the mimic joint in any collection; it is declared but never built here.
+#pragma once
+
+#include <pinocchio/multibody.hpp>
+
+namespace wholebody
+{
+  template<typename _Scalar, int _Options>
+  struct JointCollectionLegged
+  {
+    typedef _Scalar Scalar;
+    static constexpr int Options = _Options;
+
+    typedef pinocchio::JointModelRevoluteTpl<Scalar, Options, 0> JointModelRX;
+    typedef pinocchio::JointModelRevoluteTpl<Scalar, Options, 1> JointModelRY;
+    typedef pinocchio::JointModelRevoluteTpl<Scalar, Options, 2> JointModelRZ;
+    typedef pinocchio::JointModelPrismaticTpl<Scalar, Options, 0> JointModelPX;
+    typedef pinocchio::JointModelPrismaticTpl<Scalar, Options, 1> JointModelPY;
+    typedef pinocchio::JointModelPrismaticTpl<Scalar, Options, 2> JointModelPZ;
+    typedef pinocchio::JointModelRevoluteUnalignedTpl<Scalar, Options> JointModelRevoluteUnaligned;
+    typedef pinocchio::JointModelPrismaticUnalignedTpl<Scalar, Options> JointModelPrismaticUnaligned;
+    typedef pinocchio::JointModelFreeFlyerTpl<Scalar, Options> JointModelFreeFlyer;
+    typedef pinocchio::JointModelMimicTpl<Scalar, Options, JointCollectionLegged> JointModelMimic;
+    typedef pinocchio::JointModelCompositeTpl<Scalar, Options, JointCollectionLegged>
+      JointModelComposite;
+    typedef boost::variant<
+      JointModelRX, JointModelRY, JointModelRZ, JointModelFreeFlyer, JointModelRevoluteUnaligned,
+      JointModelPX, JointModelPY, JointModelPZ, JointModelPrismaticUnaligned,
+      boost::recursive_wrapper<JointModelMimic>>
+      JointModelVariant;
+
+    typedef pinocchio::JointDataRevoluteTpl<Scalar, Options, 0> JointDataRX;
+    typedef pinocchio::JointDataRevoluteTpl<Scalar, Options, 1> JointDataRY;
+    typedef pinocchio::JointDataRevoluteTpl<Scalar, Options, 2> JointDataRZ;
+    typedef pinocchio::JointDataPrismaticTpl<Scalar, Options, 0> JointDataPX;
+    typedef pinocchio::JointDataPrismaticTpl<Scalar, Options, 1> JointDataPY;
+    typedef pinocchio::JointDataPrismaticTpl<Scalar, Options, 2> JointDataPZ;
+    typedef pinocchio::JointDataRevoluteUnalignedTpl<Scalar, Options> JointDataRevoluteUnaligned;
+    typedef pinocchio::JointDataPrismaticUnalignedTpl<Scalar, Options> JointDataPrismaticUnaligned;
+    typedef pinocchio::JointDataFreeFlyerTpl<Scalar, Options> JointDataFreeFlyer;
+    typedef pinocchio::JointDataMimicTpl<Scalar, Options, JointCollectionLegged> JointDataMimic;
+    typedef pinocchio::JointDataCompositeTpl<Scalar, Options, JointCollectionLegged>
+      JointDataComposite;
+    typedef boost::variant<
+      JointDataRX, JointDataRY, JointDataRZ, JointDataFreeFlyer, JointDataRevoluteUnaligned,
+      JointDataPX, JointDataPY, JointDataPZ, JointDataPrismaticUnaligned,
+      boost::recursive_wrapper<JointDataMimic>>
+      JointDataVariant;
+  };
+
+  typedef pinocchio::ModelTpl<double, 0, JointCollectionLegged> LeggedModel;
+  typedef pinocchio::DataTpl<double, 0, JointCollectionLegged> LeggedData;
+} // namespace wholebody

@@ -1,0 +1,726 @@
+// The passive whole-body controller's per-cycle work in one compiled object (Fahmi et al. 2019,
+// seed 001): Pinocchio's rigid-body terms, the QP of eqs. 7-18 written into the arrays that
+// wholebody.control.passive.PassiveWBC hands to DAQP, and the torques of eq. 19.
+//
+// It mirrors PassiveWBC's Python assembly (the tested reference) row for row: same layout, same
+// senses, same formulas; tests/test_passive_native.py checks both on recorded closed-loop cycles.
+// Only the arithmetic lives here; the QP is solved by DAQP from Python and failures are handled
+// there. Python allocates every array this object writes (``bind``) so nothing is copied back.
+#include "legged_model.hpp"
+
+#include <pinocchio/algorithm/centroidal.hpp>
+#include <pinocchio/algorithm/compute-all-terms.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/spatial.hpp>
+
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace py = pybind11;
+
+namespace
+{
+  using Eigen::Index;
+  using Eigen::Map;
+  using Eigen::Matrix3d;
+  using Eigen::MatrixXd;
+  using Eigen::Vector3d;
+  using Eigen::VectorXd;
+  using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  constexpr double kGravity = 9.81; // as wholebody.tasks.wrench.GRAVITY
+  constexpr int kEqual = 5, kFree = 0; // DAQP constraint senses
+
+  using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+  std::string shape_of(const py::array & a)
+  {
+    std::string s = "(";
+    for (py::ssize_t i = 0; i < a.ndim(); ++i)
+      s += (i ? ", " : "") + std::to_string(a.shape(i));
+    return s + (a.ndim() == 1 ? ",)" : ")");
+  }
+
+  // A read-only view of an input of exactly ``size`` doubles; ValueError naming ``field``.
+  const double * input(const DoubleArray & a, py::ssize_t size, const char * field, bool finite = true)
+  {
+    if (a.size() != size)
+      throw std::invalid_argument(
+        std::string(field) + ": expected " + std::to_string(size) + " values, got shape "
+        + shape_of(a));
+    const double * p = a.data();
+    if (finite)
+      for (py::ssize_t i = 0; i < size; ++i)
+        if (!std::isfinite(p[i]))
+          throw std::invalid_argument(
+            std::string(field) + ": contains NaN or inf at index " + std::to_string(i));
+    return p;
+  }
+
+  // A writable, C-contiguous buffer owned by Python, kept alive by the holder.
+  template<typename T>
+  T * buffer(const py::dict & buffers, const char * name, py::ssize_t size, std::vector<py::object> & keep)
+  {
+    if (!buffers.contains(name))
+      throw std::invalid_argument(std::string("bind: missing buffer '") + name + "'");
+    py::object obj = buffers[name];
+    if (!py::isinstance<py::array_t<T>>(obj))
+      throw std::invalid_argument(std::string("bind: buffer '") + name + "' has the wrong dtype");
+    auto arr = py::reinterpret_borrow<py::array_t<T>>(obj);
+    if (arr.size() != size || !(arr.flags() & py::array::c_style) || !arr.writeable())
+      throw std::invalid_argument(
+        std::string("bind: buffer '") + name + "' must be a writable C-contiguous array of "
+        + std::to_string(size) + " values, got shape " + shape_of(arr));
+    keep.push_back(obj);
+    return arr.mutable_data();
+  }
+
+  template<typename T>
+  T get(const py::dict & spec, const char * key)
+  {
+    if (!spec.contains(key))
+      throw std::invalid_argument(std::string("spec: missing key '") + key + "'");
+    return spec[key].cast<T>();
+  }
+
+  VectorXd get_vector(const py::dict & spec, const char * key, Index size)
+  {
+    DoubleArray a = get<DoubleArray>(spec, key);
+    const double * p = input(a, size, key, false);
+    return Map<const VectorXd>(p, size);
+  }
+
+  pinocchio::SE3 placement_from(const double * h)
+  {
+    Eigen::Matrix<double, 4, 4, Eigen::RowMajor> m = Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(h);
+    return pinocchio::SE3(m.topLeftCorner<3, 3>(), m.topRightCorner<3, 1>());
+  }
+
+  // Unit normal and two unit tangents (t1, t2, n right-handed), as wholebody.tasks.contact.tangent_basis.
+  void tangent_basis(const Vector3d & normal, Vector3d & t1, Vector3d & t2, Vector3d & n)
+  {
+    n = normal / normal.norm();
+    const Vector3d helper = std::abs(n[0]) < 0.9 ? Vector3d::UnitX() : Vector3d::UnitY();
+    t1 = helper.cross(n);
+    t1 /= t1.norm();
+    t2 = n.cross(t1);
+  }
+} // namespace
+
+class PassiveCycle
+{
+public:
+  explicit PassiveCycle(const py::dict & spec)
+  {
+    build_model(spec);
+    configure(spec);
+  }
+
+  // Weights, gains and limits (see PassiveWBC._native_spec); may be called between cycles.
+  void configure(const py::dict & spec)
+  {
+    slack_none_ = get<std::string>(spec, "swing_slack") == "none";
+    slack_weight_ = get<double>(spec, "slack_weight");
+    K_st_ = get<double>(spec, "K_st");
+    D_st_ = get<double>(spec, "D_st");
+    Q_ = get_vector(spec, "Q", 6);
+    R_qdd_ = get<double>(spec, "R_qdd");
+    R_force_ = get<double>(spec, "R_force");
+    torque_regularization_ = get<std::string>(spec, "regularization") == "torque";
+    tangential_weight_ = get<double>(spec, "tangential_weight");
+    torque_weights_ = get_vector(spec, "torque_weights", na_);
+    mu_ = get<double>(spec, "mu");
+    f_min_ = get<double>(spec, "f_min");
+    f_max_ = get<double>(spec, "f_max");
+    swing_K_ = get<double>(spec, "swing_K");
+    swing_D_ = get<double>(spec, "swing_D");
+    swing_feedforward_ = get<bool>(spec, "swing_feedforward");
+    K_x_ = get_vector(spec, "K_x", 3);
+    D_x_ = get_vector(spec, "D_x", 3);
+    K_theta_ = get_vector(spec, "K_theta", 3);
+    D_theta_ = get_vector(spec, "D_theta", 3);
+    trunk_feedforward_ = get<bool>(spec, "trunk_feedforward");
+    mass_ = get<double>(spec, "mass");
+    limits_tanh_ = get<std::string>(spec, "limits_mode") == "tanh";
+    horizon_ = get<double>(spec, "horizon");
+    a_max_ = get<double>(spec, "a_max");
+    steepness_ = get<double>(spec, "steepness");
+    torque_constant_ = get_vector(spec, "torque_constant", na_);
+    torque_scale_ = get<double>(spec, "torque_scale");
+    torque_cap_ = get_vector(spec, "torque_cap", na_);
+    linkage_rows_ = get<std::vector<int>>(spec, "linkage_rows");
+    DoubleArray params = get<DoubleArray>(spec, "linkage_params");
+    const double * p = input(params, 4 * py::ssize_t(linkage_rows_.size()), "linkage_params");
+    linkage_.resize(linkage_rows_.size(), 4);
+    linkage_ = Map<const RowMatrix>(p, Index(linkage_rows_.size()), 4);
+    for (int row : linkage_rows_)
+      if (row < 0 || row >= na_)
+        throw std::invalid_argument("linkage_rows: joint index out of range");
+  }
+
+  // The arrays this object writes (allocated by Python, see PassiveWBC._bind_native).
+  void bind(const py::dict & b)
+  {
+    keep_.clear();
+    H_ = buffer<double>(b, "H", n_ * n_, keep_);
+    g_ = buffer<double>(b, "g", n_, keep_);
+    A_ = buffer<double>(b, "A", m_ * n_, keep_);
+    upper_ = buffer<double>(b, "upper", n_ + m_, keep_);
+    lower_ = buffer<double>(b, "lower", n_ + m_, keep_);
+    sense_ = buffer<int32_t>(b, "sense", n_ + m_, keep_);
+    feet_ = buffer<double>(b, "feet", 3 * n_legs_, keep_);
+    tau_ = buffer<double>(b, "tau", na_, keep_);
+    tau_lo_ = buffer<double>(b, "tau_lo", na_, keep_);
+    tau_hi_ = buffer<double>(b, "tau_hi", na_, keep_);
+    h_out_ = buffer<double>(b, "h", nv_, keep_);
+    hg_out_ = buffer<double>(b, "h_G", 6, keep_);
+    wrench_d_ = buffer<double>(b, "wrench_d", 6, keep_);
+    commanded_ = buffer<double>(b, "commanded", 6, keep_);
+    errors_ = buffer<double>(b, "errors", 12, keep_);
+    swing_residual_ = buffer<double>(b, "swing_residual", nc_, keep_);
+    qdd_ = buffer<double>(b, "qdd", nv_, keep_);
+    forces_ = buffer<double>(b, "forces", nf_, keep_);
+    bound_ = true;
+  }
+
+  // Robot.update for this cycle: Pinocchio's terms and the contact points, Jacobians and drifts.
+  void update(const DoubleArray & q_in, const DoubleArray & v_in)
+  {
+    const double * qp = input(q_in, nq_, "q");
+    const double * vp = input(v_in, nv_, "v");
+    require_bound();
+    q_ = Map<const VectorXd>(qp, nq_);
+    v_ = Map<const VectorXd>(vp, nv_);
+    const double quat_norm = q_.segment<4>(3).norm();
+    if (std::abs(quat_norm - 1.0) > 1e-3)
+      throw std::invalid_argument(
+        "q: base quaternion q[3:7] must be unit, has norm " + std::to_string(quat_norm));
+    pinocchio::computeAllTerms(model_, data_, q_, v_);
+    pinocchio::updateFramePlacements(model_, data_);
+    pinocchio::computeCentroidalMomentumTimeVariation(model_, data_);
+    data_.M.triangularView<Eigen::StrictlyLower>() =
+      data_.M.transpose().triangularView<Eigen::StrictlyLower>();
+    for (Index i = 0; i < nc_; ++i)
+    {
+      Matrix6x & J6 = frame_jacobians_[i];
+      J6.setZero();
+      pinocchio::getFrameJacobian(model_, data_, frame_ids_[i], pinocchio::LOCAL_WORLD_ALIGNED, J6);
+      const pinocchio::Motion acc = pinocchio::getFrameClassicalAcceleration(
+        model_, data_, frame_ids_[i], pinocchio::LOCAL_WORLD_ALIGNED);
+      frame_drifts_.row(i) = acc.linear().transpose();
+      const Vector3d origin = data_.oMf[frame_ids_[i]].translation();
+      origins_.row(i) = origin.transpose();
+      Map<Vector3d>(feet_ + 3 * leg_[i]) = origin;
+      // the material point under the foot sphere's centre, d = (0, 0, -r) in world axes
+      // (Robot._contact_jacobian / _contact_drift): J_p = J_lin - [d]x J_ang
+      const double r = radii_[i];
+      auto Jp = J_.middleRows(3 * i, 3);
+      Jp = J6.topRows<3>();
+      Jp.row(0) -= r * J6.row(4);
+      Jp.row(1) += r * J6.row(3);
+      const Vector3d w = J6.bottomRows<3>() * v_;
+      const Vector3d al = acc.angular();
+      Vector3d a = acc.linear();
+      a[0] -= r * (al[1] + w[0] * w[2]);
+      a[1] += r * (al[0] - w[1] * w[2]);
+      a[2] += r * (w[0] * w[0] + w[1] * w[1]);
+      drift_.segment<3>(3 * i) = a;
+      points_.row(i) = origin.transpose();
+      points_(i, 2) -= r;
+    }
+    Map<VectorXd>(h_out_, nv_) = data_.nle;
+    Map<Eigen::Matrix<double, 6, 1>> h_G(hg_out_);
+    h_G = data_.hg.toVector();
+    updated_ = true;
+  }
+
+  // The QP of PassiveWBC.solve for one plan (arrays in the planner's leg order), written into
+  // the bound arrays without the swing feet's force variables (fixed at zero) and the rows left
+  // free (swing feet's rows and friction rows): the same optimum, a smaller QP for DAQP.
+  // Returns (variables, rows) of that QP.
+  py::tuple assemble(
+    const py::array_t<bool, py::array::c_style | py::array::forcecast> & stance_in,
+    const DoubleArray & normals_in, const DoubleArray & foot_position,
+    const DoubleArray & foot_velocity, const DoubleArray & foot_acceleration,
+    const DoubleArray & trunk_position, const DoubleArray & trunk_velocity,
+    const DoubleArray & trunk_acceleration, const DoubleArray & trunk_rotation,
+    const DoubleArray & trunk_angular_velocity, const DoubleArray & trunk_angular_acceleration,
+    const DoubleArray & external_wrench)
+  {
+    if (!updated_)
+      throw std::runtime_error("assemble: call update(q, v) first");
+    if (stance_in.size() != n_legs_)
+      throw std::invalid_argument("contact: expected " + std::to_string(n_legs_) + " flags");
+    const bool * stance_legs = stance_in.data();
+    const double * normals = input(normals_in, 3 * n_legs_, "touchdown_normal");
+    const double * fp = input(foot_position, 3 * n_legs_, "foot_position");
+    const double * fv = input(foot_velocity, 3 * n_legs_, "foot_velocity");
+    const double * fa = input(foot_acceleration, 3 * n_legs_, "foot_acceleration");
+    RowMatrix & A = A_full_;
+    RowMatrix & H = H_full_;
+    VectorXd & g = g_full_;
+    VectorXd & up = upper_full_;
+    VectorXd & lo = lower_full_;
+    std::vector<int32_t> & sense = sense_full_;
+    const Index nv = nv_, n = n_, rf = r_feet_, rq = r_fric_;
+    for (Index i = 0; i < nc_; ++i)
+      stance_[i] = stance_legs[leg_[i]];
+    bool all_stance = true;
+    for (Index i = 0; i < nc_; ++i)
+      all_stance = all_stance && stance_[i];
+
+    // eq. 9 and eq. 15 in one block: M q̈ − Jᵀ F = −h (base rows equal, joint rows bounded)
+    A.topLeftCorner(nv, nv) = data_.M;
+    A.block(0, nv, nv, nf_) = -J_.transpose();
+    torque_bounds();
+    up.segment(n, nv) = -data_.nle;
+    lo.segment(n, nv) = -data_.nle;
+    up.segment(n + 6, na_) += Map<VectorXd>(tau_hi_, na_);
+    lo.segment(n + 6, na_) += Map<VectorXd>(tau_lo_, na_);
+    joint_acceleration_bounds(lo, up);
+
+    // stance feet, eq. 10 / 32 (rows of swing feet freed or overwritten below)
+    for (Index i = 0; i < nc_; ++i)
+    {
+      if (stance_[i] && !was_stance_[i])
+        anchors_.row(i) = points_.row(i); // x̂_st of eq. 32
+      was_stance_[i] = stance_[i];
+    }
+    A.block(rf, 0, 3 * nc_, nv) = J_;
+    VectorXd & target = feet_target_;
+    target = -drift_;
+    if (K_st_ != 0.0 || D_st_ != 0.0)
+    {
+      for (Index i = 0; i < nc_; ++i)
+        target.segment<3>(3 * i) += K_st_ * (anchors_.row(i) - points_.row(i)).transpose();
+      target.noalias() -= D_st_ * (J_ * v_);
+    }
+    for (Index k = 0; k < 3 * nc_; ++k)
+    {
+      const bool st = stance_[k / 3];
+      up[n + rf + k] = st ? target[k] : kInf;
+      lo[n + rf + k] = st ? target[k] : -kInf;
+      sense[n + rf + k] = st ? kEqual : kFree;
+    }
+
+    // eqs. 13-14: friction pyramid and normal-force bounds; swing forces bounded to zero
+    tangential_.setZero();
+    for (Index i = 0; i < nc_; ++i)
+    {
+      Vector3d t1, t2, nn;
+      tangent_basis(Map<const Vector3d>(normals + 3 * leg_[i]), t1, t2, nn);
+      const Index rr = rq + 5 * i, fi = nv + 3 * i;
+      A.block<1, 3>(rr, fi) = (t1 - mu_ * nn).transpose();
+      A.block<1, 3>(rr + 1, fi) = (-t1 - mu_ * nn).transpose();
+      A.block<1, 3>(rr + 2, fi) = (t2 - mu_ * nn).transpose();
+      A.block<1, 3>(rr + 3, fi) = (-t2 - mu_ * nn).transpose();
+      A.block<1, 3>(rr + 4, fi) = nn.transpose();
+      const bool st = stance_[i];
+      for (Index k = 0; k < 4; ++k)
+      {
+        up[n + rr + k] = st ? 0.0 : kInf;
+        lo[n + rr + k] = -kInf;
+      }
+      up[n + rr + 4] = st ? f_max_ : kInf;
+      lo[n + rr + 4] = st ? f_min_ : -kInf;
+      if (st)
+        tangential_.block<3, 3>(3 * i, 3 * i) = t1 * t1.transpose() + t2 * t2.transpose();
+      for (Index k = 0; k < 3; ++k)
+      {
+        up[fi + k] = st ? kInf : 0.0;
+        lo[fi + k] = st ? -kInf : 0.0;
+        sense[fi + k] = st ? kFree : kEqual;
+      }
+    }
+
+    // cost: ‖u‖²_R, the trunk wrench (eqs. 4, 7a, 8) and the force regulariser (Sect. V-D)
+    H.setZero();
+    H.diagonal().head(nv).setConstant(R_qdd_);
+    H.diagonal().segment(nv, nf_).setConstant(R_force_);
+    g.setZero();
+    const Vector3d com = data_.com[0];
+    for (Index i = 0; i < nc_; ++i)
+    {
+      const Vector3d r = points_.row(i).transpose() - com;
+      auto Gi = G_.middleCols<3>(3 * i);
+      Gi.topRows<3>().setIdentity();
+      Gi.bottomRows<3>() << 0.0, -r[2], r[1], r[2], 0.0, -r[0], -r[1], r[0], 0.0;
+    }
+    trunk_wrench(
+      input(trunk_position, 3, "trunk.position"), input(trunk_velocity, 3, "trunk.velocity"),
+      input(trunk_acceleration, 3, "trunk.acceleration"), input(trunk_rotation, 9, "trunk.rotation"),
+      input(trunk_angular_velocity, 3, "trunk.angular_velocity"),
+      input(trunk_angular_acceleration, 3, "trunk.angular_acceleration"),
+      input(external_wrench, 6, "external_wrench"));
+    const Map<const Eigen::Matrix<double, 6, 1>> W_d(wrench_d_);
+    GQ_.noalias() = G_.transpose() * Q_.asDiagonal();
+    HF_.noalias() = GQ_ * G_;
+    g.segment(nv, nf_).noalias() = -GQ_ * W_d;
+    if (torque_regularization_) // footnote 16: R_F = J_st,j R_τ J_st,jᵀ
+      HF_.noalias() += J_.rightCols(na_) * torque_weights_.asDiagonal() * J_.rightCols(na_).transpose();
+    else if (tangential_weight_ != 0.0)
+      HF_ += tangential_weight_ * tangential_;
+    H.block(nv, nv, nf_, nf_) += HF_;
+
+    // swing feet: eq. 6 and eq. 12, as a weighted least-squares term (eq. 33) or hard (eq. 11)
+    if (!all_stance)
+    {
+      for (Index i = 0; i < nc_; ++i)
+      {
+        if (stance_[i])
+          continue;
+        const auto Jsw = frame_jacobians_[i].topRows<3>();
+        const Index l = leg_[i];
+        Vector3d a_d = swing_K_ * (Map<const Vector3d>(fp + 3 * l) - origins_.row(i).transpose());
+        a_d += swing_D_ * (Map<const Vector3d>(fv + 3 * l) - Jsw * v_);
+        if (swing_feedforward_)
+          a_d += Map<const Vector3d>(fa + 3 * l);
+        const Vector3d b = a_d - frame_drifts_.row(i).transpose();
+        swing_targets_.row(i) = b.transpose();
+        if (slack_none_)
+        {
+          A.block(rf + 3 * i, 0, 3, nv) = Jsw;
+          for (Index k = 0; k < 3; ++k)
+          {
+            up[n + rf + 3 * i + k] = lo[n + rf + 3 * i + k] = b[k];
+            sense[n + rf + 3 * i + k] = kEqual;
+          }
+        }
+        else // rows stay free: α‖J q̈ − b‖² in the cost
+        {
+          H.topLeftCorner(nv, nv).noalias() += slack_weight_ * (Jsw.transpose() * Jsw);
+          g.head(nv).noalias() -= slack_weight_ * (Jsw.transpose() * b);
+        }
+      }
+    }
+    H.triangularView<Eigen::StrictlyUpper>() = H.transpose().triangularView<Eigen::StrictlyUpper>();
+    compact();
+    assembled_ = true;
+    return py::make_tuple(kept_vars_.size(), kept_rows_.size());
+  }
+
+  // Eq. 19 for a QP solution x = [q̈, F]: torques (clipped to the bounds, returns by how much
+  // they exceeded them), the commanded contact wrench and the swing residuals.
+  // x is the solution of the compact QP; NaN is returned (nothing written) if it is not finite.
+  double finish(const DoubleArray & x_in)
+  {
+    if (!assembled_)
+      throw std::runtime_error("finish: call assemble(...) first");
+    const double * xc = input(x_in, Index(kept_vars_.size()), "x", false);
+    x_full_.setZero();
+    for (std::size_t a = 0; a < kept_vars_.size(); ++a)
+    {
+      if (!std::isfinite(xc[a]))
+        return std::numeric_limits<double>::quiet_NaN();
+      x_full_[kept_vars_[a]] = xc[a];
+    }
+    const Map<const VectorXd> qdd(x_full_.data(), nv_), F(x_full_.data() + nv_, nf_);
+    Map<VectorXd> tau(tau_, na_);
+    tau.noalias() = data_.M.bottomRows(na_) * qdd;
+    tau += data_.nle.tail(na_);
+    tau.noalias() -= J_.rightCols(na_).transpose() * F;
+    const Map<VectorXd> lo(tau_lo_, na_), hi(tau_hi_, na_);
+    const double excess = std::max((tau - hi).maxCoeff(), (lo - tau).maxCoeff());
+    if (excess > 0.0)
+      tau = tau.cwiseMax(lo).cwiseMin(hi);
+    Map<VectorXd>(qdd_, nv_) = qdd;
+    Map<VectorXd>(forces_, nf_) = F;
+    Map<Eigen::Matrix<double, 6, 1>>(commanded_).noalias() = G_ * F;
+    for (Index i = 0; i < nc_; ++i)
+      swing_residual_[i] =
+        stance_[i] ? 0.0
+                   : (frame_jacobians_[i].topRows<3>() * qdd - swing_targets_.row(i).transpose()).norm();
+    return excess;
+  }
+
+  // Writes the full-layout QP without fixed-at-zero variables and free rows into the bound arrays.
+  void compact()
+  {
+    kept_vars_.clear();
+    kept_rows_.clear();
+    for (Index j = 0; j < n_; ++j)
+      if (!(sense_full_[j] == kEqual && upper_full_[j] == 0.0 && lower_full_[j] == 0.0))
+        kept_vars_.push_back(j);
+    for (Index r = 0; r < m_; ++r)
+      if (upper_full_[n_ + r] != kInf || lower_full_[n_ + r] != -kInf)
+        kept_rows_.push_back(r);
+    const Index k = Index(kept_vars_.size()), rows = Index(kept_rows_.size());
+    Map<RowMatrix> H(H_, k, k), A(A_, rows, k);
+    for (Index a = 0; a < k; ++a)
+    {
+      g_[a] = g_full_[kept_vars_[a]];
+      upper_[a] = upper_full_[kept_vars_[a]];
+      lower_[a] = lower_full_[kept_vars_[a]];
+      sense_[a] = sense_full_[kept_vars_[a]];
+      for (Index b = 0; b < k; ++b)
+        H(a, b) = H_full_(kept_vars_[a], kept_vars_[b]);
+    }
+    for (Index r = 0; r < rows; ++r)
+    {
+      const Index row = kept_rows_[r];
+      upper_[k + r] = upper_full_[n_ + row];
+      lower_[k + r] = lower_full_[n_ + row];
+      sense_[k + r] = sense_full_[n_ + row];
+      for (Index b = 0; b < k; ++b)
+        A(r, b) = A_full_(row, kept_vars_[b]);
+    }
+  }
+
+  // Copies of the rigid-body terms of the last update (for tests against Robot.update).
+  py::dict terms() const
+  {
+    py::dict d;
+    d["M"] = MatrixXd(data_.M);
+    d["h"] = VectorXd(data_.nle);
+    d["com"] = Vector3d(data_.com[0]);
+    d["vcom"] = Vector3d(data_.vcom[0]);
+    d["h_G"] = Eigen::Matrix<double, 6, 1>(data_.hg.toVector());
+    d["J"] = MatrixXd(J_);
+    d["drift"] = VectorXd(drift_);
+    d["points"] = MatrixXd(points_);
+    return d;
+  }
+
+  Index nv() const { return nv_; }
+  Index n() const { return n_; }
+  Index m() const { return m_; }
+
+private:
+  void build_model(const py::dict & spec)
+  {
+    auto parents = get<std::vector<int>>(spec, "parents");
+    auto kinds = get<std::vector<std::string>>(spec, "kinds");
+    const py::ssize_t nj = py::ssize_t(parents.size());
+    if (py::ssize_t(kinds.size()) != nj)
+      throw std::invalid_argument("spec: 'kinds' and 'parents' differ in length");
+    DoubleArray placements = get<DoubleArray>(spec, "placements");
+    DoubleArray masses = get<DoubleArray>(spec, "masses");
+    DoubleArray levers = get<DoubleArray>(spec, "levers");
+    DoubleArray inertias = get<DoubleArray>(spec, "inertias");
+    const double * pl = input(placements, 16 * nj, "placements");
+    const double * ms = input(masses, nj, "masses");
+    const double * lv = input(levers, 3 * nj, "levers");
+    const double * in = input(inertias, 9 * nj, "inertias");
+    for (py::ssize_t k = 0; k < nj; ++k)
+    {
+      const pinocchio::SE3 placement = placement_from(pl + 16 * k);
+      const std::string name = "joint" + std::to_string(k + 1);
+      const auto parent = pinocchio::JointIndex(parents[k]);
+      const std::string & kind = kinds[k];
+      pinocchio::JointIndex id;
+      if (kind == "JointModelFreeFlyer")
+        id = model_.addJoint(parent, pinocchio::JointModelFreeFlyer(), placement, name);
+      else if (kind == "JointModelRX")
+        id = model_.addJoint(parent, pinocchio::JointModelRX(), placement, name);
+      else if (kind == "JointModelRY")
+        id = model_.addJoint(parent, pinocchio::JointModelRY(), placement, name);
+      else if (kind == "JointModelRZ")
+        id = model_.addJoint(parent, pinocchio::JointModelRZ(), placement, name);
+      else if (kind == "JointModelPX")
+        id = model_.addJoint(parent, pinocchio::JointModelPX(), placement, name);
+      else if (kind == "JointModelPY")
+        id = model_.addJoint(parent, pinocchio::JointModelPY(), placement, name);
+      else if (kind == "JointModelPZ")
+        id = model_.addJoint(parent, pinocchio::JointModelPZ(), placement, name);
+      else
+        throw std::invalid_argument(
+          "spec: joint " + std::to_string(k + 1) + " is a " + kind
+          + "; the native cycle supports the free flyer and revolute/prismatic joints about x, y, z");
+      const Matrix3d I = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(in + 9 * k);
+      model_.appendBodyToJoint(
+        id, pinocchio::Inertia(ms[k], Map<const Vector3d>(lv + 3 * k), I), pinocchio::SE3::Identity());
+    }
+    if (model_.njoints < 2 || model_.joints[1].nv() != 6)
+      throw std::invalid_argument("spec: the root joint must be a free flyer");
+    nq_ = model_.nq;
+    nv_ = model_.nv;
+    na_ = nv_ - 6;
+    model_.armature = get_vector(spec, "armature", nv_);
+
+    auto contact_joints = get<std::vector<int>>(spec, "contact_joints");
+    leg_ = get<std::vector<int>>(spec, "leg");
+    n_legs_ = get<int>(spec, "n_legs");
+    nc_ = Index(contact_joints.size());
+    if (Index(leg_.size()) != nc_)
+      throw std::invalid_argument("spec: 'leg' and 'contact_joints' differ in length");
+    DoubleArray cpl = get<DoubleArray>(spec, "contact_placements");
+    const double * cp = input(cpl, 16 * nc_, "contact_placements");
+    radii_ = get_vector(spec, "radii", nc_);
+    for (Index i = 0; i < nc_; ++i)
+    {
+      if (leg_[i] < 0 || leg_[i] >= n_legs_)
+        throw std::invalid_argument("spec: 'leg' index out of range");
+      frame_ids_.push_back(model_.addFrame(pinocchio::Frame(
+        "contact" + std::to_string(i), pinocchio::JointIndex(contact_joints[i]),
+        placement_from(cp + 16 * i), pinocchio::OP_FRAME)));
+    }
+    q_min_ = get_vector(spec, "q_min", na_);
+    q_max_ = get_vector(spec, "q_max", na_);
+    data_ = wholebody::LeggedData(model_);
+
+    nf_ = 3 * nc_;
+    n_ = nv_ + nf_;
+    r_feet_ = nv_;
+    r_fric_ = r_feet_ + 3 * nc_;
+    m_ = r_fric_ + 5 * nc_;
+    frame_jacobians_.assign(nc_, Matrix6x::Zero(6, nv_));
+    frame_drifts_.setZero(nc_, 3);
+    origins_.setZero(nc_, 3);
+    points_.setZero(nc_, 3);
+    anchors_.setZero(nc_, 3);
+    swing_targets_.setZero(nc_, 3);
+    J_.setZero(3 * nc_, nv_);
+    drift_.setZero(3 * nc_);
+    feet_target_.setZero(3 * nc_);
+    G_.setZero(6, nf_);
+    GQ_.setZero(nf_, 6);
+    HF_.setZero(nf_, nf_);
+    tangential_.setZero(nf_, nf_);
+    stance_.assign(nc_, false);
+    was_stance_.assign(nc_, false);
+    // the full layout of PassiveWBC._allocate, and its constant parts
+    H_full_.setZero(n_, n_);
+    A_full_.setZero(m_, n_);
+    g_full_.setZero(n_);
+    x_full_.setZero(n_);
+    upper_full_.setZero(n_ + m_);
+    lower_full_.setZero(n_ + m_);
+    upper_full_.head(6).setConstant(kInf);
+    lower_full_.head(6).setConstant(-kInf);
+    sense_full_.assign(n_ + m_, kFree);
+    for (Index i = n_; i < n_ + 6; ++i)
+      sense_full_[i] = kEqual;
+  }
+
+  void require_bound() const
+  {
+    if (!bound_)
+      throw std::runtime_error("update: call bind(buffers) first");
+  }
+
+  // τ_min(q), τ_max(q) of eq. 15: the robot's linkage profile (wholebody.robots.torque_limits),
+  // scaled, capped by the weak-joint overrides.
+  void torque_bounds()
+  {
+    Map<VectorXd> hi(tau_hi_, na_), lo(tau_lo_, na_);
+    hi = torque_constant_;
+    for (std::size_t k = 0; k < linkage_rows_.size(); ++k)
+    {
+      const int j = linkage_rows_[k];
+      const double a = linkage_(Index(k), 0), b = linkage_(Index(k), 1);
+      const double force = linkage_(Index(k), 2), q_peak = linkage_(Index(k), 3);
+      const double t = q_[7 + j] + M_PI / 2 - q_peak;
+      hi[j] = force * a * b * std::abs(std::sin(t)) / std::sqrt(a * a + b * b - 2.0 * a * b * std::cos(t));
+    }
+    hi *= torque_scale_;
+    hi = hi.cwiseMin(torque_cap_);
+    lo = -hi;
+  }
+
+  // eqs. 16-18 (braking) or Herzog et al. 2016's tanh form, as JointAccelerationLimits.bounds.
+  void joint_acceleration_bounds(VectorXd & lo, VectorXd & up) const
+  {
+    for (Index j = 0; j < na_; ++j)
+    {
+      const double q = q_[7 + j], qd = v_[6 + j];
+      if (limits_tanh_)
+      {
+        lo[6 + j] = a_max_ * std::tanh(steepness_ * (q_min_[j] - q));
+        up[6 + j] = a_max_ * std::tanh(steepness_ * (q_max_[j] - q));
+      }
+      else
+      {
+        const double h = horizon_;
+        lo[6 + j] = 2.0 * (q_min_[j] - q - h * qd) / (h * h);
+        up[6 + j] = 2.0 * (q_max_[j] - q - h * qd) / (h * h);
+      }
+    }
+  }
+
+  // W_com,d of eq. 4 (wholebody.tasks.wrench.TrunkImpedance.wrench).
+  void trunk_wrench(
+    const double * position, const double * velocity, const double * acceleration,
+    const double * rotation, const double * angular_velocity, const double * angular_acceleration,
+    const double * external)
+  {
+    const Matrix3d R = data_.oMi[1].rotation();
+    const Vector3d omega = R * v_.segment<3>(3);
+    const Matrix3d R_d = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(rotation);
+    Map<Eigen::Matrix<double, 12, 1>> e(errors_);
+    e.segment<3>(0) = Map<const Vector3d>(position) - data_.com[0];
+    e.segment<3>(3) = pinocchio::log3(Matrix3d(R_d * R.transpose()));
+    e.segment<3>(6) = Map<const Vector3d>(velocity) - data_.vcom[0];
+    e.segment<3>(9) = Map<const Vector3d>(angular_velocity) - omega;
+    Map<Eigen::Matrix<double, 6, 1>> out(wrench_d_);
+    out.head<3>() = K_x_.cwiseProduct(e.segment<3>(0)) + D_x_.cwiseProduct(e.segment<3>(6));
+    out.tail<3>() = K_theta_.cwiseProduct(e.segment<3>(3)) + D_theta_.cwiseProduct(e.segment<3>(9));
+    out[2] += mass_ * kGravity;
+    if (trunk_feedforward_)
+    {
+      out.head<3>() += mass_ * Map<const Vector3d>(acceleration);
+      out.tail<3>() += data_.Ig.inertia().matrix() * Map<const Vector3d>(angular_acceleration);
+    }
+    out -= Map<const Eigen::Matrix<double, 6, 1>>(external);
+  }
+
+  wholebody::LeggedModel model_;
+  wholebody::LeggedData data_;
+  Index nq_ = 0, nv_ = 0, na_ = 0, nc_ = 0, nf_ = 0, n_ = 0, m_ = 0, r_feet_ = 0, r_fric_ = 0;
+  int n_legs_ = 0;
+  std::vector<int> leg_;
+  std::vector<pinocchio::FrameIndex> frame_ids_;
+  VectorXd radii_, q_min_, q_max_, q_, v_;
+  // settings
+  bool slack_none_ = false, torque_regularization_ = false, swing_feedforward_ = true;
+  bool trunk_feedforward_ = true, limits_tanh_ = false;
+  double slack_weight_ = 0, K_st_ = 0, D_st_ = 0, R_qdd_ = 0, R_force_ = 0, tangential_weight_ = 0;
+  double mu_ = 0, f_min_ = 0, f_max_ = 0, swing_K_ = 0, swing_D_ = 0, mass_ = 0;
+  double horizon_ = 0, a_max_ = 0, steepness_ = 0, torque_scale_ = 1;
+  VectorXd Q_, torque_weights_, K_x_, D_x_, K_theta_, D_theta_, torque_constant_, torque_cap_;
+  std::vector<int> linkage_rows_;
+  RowMatrix linkage_;
+  // per-cycle state
+  std::vector<Matrix6x> frame_jacobians_;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> frame_drifts_, origins_, points_, anchors_, swing_targets_;
+  MatrixXd J_, G_, GQ_, HF_, tangential_;
+  RowMatrix H_full_, A_full_;
+  VectorXd g_full_, upper_full_, lower_full_, x_full_;
+  std::vector<int32_t> sense_full_;
+  std::vector<Index> kept_vars_, kept_rows_;
+  VectorXd drift_, feet_target_;
+  std::vector<bool> stance_, was_stance_;
+  bool bound_ = false, updated_ = false, assembled_ = false;
+  // Python-owned buffers
+  std::vector<py::object> keep_;
+  double *H_ = nullptr, *g_ = nullptr, *A_ = nullptr, *upper_ = nullptr, *lower_ = nullptr;
+  int32_t * sense_ = nullptr;
+  double *feet_ = nullptr, *tau_ = nullptr, *tau_lo_ = nullptr, *tau_hi_ = nullptr, *h_out_ = nullptr;
+  double *hg_out_ = nullptr, *wrench_d_ = nullptr, *commanded_ = nullptr, *errors_ = nullptr;
+  double *swing_residual_ = nullptr, *qdd_ = nullptr, *forces_ = nullptr;
+};
+
+PYBIND11_MODULE(_passive_cycle, m)
+{
+  m.doc() = "Compiled per-cycle work of wholebody.control.passive.PassiveWBC (engine='native').";
+  py::class_<PassiveCycle>(m, "PassiveCycle")
+    .def(py::init<const py::dict &>(), py::arg("spec"))
+    .def("configure", &PassiveCycle::configure, py::arg("spec"))
+    .def("bind", &PassiveCycle::bind, py::arg("buffers"))
+    .def("update", &PassiveCycle::update, py::arg("q"), py::arg("v"))
+    .def("assemble", &PassiveCycle::assemble)
+    .def("finish", &PassiveCycle::finish, py::arg("x"))
+    .def("terms", &PassiveCycle::terms)
+    .def_property_readonly("nv", &PassiveCycle::nv)
+    .def_property_readonly("n", &PassiveCycle::n)
+    .def_property_readonly("m", &PassiveCycle::m);
+}

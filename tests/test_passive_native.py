@@ -1,0 +1,213 @@
+"""PassiveWBC(engine="native"): the compiled cycle (src/wholebody/native/passive_cycle.cpp) against
+the Python engine — its tested reference — on closed-loop HyQ trot states, against Robot.update's
+Pinocchio terms (the compiled cycle rebuilds the model from arrays), and in closed loop in the
+twin. The compiled QP leaves out the swing feet's force variables and the free rows; equal
+torques also check that this changes nothing."""
+
+import os
+from types import SimpleNamespace
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from wholebody.control.observer import MomentumObserver
+from wholebody.control.passive import PassiveWBC
+
+try:
+    from wholebody import _passive_cycle  # noqa: F401
+except ImportError:  # pragma: no cover - CI builds it; only an explicit opt-out may skip
+    if not os.environ.get("WHOLEBODY_NO_NATIVE"):
+        raise
+    pytest.skip("native cycle not built (WHOLEBODY_NO_NATIVE set)", allow_module_level=True)
+
+
+@pytest.fixture(scope="module")
+def trot_states(robots):
+    """(q, v, plan) of every WBC cycle of 2 s of closed-loop trot (Python engine), every 3rd kept."""
+    from wholebody.planning.trunk import VelocityCommand
+    from wholebody.scenarios.locomotion import run_gait
+    states = []
+
+    def keep(t, result, ctrl, sim):
+        q, v = sim.state()
+        states.append((q, v, ctrl.last_plan.copy()))
+
+    run_gait(robots["hyq"], "passive", "trot", VelocityCommand.speed_ramp(0.0, 0.3, 1.0, 2.0),
+             duration=2.0, on_cycle=keep)
+    return states[::3]
+
+
+def planner(robot):
+    return SimpleNamespace(legs=robot.contact_names)
+
+
+def tilted(plan, angle=0.26):
+    """The plan with every foot's terrain normal tilted by ``angle`` about x (a 15° ramp)."""
+    plan = plan.copy()
+    plan.touchdown_normal = np.tile([0.0, -np.sin(angle), np.cos(angle)], (len(plan.legs), 1))
+    return plan
+
+
+def assert_same_solution(a, b, where=""):
+    assert a.ok == b.ok, where
+    np.testing.assert_allclose(b.tau, a.tau, atol=1e-6, rtol=0, err_msg=where)
+    np.testing.assert_allclose(b.lam, a.lam, atol=1e-5, rtol=0, err_msg=where)
+    np.testing.assert_allclose(b.qdd, a.qdd, atol=1e-5, rtol=0, err_msg=where)
+    assert [t.name for t in a.tasks] == [t.name for t in b.tasks], where
+    np.testing.assert_allclose([t.error for t in b.tasks], [t.error for t in a.tasks],
+                               atol=1e-5, err_msg=where)
+    assert a.contacts == b.contacts, where
+
+
+def test_terms_match_robot_update(robots, rng):
+    """M, h, CoM and its velocity, centroidal momentum, the contact points' Jacobians, drifts and
+    positions equal Robot.update's (Pinocchio's Python bindings on the URDF model)."""
+    robot = robots["hyq"]
+    wbc = PassiveWBC(robot, planner=planner(robot), engine="native")
+    for _ in range(20):
+        q, v = robot.random_state(rng)
+        robot.update(q, v)
+        wbc._native.update(q, v)
+        terms = wbc._native.terms()
+        np.testing.assert_allclose(terms["M"], robot.M, atol=1e-10)
+        np.testing.assert_allclose(terms["h"], robot.h, atol=1e-9)
+        np.testing.assert_allclose(terms["com"], robot.com, atol=1e-12)
+        np.testing.assert_allclose(terms["vcom"], robot.vcom, atol=1e-12)
+        np.testing.assert_allclose(terms["h_G"], robot.h_G, atol=1e-10)
+        np.testing.assert_allclose(terms["J"], robot.stacked_contact_jacobian(wbc.contacts),
+                                   atol=1e-12)
+        np.testing.assert_allclose(terms["drift"], robot.stacked_contact_drift(wbc.contacts),
+                                   atol=1e-9)
+        np.testing.assert_allclose(terms["points"], robot.contact_points, atol=1e-12)
+
+
+CONFIGS = {
+    "default": {},
+    "hard swing": {"swing_slack": "none"},
+    "torque regularisation": {"regularization": "torque"},
+    "weak knee, eq. 10 stance": {"torque_limit_override": {"lf_kfe_joint": 26.0}, "K_st": 0.0,
+                                 "D_st": 0.0},
+    "no feed-forward, mu 0.4": {"mu": 0.4, "f_min": 10.0},
+}
+
+
+@pytest.mark.parametrize("name", list(CONFIGS))
+@pytest.mark.parametrize("ramp", [False, True], ids=["flat", "ramp"])
+def test_matches_python_engine(robots, trot_states, name, ramp):
+    """Same torques, forces, accelerations and task reports as the Python engine, cycle by cycle
+    (the stance anchors of eq. 32 evolve in both)."""
+    robot = robots["hyq"]
+    options = CONFIGS[name]
+    python = PassiveWBC(robot, planner=planner(robot), **options)
+    native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
+    if name.startswith("no feed-forward"):
+        for wbc in (python, native):
+            wbc.impedance.feedforward = False
+            wbc.swing.feedforward = False
+            wbc.configure()
+    swinging = 0
+    for k, (q, v, plan) in enumerate(trot_states):
+        plan = tilted(plan) if ramp else plan
+        a = python.cycle(q, v, plan)
+        b = native.cycle(q, v, plan)
+        assert_same_solution(a, b, f"{name} cycle {k}")
+        np.testing.assert_allclose(native.impedance.last_errors, python.impedance.last_errors,
+                                   atol=1e-12)
+        swinging += not plan.contact.all()
+    assert swinging > len(trot_states) // 3  # the states exercise the swing rows
+
+
+def test_observer_matches_python_engine(robots, trot_states):
+    """With the W_ext observer (its input is the engine's centroidal momentum and commanded
+    wrench) both engines stay equal."""
+    robot = robots["hyq"]
+    python = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0))
+    native = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
+                        engine="native")
+    for q, v, plan in trot_states[:150]:
+        assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan))
+    np.testing.assert_allclose(native.impedance.external_wrench,
+                               python.impedance.external_wrench, atol=1e-6)
+    assert np.abs(python.impedance.external_wrench).max() > 0.1  # the observer did something
+
+
+def test_configure_hands_over_changed_settings(robots, trot_states):
+    """Settings are copied when the engine is built: a change is seen only after configure()."""
+    robot = robots["hyq"]
+    python = PassiveWBC(robot, planner=planner(robot))
+    native = PassiveWBC(robot, planner=planner(robot), engine="native")
+    q, v, plan = next(s for s in trot_states if not s[2].contact.all())
+    for wbc in (python, native):
+        wbc.Q[:] = (1.0, 1.0, 1.0, 10.0, 10.0, 10.0)
+        wbc.joint_limits.mode = "tanh"
+    a = python.cycle(q, v, plan)
+    assert np.abs(native.cycle(q, v, plan).tau - a.tau).max() > 1e-3
+    native.configure()
+    assert_same_solution(a, native.cycle(q, v, plan))
+
+
+def test_infeasible_is_a_flagged_value(robots, rng):
+    """An infeasible QP (normal-force floor above the weight share): ok False, the reason, and the
+    same finite, limited torque as the Python engine."""
+    robot = robots["hyq"]
+    options = {"f_min": 1500.0, "f_max": 2000.0, "torque_limit_override": {"lf_kfe_joint": 1.0}}
+    python = PassiveWBC(robot, planner=planner(robot), **options)
+    native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
+    q = robot.q_ref.copy()
+    q[7:] += rng.normal(scale=0.02, size=robot.na)
+    v = rng.normal(scale=0.05, size=robot.nv)
+    robot.update(q, v)
+    plan = SimpleNamespace(
+        legs=robot.contact_names, contact=np.ones(4, dtype=bool),
+        foot_position=robot.contact_points.copy(), foot_velocity=np.zeros((4, 3)),
+        foot_acceleration=np.zeros((4, 3)), touchdown_normal=np.tile([0.0, 0.0, 1.0], (4, 1)),
+        trunk=SimpleNamespace(position=robot.com.copy(), velocity=np.zeros(3),
+                              acceleration=np.zeros(3), rotation=np.eye(3),
+                              angular_velocity=np.zeros(3), angular_acceleration=np.zeros(3)))
+    a, b = python.cycle(q, v, plan), native.cycle(q, v, plan)
+    assert not b.ok and "daqp" in b.status
+    np.testing.assert_allclose(b.tau, a.tau, atol=1e-9)
+    hi = robot.torque_bounds()[1]
+    hi[robot.joint_names.index("lf_kfe_joint")] = 1.0
+    assert np.all(np.isfinite(b.tau)) and np.all(np.abs(b.tau) <= hi + 1e-12)
+
+
+@pytest.mark.parametrize("field,args", [
+    ("q", lambda r: (np.full(r.nq, np.nan), np.zeros(r.nv))),
+    ("q", lambda r: (np.zeros(r.nq - 1), np.zeros(r.nv))),
+    ("v", lambda r: (r.q_ref, np.zeros(r.nv + 1))),
+    ("quaternion", lambda r: (np.r_[r.q_ref[:3], 0.0, 0.0, 0.0, 2.0, r.q_ref[7:]], np.zeros(r.nv)))])
+def test_bad_state_names_the_field(robots, field, args):
+    robot = robots["hyq"]
+    native = PassiveWBC(robot, planner=planner(robot), engine="native")
+    with pytest.raises(ValueError, match=field):
+        native.compute(*args(robot), 0.0)
+
+
+@pytest.mark.parametrize("kwargs,match", [({"engine": "gpu"}, "engine"),
+                                          ({"engine": "native", "swing_slack": "single"},
+                                           "engine")])
+def test_bad_engine_options_name_the_field(robots, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        PassiveWBC(robots["hyq"], planner=planner(robots["hyq"]), **kwargs)
+
+
+def test_trot_in_the_twin(robots):
+    """Closed loop (250 Hz WBC, 1 kHz twin): HyQ trots with the native engine as with the Python
+    one — no fall, no failed cycle, the same base trajectory to within 1 mm."""
+    from wholebody.planning.trunk import VelocityCommand
+    from wholebody.scenarios.locomotion import run_gait
+    robot = robots["hyq"]
+    command = VelocityCommand.speed_ramp(0.0, 0.3, 1.0, 2.0)
+    runs = {engine: run_gait(robot, "passive", "trot", command, duration=3.0,
+                             controller_options={"engine": engine})
+            for engine in ("python", "native")}
+    for run in runs.values():
+        assert not run.fell and run.failures == 0
+    assert runs["native"].distance > 0.2
+    q_python, q_native = runs["python"].sim.state()[0], runs["native"].sim.state()[0]
+    np.testing.assert_allclose(q_native[:3], q_python[:3], atol=1e-3)
+    rotation = pin.Quaternion(q_native[3:7]).toRotationMatrix().T @ pin.Quaternion(
+        q_python[3:7]).toRotationMatrix()
+    assert np.linalg.norm(pin.log3(rotation)) < 1e-3
