@@ -2,10 +2,12 @@
 the swing slacks, C++ on an i5; issue target here: full cycle median <= 60 µs, slacks adding <= 10 %).
 
 States (q, v, plan) are recorded from closed-loop HyQ crawl and trot runs in the twin, then replayed:
-full cycle = Robot.update + assembly + DAQP solve + τ (eq. 19); the QP time is DAQP's own. Slack
-modes: per-direction (a weighted least-squares term, no variables), single (one slack variable per
-swing foot + 6 rows), none (hard swing equality). For reference the same QP through the generic
-two-level Formulation (``as_stack``, method "weighted"). A benchmark, not a test.
+full cycle = rigid-body update + assembly + DAQP solve + τ (eq. 19) + the Solution; the QP time is
+the DAQP call. Engines: "python" (Robot.update + numpy assembly) and "native" (the compiled cycle,
+PassiveWBC(engine="native")). Slack modes: per-direction (a weighted least-squares term, no
+variables), single (one slack variable per swing foot + 6 rows; Python engine only), none (hard
+swing equality). For reference the same QP through the generic two-level Formulation
+(``as_stack``, method "weighted"). A benchmark, not a test.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_passive.py [--cycles 1500] [--repeat 3] [--passes 5]
 """
@@ -23,7 +25,7 @@ from types import SimpleNamespace  # noqa: E402
 import numpy as np  # noqa: E402
 
 import wholebody as wb  # noqa: E402
-from wholebody.control.passive import PassiveWBC  # noqa: E402
+from wholebody.control.passive import ENGINES, PassiveWBC  # noqa: E402
 from wholebody.formulation import Formulation  # noqa: E402
 from wholebody.planning.trunk import VelocityCommand  # noqa: E402
 from wholebody.scenarios.locomotion import run_gait  # noqa: E402
@@ -48,20 +50,25 @@ def stats(us: np.ndarray) -> str:
             f"p99 {np.percentile(us, 99):6.0f}  max {us.max():6.0f} µs")
 
 
-def time_dedicated(robot, states, swing_slack: str, passes: int = 1):
-    """Per cycle: update, full cycle and QP time; with ``passes`` > 1 each cycle is run that many
-    times and its fastest pass kept (an estimate of the uncontended time on a shared machine;
-    the repeated passes see the previous pass's warm start, a slight optimistic bias)."""
+def time_dedicated(robot, states, swing_slack: str, passes: int = 1, engine: str = "python"):
+    """Per cycle: full cycle and QP time (and for the Python engine Robot.update's); with
+    ``passes`` > 1 each cycle is run that many times and its fastest pass kept (an estimate of the
+    uncontended time on a shared machine; the repeated passes see the previous pass's warm start,
+    a slight optimistic bias)."""
     wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
-                     swing_slack=swing_slack)
+                     swing_slack=swing_slack, engine=engine)
     full, qp, update = [], [], []
     for q, v, plan in states:
         best = (np.inf, np.inf, np.inf)
         for _ in range(passes):
-            t0 = time.perf_counter()
-            robot.update(q, v)
-            t1 = time.perf_counter()
-            sol = wbc.solve(plan)
+            if engine == "python":
+                t0 = time.perf_counter()
+                robot.update(q, v)
+                t1 = time.perf_counter()
+                sol = wbc.solve(plan)
+            else:
+                t0 = t1 = time.perf_counter()
+                sol = wbc.cycle(q, v, plan)
             t2 = time.perf_counter()
             best = min(best, (t2 - t0, t1 - t0, sol.timings["solve"]))
         full.append(best[0])
@@ -100,15 +107,24 @@ def main() -> None:
         print(f"\n== HyQ {gait}: {len(states)} cycles ({swinging} with a swing leg) ==")
         medians = {}
         for rep in range(args.repeat):
-            for mode in ("per-direction", "single", "none"):
-                update, full, qp = time_dedicated(robot, states, mode, args.passes)
-                medians.setdefault(mode, []).append(np.median(full))
-                print(f"[{rep}] {mode:14s} full cycle {stats(full)} | QP {np.median(qp):5.0f}"
-                      f" | update {np.median(update):4.0f}")
-        base = np.median(medians["none"])
-        for mode, values in medians.items():
-            print(f"median of medians {mode:14s} {np.median(values):6.0f} µs "
-                  f"({np.median(values) / base:.2f}x hard swing)")
+            for engine in ENGINES:
+                for mode in ("per-direction", "single", "none"):
+                    if engine == "native" and mode == "single":
+                        continue
+                    update, full, qp = time_dedicated(robot, states, mode, args.passes, engine)
+                    medians.setdefault((engine, mode), []).append(np.median(full))
+                    extra = f" | update {np.median(update):4.0f}" if engine == "python" else ""
+                    print(f"[{rep}] {engine:6s} {mode:14s} full cycle {stats(full)} | QP "
+                          f"{np.median(qp):5.0f}{extra}")
+        for engine in ENGINES:
+            base = np.median(medians[(engine, "none")])
+            for (e, mode), values in medians.items():
+                if e == engine:
+                    print(f"median of medians {engine:6s} {mode:14s} {np.median(values):6.0f} µs "
+                          f"({np.median(values) / base:.2f}x hard swing)")
+        ratio = [n / p for n, p in zip(medians[("native", "per-direction")],
+                                       medians[("python", "per-direction")])]
+        print(f"native / python (per-direction, paired by repeat): {np.median(ratio):.2f}")
         stack = time_stack(robot, states[:max(200, args.cycles // 5)])
         print(f"generic Formulation, same QP (weighted) {stats(stack)}")
 

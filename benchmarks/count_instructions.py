@@ -8,7 +8,8 @@ misses and IPC differ between parts), but a change that removes instructions fro
 cycle removes time, and the split shows where the cycle goes.
 
 Parts per case: ``update`` (Robot.update only), ``cycle`` (update + assembly + QP + τ) and, for
-the passive WBC, ``qp`` (the recorded QPs replayed through ``daqp.solve`` with the same warm start).
+the passive WBC, ``qp`` (the recorded QPs replayed through ``daqp.solve`` with the same warm start)
+and ``native`` (the whole cycle with ``engine="native"``, the compiled cycle).
 
     python benchmarks/count_instructions.py [--cases passive-trot,table2] [--cycles 100]
 
@@ -29,7 +30,8 @@ import tempfile
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 CASES = ("passive-crawl", "passive-trot", "table2", "table1")
-PARTS = {"passive-crawl": ("update", "cycle", "qp"), "passive-trot": ("update", "cycle", "qp"),
+PARTS = {"passive-crawl": ("update", "cycle", "qp", "native"),
+         "passive-trot": ("update", "cycle", "qp", "native"),
          "table2": ("update", "cycle"), "table1": ("update", "cycle")}
 
 
@@ -44,7 +46,13 @@ def worker(case: str, part: str, cycles: int, data: str) -> None:
         from wholebody.control.passive import PassiveWBC
         states, qps = pickle.load(open(data, "rb"))
         robot = wb.load_robot("hyq")
-        wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names))
+        wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
+                         engine="native" if part == "native" else "python")
+        if part == "native":
+            for k in range(cycles):
+                q, v, plan = states[k % len(states)]
+                wbc.cycle(q, v, plan)
+            return
         if part == "qp":
             import daqp
             dual = None

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..control.passive import ENGINES
 from ..planning.trunk import VelocityCommand
 from ..report.plots import time_series_figure
 from .base import Parameter, Scenario, ScenarioResult
@@ -28,6 +29,7 @@ PARAMETERS = (
     Parameter("ramp_time", 10.0, "duration of the speed ramp (s), after 1 s of standing"),
     Parameter("duration", 12.0, "simulated time (s)"),
     Parameter("gait", "crawl", "crawl or trot"),
+    Parameter("engine", "python", "passive WBC engine: python, or native (the compiled cycle)"),
 )
 
 CONTROLLER_CHOICES = ("passive+quasi-static", "passive", "quasi-static")
@@ -45,6 +47,8 @@ def validate(robot, params: dict) -> None:
                          "feet (hyq)")
     if params["gait"] not in ("crawl", "trot"):
         raise ValueError(f"--set gait: expected crawl or trot, got '{params['gait']}'")
+    if params["engine"] not in ENGINES:
+        raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
@@ -52,7 +56,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     command = VelocityCommand.speed_ramp(params["speed_start"], params["speed_end"], 1.0,
                                          1.0 + params["ramp_time"])
     runs = {name: run_gait(robot, name, params["gait"], command, params["duration"],
-                           progress=progress) for name in names}
+                           progress=progress, controller_options=(
+                               {"engine": params["engine"]} if name == "passive" else None))
+            for name in names}
     expected = commanded_distance(params)
     metrics, success, notes = {}, True, []
     for name, r in runs.items():
