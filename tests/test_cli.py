@@ -38,6 +38,17 @@ def test_run_writes_summary_and_plots(tmp_path, capsys):
     assert "SUCCESS" in capsys.readouterr().out
 
 
+def test_crawl_with_the_native_engine(tmp_path):
+    """`--set engine=native` runs the passive WBC's compiled cycle in the crawl scenario."""
+    out = tmp_path / "crawl"
+    assert main(["run", "crawl", "--robot", "hyq", "--controller", "passive", "--set",
+                 "engine=native", "--set", "duration=3.0", "--set", "ramp_time=2.0",
+                 "--out", str(out), "--no-progress"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["success"] is True and summary["parameters"]["engine"] == "native"
+    assert summary["metrics"]["passive"]["distance_m"] > 0.1
+
+
 def test_run_with_robot_file(tmp_path):
     robot_file = tmp_path / "quad.toml"
     robot_file.write_text(
@@ -58,6 +69,7 @@ def test_run_with_robot_file(tmp_path):
     (["run", "stand", "--set", "duration"], "--set expects key=value"),
     (["run", "stand", "--controller", "mpc"], "no controller 'mpc'"),
     (["run", "stand", "--robot", "missing.toml"], "robot file not found"),
+    (["run", "crawl", "--robot", "hyq", "--set", "engine=gpu"], "--set engine: expected one of"),
 ])
 def test_bad_input_exit_2(argv, needle, capsys):
     assert main(argv) == 2
