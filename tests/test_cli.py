@@ -40,6 +40,8 @@ def test_run_writes_summary_and_plots(tmp_path, capsys):
 
 def test_crawl_with_the_native_engine(tmp_path):
     """`--set engine=native` runs the passive WBC's compiled cycle in the crawl scenario."""
+    from conftest import native_cycle_or_skip
+    native_cycle_or_skip()
     out = tmp_path / "crawl"
     assert main(["run", "crawl", "--robot", "hyq", "--controller", "passive", "--set",
                  "engine=native", "--set", "duration=3.0", "--set", "ramp_time=2.0",

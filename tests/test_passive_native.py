@@ -4,7 +4,6 @@ Pinocchio terms (the compiled cycle rebuilds the model from arrays), and in clos
 twin. The compiled QP leaves out the swing feet's force variables and the free rows; equal
 torques also check that this changes nothing."""
 
-import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,12 +13,9 @@ import pytest
 from wholebody.control.observer import MomentumObserver
 from wholebody.control.passive import PassiveWBC
 
-try:
-    from wholebody import _passive_cycle  # noqa: F401
-except ImportError:  # pragma: no cover - CI builds it; only an explicit opt-out may skip
-    if not os.environ.get("WHOLEBODY_NO_NATIVE"):
-        raise
-    pytest.skip("native cycle not built (WHOLEBODY_NO_NATIVE set)", allow_module_level=True)
+from conftest import native_cycle_or_skip
+
+native_cycle_or_skip()
 
 
 @pytest.fixture(scope="module")
