@@ -32,7 +32,11 @@ def extensions() -> list[Extension]:
         print("wholebody: Pinocchio/Eigen headers not found; building without the native cycle",
               file=sys.stderr)
         return []
-    import pybind11
+    try:
+        import pybind11
+    except ImportError:  # e.g. --no-build-isolation without pybind11 installed
+        print("wholebody: pybind11 not found; building without the native cycle", file=sys.stderr)
+        return []
 
     return [Extension(
         "wholebody._passive_cycle",
