@@ -102,14 +102,9 @@ class Formulation:
     """Maps task rows to solver levels over the reduced [qdd, lambda] or full [qdd, lambda, tau].
 
     The solver sees the decision vector in scaled units, x = s * x_scaled, with s = 1 for
-    accelerations, the robot's weight m g for contact forces, m g times the largest sole half-size
-    for sole moments and tau_max for torques, so that the regulariser eps ||x_scaled||^2 of eq. 5
-    weighs rad/s^2, N and Nm alike. (Unscaled, eps ||lambda||^2 with lambda ~ 500 N outweighs task
-    costs of 1e-2 and visibly trades off the contact constraint.) A sole moment is scaled by the
-    moment that puts the centre of pressure at the sole's edge: scaled like forces instead, the
-    regulariser finds a moment ~10x cheaper than the same wrench made by shifting force between
-    the feet, and the exact minimiser then moves the CoPs to the sole edges (talos14 squat: soles
-    tilt 3.6°, slip 5 cm) wherever the tasks leave the internal wrench free.
+    accelerations, the robot's weight m g for contact forces and tau_max for torques, so that the
+    regulariser eps ||x_scaled||^2 of eq. 5 weighs rad/s^2, N and Nm alike. (Unscaled, eps ||lambda||^2
+    with lambda ~ 500 N outweighs task costs of 1e-2 and visibly trades off the contact constraint.)
     """
 
     def __init__(self, robot: Robot, reduced: bool = True):
@@ -124,15 +119,9 @@ class Formulation:
 
     def scales(self, variables: Variables) -> np.ndarray:
         """s with x = s * x_scaled (see class docstring)."""
-        key = (variables.nv, tuple(variables.lambda_slices))
+        key = (variables.nv, variables.n_lambda)
         if self._scales_key != key:
-            weight = self.robot.mass * 9.81
-            lam = np.full(variables.n_lambda, weight)
-            for name, rows in variables.lambda_slices.items():
-                spec = self.robot.contact(name).spec
-                if spec.type == "rectangle":  # a sole moment of m g x half-size (CoP at the edge)
-                    lam[rows][3:] = weight * max(spec.half_size)  # weighs as much as m g of force
-            parts = [np.ones(variables.nv), lam]
+            parts = [np.ones(variables.nv), np.full(variables.n_lambda, self.robot.mass * 9.81)]
             if not self.reduced:
                 parts.append(self._tau_scale)
             self._scales, self._scales_key = np.concatenate(parts), key
