@@ -26,8 +26,10 @@ Methods
     ``Z`` empty is only evaluated.
 
     Closed form first. Every level's QP is first solved without its rows: the minimiser of
-    ``½‖M u + e‖² + ε/2‖x* + Z u‖²`` by Cholesky of ``MᵀM + εI`` (a regularised least-squares
-    problem). If it satisfies the level's own inequality rows and the relaxed higher rows, it
+    ``½‖M u + e‖² + ε/2‖x* + Z u‖²`` by Householder QR of the stacked ``[M; √ε I]`` (a
+    regularised least-squares problem; not the normal equations ``MᵀM + εI``, whose condition
+    number is squared). The level QP reuses that factor R: it is posed in w = R u, so the
+    backend sees an identity Hessian (see :func:`_level_qp`). If it satisfies the level's own inequality rows and the relaxed higher rows, it
     is the QP's solution (the minimiser of a relaxation that is feasible, with zero slacks) and
     the backend is not called; otherwise the QP of eqs. 10-11 is solved. A level of equalities
     only, below no inequality, is thus exactly the least-squares problem its QP is. On the
@@ -443,13 +445,13 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None, 
             hb = _loosen_tight(hx, high[1], high[2], relax_tol) if tight else high[1:3]
 
         # ---- project the level onto the remaining freedom x = x* + Z u (eq. 8); its
-        # unconstrained minimiser (Cholesky) is tried first: if it satisfies the level's own rows
+        # unconstrained minimiser (QR least squares) is tried first: if it satisfies the level's own rows
         # and the relaxed higher rows, it is the QP's solution (the minimiser of a relaxation,
         # feasible with zero slacks) and no QP is solved. A level of equalities below no
         # inequality is always solved so: its QP (eq. 10) is exactly a regularised least-squares
         # problem.
-        wB, M, Hu, gu, own, ls = _project_level(L, B, C, Z, z, x, eps, drop2)
-        u, ok, status = _unconstrained(*ls, eps)
+        wB, M, own, ls = _project_level(L, B, C, Z, z, x, eps, drop2)
+        u, ok, status, Rc = _unconstrained(*ls, eps)
         rows = _qp_rows(own, high, HZ, hx, hb, x, z) if (own is not None or high is not None) else None
         solved = ok and (rows is None or not _violated(rows, u))
         if not solved and tight:
@@ -468,15 +470,15 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None, 
                     if high is not None:
                         hx = high[0] @ x
                         hb = _loosen_tight(hx, high[1], high[2], relax_tol)
-                wB, M, Hu, gu, own, ls = _project_level(L, B, C, Z, z, x, eps, drop2)
-                u, ok, status = _unconstrained(*ls, eps)
+                wB, M, own, ls = _project_level(L, B, C, Z, z, x, eps, drop2)
+                u, ok, status, Rc = _unconstrained(*ls, eps)
                 rows = (_qp_rows(own, high, HZ, hx, hb, x, z)
                         if (own is not None or high is not None) else None)
                 solved = ok and (rows is None or not _violated(rows, u))
         if not solved and rows is not None:
-            u, ok, status = _level_qp(Hu, gu, *rows, backend, opts)
+            u, ok, status = _level_qp(Rc, *rows, backend, opts)
             if not ok and fallback is not None:
-                u, ok, status2 = _level_qp(Hu, gu, *rows, fallback, {})
+                u, ok, status2 = _level_qp(Rc, *rows, fallback, {})
                 if ok:
                     msg = f"level {r} ({L.name!r}): {status}; solved with {fallback}"
                     log.debug(msg)
@@ -512,19 +514,15 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None, 
 
 
 def _project_level(L, B, C, Z, z, x, eps, drop2):
-    """The level over x = x* + Z u (eq. 8): weighted rows W B, M = W B Z, the Hessian and gradient
-    of ½‖M u + W(B x* − b)‖² + ε/2 ‖x* + Z u‖², and its own inequality rows that still have
-    freedom: (C, C Z, lower, upper, V, drop_tol² ‖C_i‖²), or None."""
+    """The level over x = x* + Z u (eq. 8): weighted rows W B, M = W B Z, its own inequality rows
+    that still have freedom: (C, C Z, lower, upper, V, drop_tol² ‖C_i‖²) or None, and the data
+    (M, r0 = W(B x* − b), Zᵀx*) of ½‖M u + r0‖² + ε/2 ‖x* + Z u‖² for :func:`_unconstrained`."""
     wB = L.w[:, None] * B
     if Z is None:
         M, zx = wB, x
     else:
         M, zx = wB @ Z, Z.T @ x
-    Hu = M.T @ M
-    Hu.flat[:: z + 1] += eps
     r0 = wB @ x - L.w * L.b
-    gu = M.T @ r0
-    gu += eps * zx
     own = None
     if C.shape[0]:  # own rows without freedom keep their (fixed) violation: no slack
         CZ = C if Z is None else C @ Z
@@ -534,12 +532,12 @@ def _project_level(L, B, C, Z, z, x, eps, drop2):
             own = (C, CZ, L.lower, L.upper, L.v, nC)
         elif free.any():
             own = (C[free], CZ[free], L.lower[free], L.upper[free], L.v[free], nC[free])
-    return wB, M, Hu, gu, own, (M, r0, zx)
+    return wB, M, own, (M, r0, zx)
 
 
 def _qp_rows(own, high, HZ, hx, hb, x, z):
     """The rows of the level QP in u: own (C Z, C x*, lower, upper, V), higher (H Z, H x*,
-    relaxed lower, relaxed upper) — the argument list of :func:`_level_qp` after (Hu, gu)."""
+    relaxed lower, relaxed upper) — the argument list of :func:`_level_qp` after (R, c)."""
     empty = np.zeros(0)
     own_qp = ((np.zeros((0, z)), empty, empty, empty, empty) if own is None
               else (own[1], own[0] @ x, own[2], own[3], own[4]))
@@ -723,7 +721,10 @@ def _drop_frozen(high, HZ, x, feas_tol, L, warns):
 def _unconstrained(M, r0, zx, eps):
     """The minimiser of ‖M u + r0‖² + ε ‖zx + u‖² (the level over x = x* + Z u, Z orthonormal so
     that ‖x* + Z u‖² = ‖Zᵀx* + u‖² + const) as the least-squares solution of the stacked system
-    [M; √ε I] u ≈ [−r0; −√ε zx] by Householder QR (LAPACK dgels).
+    [M; √ε I] u ≈ [−r0; −√ε zx] by Householder QR (LAPACK dgeqrf, dormqr, dtrtrs — what dgels
+    does). Returns ``(u, ok, status, (R, c))`` with R the triangular factor and c the first z
+    entries of Qᵀ·rhs, so that the level's cost is ‖R u − c‖² + const: :func:`_level_qp` uses
+    them to give the backend the well-conditioned problem in w = R u.
 
     Not by Cholesky of the normal equations MᵀM + ε I: that squares the condition number, and a
     level whose row weights span 1e4 … 1e-4 (Table 2's level 3: momentum 1e4, GRF regulariser
@@ -736,56 +737,78 @@ def _unconstrained(M, r0, zx, eps):
     A[k:] = 0.0
     root = math.sqrt(eps)
     A[k:].flat[:: z + 1] = root
-    rhs = np.empty(k + z)
-    np.negative(r0, out=rhs[:k])
-    np.multiply(zx, -root, out=rhs[k:])
-    _, sol, info = lapack.dgels(A, rhs, overwrite_a=True, overwrite_b=True)
-    u = sol[:z]
+    rhs = np.empty((k + z, 1), order="F")
+    np.negative(r0, out=rhs[:k, 0])
+    np.multiply(zx, -root, out=rhs[k:, 0])
+    qr, tau, _, info = lapack.dgeqrf(A, overwrite_a=True)
+    if info == 0:
+        qtb, _, info = lapack.dormqr("L", "T", qr, tau, rhs, max(1, (k + z) * 64), overwrite_c=True)
+    if info != 0:
+        return None, False, f"least squares: QR failed (info {info})", None
+    R = np.triu(qr[:z, :z])
+    c = qtb[:z, 0].copy()
+    u, info = lapack.dtrtrs(R, c, lower=0)
     if info != 0 or not np.isfinite(u).all():
-        return None, False, f"least squares: dgels failed (info {info})"
-    return u.copy(), True, "optimal"
+        return None, False, f"least squares: triangular solve failed (info {info})", None
+    return u, True, "optimal", (R, c)
 
 
-def _level_qp(Hu, gu, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
+def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
     """QP of eqs. 10-11 over [u, s]: own rows lower − s/V ≤ C x ≤ upper + s/V, higher rows relaxed.
+
+    The level's cost ½‖M u + r0‖² + ε/2 ‖Zᵀx* + u‖² is ½‖R u − c‖² + const with R, c from the QR
+    of the stacked system (:func:`_unconstrained`, ``Rc = (R, c)``). The backend is given the
+    problem in w = R u: Hessian I (with the slacks' I), gradient −c, rows C Z R⁻¹ (triangular
+    solves); u = R⁻¹ w afterwards. Handing it Hu = MᵀM + εI instead (the normal equations) squares
+    cond(R): with Table 2's level-3 weights (1e4 … 1e-4, ε = 1e-4) cond(Hu) ~ 1e16, and every
+    backend's factorisation of Hu turned the weakly weighted directions (the internal wrench
+    between the feet) into rounding noise (torques moved by up to 2 Nm for a 1e-13 change of the
+    state). The row values A u are the same in both parametrisations, so the backends'
+    feasibility tolerances keep their meaning.
 
     ``s ≥ 0`` is not imposed: it holds at the optimum (a negative slack only tightens its row
     and costs s², so it is never better than s = 0).
     """
-    z = Hu.shape[0]
+    R, c = Rc
+    z = R.shape[0]
     m = CZ.shape[0]
     nv = z + m
-    H = np.zeros((nv, nv))
-    H[:z, :z] = Hu
-    H.flat[z * nv + z :: nv + 1] = 1.0
+    H = np.eye(nv)
     g = np.zeros(nv)
-    g[:z] = gu
+    np.negative(c, out=g[:z])
     fl, fu = np.isfinite(lo), np.isfinite(up)
     il, iu = np.flatnonzero(fl), np.flatnonzero(fu)
     nl_, nu_, nh = il.size, iu.size, HZ.shape[0]
-    A = np.zeros((nl_ + nu_ + nh, nv))
-    lower = np.empty(nl_ + nu_ + nh)
-    upper = np.empty(nl_ + nu_ + nh)
+    nr = nl_ + nu_ + nh
+    A = np.zeros((nr, nv))
+    lower = np.empty(nr)
+    upper = np.empty(nr)
+    Au = np.empty((nr, z))  # the rows in u, then mapped to w: Au R⁻¹ = (R⁻ᵀ Auᵀ)ᵀ
     if m:
         VCZ = vw[:, None] * CZ
         # V C Z u + s ≥ V (lower − C x*)
-        A[:nl_, :z] = VCZ[il]
+        Au[:nl_] = VCZ[il]
         A[np.arange(nl_), z + il] = 1.0
         lower[:nl_] = vw[il] * (lo[il] - c0[il])
         upper[:nl_] = np.inf
         # V C Z u − s ≤ V (upper − C x*)
-        A[nl_ : nl_ + nu_, :z] = VCZ[iu]
+        Au[nl_ : nl_ + nu_] = VCZ[iu]
         A[nl_ + np.arange(nu_), z + iu] = -1.0
         lower[nl_ : nl_ + nu_] = -np.inf
         upper[nl_ : nl_ + nu_] = vw[iu] * (up[iu] - c0[iu])
     if nh:
-        A[nl_ + nu_ :, :z] = HZ
+        Au[nl_ + nu_ :] = HZ
         lower[nl_ + nu_ :] = hlo - h0
         upper[nl_ + nu_ :] = hup - h0
+    if nr:
+        A[:, :z] = solve_triangular(R, Au.T, trans="T", lower=False, check_finite=False).T
     y, status, ok = solve_qp(H, g, A, lower, upper, backend=backend, **opts)
     if not ok:
         return None, False, status
-    return y[:z], True, status
+    u = solve_triangular(R, y[:z], lower=False, check_finite=False)
+    if not np.isfinite(u).all():
+        return None, False, f"{backend}: non-finite solution after the change of variables"
+    return u, True, status
 
 
 # ---------------------------------------------------------------------------- weighted
