@@ -766,6 +766,18 @@ def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
     state). The row values A u are the same in both parametrisations, so the backends'
     feasibility tolerances keep their meaning.
 
+    Measured: the 15 Nm torque step of the single-support scenario (t = 1.358 s, PD, DAQP) was
+    such a mis-solved QP, not a change of the problem: at level 3 DAQP on Hu (cond 1.8e13) put
+    the left sole's lateral CoP row (a level-2 row) into its active set, at 16× the true
+    optimum's cost (3.0e-4 vs 1.9e-5); the problem in w keeps only the right sole's row active
+    (left row 15.5 inside its bound), and 82 N no longer jump between the feet (largest
+    cycle-to-cycle torque change in [1.3, 1.4] s: 0.05 Nm).
+    Open: DAQP without fallback fails more often on Table 1 (talos, double support, reduced:
+    210 instead of 88 of 500 bench cycles, "infeasible"/"cycling" at level 4; quadprog and
+    proxsuite solve the same QPs). The failing QPs have 7 active rows, nearly (σ_min 3e-6) or
+    exactly dependent after normalisation, with a margin (``relax_tol``) far below DAQP's
+    tolerances in the normalised metric; widening the rows by 1e-5 ‖row‖ makes DAQP solve all.
+
     ``s ≥ 0`` is not imposed: it holds at the optimum (a negative slack only tightens its row
     and costs s², so it is never better than s = 0).
     """
