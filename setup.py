@@ -1,11 +1,11 @@
-"""Builds the optional compiled cycle of the passive WBC (src/wholebody/native); the rest of the
-package metadata is in pyproject.toml.
+"""Builds the optional compiled parts (src/wholebody/native): the passive WBC's cycle and the
+cascade's common path. The rest of the package metadata is in pyproject.toml.
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
 and ``cmeel-eigen``), so the extension links no Pinocchio library and needs no run-time path.
 The extension is optional: without a C++ compiler (or with WHOLEBODY_NO_NATIVE=1) the package
-installs without it and ``PassiveWBC(engine="native")`` raises a clear error; the Python engine is
-always there.
+installs without them: ``PassiveWBC(engine="native")`` then raises a clear error and the cascade
+runs in Python only (same results).
 """
 
 import os
@@ -38,18 +38,24 @@ def extensions() -> list[Extension]:
         print("wholebody: pybind11 not found; building without the native cycle", file=sys.stderr)
         return []
 
-    return [Extension(
-        "wholebody._passive_cycle",
-        sources=["src/wholebody/native/passive_cycle.cpp"],
-        include_dirs=[str(include), str(include / "eigen3"), pybind11.get_include()],
-        # Pinocchio's joint variants need larger Boost.MPL limits (Pinocchio's CMake exports these)
-        define_macros=[("BOOST_MPL_LIMIT_LIST_SIZE", "30"), ("BOOST_MPL_LIMIT_VECTOR_SIZE", "30"),
-                       ("BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", None),
-                       ("BOOST_FUSION_INVOKE_MAX_ARITY", "12"), ("NDEBUG", None)],
-        extra_compile_args=["-std=c++17", "-O2", "-g0", "-fvisibility=hidden"],
-        language="c++",
-        optional=True,
-    )]
+    flags = ["-std=c++17", "-O2", "-g0", "-fvisibility=hidden"]
+    eigen = [str(include / "eigen3"), pybind11.get_include()]
+    return [
+        Extension(
+            "wholebody._passive_cycle",
+            sources=["src/wholebody/native/passive_cycle.cpp"],
+            include_dirs=[str(include)] + eigen,
+            # Pinocchio's joint variants need larger Boost.MPL limits (its CMake exports these)
+            define_macros=[("BOOST_MPL_LIMIT_LIST_SIZE", "30"), ("BOOST_MPL_LIMIT_VECTOR_SIZE", "30"),
+                           ("BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", None),
+                           ("BOOST_FUSION_INVOKE_MAX_ARITY", "12"), ("NDEBUG", None)],
+            extra_compile_args=flags, language="c++", optional=True),
+        Extension(  # the cascade's common path: Eigen only
+            "wholebody._cascade",
+            sources=["src/wholebody/native/cascade.cpp"],
+            include_dirs=eigen, define_macros=[("NDEBUG", None)],
+            extra_compile_args=flags, language="c++", optional=True),
+    ]
 
 
 setup(ext_modules=extensions())

@@ -114,17 +114,6 @@ def test_table2_momentum_rows_weights(robots):
     np.testing.assert_array_equal(w, [1e4] * 6)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known defect (session 4): the cascade solves each level's least squares by Cholesky of the "
-    "normal equations MᵀM + εI, which squares the condition number; Table 2's level 3 weighs rows "
-    "from 1e4 to 1e-4, so the directions left to ε (the internal wrench between the feet) are "
-    "rounding noise: a 1e-13 relative change of v moves talos14's torques by up to 4.2 Nm on this "
-    "test's 40 states (median 1.4 Nm, max 20 Nm on bench_wbc's moving states). A QR least-squares solve (branch native-cascade) brings that to 1e-11 Nm, but then "
-    "the exact minimiser prefers sole moments (ε weighs forces and moments alike in the scaled "
-    "variables) and the squat test's soles tilt 3.6°. Weighing sole moments by 1/half-size in the "
-    "GRF regulariser (or in ε's scaling) fixes the squat, but single support then fails its 10 Nm "
-    "torque-continuity bound: 15 Nm in one cycle at t = 1.358 s of the CoG shift, where 82 N "
-    "jump between the feet (ε-scaling variant: 18.9 Nm chatter during unloading). Not resolved."))
 def test_table2_torques_are_determined_by_the_state(robots):
     """A change of the state at the level of rounding (1e-13 relative) must not move the torques
     by more than 1e-6 Nm: the hierarchy's solution is a function of its data."""

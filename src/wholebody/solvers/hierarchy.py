@@ -26,8 +26,10 @@ Methods
     ``Z`` empty is only evaluated.
 
     Closed form first. Every level's QP is first solved without its rows: the minimiser of
-    ``½‖M u + e‖² + ε/2‖x* + Z u‖²`` by Cholesky of ``MᵀM + εI`` (a regularised least-squares
-    problem). If it satisfies the level's own inequality rows and the relaxed higher rows, it
+    ``½‖M u + e‖² + ε/2‖x* + Z u‖²`` by Householder QR of the stacked ``[M; √ε I]`` (a
+    regularised least-squares problem; not the normal equations ``MᵀM + εI``, whose condition
+    number is squared). The level QP reuses that factor R: it is posed in w = R u, so the
+    backend sees an identity Hessian (see :func:`_level_qp`). If it satisfies the level's own inequality rows and the relaxed higher rows, it
     is the QP's solution (the minimiser of a relaxation that is feasible, with zero slacks) and
     the backend is not called; otherwise the QP of eqs. 10-11 is solved. A level of equalities
     only, below no inequality, is thus exactly the least-squares problem its QP is. On the
@@ -137,6 +139,11 @@ from scipy.optimize import nnls
 
 from .backends import BACKENDS, solve_qp
 from .level import Level
+
+try:  # the cascade's common path, compiled (src/wholebody/native/cascade.cpp); optional
+    from .._cascade import cascade_common_path as _compiled_common_path
+except ImportError:  # not built (no C++ compiler at install): the Python cascade does everything
+    _compiled_common_path = None
 
 __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
            "row_normalised"]
@@ -248,6 +255,7 @@ def solve_hierarchy(
     backend_options: dict | None = None,
     daqp_native_weights: bool = False,
     fallback_backend: str | None = None,
+    compiled: bool = True,
 ) -> HierarchySolution:
     """Lexicographic optimum of a list of :class:`Level` (Herzog et al. 2016, eqs. 5-11).
 
@@ -277,6 +285,10 @@ def solve_hierarchy(
         this backend (same QP, so the same optimum), recorded in ``warnings``. Cheaper than
         re-solving the whole cascade: each backend has rare failures of its own on these
         ill-conditioned QPs (DAQP: cycling/infeasible verdicts on ~10-20 % of Table 1 cycles).
+    compiled : cascade only — try the compiled common path first (``wholebody._cascade``, when
+        built): if no level needs a QP (every level's unconstrained minimiser is feasible, nothing
+        to warn about) it returns the cascade's solution without per-level timings; otherwise the
+        Python cascade solves the problem. ``False`` runs the Python cascade only.
 
     Bad input (NaN/inf in data, inconsistent column counts, unknown names) raises ValueError
     naming the level and field. Numerical failures never raise: the solution is flagged
@@ -317,8 +329,33 @@ def solve_hierarchy(
         sol = _solve_cascade(levels, n, backend, regularization, None, tols, opts, t0, fallback_backend)
         sol.warnings = (warn,) + sol.warnings
         return sol
+    resume = None
+    if compiled and _compiled_common_path is not None:
+        sol, resume = _common_path(levels, n, regularization, first_level_solution, tols, t0)
+        if sol is not None:
+            return sol
     return _solve_cascade(levels, n, backend, regularization, first_level_solution, tols, opts, t0,
-                          fallback_backend)
+                          fallback_backend, resume)
+
+
+def _common_path(levels, n, eps, fls, tols, t0):
+    """The cascade as far as no level needs a QP, compiled (see ``compiled`` of solve_hierarchy):
+    (solution, None) when it got through every level, else (None, the state at the start of the
+    first level it could not do, for :func:`_solve_cascade` to resume from; or None)."""
+    rows = [_rows(L, n) for L in levels]
+    x1, Z1 = fls if fls is not None else (None, None)
+    out = _compiled_common_path([B for B, _ in rows], [L.b for L in levels],
+                                [L.w for L in levels], [C for _, C in rows],
+                                [L.lower for L in levels], [L.upper for L in levels], n, eps,
+                                x1, Z1, *tols)
+    if out is None:
+        return None, None
+    done, resume = out
+    if done is None:
+        return None, resume
+    x, zdims = done
+    return _finish(levels, x, "optimal", True, t0, np.zeros(len(levels)), "cascade",
+                   len(levels), zdims, []), None
 
 
 class FirstLevelSolution(NamedTuple):
@@ -354,7 +391,9 @@ def _check_first_level(fls):
 
 
 # ---------------------------------------------------------------------------- cascade
-def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
+def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None, resume=None):
+    """The cascade (module docstring). ``resume`` = (r, x*, Z, higher rows, null-space dimensions
+    of the levels before r): the state at the start of level r, from the compiled common path."""
     rank_tol, drop_tol, relax_tol, feas_tol = tols
     drop2 = drop_tol * drop_tol  # freedom tests on squared norms: ‖C_i Z‖² > drop_tol² ‖C_i‖²
     nl = len(levels)
@@ -368,8 +407,15 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
     # (eq. 9), drop_tol² ‖C_i‖²), or None while there are none
     high = None
     HZ = hx = hb = None
+    start = 0
+    if resume is not None:
+        start, x, Z, high, done = resume
+        z = n if Z is None else Z.shape[1]
+        zdims[:start] = done
 
     for r, L in enumerate(levels):
+        if r < start:
+            continue
         tl = time.perf_counter()
         B, C = _rows(L, n)
         m = C.shape[0]
@@ -399,13 +445,13 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
             hb = _loosen_tight(hx, high[1], high[2], relax_tol) if tight else high[1:3]
 
         # ---- project the level onto the remaining freedom x = x* + Z u (eq. 8); its
-        # unconstrained minimiser (Cholesky) is tried first: if it satisfies the level's own rows
+        # unconstrained minimiser (QR least squares) is tried first: if it satisfies the level's own rows
         # and the relaxed higher rows, it is the QP's solution (the minimiser of a relaxation,
         # feasible with zero slacks) and no QP is solved. A level of equalities below no
         # inequality is always solved so: its QP (eq. 10) is exactly a regularised least-squares
         # problem.
-        wB, M, Hu, gu, own = _project_level(L, B, C, Z, z, x, eps, drop2)
-        u, ok, status = _unconstrained(Hu, gu)
+        wB, M, own, ls = _project_level(L, B, C, Z, z, x, eps, drop2)
+        u, ok, status, Rc = _unconstrained(*ls, eps)
         rows = _qp_rows(own, high, HZ, hx, hb, x, z) if (own is not None or high is not None) else None
         solved = ok and (rows is None or not _violated(rows, u))
         if not solved and tight:
@@ -424,15 +470,15 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
                     if high is not None:
                         hx = high[0] @ x
                         hb = _loosen_tight(hx, high[1], high[2], relax_tol)
-                wB, M, Hu, gu, own = _project_level(L, B, C, Z, z, x, eps, drop2)
-                u, ok, status = _unconstrained(Hu, gu)
+                wB, M, own, ls = _project_level(L, B, C, Z, z, x, eps, drop2)
+                u, ok, status, Rc = _unconstrained(*ls, eps)
                 rows = (_qp_rows(own, high, HZ, hx, hb, x, z)
                         if (own is not None or high is not None) else None)
                 solved = ok and (rows is None or not _violated(rows, u))
         if not solved and rows is not None:
-            u, ok, status = _level_qp(Hu, gu, *rows, backend, opts)
+            u, ok, status = _level_qp(Rc, *rows, backend, opts)
             if not ok and fallback is not None:
-                u, ok, status2 = _level_qp(Hu, gu, *rows, fallback, {})
+                u, ok, status2 = _level_qp(Rc, *rows, fallback, {})
                 if ok:
                     msg = f"level {r} ({L.name!r}): {status}; solved with {fallback}"
                     log.debug(msg)
@@ -468,18 +514,15 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
 
 
 def _project_level(L, B, C, Z, z, x, eps, drop2):
-    """The level over x = x* + Z u (eq. 8): weighted rows W B, M = W B Z, the Hessian and gradient
-    of ½‖M u + W(B x* − b)‖² + ε/2 ‖x* + Z u‖², and its own inequality rows that still have
-    freedom: (C, C Z, lower, upper, V, drop_tol² ‖C_i‖²), or None."""
+    """The level over x = x* + Z u (eq. 8): weighted rows W B, M = W B Z, its own inequality rows
+    that still have freedom: (C, C Z, lower, upper, V, drop_tol² ‖C_i‖²) or None, and the data
+    (M, r0 = W(B x* − b), Zᵀx*) of ½‖M u + r0‖² + ε/2 ‖x* + Z u‖² for :func:`_unconstrained`."""
     wB = L.w[:, None] * B
     if Z is None:
         M, zx = wB, x
     else:
         M, zx = wB @ Z, Z.T @ x
-    Hu = M.T @ M
-    Hu.flat[:: z + 1] += eps
-    gu = M.T @ (wB @ x - L.w * L.b)
-    gu += eps * zx
+    r0 = wB @ x - L.w * L.b
     own = None
     if C.shape[0]:  # own rows without freedom keep their (fixed) violation: no slack
         CZ = C if Z is None else C @ Z
@@ -489,12 +532,12 @@ def _project_level(L, B, C, Z, z, x, eps, drop2):
             own = (C, CZ, L.lower, L.upper, L.v, nC)
         elif free.any():
             own = (C[free], CZ[free], L.lower[free], L.upper[free], L.v[free], nC[free])
-    return wB, M, Hu, gu, own
+    return wB, M, own, (M, r0, zx)
 
 
 def _qp_rows(own, high, HZ, hx, hb, x, z):
     """The rows of the level QP in u: own (C Z, C x*, lower, upper, V), higher (H Z, H x*,
-    relaxed lower, relaxed upper) — the argument list of :func:`_level_qp` after (Hu, gu)."""
+    relaxed lower, relaxed upper) — the argument list of :func:`_level_qp` after (R, c)."""
     empty = np.zeros(0)
     own_qp = ((np.zeros((0, z)), empty, empty, empty, empty) if own is None
               else (own[1], own[0] @ x, own[2], own[3], own[4]))
@@ -675,57 +718,109 @@ def _drop_frozen(high, HZ, x, feas_tol, L, warns):
     return (hC[free], hlo[free], hup[free], hn[free]), HZ[free]
 
 
-def _unconstrained(Hu, gu):
-    """u = −Hu⁻¹ gu by Cholesky (LAPACK dpotrf/dpotrs, no copies of the small arrays)."""
-    cf, info = lapack.dpotrf(Hu, lower=False, clean=False)
+def _unconstrained(M, r0, zx, eps):
+    """The minimiser of ‖M u + r0‖² + ε ‖zx + u‖² (the level over x = x* + Z u, Z orthonormal so
+    that ‖x* + Z u‖² = ‖Zᵀx* + u‖² + const) as the least-squares solution of the stacked system
+    [M; √ε I] u ≈ [−r0; −√ε zx] by Householder QR (LAPACK dgeqrf, dormqr, dtrtrs — what dgels
+    does). Returns ``(u, ok, status, (R, c))`` with R the triangular factor and c the first z
+    entries of Qᵀ·rhs, so that the level's cost is ‖R u − c‖² + const: :func:`_level_qp` uses
+    them to give the backend the well-conditioned problem in w = R u.
+
+    Not by Cholesky of the normal equations MᵀM + ε I: that squares the condition number, and a
+    level whose row weights span 1e4 … 1e-4 (Table 2's level 3: momentum 1e4, GRF regulariser
+    1e-4) has cond(M)² ~ 1e16 — the low-weight rows then sit at rounding level, and a 1e-13
+    relative change of the state moved talos14's Table 2 torques by up to 20 Nm (median 1.4 Nm).
+    """
+    k, z = M.shape
+    A = np.empty((k + z, z), order="F")
+    A[:k] = M
+    A[k:] = 0.0
+    root = math.sqrt(eps)
+    A[k:].flat[:: z + 1] = root
+    rhs = np.empty((k + z, 1), order="F")
+    np.negative(r0, out=rhs[:k, 0])
+    np.multiply(zx, -root, out=rhs[k:, 0])
+    qr, tau, _, info = lapack.dgeqrf(A, overwrite_a=True)
+    if info == 0:
+        qtb, _, info = lapack.dormqr("L", "T", qr, tau, rhs, max(1, (k + z) * 64), overwrite_c=True)
     if info != 0:
-        return None, False, f"cholesky: matrix not positive definite (info {info})"
-    u, info = lapack.dpotrs(cf, gu, lower=False)
+        return None, False, f"least squares: QR failed (info {info})", None
+    R = np.triu(qr[:z, :z])
+    c = qtb[:z, 0].copy()
+    u, info = lapack.dtrtrs(R, c, lower=0)
     if info != 0 or not np.isfinite(u).all():
-        return None, False, "cholesky: non-finite solution"
-    return -u, True, "optimal"
+        return None, False, f"least squares: triangular solve failed (info {info})", None
+    return u, True, "optimal", (R, c)
 
 
-def _level_qp(Hu, gu, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
+def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
     """QP of eqs. 10-11 over [u, s]: own rows lower − s/V ≤ C x ≤ upper + s/V, higher rows relaxed.
+
+    The level's cost ½‖M u + r0‖² + ε/2 ‖Zᵀx* + u‖² is ½‖R u − c‖² + const with R, c from the QR
+    of the stacked system (:func:`_unconstrained`, ``Rc = (R, c)``). The backend is given the
+    problem in w = R u: Hessian I (with the slacks' I), gradient −c, rows C Z R⁻¹ (triangular
+    solves); u = R⁻¹ w afterwards. Handing it Hu = MᵀM + εI instead (the normal equations) squares
+    cond(R): with Table 2's level-3 weights (1e4 … 1e-4, ε = 1e-4) cond(Hu) ~ 1e16, and every
+    backend's factorisation of Hu turned the weakly weighted directions (the internal wrench
+    between the feet) into rounding noise (torques moved by up to 2 Nm for a 1e-13 change of the
+    state). The row values A u are the same in both parametrisations, so the backends'
+    feasibility tolerances keep their meaning.
+
+    Measured: the 15 Nm torque step of the single-support scenario (t = 1.358 s, PD, DAQP) was
+    such a mis-solved QP, not a change of the problem: at level 3 DAQP on Hu (cond 1.8e13) put
+    the left sole's lateral CoP row (a level-2 row) into its active set, at 16× the true
+    optimum's cost (3.0e-4 vs 1.9e-5); the problem in w keeps only the right sole's row active
+    (left row 15.5 inside its bound), and 82 N no longer jump between the feet (largest
+    cycle-to-cycle torque change in [1.3, 1.4] s: 0.05 Nm).
+    Open: DAQP without fallback fails more often on Table 1 (talos, double support, reduced:
+    210 instead of 88 of 500 bench cycles, "infeasible"/"cycling" at level 4; quadprog and
+    proxsuite solve the same QPs). The failing QPs have 7 active rows, nearly (σ_min 3e-6) or
+    exactly dependent after normalisation, with a margin (``relax_tol``) far below DAQP's
+    tolerances in the normalised metric; widening the rows by 1e-5 ‖row‖ makes DAQP solve all.
 
     ``s ≥ 0`` is not imposed: it holds at the optimum (a negative slack only tightens its row
     and costs s², so it is never better than s = 0).
     """
-    z = Hu.shape[0]
+    R, c = Rc
+    z = R.shape[0]
     m = CZ.shape[0]
     nv = z + m
-    H = np.zeros((nv, nv))
-    H[:z, :z] = Hu
-    H.flat[z * nv + z :: nv + 1] = 1.0
+    H = np.eye(nv)
     g = np.zeros(nv)
-    g[:z] = gu
+    np.negative(c, out=g[:z])
     fl, fu = np.isfinite(lo), np.isfinite(up)
     il, iu = np.flatnonzero(fl), np.flatnonzero(fu)
     nl_, nu_, nh = il.size, iu.size, HZ.shape[0]
-    A = np.zeros((nl_ + nu_ + nh, nv))
-    lower = np.empty(nl_ + nu_ + nh)
-    upper = np.empty(nl_ + nu_ + nh)
+    nr = nl_ + nu_ + nh
+    A = np.zeros((nr, nv))
+    lower = np.empty(nr)
+    upper = np.empty(nr)
+    Au = np.empty((nr, z))  # the rows in u, then mapped to w: Au R⁻¹ = (R⁻ᵀ Auᵀ)ᵀ
     if m:
         VCZ = vw[:, None] * CZ
         # V C Z u + s ≥ V (lower − C x*)
-        A[:nl_, :z] = VCZ[il]
+        Au[:nl_] = VCZ[il]
         A[np.arange(nl_), z + il] = 1.0
         lower[:nl_] = vw[il] * (lo[il] - c0[il])
         upper[:nl_] = np.inf
         # V C Z u − s ≤ V (upper − C x*)
-        A[nl_ : nl_ + nu_, :z] = VCZ[iu]
+        Au[nl_ : nl_ + nu_] = VCZ[iu]
         A[nl_ + np.arange(nu_), z + iu] = -1.0
         lower[nl_ : nl_ + nu_] = -np.inf
         upper[nl_ : nl_ + nu_] = vw[iu] * (up[iu] - c0[iu])
     if nh:
-        A[nl_ + nu_ :, :z] = HZ
+        Au[nl_ + nu_ :] = HZ
         lower[nl_ + nu_ :] = hlo - h0
         upper[nl_ + nu_ :] = hup - h0
+    if nr:
+        A[:, :z] = solve_triangular(R, Au.T, trans="T", lower=False, check_finite=False).T
     y, status, ok = solve_qp(H, g, A, lower, upper, backend=backend, **opts)
     if not ok:
         return None, False, status
-    return y[:z], True, status
+    u = solve_triangular(R, y[:z], lower=False, check_finite=False)
+    if not np.isfinite(u).all():
+        return None, False, f"{backend}: non-finite solution after the change of variables"
+    return u, True, status
 
 
 # ---------------------------------------------------------------------------- weighted

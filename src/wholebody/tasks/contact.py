@@ -224,13 +224,24 @@ class ForceRegularizer(_PerContact):
         names = contact_subset(variables, self.contacts)
         key = (names, tuple(variables.lambda_slices[n].start for n in names), variables.n_lambda)
         if self._key != key:  # the selection only changes with the contact set
-            self._A = self._lambda_rows(variables, {n: np.eye(robot.contact(n).dim) for n in names})
+            self._scale = {n: self.row_scale(robot.contact(n).spec) for n in names}
+            self._A = self._lambda_rows(variables, {n: np.diag(self._scale[n]) for n in names})
             self._key = key
         dims = [robot.contact(n).dim for n in names]
         target = np.zeros(sum(dims))
         start = 0
         for n, d in zip(names, dims):
             if n in self.targets:
-                target[start:start + d] = self.targets[n]
+                target[start:start + d] = self._scale[n] * self.targets[n]
             start += d
         return TaskRows(qdd=None, lam=self._A, tau=None, target=target)
+
+    @staticmethod
+    def row_scale(spec) -> np.ndarray:
+        """Per-component row scale: 1 for forces, 1 / (largest sole half-size) for sole moments,
+        so that a moment putting the CoP at the sole's edge costs as much as the normal force
+        (in N and Nm alike the regulariser finds moments ~10x cheaper than shifting force
+        between the feet, and its exact minimiser pushes the CoPs to the sole edges)."""
+        if spec.type != "rectangle":
+            return np.ones(3)
+        return np.r_[np.ones(3), np.full(3, 1.0 / max(spec.half_size))]
