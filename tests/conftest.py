@@ -21,16 +21,16 @@ def rng():
     return np.random.default_rng(12345)
 
 
-def native_cycle_or_skip():
-    """Import the compiled passive-WBC cycle. Skip only where it cannot have been built (no C++
-    compiler on this machine, or WHOLEBODY_NO_NATIVE set at install); anywhere else a missing
-    extension is a broken build and fails the test."""
+def native_cycle_or_skip(module: str = "_passive_cycle"):
+    """Import a compiled part of wholebody (``_passive_cycle``, ``_cascade``). Skip only where it
+    cannot have been built (no C++ compiler on this machine, or WHOLEBODY_NO_NATIVE set at
+    install); anywhere else a missing extension is a broken build and fails the test."""
+    import importlib
     try:
-        from wholebody import _passive_cycle
+        return importlib.import_module(f"wholebody.{module}")
     except ImportError:
         compiler = (sysconfig.get_config_var("CXX") or "c++").split()[0]
         if os.environ.get("WHOLEBODY_NO_NATIVE") or shutil.which(compiler) is None:
-            pytest.skip(f"native cycle not built here (no C++ compiler '{compiler}' or "
+            pytest.skip(f"wholebody.{module} not built here (no C++ compiler '{compiler}' or "
                         "WHOLEBODY_NO_NATIVE set)", allow_module_level=True)
         raise
-    return _passive_cycle

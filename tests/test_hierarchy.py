@@ -597,3 +597,76 @@ def test_bad_solver_arguments():
         solve_hierarchy([L], first_level_solution=(np.array([np.nan, 0, 0]), np.eye(3)))
     with pytest.raises(ValueError, match="'weighted' takes"):
         solve_hierarchy([L, L, L], method="weighted")
+
+
+# ---------------------------------------------------------------------------- compiled common path
+def _count_compiled(monkeypatch):
+    """Wrap the compiled common path to count the problems it finished by itself."""
+    import wholebody.solvers.hierarchy as h
+    finished = []
+    compiled = h._compiled_common_path
+
+    def counting(*args):
+        out = compiled(*args)
+        finished.append(out is not None and out[0] is not None)
+        return out
+
+    monkeypatch.setattr(h, "_compiled_common_path", counting)
+    return finished
+
+
+def test_compiled_common_path_matches_python_on_equality_levels(monkeypatch):
+    """Levels of equalities only (no QP ever): the compiled path finishes every problem, with
+    the Python cascade's x (compiled=False) to 1e-9."""
+    from conftest import native_cycle_or_skip
+    native_cycle_or_skip("_cascade")
+    finished = _count_compiled(monkeypatch)
+    rng = np.random.default_rng(7)
+    for _ in range(100):
+        n = int(rng.integers(3, 12))
+        levels = []
+        for _ in range(int(rng.integers(2, 5))):
+            k = int(rng.integers(1, n))
+            levels.append(Level(eq=(rng.normal(size=(k, n)), rng.normal(size=k)),
+                                weights=10.0 ** rng.uniform(-4, 4, size=k)))
+        compiled = solve_hierarchy(levels)
+        python = solve_hierarchy(levels, compiled=False)
+        np.testing.assert_allclose(compiled.x, python.x, atol=1e-9, rtol=1e-9)
+        np.testing.assert_allclose(compiled.costs, python.costs, atol=1e-12, rtol=1e-6)
+        np.testing.assert_array_equal(compiled.nullspace_dims, python.nullspace_dims)
+    assert all(finished) and len(finished) == 100
+
+
+@pytest.mark.parametrize("name", ["talos14", "talos"])
+def test_compiled_common_path_matches_python_on_robots(robots, monkeypatch, name):
+    """Table 2 (talos14) and Table 1 (talos) over a moving state: the same torques with the
+    compiled path (finishing QP-free problems, handing the rest to the Python cascade at the
+    first level that needs a QP) as with the Python cascade alone."""
+    import sys
+    from pathlib import Path
+    from conftest import native_cycle_or_skip
+    native_cycle_or_skip("_cascade")
+    import wholebody.solvers.hierarchy as h
+    from wholebody.control.stacks import table1_stack, table2_stack
+    from wholebody.formulation import Formulation
+    from wholebody.variables import Variables
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_wbc import moving_states
+    robot = robots[name]
+    stack = table2_stack(robot) if name == "talos14" else table1_stack(robot, robot.contact_names)
+    formulation, variables = Formulation(robot), Variables(robot)
+    finished = _count_compiled(monkeypatch)
+    compiled = h._compiled_common_path
+    for k, (q, v) in enumerate(moving_states(robot, 1200)):
+        if k % 20:
+            continue
+        robot.update(q, v)
+        a = formulation.solve(stack, variables, diagnostics=False)
+        monkeypatch.setattr(h, "_compiled_common_path", None)
+        b = formulation.solve(stack, variables, diagnostics=False)
+        monkeypatch.setattr(h, "_compiled_common_path", compiled)
+        assert a.ok and b.ok
+        np.testing.assert_allclose(a.tau, b.tau, atol=1e-6, err_msg=f"state {k}")
+    assert len(finished) >= 60  # (a retry with the fallback backend calls it again)
+    if name == "talos14":  # most Table 2 problems need no QP; Table 1's usually do
+        assert sum(finished) > 20
