@@ -504,6 +504,7 @@ class PassiveWBC(PlannedController):
         joints = range(1, model.njoints)
         frames = [model.frames[robot.contact(n).frame_id] for n in self.contacts]
         limits = robot.torque_limits
+        linkage_rows, linkage_params = limits.linkage
         cap = np.full(robot.na, np.inf)
         for joint, value in self.torque_limits.upper_override.items():
             if joint not in robot.joint_names:
@@ -523,8 +524,8 @@ class PassiveWBC(PlannedController):
             "contact_placements": np.array([f.placement.homogeneous for f in frames]),
             "radii": self._radii, "leg": [int(i) for i in self._leg],
             "n_legs": len(self.planner.legs), "q_min": robot.q_min, "q_max": robot.q_max,
-            "torque_constant": limits.constant, "linkage_rows": [int(i) for i in limits._linkage_rows],
-            "linkage_params": limits._linkage.ravel(),
+            "torque_constant": limits.constant, "linkage_rows": [int(i) for i in linkage_rows],
+            "linkage_params": linkage_params.ravel(),
             "torque_scale": limits.scale * self.torque_limits.scale, "torque_cap": cap,
             "swing_slack": self.swing_slack, "slack_weight": self.slack_weight,
             "K_st": float(self.K_st), "D_st": float(self.D_st), "Q": self.Q,

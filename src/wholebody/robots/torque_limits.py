@@ -56,6 +56,11 @@ class TorqueLimits:
         self._angle_offset = np.pi / 2 - q_peak
 
     @property
+    def linkage(self) -> tuple[np.ndarray, np.ndarray]:
+        """(joint indices, rows [a, b, force, q_peak]) of the joints with a linkage profile."""
+        return self._linkage_rows, self._linkage
+
+    @property
     def has_profile(self) -> bool:
         """True when some bound depends on the joint position."""
         return self._linkage_rows.size > 0
