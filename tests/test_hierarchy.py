@@ -599,28 +599,38 @@ def test_bad_solver_arguments():
         solve_hierarchy([L, L, L], method="weighted")
 
 
-# ---------------------------------------------------------------------------- compiled common path
-def _count_compiled(monkeypatch):
-    """Wrap the compiled common path to count the problems it finished by itself."""
+# ---------------------------------------------------------------------------- compiled cascade
+def _python_only(monkeypatch):
+    """Run solve_hierarchy's cascade in Python only (the reference), whatever ``compiled`` says."""
     import wholebody.solvers.hierarchy as h
-    finished = []
-    compiled = h._compiled_common_path
-
-    def counting(*args):
-        out = compiled(*args)
-        finished.append(out is not None and out[0] is not None)
-        return out
-
-    monkeypatch.setattr(h, "_compiled_common_path", counting)
-    return finished
+    monkeypatch.setattr(h, "_CompiledCascade", None)
 
 
-def test_compiled_common_path_matches_python_on_equality_levels(monkeypatch):
-    """Levels of equalities only (no QP ever): the compiled path finishes every problem, with
-    the Python cascade's x (compiled=False) to 1e-9."""
+def _count_requests(monkeypatch):
+    """Count the level QPs the compiled cascade hands back and the NNLS solves of its
+    implicit-equality searches."""
+    import wholebody.solvers.hierarchy as h
+    seen = {"qp": 0, "implicit": 0}
+    solve, nnls = h.solve_qp, h.nnls
+
+    def counting_solve(*args, **kwargs):
+        seen["qp"] += 1
+        return solve(*args, **kwargs)
+
+    def counting_nnls(*args):
+        seen["implicit"] += 1
+        return nnls(*args)
+
+    monkeypatch.setattr(h, "solve_qp", counting_solve)
+    monkeypatch.setattr(h, "nnls", counting_nnls)
+    return seen
+
+
+def test_compiled_cascade_matches_python_on_equality_levels():
+    """Levels of equalities only (no QP ever): the compiled cascade gives the Python cascade's
+    x (compiled=False) to 1e-9, its costs and null-space dimensions."""
     from conftest import native_cycle_or_skip
     native_cycle_or_skip("_cascade")
-    finished = _count_compiled(monkeypatch)
     rng = np.random.default_rng(7)
     for _ in range(100):
         n = int(rng.integers(3, 12))
@@ -634,14 +644,38 @@ def test_compiled_common_path_matches_python_on_equality_levels(monkeypatch):
         np.testing.assert_allclose(compiled.x, python.x, atol=1e-9, rtol=1e-9)
         np.testing.assert_allclose(compiled.costs, python.costs, atol=1e-12, rtol=1e-6)
         np.testing.assert_array_equal(compiled.nullspace_dims, python.nullspace_dims)
-    assert all(finished) and len(finished) == 100
+
+
+@pytest.mark.parametrize("backend", ["quadprog", "daqp"])
+def test_compiled_cascade_matches_python_on_random_hierarchies(monkeypatch, backend):
+    """The random hierarchies of the oracle tests (inequalities at every level, conflicts,
+    redundant rows, infeasible rows): the compiled cascade, asking Python for each level QP and
+    implicit-equality search's NNLS, gives the Python cascade's result — same ok/status kind, x and
+    costs to 1e-7 (measured ≤ 2e-9), the same null-space dimensions and warnings."""
+    from conftest import native_cycle_or_skip
+    native_cycle_or_skip("_cascade")
+    seen = _count_requests(monkeypatch)
+    rng = np.random.default_rng(2024)
+    for i in range(200):
+        levels = random_hierarchy(rng)
+        compiled = solve_hierarchy(levels, backend=backend)
+        python = solve_hierarchy(levels, backend=backend, compiled=False)
+        assert compiled.ok == python.ok, (i, compiled.status, python.status)
+        assert compiled.status == python.status
+        assert compiled.levels_solved == python.levels_solved
+        scale = 1.0 + np.abs(python.x).max()
+        np.testing.assert_allclose(compiled.x, python.x, atol=1e-7 * scale, rtol=0, err_msg=str(i))
+        np.testing.assert_allclose(compiled.costs, python.costs, atol=1e-7 * (1 + python.costs.max()),
+                                   rtol=0, err_msg=str(i))
+        np.testing.assert_array_equal(compiled.nullspace_dims, python.nullspace_dims)
+        assert sorted(compiled.warnings) == sorted(python.warnings)
+    assert seen["qp"] > 200 and seen["implicit"] > 0  # both requests were exercised
 
 
 @pytest.mark.parametrize("name", ["talos14", "talos"])
-def test_compiled_common_path_matches_python_on_robots(robots, monkeypatch, name):
-    """Table 2 (talos14) and Table 1 (talos) over a moving state: the same torques with the
-    compiled path (finishing QP-free problems, handing the rest to the Python cascade at the
-    first level that needs a QP) as with the Python cascade alone."""
+def test_compiled_cascade_matches_python_on_robots(robots, monkeypatch, name):
+    """Table 2 (talos14) and Table 1 (talos) over a moving state: the same torques (1e-6 Nm)
+    and level costs (1e-6 relative) with the compiled cascade as with the Python cascade."""
     import sys
     from pathlib import Path
     from conftest import native_cycle_or_skip
@@ -655,18 +689,19 @@ def test_compiled_common_path_matches_python_on_robots(robots, monkeypatch, name
     robot = robots[name]
     stack = table2_stack(robot) if name == "talos14" else table1_stack(robot, robot.contact_names)
     formulation, variables = Formulation(robot), Variables(robot)
-    finished = _count_compiled(monkeypatch)
-    compiled = h._compiled_common_path
+    seen = _count_requests(monkeypatch)
+    compiled = h._CompiledCascade
     for k, (q, v) in enumerate(moving_states(robot, 1200)):
         if k % 20:
             continue
         robot.update(q, v)
         a = formulation.solve(stack, variables, diagnostics=False)
-        monkeypatch.setattr(h, "_compiled_common_path", None)
+        monkeypatch.setattr(h, "_CompiledCascade", None)
         b = formulation.solve(stack, variables, diagnostics=False)
-        monkeypatch.setattr(h, "_compiled_common_path", compiled)
+        monkeypatch.setattr(h, "_CompiledCascade", compiled)
         assert a.ok and b.ok
         np.testing.assert_allclose(a.tau, b.tau, atol=1e-6, err_msg=f"state {k}")
-    assert len(finished) >= 60  # (a retry with the fallback backend calls it again)
-    if name == "talos14":  # most Table 2 problems need no QP; Table 1's usually do
-        assert sum(finished) > 20
+        # (level costs of ~1e-9 are the backends' feasibility tolerances squared: ±1e-8)
+        np.testing.assert_allclose(a.level_costs, b.level_costs, atol=1e-8, rtol=1e-6)
+    if name == "talos":  # Table 1's levels need QPs and implicit-equality searches (NNLS)
+        assert seen["qp"] > 60 and seen["implicit"] > 60

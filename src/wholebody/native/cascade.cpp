@@ -1,20 +1,30 @@
-// The common path of the cascade of QPs (Herzog et al. 2016, eqs. 8-11), compiled: every level's
-// unconstrained regularised least-squares minimiser over the remaining null space is feasible for
-// the level's own inequality rows and for the (relaxed) higher ones, so no QP is solved. This is
-// wholebody.solvers.hierarchy._solve_cascade line for line for that case; at the first level
-// where the Python cascade would do anything else (a level QP, an implicit-equality search, a
-// failed least-squares solve, a warning about a frozen higher row) this returns the cascade's
-// state at the start of that level and the Python cascade resumes from there — it stays the
-// reference, and the only place where QPs are solved.
+// The cascade of QPs (Herzog et al. 2016, eqs. 8-11), compiled: a line-for-line mirror of
+// wholebody.solvers.hierarchy._solve_cascade (the reference, run with compiled=False) that hands
+// the QP solves back to Python: each level QP (eqs. 10-11, posed in w = R u, see _level_qp) is
+// solved by the caller with the chosen backend (and the fallback backend) and given back — the QP
+// solvers stay the library's backends, called as everywhere else; the NNLS of the
+// implicit-equality search is the caller's too (scipy.optimize.nnls, passed in).
+// Everything else — the analytic first level's rows, dropping frozen rows, loosening tight rows,
+// projecting each level onto the remaining null space, its regularised least-squares minimiser
+// (Householder QR of [M; √ε I]), the implicit-equality search, the QP's rows, locking
+// directions (QR with column pivoting) and the per-level costs — runs here. Usage (see
+// hierarchy._solve_compiled):
+//   run = CascadeRun(B, b, w, C, lower, upper, V, names, n, eps, x1, Z1, tolerances..., nnls)
+//   while run.advance() == "qp": run.give_qp(y, status)
 #include <Eigen/Dense>
 
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace py = pybind11;
@@ -26,8 +36,13 @@ namespace
   using Eigen::VectorXd;
   using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   using Mask = std::vector<Index>;
+  using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+  using ConstRowMap = Eigen::Map<const RowMatrix>;
+  using ConstVecMap = Eigen::Map<const VectorXd>;
+  using Clock = std::chrono::steady_clock;
 
   constexpr double kTightTol = 1e-8; // hierarchy._TIGHT_TOL
+  constexpr double kInf = std::numeric_limits<double>::infinity();
 
   VectorXd sq_norms(const MatrixXd & A) { return A.rowwise().squaredNorm(); }
 
@@ -47,16 +62,27 @@ namespace
     return out;
   }
 
-  // Higher-priority inequality rows that still have freedom: (C, relaxed lower, relaxed upper,
-  // drop_tol² ‖C_i‖²), as the ``high`` tuple of _solve_cascade.
+  std::string format_g(double value)
+  {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.3g", value);
+    return buf;
+  }
+
+  // Inequality rows: (C, lower, upper, drop_tol² ‖C_i‖²) as the ``high`` tuple of _solve_cascade;
+  // for a level's own rows also V (their slack weights).
   struct Rows
   {
     MatrixXd C;
-    VectorXd lower, upper, norms;
+    VectorXd lower, upper, norms, V;
     bool empty() const { return C.rows() == 0; }
     Rows subset(const Mask & keep) const
     {
-      return {rows_of(C, keep), entries_of(lower, keep), entries_of(upper, keep), entries_of(norms, keep)};
+      Rows out{rows_of(C, keep), entries_of(lower, keep), entries_of(upper, keep),
+               entries_of(norms, keep), VectorXd()};
+      if (V.size())
+        out.V = entries_of(V, keep);
+      return out;
     }
     void append(const Rows & other)
     {
@@ -65,6 +91,7 @@ namespace
       if (empty())
       {
         *this = other;
+        V.resize(0);
         return;
       }
       const Index m = C.rows(), k = other.C.rows();
@@ -77,32 +104,6 @@ namespace
       norms.tail(k) = other.norms;
     }
   };
-
-  // _drop_frozen: keep the rows with ‖C_i Z‖² > drop_tol² ‖C_i‖²; false if a dropped row violates
-  // its relaxed bounds (the Python cascade then records a warning: not the common path).
-  bool drop_frozen(Rows & high, MatrixXd & HZ, const VectorXd & x, double feas_tol)
-  {
-    const VectorXd n2 = sq_norms(HZ);
-    Mask free_rows;
-    for (Index i = 0; i < HZ.rows(); ++i)
-    {
-      if (n2[i] > high.norms[i])
-      {
-        free_rows.push_back(i);
-        continue;
-      }
-      const double cx = high.C.row(i).dot(x);
-      const double over = std::max(high.lower[i] - cx, cx - high.upper[i]);
-      if (over > feas_tol * (1.0 + std::abs(cx)))
-        return false;
-    }
-    if (Index(free_rows.size()) != HZ.rows())
-    {
-      high = high.subset(free_rows);
-      HZ = rows_of(HZ, free_rows);
-    }
-    return true;
-  }
 
   // _kernel: orthonormal basis of ker(RZ) by QR with column pivoting of RZᵀ, SVD when a |R_ii|
   // is within three decades of the threshold.
@@ -129,208 +130,649 @@ namespace
       return MatrixXd::Identity(z, z);
     if (rank >= z)
       return MatrixXd(z, 0);
-    const MatrixXd Q = qr.householderQ() * MatrixXd::Identity(z, z);
+    MatrixXd Q = MatrixXd::Identity(z, z);
+    Q.applyOnTheLeft(qr.householderQ());
     return Q.rightCols(z - rank);
   }
 
-  struct Level
+  // _loosen_tight: widen the bounds of rows tight at x by δ = relax_tol (1 + |C x|).
+  void loosen_tight(const VectorXd & hx, VectorXd & lo, VectorXd & up, double relax_tol)
   {
-    MatrixXd B, C;
-    VectorXd b, w, lower, upper;
-  };
+    for (Index i = 0; i < hx.size(); ++i)
+    {
+      const double dlt = relax_tol * (1.0 + std::abs(hx[i]));
+      if (std::abs(hx[i] - lo[i]) <= dlt)
+        lo[i] = std::min(lo[i], hx[i]) - dlt;
+      if (std::abs(hx[i] - up[i]) <= dlt)
+        up[i] = std::max(up[i], hx[i]) + dlt;
+    }
+  }
+
+  // _range_basis: orthonormal columns spanning range(A) (A is z × k), from a Householder QR
+  // without the columns whose |R_ii| ≤ 1e-12.
+  MatrixXd range_basis(const MatrixXd & A)
+  {
+    const Index z = A.rows(), p = std::min(A.rows(), A.cols());
+    Eigen::HouseholderQR<MatrixXd> qr(A);
+    MatrixXd Q = MatrixXd::Identity(z, p);
+    Q.applyOnTheLeft(qr.householderQ());
+    Mask keep;
+    for (Index i = 0; i < p; ++i)
+      if (std::abs(qr.matrixQR()(i, i)) > 1e-12)
+        keep.push_back(i);
+    MatrixXd out(z, Index(keep.size()));
+    for (std::size_t j = 0; j < keep.size(); ++j)
+      out.col(Index(j)) = Q.col(keep[j]);
+    return out;
+  }
+
+  // _implicit_equalities: the rows tight at x whose signed, projected, normalised normals are
+  // positively dependent (see the Python function's docstring), found with ``nnls`` — the
+  // caller's NNLS solver (scipy.optimize.nnls), called as nnls(A, b) -> (y, residual).
+  // Empty when there is none.
+  std::vector<bool> implicit_equalities(const MatrixXd & HZ, const VectorXd & hx,
+                                        const VectorXd & hlo, const VectorXd & hup,
+                                        const py::object & nnls, double tight_tol = kTightTol,
+                                        double dep_tol = 1e-7)
+  {
+    const Index m = HZ.rows(), z = HZ.cols();
+    if (m < 2)
+      return {};
+    Mask tl, tu;
+    for (Index i = 0; i < m; ++i)
+    {
+      const double tol = tight_tol * (1.0 + std::abs(hx[i]));
+      if (std::abs(hx[i] - hlo[i]) <= tol)
+        tl.push_back(i);
+      if (std::abs(hup[i] - hx[i]) <= tol)
+        tu.push_back(i);
+    }
+    if (tl.size() + tu.size() < 2)
+      return {};
+    Mask idx;
+    std::vector<VectorXd> normals;
+    for (int side = 0; side < 2; ++side)
+      for (Index i : side == 0 ? tl : tu)
+      {
+        VectorXd g = side == 0 ? VectorXd(HZ.row(i).transpose()) : VectorXd(-HZ.row(i).transpose());
+        const double nrm = g.norm();
+        if (nrm > 0.0)
+        {
+          idx.push_back(i);
+          normals.push_back(g / nrm);
+        }
+      }
+    const Index k = Index(idx.size());
+    MatrixXd G(k, z);
+    for (Index j = 0; j < k; ++j)
+      G.row(j) = normals[std::size_t(j)].transpose();
+    // cheap certificates of NO dependency: a direction d with G d > 0
+    VectorXd d = G.colwise().sum().transpose();
+    if (k == 0 || ((G * d).array() > dep_tol).all())
+      return {};
+    MatrixXd GGt = G * G.transpose();
+    GGt.diagonal().array() += 1e-10 * double(k);
+    Eigen::LLT<MatrixXd> llt(GGt);
+    if (llt.info() == Eigen::Success)
+    {
+      d = G.transpose() * llt.solve(VectorXd::Ones(k));
+      if (d.allFinite() && ((G * d).array() > dep_tol).all())
+        return {};
+    }
+    std::vector<bool> found(std::size_t(k), false);
+    Index n_found = 0;
+    MatrixXd P(z, 0); // orthonormal basis of the span of the rows found so far
+    while (k - n_found >= 2)
+    {
+      Mask rest;
+      for (Index j = 0; j < k; ++j)
+        if (!found[std::size_t(j)])
+          rest.push_back(j);
+      MatrixXd Gr = rows_of(G, rest);
+      if (P.cols())
+        Gr -= (Gr * P) * P.transpose();
+      const Index kr = Gr.rows();
+      MatrixXd A(z + 1, kr);
+      A.topRows(z) = Gr.transpose();
+      A.row(z).setConstant(1e3);
+      VectorXd b = VectorXd::Zero(z + 1);
+      b[z] = 1e3;
+      VectorXd y;
+      try
+      {
+        y = nnls(A, b).cast<py::tuple>()[0].cast<VectorXd>();
+      }
+      catch (const py::error_already_set &)
+      {
+        break;
+      }
+      const double ys = y.sum();
+      if (!(ys > 0.0) || (Gr.transpose() * y).norm() > dep_tol * ys)
+        break;
+      const double ymax = y.maxCoeff();
+      for (Index j = 0; j < kr; ++j)
+        if (y[j] > 1e-9 * ymax)
+        {
+          found[std::size_t(rest[std::size_t(j)])] = true;
+          ++n_found;
+        }
+      Mask rows_found;
+      for (Index j = 0; j < k; ++j)
+        if (found[std::size_t(j)])
+          rows_found.push_back(j);
+      P = range_basis(rows_of(G, rows_found).transpose());
+    }
+    if (n_found == 0)
+      return {};
+    std::vector<bool> out(std::size_t(m), false);
+    for (Index j = 0; j < k; ++j)
+      if (found[std::size_t(j)])
+        out[std::size_t(idx[std::size_t(j)])] = true;
+    return out;
+  }
+
+  bool outside(const MatrixXd & A, const VectorXd & a0, const VectorXd & lo, const VectorXd & up,
+               const VectorXd & u)
+  {
+    const VectorXd v = A * u + a0;
+    return ((v.array() < lo.array()) || (v.array() > up.array())).any();
+  }
 } // namespace
 
-using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
-using ConstRowMap = Eigen::Map<const RowMatrix>;
-using ConstVecMap = Eigen::Map<const VectorXd>;
-
-ConstRowMap matrix_at(const std::vector<DoubleArray> & list, std::size_t i, Index cols)
+class CascadeRun
 {
-  const DoubleArray & a = list[i];
-  const Index rows = a.ndim() == 2 && a.shape(1) == cols ? Index(a.shape(0)) : 0;
-  return ConstRowMap(a.data(), rows, cols);
-}
+public:
+  enum class Kind { Done, QP, Failed };
 
-ConstVecMap vector_at(const std::vector<DoubleArray> & list, std::size_t i)
-{
-  return ConstVecMap(list[i].data(), Index(list[i].size()));
-}
-
-// Returns ((x, null-space dimensions), None) when every level took the common path; (None,
-// (r, x*, Z or None, higher rows or None, null-space dimensions of levels < r)) — the state of
-// the cascade at the start of level r — when level r needs the Python cascade; None when the
-// first level already does (the Python cascade then starts from scratch).
-// The per-level arrays are read in place (numpy, C order); a matrix without n columns is an
-// empty level (hierarchy._rows).
-py::object cascade_common_path(
-  const std::vector<DoubleArray> & Bs, const std::vector<DoubleArray> & bs,
-  const std::vector<DoubleArray> & ws, const std::vector<DoubleArray> & Cs,
-  const std::vector<DoubleArray> & lowers, const std::vector<DoubleArray> & uppers, Index n,
-  double eps, const std::optional<VectorXd> & x1, const std::optional<MatrixXd> & Z1,
-  double rank_tol, double drop_tol, double relax_tol, double feas_tol)
-{
-  const std::size_t nl = Bs.size();
-  if (bs.size() != nl || ws.size() != nl || Cs.size() != nl || lowers.size() != nl
-      || uppers.size() != nl)
-    throw std::invalid_argument("cascade_common_path: per-level lists differ in length");
-  const double drop2 = drop_tol * drop_tol;
-  std::vector<Index> zdims(nl, 0);
-  VectorXd x = VectorXd::Zero(n);
-  bool haveZ = false; // false stands for Z = identity (nothing locked yet)
-  MatrixXd Z;
-  Index z = n;
-  Rows high;
-
-  for (std::size_t r = 0; r < nl; ++r)
+  CascadeRun(std::vector<DoubleArray> Bs, std::vector<DoubleArray> bs, std::vector<DoubleArray> ws,
+             std::vector<DoubleArray> Cs, std::vector<DoubleArray> lowers,
+             std::vector<DoubleArray> uppers, std::vector<DoubleArray> Vs,
+             std::vector<std::string> names, Index n, double eps,
+             const std::optional<VectorXd> & x1, const std::optional<MatrixXd> & Z1,
+             double rank_tol, double drop_tol, double relax_tol, double feas_tol, py::object nnls)
+  : nnls_(std::move(nnls)), Bs_(std::move(Bs)), bs_(std::move(bs)), ws_(std::move(ws)), Cs_(std::move(Cs)),
+    lowers_(std::move(lowers)), uppers_(std::move(uppers)), Vs_(std::move(Vs)),
+    names_(std::move(names)), n_(n), eps_(eps), rank_tol_(rank_tol),
+    drop2_(drop_tol * drop_tol), relax_tol_(relax_tol), feas_tol_(feas_tol)
   {
-    const ConstRowMap B = matrix_at(Bs, r, n), C = matrix_at(Cs, r, n);
-    const ConstVecMap b = vector_at(bs, r), w = vector_at(ws, r);
-    const ConstVecMap lower = vector_at(lowers, r), upper = vector_at(uppers, r);
+    nl_ = Bs_.size();
+    for (auto * list : {&bs_, &ws_, &Cs_, &lowers_, &uppers_, &Vs_})
+      if (list->size() != nl_)
+        throw std::invalid_argument("CascadeRun: per-level lists differ in length");
+    if (names_.size() != nl_)
+      throw std::invalid_argument("CascadeRun: names differ in length from the levels");
+    if (x1.has_value() != Z1.has_value())
+      throw std::invalid_argument("CascadeRun: give both x1 and Z1, or neither");
+    if (x1)
+    {
+      if (x1->size() != n || Z1->rows() != n)
+        throw std::invalid_argument("CascadeRun: x1 / Z1 do not have n rows");
+      x1_ = *x1;
+      Z1_ = *Z1;
+      have_first_ = true;
+    }
+    for (std::size_t r = 0; r < nl_; ++r)
+      if (rows_of_level(Bs_, r) != bs_[r].size() || rows_of_level(Bs_, r) != ws_[r].size()
+          || rows_of_level(Cs_, r) != lowers_[r].size() || rows_of_level(Cs_, r) != uppers_[r].size()
+          || rows_of_level(Cs_, r) != Vs_[r].size())
+        throw std::invalid_argument("CascadeRun: level " + std::to_string(r)
+                                    + ": row counts of its arrays differ");
+    x_ = VectorXd::Zero(n);
+    z_ = n;
+    zdims_.assign(nl_, 0);
+    times_.assign(nl_, 0.0);
+  }
+
+  // Runs until the cascade needs a level QP solved or ends: "qp", "done" or "failed".
+  std::string advance()
+  {
+    if (pending_ == Kind::QP)
+      return "qp";
+    if (finished_)
+      return failed_ ? "failed" : "done";
+    while (r_ < nl_)
+    {
+      const auto t0 = Clock::now();
+      const std::size_t r = r_;
+      const bool yielded = begin_level();
+      times_[r] += seconds_since(t0);
+      if (failed_)
+        return "failed";
+      if (yielded)
+        return "qp";
+    }
+    finished_ = true;
+    return "done";
+  }
+
+  // The QP of the pending level (hierarchy._level_qp): Hessian I (not returned), gradient g,
+  // rows lower ≤ A [w; s] ≤ upper.
+  py::tuple qp() const
+  {
+    if (pending_ != Kind::QP)
+      throw std::runtime_error("CascadeRun.qp: no QP pending");
+    return py::make_tuple(qp_g_, qp_A_, qp_lower_, qp_upper_);
+  }
+
+  // The solution y = [w; s] of the pending QP, or None if the backends failed (``status`` why).
+  void give_qp(const std::optional<VectorXd> & y, const std::string & status)
+  {
+    if (pending_ != Kind::QP)
+      throw std::runtime_error("CascadeRun.give_qp: no QP pending");
+    pending_ = Kind::Done;
+    const auto t0 = Clock::now();
+    const std::size_t r = r_;
+    const Index z = R_.rows();
+    if (!y || y->size() != qp_g_.size())
+      fail(status);
+    else
+    {
+      u_ = R_.triangularView<Eigen::Upper>().solve(y->head(z));
+      if (!u_.allFinite())
+        fail(status + ": non-finite solution after the change of variables");
+      else
+        end_level();
+    }
+    times_[r] += seconds_since(t0);
+  }
+
+  // Per-level costs ‖W(Bx − b)‖² + ‖V viol‖², weighted residuals and violations at x
+  // (hierarchy.evaluate_levels).
+  py::tuple evaluate() const
+  {
+    VectorXd costs = VectorXd::Zero(Index(nl_));
+    py::list res, vio;
+    for (std::size_t r = 0; r < nl_; ++r)
+    {
+      const ConstRowMap B = matrix(Bs_, r), C = matrix(Cs_, r);
+      const VectorXd e = vec(ws_, r).cwiseProduct(B * x_ - vec(bs_, r));
+      const VectorXd cx = C * x_;
+      const VectorXd s = vec(Vs_, r).cwiseProduct(
+        (vec(lowers_, r) - cx).cwiseMax(cx - vec(uppers_, r)).cwiseMax(0.0));
+      costs[Index(r)] = e.squaredNorm() + s.squaredNorm();
+      res.append(e);
+      vio.append(s);
+    }
+    return py::make_tuple(costs, res, vio);
+  }
+
+  const VectorXd & x() const { return x_; }
+  std::vector<Index> nullspace_dims() const
+  {
+    return std::vector<Index>(zdims_.begin(), zdims_.begin() + Index(std::min(r_, nl_)));
+  }
+  const std::vector<std::string> & warnings() const { return warns_; }
+  const std::string & status() const { return status_; }
+  std::size_t level() const { return r_; }
+  std::vector<double> times() const { return times_; }
+
+private:
+  static double seconds_since(Clock::time_point t0)
+  {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+  }
+
+  // a matrix without n columns is an empty level (hierarchy._rows)
+  Index rows_of_level(const std::vector<DoubleArray> & list, std::size_t r) const
+  {
+    const DoubleArray & a = list[r];
+    return a.ndim() == 2 && a.shape(1) == n_ ? Index(a.shape(0)) : 0;
+  }
+  ConstRowMap matrix(const std::vector<DoubleArray> & list, std::size_t r) const
+  {
+    return ConstRowMap(list[r].data(), rows_of_level(list, r), n_);
+  }
+  static ConstVecMap vec(const std::vector<DoubleArray> & list, std::size_t r)
+  {
+    return ConstVecMap(list[r].data(), Index(list[r].size()));
+  }
+  std::string level_name(std::size_t r) const { return "'" + names_[r] + "'"; }
+
+  void fail(const std::string & why)
+  {
+    status_ = "level " + std::to_string(r_) + " (" + level_name(r_) + "): " + why;
+    failed_ = finished_ = true;
+  }
+
+  // _drop_frozen: keep the rows of ``rows`` with ‖C_i Z‖² > drop_tol² ‖C_i‖²; a dropped row that
+  // violates its relaxed bounds is recorded as a warning.
+  void drop_frozen(Rows & rows, MatrixXd & RZ)
+  {
+    const VectorXd n2 = sq_norms(RZ);
+    Mask free_rows;
+    Index bad = 0;
+    double worst = 0.0;
+    for (Index i = 0; i < RZ.rows(); ++i)
+    {
+      if (n2[i] > rows.norms[i])
+      {
+        free_rows.push_back(i);
+        continue;
+      }
+      const double cx = rows.C.row(i).dot(x_);
+      const double over = std::max(rows.lower[i] - cx, cx - rows.upper[i]);
+      if (over > feas_tol_ * (1.0 + std::abs(cx)))
+      {
+        worst = bad ? std::max(worst, over) : over;
+        ++bad;
+      }
+    }
+    if (bad)
+      warns_.push_back("before level " + level_name(r_) + ": " + std::to_string(bad)
+                       + " higher-priority inequality row(s) without freedom violate their "
+                         "relaxed bounds by up to " + format_g(worst));
+    if (Index(free_rows.size()) != RZ.rows())
+    {
+      rows = rows.subset(free_rows);
+      RZ = rows_of(RZ, free_rows);
+    }
+  }
+
+  // _lock: Z ← Z N with N a basis of ker(rows Z); ``projected`` = rows Z.
+  void lock(const MatrixXd & rows, const MatrixXd & projected)
+  {
+    if (rows.rows() == 0 || z_ == 0)
+      return;
+    const double scale = std::sqrt(sq_norms(rows).maxCoeff());
+    if (scale == 0.0)
+      return;
+    const MatrixXd N = kernel(projected, rank_tol_ * scale);
+    if (N.cols() == z_)
+      return;
+    Z_ = have_Z_ ? MatrixXd(Z_ * N) : N;
+    have_Z_ = true;
+    z_ = Z_.cols();
+  }
+
+  MatrixXd times_Z(const MatrixXd & A) const { return have_Z_ ? MatrixXd(A * Z_) : A; }
+
+  // _project_level + _unconstrained + _qp_rows + _violated: the level over x = x* + Z u, its
+  // least-squares minimiser u and whether u satisfies the own and relaxed higher rows.
+  bool project_and_try()
+  {
+    const std::size_t r = r_;
+    const ConstRowMap B = matrix(Bs_, r), C = matrix(Cs_, r);
+    const ConstVecMap w = vec(ws_, r), b = vec(bs_, r);
     const Index k = B.rows(), m = C.rows();
-    if (r == 0 && x1 && Z1) // analytic first priority (§2.4): v*_1 = 0
-    {
-      x = *x1;
-      Z = *Z1;
-      haveZ = true;
-      z = Z.cols();
-      if (m)
-      {
-        high = {C, lower, upper, drop2 * C.rowwise().squaredNorm()};
-        MatrixXd CZ1 = z ? MatrixXd(C * Z) : MatrixXd(m, 0);
-        if (!drop_frozen(high, CZ1, x, feas_tol))
-          return py::none();
-      }
-      zdims[0] = z;
-      continue;
-    }
-    if (z == 0)
-      continue;
-    // where the Python cascade resumes if this level needs more than the common path
-    const Rows high_at_start = high;
-    auto resume = [&]() -> py::object {
-      py::object Zout = haveZ ? py::cast(Z) : py::none();
-      py::object hout = py::none();
-      if (!high_at_start.empty())
-        hout = py::make_tuple(high_at_start.C, high_at_start.lower, high_at_start.upper,
-                              high_at_start.norms);
-      std::vector<Index> done(zdims.begin(), zdims.begin() + r);
-      return py::make_tuple(py::none(), py::make_tuple(Index(r), x, Zout, hout, done));
-    };
-
-    // higher rows: drop those without freedom; rows tight at x* are loosened (_loosen_tight)
-    MatrixXd HZ;
-    VectorXd hx, hlo, hup;
-    if (!high.empty())
-    {
-      HZ = haveZ ? MatrixXd(high.C * Z) : high.C;
-      if (!drop_frozen(high, HZ, x, feas_tol))
-        return resume();
-    }
-    if (!high.empty())
-    {
-      hx = high.C * x;
-      hlo = high.lower;
-      hup = high.upper;
-      const double gap_tol = std::max(kTightTol, relax_tol);
-      bool tight = false;
-      for (Index i = 0; i < hx.size(); ++i)
-      {
-        const double gap = std::min(std::abs(hx[i] - hlo[i]), std::abs(hup[i] - hx[i]));
-        tight = tight || !(gap > gap_tol * (1.0 + std::abs(hx[i])));
-      }
-      if (tight)
-        for (Index i = 0; i < hx.size(); ++i)
-        {
-          const double dlt = relax_tol * (1.0 + std::abs(hx[i]));
-          if (std::abs(hx[i] - hlo[i]) <= dlt)
-            hlo[i] = std::min(hlo[i], hx[i]) - dlt;
-          if (std::abs(hx[i] - hup[i]) <= dlt)
-            hup[i] = std::max(hup[i], hx[i]) + dlt;
-        }
-    }
-
-    // the level over x = x* + Z u (eq. 8) and its unconstrained minimiser (_project_level)
-    const MatrixXd wB = w.asDiagonal() * B;
-    const MatrixXd M = haveZ ? MatrixXd(wB * Z) : wB;
-    // least squares [M; √ε I] u ≈ [−r0; −√ε Zᵀx*] by Householder QR (_unconstrained: the normal
-    // equations would square the condition number)
-    const Index zc = M.cols();
-    const double root = std::sqrt(eps);
+    wB_ = w.asDiagonal() * B;
+    M_ = have_Z_ ? MatrixXd(wB_ * Z_) : wB_;
+    const Index zc = M_.cols();
+    const double root = std::sqrt(eps_);
     MatrixXd A(k + zc, zc);
-    A.topRows(k) = M;
+    A.topRows(k) = M_;
     A.bottomRows(zc) = root * MatrixXd::Identity(zc, zc);
     VectorXd rhs(k + zc);
-    rhs.head(k) = -(wB * x - w.cwiseProduct(b));
-    rhs.tail(zc) = -root * (haveZ ? VectorXd(Z.transpose() * x) : x);
-    Rows own;
-    MatrixXd ownCZ;
+    rhs.head(k) = -(wB_ * x_ - w.cwiseProduct(b));
+    rhs.tail(zc) = -root * (have_Z_ ? VectorXd(Z_.transpose() * x_) : x_);
+    own_ = Rows();
+    own_CZ_.resize(0, zc);
     if (m)
     {
-      const MatrixXd CZ = haveZ ? MatrixXd(C * Z) : C;
-      const VectorXd nC = drop2 * C.rowwise().squaredNorm(), n2 = sq_norms(CZ);
+      const MatrixXd Cd = C;
+      const MatrixXd CZ = times_Z(Cd);
+      const VectorXd nC = drop2_ * Cd.rowwise().squaredNorm(), n2 = sq_norms(CZ);
       Mask free_rows;
       for (Index i = 0; i < m; ++i)
         if (n2[i] > nC[i])
           free_rows.push_back(i);
-      Rows all{C, lower, upper, nC};
-      own = all.subset(free_rows);
-      ownCZ = rows_of(CZ, free_rows);
-    }
-    const VectorXd u = A.householderQr().solve(rhs);
-    if (!u.allFinite())
-      return resume();
-    // feasible for its own rows and the relaxed higher rows (exactly, no tolerance: _violated)?
-    if (!own.empty())
-    {
-      const VectorXd v = ownCZ * u + own.C * x;
-      if (((v.array() < own.lower.array()) || (v.array() > own.upper.array())).any())
-        return resume();
-    }
-    if (!high.empty())
-    {
-      const VectorXd v = HZ * u + hx;
-      if (((v.array() < hlo.array()) || (v.array() > hup.array())).any())
-        return resume();
-      high.lower = hlo; // the margins stay for the lower levels
-      high.upper = hup;
-    }
-    x += haveZ ? VectorXd(Z * u) : u;
-
-    // this level's free rows join the higher ones, relaxed by v* (eq. 9)
-    if (!own.empty())
-    {
-      const VectorXd cx = own.C * x;
-      const VectorXd viol =
-        (own.lower - cx).cwiseMax(cx - own.upper).cwiseMax(0.0);
-      own.lower -= viol;
-      own.upper += viol;
-      high.append(own);
-    }
-    // lock the weighted equality rows' directions (_lock): Z ← Z N
-    if (k && r + 1 < nl && z)
-    {
-      const double scale = std::sqrt(sq_norms(wB).maxCoeff());
-      if (scale != 0.0)
+      if (!free_rows.empty())
       {
-        const MatrixXd N = kernel(M, rank_tol * scale);
-        if (N.cols() != z)
+        Rows all{Cd, vec(lowers_, r), vec(uppers_, r), nC, vec(Vs_, r)};
+        own_ = Index(free_rows.size()) == m ? all : all.subset(free_rows);
+        own_CZ_ = Index(free_rows.size()) == m ? CZ : rows_of(CZ, free_rows);
+      }
+    }
+    // least squares [M; √ε I] u ≈ [−r0; −√ε Zᵀx*]: R and c = (Qᵀ rhs)[:z]
+    Eigen::HouseholderQR<MatrixXd> qr(A);
+    R_ = qr.matrixQR().topRows(zc).triangularView<Eigen::Upper>();
+    VectorXd qtb = rhs;
+    qtb.applyOnTheLeft(qr.householderQ().transpose());
+    c_ = qtb.head(zc);
+    u_ = R_.triangularView<Eigen::Upper>().solve(c_);
+    if (!u_.allFinite())
+      return false;
+    if (!own_.empty() && outside(own_CZ_, own_.C * x_, own_.lower, own_.upper, u_))
+      return false;
+    if (!high_.empty() && outside(HZ_, hx_, hlo_, hup_, u_))
+      return false;
+    return true;
+  }
+
+  // Level r up to its QP or implicit-equality request; true if it yields to Python.
+  bool begin_level()
+  {
+    const std::size_t r = r_;
+    const ConstRowMap C = matrix(Cs_, r);
+    if (r == 0 && have_first_) // analytic first priority (§2.4, eq. 17), v*_1 = 0
+    {
+      x_ = x1_;
+      Z_ = Z1_;
+      have_Z_ = true;
+      z_ = Z_.cols();
+      if (C.rows())
+      {
+        const MatrixXd Cd = C;
+        high_ = {Cd, vec(lowers_, r), vec(uppers_, r), drop2_ * Cd.rowwise().squaredNorm(), VectorXd()};
+        MatrixXd CZ1 = z_ ? MatrixXd(Cd * Z_) : MatrixXd(C.rows(), 0);
+        drop_frozen(high_, CZ1);
+      }
+      zdims_[r] = z_;
+      ++r_;
+      return false;
+    }
+    if (z_ == 0) // no freedom left: the level is only evaluated
+    {
+      zdims_[r] = 0;
+      ++r_;
+      return false;
+    }
+    // higher rows: drop those without freedom; rows tight at x* get a margin
+    tight_ = false;
+    if (!high_.empty())
+    {
+      HZ_ = times_Z(high_.C);
+      drop_frozen(high_, HZ_);
+    }
+    if (!high_.empty())
+    {
+      hx_ = high_.C * x_;
+      hlo_ = high_.lower;
+      hup_ = high_.upper;
+      const double gap_tol = std::max(kTightTol, relax_tol_);
+      for (Index i = 0; i < hx_.size() && !tight_; ++i)
+      {
+        const double gap = std::min(std::abs(hx_[i] - hlo_[i]), std::abs(hup_[i] - hx_[i]));
+        tight_ = !(gap > gap_tol * (1.0 + std::abs(hx_[i])));
+      }
+      if (tight_)
+        loosen_tight(hx_, hlo_, hup_, relax_tol_);
+    }
+    if (project_and_try())
+    {
+      end_level();
+      return false;
+    }
+    // implicit equalities keep the QP well posed: looked for only when a QP is solved
+    if (tight_)
+      return after_implicit(implicit_equalities(HZ_, hx_, high_.lower, high_.upper, nnls_));
+    return request_qp();
+  }
+
+  // Locks the implicit equalities ``mask`` (none if empty) and retries the level; true if it
+  // still needs its QP.
+  bool after_implicit(const std::vector<bool> & mask)
+  {
+    if (!mask.empty())
+    {
+      Mask imp, keep;
+      for (Index i = 0; i < Index(mask.size()); ++i)
+        (mask[std::size_t(i)] ? imp : keep).push_back(i);
+      if (!imp.empty())
+      {
+        const MatrixXd rows = rows_of(high_.C, imp);
+        lock(rows, times_Z(rows));
+        high_ = high_.subset(keep);
+        if (z_ == 0)
         {
-          Z = haveZ ? MatrixXd(Z * N) : N;
-          haveZ = true;
-          z = Z.cols();
+          zdims_[r_] = 0;
+          ++r_;
+          return false;
+        }
+        if (!high_.empty())
+        {
+          HZ_ = times_Z(high_.C);
+          drop_frozen(high_, HZ_);
+          if (!high_.empty())
+          {
+            hx_ = high_.C * x_;
+            hlo_ = high_.lower;
+            hup_ = high_.upper;
+            loosen_tight(hx_, hlo_, hup_, relax_tol_);
+          }
+        }
+        if (project_and_try())
+        {
+          end_level();
+          return false;
         }
       }
     }
-    zdims[r] = z;
+    return request_qp();
   }
-  return py::make_tuple(py::make_tuple(x, zdims), py::none());
-}
+
+  // _level_qp's rows in w = R u: own rows with a slack each (V C Z u ± s against V (bound − C x*)),
+  // the relaxed higher rows; A[:, :z] = Au R⁻¹.
+  bool request_qp()
+  {
+    const Index z = R_.rows(), m = own_.C.rows(), nh = high_.C.rows();
+    if (m == 0 && nh == 0) // nothing to satisfy: the least-squares minimiser failed
+    {
+      fail("least squares: non-finite solution");
+      return false;
+    }
+    Mask il, iu;
+    for (Index i = 0; i < m; ++i)
+    {
+      if (std::isfinite(own_.lower[i]))
+        il.push_back(i);
+      if (std::isfinite(own_.upper[i]))
+        iu.push_back(i);
+    }
+    const Index nlo = Index(il.size()), nup = Index(iu.size()), nr = nlo + nup + nh;
+    const VectorXd c0 = m ? VectorXd(own_.C * x_) : VectorXd();
+    MatrixXd Au(nr, z);
+    qp_A_.setZero(nr, z + m);
+    qp_lower_.resize(nr);
+    qp_upper_.resize(nr);
+    for (Index j = 0; j < nlo; ++j)
+    {
+      const Index i = il[std::size_t(j)];
+      Au.row(j) = own_.V[i] * own_CZ_.row(i);
+      qp_A_(j, z + i) = 1.0;
+      qp_lower_[j] = own_.V[i] * (own_.lower[i] - c0[i]);
+      qp_upper_[j] = kInf;
+    }
+    for (Index j = 0; j < nup; ++j)
+    {
+      const Index i = iu[std::size_t(j)];
+      Au.row(nlo + j) = own_.V[i] * own_CZ_.row(i);
+      qp_A_(nlo + j, z + i) = -1.0;
+      qp_lower_[nlo + j] = -kInf;
+      qp_upper_[nlo + j] = own_.V[i] * (own_.upper[i] - c0[i]);
+    }
+    if (nh)
+    {
+      Au.bottomRows(nh) = HZ_;
+      qp_lower_.tail(nh) = hlo_ - hx_;
+      qp_upper_.tail(nh) = hup_ - hx_;
+    }
+    if (nr)
+      qp_A_.leftCols(z) = R_.triangularView<Eigen::Upper>().solve<Eigen::OnTheRight>(Au);
+    qp_g_ = VectorXd::Zero(z + m);
+    qp_g_.head(z) = -c_;
+    pending_ = Kind::QP;
+    return true;
+  }
+
+  // After u is known: x ← x* + Z u, the own free rows join the higher ones relaxed by v*
+  // (eq. 9), the weighted equality rows' directions are locked (eq. 8).
+  void end_level()
+  {
+    const std::size_t r = r_;
+    if (!high_.empty()) // the margins stay for the lower levels
+    {
+      high_.lower = hlo_;
+      high_.upper = hup_;
+    }
+    x_ += have_Z_ ? VectorXd(Z_ * u_) : u_;
+    if (!own_.empty())
+    {
+      const VectorXd cx = own_.C * x_;
+      const VectorXd viol = (own_.lower - cx).cwiseMax(cx - own_.upper).cwiseMax(0.0);
+      own_.lower -= viol;
+      own_.upper += viol;
+      high_.append(own_);
+    }
+    if (wB_.rows() && r + 1 < nl_)
+      lock(wB_, M_);
+    zdims_[r] = z_;
+    ++r_;
+  }
+
+  // problem
+  py::object nnls_;
+  std::vector<DoubleArray> Bs_, bs_, ws_, Cs_, lowers_, uppers_, Vs_;
+  std::vector<std::string> names_;
+  std::size_t nl_ = 0;
+  Index n_;
+  double eps_, rank_tol_, drop2_, relax_tol_, feas_tol_;
+  bool have_first_ = false;
+  VectorXd x1_;
+  MatrixXd Z1_;
+  // cascade state
+  std::size_t r_ = 0;
+  VectorXd x_;
+  bool have_Z_ = false; // false stands for Z = identity (nothing locked yet)
+  MatrixXd Z_;
+  Index z_ = 0;
+  Rows high_;
+  std::vector<Index> zdims_;
+  std::vector<double> times_;
+  std::vector<std::string> warns_;
+  std::string status_ = "optimal";
+  bool finished_ = false, failed_ = false;
+  Kind pending_ = Kind::Done;
+  // the level in progress
+  bool tight_ = false;
+  MatrixXd HZ_, wB_, M_, R_, own_CZ_;
+  VectorXd hx_, hlo_, hup_, u_, c_;
+  Rows own_;
+  // its QP
+  MatrixXd qp_A_;
+  VectorXd qp_g_, qp_lower_, qp_upper_;
+};
 
 PYBIND11_MODULE(_cascade, m)
 {
-  m.doc() = "Compiled common path of wholebody.solvers.hierarchy's cascade (no level QP).";
-  m.def("cascade_common_path", &cascade_common_path, py::arg("B"), py::arg("b"), py::arg("w"),
-        py::arg("C"), py::arg("lower"), py::arg("upper"), py::arg("n"), py::arg("eps"),
-        py::arg("x1"), py::arg("Z1"), py::arg("rank_tol"), py::arg("drop_tol"),
-        py::arg("relax_tol"), py::arg("feas_tol"));
+  m.doc() = "The cascade of wholebody.solvers.hierarchy, compiled; QPs are solved by the caller.";
+  py::class_<CascadeRun>(m, "CascadeRun")
+    .def(py::init<std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
+                  std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
+                  std::vector<DoubleArray>, std::vector<std::string>, Index, double,
+                  const std::optional<VectorXd> &, const std::optional<MatrixXd> &, double, double,
+                  double, double, py::object>(),
+         py::arg("B"), py::arg("b"), py::arg("w"), py::arg("C"), py::arg("lower"), py::arg("upper"),
+         py::arg("V"), py::arg("names"), py::arg("n"), py::arg("eps"), py::arg("x1"), py::arg("Z1"),
+         py::arg("rank_tol"), py::arg("drop_tol"), py::arg("relax_tol"), py::arg("feas_tol"),
+         py::arg("nnls"))
+    .def("advance", &CascadeRun::advance)
+    .def("qp", &CascadeRun::qp)
+    .def("give_qp", &CascadeRun::give_qp, py::arg("y"), py::arg("status"))
+    .def("evaluate", &CascadeRun::evaluate)
+    .def_property_readonly("x", &CascadeRun::x)
+    .def_property_readonly("nullspace_dims", &CascadeRun::nullspace_dims)
+    .def_property_readonly("warnings", &CascadeRun::warnings)
+    .def_property_readonly("status", &CascadeRun::status)
+    .def_property_readonly("level", &CascadeRun::level)
+    .def_property_readonly("times", &CascadeRun::times);
 }
