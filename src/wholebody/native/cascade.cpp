@@ -135,15 +135,17 @@ namespace
     return Q.rightCols(z - rank);
   }
 
-  // _loosen_tight: widen the bounds of rows tight at x by δ = relax_tol (1 + |C x|).
-  void loosen_tight(const VectorXd & hx, VectorXd & lo, VectorXd & up, double relax_tol)
+  // _loosen_tight: rows within δ = relax_tol (1 + |C x|) of a bound, or beyond it by at most
+  // feas_tol (1 + |C x|), get bounds that include C x with the margin δ.
+  void loosen_tight(const VectorXd & hx, VectorXd & lo, VectorXd & up, double relax_tol,
+                    double feas_tol)
   {
     for (Index i = 0; i < hx.size(); ++i)
     {
-      const double dlt = relax_tol * (1.0 + std::abs(hx[i]));
-      if (std::abs(hx[i] - lo[i]) <= dlt)
+      const double a = 1.0 + std::abs(hx[i]), dlt = relax_tol * a, out = feas_tol * a;
+      if (hx[i] - lo[i] <= dlt && lo[i] - hx[i] <= out)
         lo[i] = std::min(lo[i], hx[i]) - dlt;
-      if (std::abs(hx[i] - up[i]) <= dlt)
+      if (up[i] - hx[i] <= dlt && hx[i] - up[i] <= out)
         up[i] = std::max(up[i], hx[i]) + dlt;
     }
   }
@@ -581,11 +583,11 @@ private:
       const double gap_tol = std::max(kTightTol, relax_tol_);
       for (Index i = 0; i < hx_.size() && !tight_; ++i)
       {
-        const double gap = std::min(std::abs(hx_[i] - hlo_[i]), std::abs(hup_[i] - hx_[i]));
+        const double gap = std::min(hx_[i] - hlo_[i], hup_[i] - hx_[i]); // < 0: violated
         tight_ = !(gap > gap_tol * (1.0 + std::abs(hx_[i])));
       }
       if (tight_)
-        loosen_tight(hx_, hlo_, hup_, relax_tol_);
+        loosen_tight(hx_, hlo_, hup_, relax_tol_, feas_tol_);
     }
     if (project_and_try())
     {
@@ -627,7 +629,7 @@ private:
             hx_ = high_.C * x_;
             hlo_ = high_.lower;
             hup_ = high_.upper;
-            loosen_tight(hx_, hlo_, hup_, relax_tol_);
+            loosen_tight(hx_, hlo_, hup_, relax_tol_, feas_tol_);
           }
         }
         if (project_and_try())
