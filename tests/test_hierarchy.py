@@ -740,3 +740,38 @@ def test_table1_level_qps_stay_feasible_after_tolerance_violations(robots, compi
         if not sol.ok:
             failed.append((k, sol.status))
     assert not failed
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_analytic_first_level_is_the_least_norm_solution(compiled):
+    """first_level_solution='analytic' (eq. 17), in the compiled cascade and in Python: x1 is
+    the least-norm solution of level 1 (numpy's pseudo-inverse as the oracle), also for a
+    rank-deficient B; with a second level the result equals the one from an explicit (x1, Z1)
+    of an independent SVD null-space basis."""
+    if compiled:
+        from conftest import native_cycle_or_skip
+        native_cycle_or_skip("_cascade")
+    rng = np.random.default_rng(11)
+    for trial in range(40):
+        n, k = int(rng.integers(4, 12)), int(rng.integers(1, 4))
+        B = rng.normal(size=(k, n))
+        if trial % 4 == 0 and k > 1:  # dependent rows (consistent right-hand side)
+            B[-1] = B[0]
+        x_true = rng.normal(size=n)
+        w = 10.0 ** rng.uniform(-1, 1, size=k)
+        L1 = Level(eq=(B, B @ x_true), weights=w)
+        only = solve_hierarchy([L1], first_level_solution="analytic", compiled=compiled)
+        np.testing.assert_allclose(only.x, np.linalg.pinv(B) @ (B @ x_true), atol=1e-9)
+        L2 = Level(eq=(rng.normal(size=(2, n)), rng.normal(size=2)),
+                   ineq=(rng.normal(size=(3, n)), -np.ones(3), np.ones(3)))
+        _, s, Vt = np.linalg.svd(B)
+        Z1 = Vt[int(np.count_nonzero(s > 1e-10)):].T
+        both = solve_hierarchy([L1, L2], first_level_solution="analytic", compiled=compiled)
+        given = solve_hierarchy([L1, L2], first_level_solution=(np.linalg.pinv(B) @ (B @ x_true), Z1),
+                                compiled=False)
+        if trial % 4 or k == 1:  # (dependent rows: Z1 keeps n - k columns, see the docstring)
+            np.testing.assert_allclose(both.x, given.x, atol=1e-7)
+    with pytest.raises(ValueError, match="needs equality rows in level 1"):
+        solve_hierarchy([Level(ineq=(np.eye(2), -np.ones(2), np.ones(2)))], first_level_solution="analytic")
+    with pytest.raises(ValueError, match="expected \\(x1, Z1\\) or 'analytic'"):
+        solve_hierarchy([L1], first_level_solution="qr")

@@ -20,11 +20,10 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-from scipy.linalg import lapack
 
 from .robot import FREE_FLYER_NV, Robot
 from .solvers import Level, solve_hierarchy
-from .solvers.hierarchy import FirstLevelSolution
+from .solvers.hierarchy import analytic_first_level
 from .tasks.base import Task, TaskRows
 from .tasks.dynamics import FullDynamics, NewtonEuler
 from .tasks.limits import TorqueLimits
@@ -193,28 +192,9 @@ class Formulation:
 
     @staticmethod
     def first_level_solution(level: Level) -> tuple[np.ndarray, np.ndarray]:
-        """x1 = B^T (B B^T)^-1 b (least norm) and an orthonormal null-space basis Z1 of B (eq. 17).
-
-        B has full row rank (the base part of M is positive definite), so the Gram matrix is SPD.
-        Both come from one complete QR of B^T = [Q1 Q2] [R; 0] (LAPACK dgeqrf/dorgqr): since
-        B B^T = R^T R, x1 = Q1 R^-T b, and Z1 = Q2 spans null(B).
-        """
-        w = level.w
-        k = w.shape[0]
-        Bt = np.array((level.B * w[:, None]).T, order="F")
-        qr, tau, _, info = lapack.dgeqrf(Bt, overwrite_a=True)
-        if info == 0:
-            q = np.zeros((Bt.shape[0], Bt.shape[0]), order="F")
-            q[:, :k] = qr
-            Q, _, info = lapack.dorgqr(q, tau, overwrite_a=True)
-            if info == 0:  # R^T y = b with R the upper triangle of qr (dtrtrs reads only that)
-                y, info = lapack.dtrtrs(qr[:k], level.b * w, lower=0, trans=1)
-        if info != 0 or not np.isfinite(y).all():  # rank-deficient B: the plain formulas
-            B = level.B * w[:, None]
-            x1 = B.T @ np.linalg.lstsq(B @ B.T, level.b * w, rcond=None)[0]
-            Q, _ = np.linalg.qr(B.T, mode="complete")
-            return x1, Q[:, k:]
-        return FirstLevelSolution(Q[:, :k] @ y, Q[:, k:])  # orthonormal by construction
+        """x1 = B⁺ b and an orthonormal null-space basis Z1 of level 1 (eq. 17); see
+        :func:`wholebody.solvers.hierarchy.analytic_first_level`."""
+        return analytic_first_level(level)
 
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
@@ -244,7 +224,8 @@ class Formulation:
             if use_analytic and not self.analytic_first_level(stack):
                 raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque "
                                  "limits")
-        fls = self.first_level_solution(levels[0]) if use_analytic and method == "cascade" else None
+        # the analytic first level (eq. 17) is computed by the solver (in the compiled cascade)
+        fls = "analytic" if use_analytic and method == "cascade" else None
         # the cascade retries a failed level QP with the fallback backend itself (one QP, not
         # the whole cascade again); other methods are re-solved as a cascade below
         result = solve_hierarchy(levels, method=method, backend=backend,

@@ -291,7 +291,8 @@ public:
              std::vector<DoubleArray> uppers, std::vector<DoubleArray> Vs,
              std::vector<std::string> names, Index n, double eps,
              const std::optional<VectorXd> & x1, const std::optional<MatrixXd> & Z1,
-             double rank_tol, double drop_tol, double relax_tol, double feas_tol, py::object nnls)
+             bool analytic_first, double rank_tol, double drop_tol, double relax_tol,
+             double feas_tol, py::object nnls)
   : nnls_(std::move(nnls)), Bs_(std::move(Bs)), bs_(std::move(bs)), ws_(std::move(ws)), Cs_(std::move(Cs)),
     lowers_(std::move(lowers)), uppers_(std::move(uppers)), Vs_(std::move(Vs)),
     names_(std::move(names)), n_(n), eps_(eps), rank_tol_(rank_tol),
@@ -305,6 +306,9 @@ public:
       throw std::invalid_argument("CascadeRun: names differ in length from the levels");
     if (x1.has_value() != Z1.has_value())
       throw std::invalid_argument("CascadeRun: give both x1 and Z1, or neither");
+    if (x1 && analytic_first)
+      throw std::invalid_argument("CascadeRun: give x1 and Z1 or analytic_first, not both");
+    analytic_first_ = analytic_first;
     if (x1)
     {
       if (x1->size() != n || Z1->rows() != n)
@@ -540,11 +544,47 @@ private:
     return true;
   }
 
+  // x1 = B⁺ b (least norm) and an orthonormal basis Z1 of null(B) for level 1's weighted rows
+  // (Herzog et al. 2016 eq. 17; hierarchy.analytic_first_level): one complete Householder QR of
+  // Bᵀ = [Q1 Q2] [R; 0], x1 = Q1 R⁻ᵀ b, Z1 = Q2; a rank-deficient B (some |R_ii| ≤
+  // 1e-12 max |R_jj|) takes the pseudo-inverse.
+  void first_level_solution()
+  {
+    const ConstRowMap B = matrix(Bs_, 0);
+    const ConstVecMap w = vec(ws_, 0), b = vec(bs_, 0);
+    const Index k = B.rows();
+    const MatrixXd Bt = (w.asDiagonal() * B).transpose();
+    const VectorXd wb = w.cwiseProduct(b);
+    Eigen::HouseholderQR<MatrixXd> qr(Bt);
+    MatrixXd Q = MatrixXd::Identity(n_, n_);
+    Q.applyOnTheLeft(qr.householderQ());
+    const Index p = std::min(k, n_);
+    const auto R = qr.matrixQR().topLeftCorner(p, p);
+    const VectorXd d = R.diagonal().cwiseAbs();
+    bool regular = k <= n_ && p > 0 && d.allFinite() && d.minCoeff() > 1e-12 * d.maxCoeff();
+    VectorXd y;
+    if (regular)
+    {
+      y = R.triangularView<Eigen::Upper>().transpose().solve(wb);
+      regular = y.allFinite();
+    }
+    if (regular)
+      x1_ = Q.leftCols(k) * y;
+    else
+      x1_ = Bt.completeOrthogonalDecomposition().pseudoInverse().transpose() * wb;
+    Z1_ = Q.rightCols(n_ - p);
+  }
+
   // Level r up to its QP or implicit-equality request; true if it yields to Python.
   bool begin_level()
   {
     const std::size_t r = r_;
     const ConstRowMap C = matrix(Cs_, r);
+    if (r == 0 && analytic_first_)
+    {
+      first_level_solution();
+      have_first_ = true;
+    }
     if (r == 0 && have_first_) // analytic first priority (§2.4, eq. 17), v*_1 = 0
     {
       x_ = x1_;
@@ -728,7 +768,7 @@ private:
   std::size_t nl_ = 0;
   Index n_;
   double eps_, rank_tol_, drop2_, relax_tol_, feas_tol_;
-  bool have_first_ = false;
+  bool have_first_ = false, analytic_first_ = false;
   VectorXd x1_;
   MatrixXd Z1_;
   // cascade state
@@ -761,10 +801,11 @@ PYBIND11_MODULE(_cascade, m)
     .def(py::init<std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
                   std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
                   std::vector<DoubleArray>, std::vector<std::string>, Index, double,
-                  const std::optional<VectorXd> &, const std::optional<MatrixXd> &, double, double,
-                  double, double, py::object>(),
+                  const std::optional<VectorXd> &, const std::optional<MatrixXd> &, bool, double,
+                  double, double, double, py::object>(),
          py::arg("B"), py::arg("b"), py::arg("w"), py::arg("C"), py::arg("lower"), py::arg("upper"),
          py::arg("V"), py::arg("names"), py::arg("n"), py::arg("eps"), py::arg("x1"), py::arg("Z1"),
+         py::arg("analytic_first"),
          py::arg("rank_tol"), py::arg("drop_tol"), py::arg("relax_tol"), py::arg("feas_tol"),
          py::arg("nnls"))
     .def("advance", &CascadeRun::advance)

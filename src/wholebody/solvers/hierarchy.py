@@ -147,7 +147,7 @@ except ImportError:  # not built (no C++ compiler at install): the Python cascad
     _CompiledCascade = None
 
 __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
-           "row_normalised"]
+           "row_normalised", "analytic_first_level"]
 
 log = logging.getLogger(__name__)
 
@@ -272,7 +272,9 @@ def solve_hierarchy(
     first_level_solution : optional ``(x1, Z1)`` replacing the first level's QP (the analytic
         first priority of §2.4, eq. 17): ``x1`` one solution of level 1 and ``Z1`` a basis of the
         directions it leaves free (orthonormalised here if it is not). Level 1's inequalities
-        are then imposed on the lower levels with zero slack (v*_1 = 0, §2.4).
+        are then imposed on the lower levels with zero slack (v*_1 = 0, §2.4). ``"analytic"``
+        computes them here from level 1's weighted equality rows
+        (:func:`analytic_first_level`; inside the compiled cascade when it runs).
     rank_tol : a direction is locked when its |R_ii| (QRCP) exceeds ``rank_tol`` times the
         largest norm of the rows being locked.
     drop_tol : an inequality row has no freedom left when ``‖C_i Z‖ ≤ drop_tol ‖C_i‖``.
@@ -309,11 +311,19 @@ def solve_hierarchy(
     if not (np.isfinite(regularization) and regularization > 0):
         raise ValueError(f"regularization must be finite and > 0, got {regularization!r}")
     n_hint = None
+    analytic = isinstance(first_level_solution, str)
     if first_level_solution is not None:
         if method != "cascade":
             raise ValueError("first_level_solution is only supported by method='cascade'")
-        first_level_solution = _check_first_level(first_level_solution)
-        n_hint = first_level_solution[0].shape[0]
+        if analytic:
+            if first_level_solution != "analytic":
+                raise ValueError(f"first_level_solution: expected (x1, Z1) or 'analytic', got "
+                                 f"{first_level_solution!r}")
+            if not levels or not isinstance(levels[0], Level) or levels[0].n_eq == 0:
+                raise ValueError("first_level_solution='analytic' needs equality rows in level 1")
+        else:
+            first_level_solution = _check_first_level(first_level_solution)
+            n_hint = first_level_solution[0].shape[0]
     n = _check_levels(levels, n_hint)
     opts = dict(backend_options or {})
     tols = (rank_tol, drop_tol, relax_tol, feas_tol)
@@ -334,6 +344,8 @@ def solve_hierarchy(
     if compiled and _CompiledCascade is not None:
         return _solve_compiled(levels, n, backend, regularization, first_level_solution, tols, opts,
                                t0, fallback_backend)
+    if analytic:
+        first_level_solution = analytic_first_level(levels[0])
     return _solve_cascade(levels, n, backend, regularization, first_level_solution, tols, opts, t0,
                           fallback_backend)
 
@@ -343,11 +355,12 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
     :func:`_solve_cascade`, including :func:`_implicit_equalities` with scipy's NNLS passed in):
     it runs the levels and hands back each level QP, solved here by ``backend``, then
     ``fallback``, exactly as the Python cascade does."""
-    x1, Z1 = fls if fls is not None else (None, None)
+    analytic = isinstance(fls, str)
+    x1, Z1 = fls if fls is not None and not analytic else (None, None)
     run = _CompiledCascade([L.B for L in levels], [L.b for L in levels], [L.w for L in levels],
                            [L.C for L in levels], [L.lower for L in levels],
                            [L.upper for L in levels], [L.v for L in levels],
-                           [L.name for L in levels], n, eps, x1, Z1, *tols, nnls)
+                           [L.name for L in levels], n, eps, x1, Z1, analytic, *tols, nnls)
     warns = []
     qp_times = np.zeros(len(levels))
     while (kind := run.advance()) == "qp":
@@ -382,6 +395,37 @@ def _backend_solve(H, g, A, lower, upper, backend, opts, fallback, r, levels, wa
         else:
             status = f"{status}; {status2}"
     return y, ok, status
+
+
+def analytic_first_level(level: Level) -> "FirstLevelSolution":
+    """x1 = Bᵀ(B Bᵀ)⁻¹ b (least norm) and an orthonormal null-space basis Z1 of level 1's
+    weighted rows B = W B_1, b = W b_1 (Herzog et al. 2016 §2.4, eq. 17: no QP for level 1).
+
+    For Newton-Euler rows B has full row rank (the base block of M is positive definite) and the
+    Gram matrix is SPD; both come from one complete QR of Bᵀ = [Q1 Q2] [R; 0] (LAPACK
+    dgeqrf/dorgqr): since B Bᵀ = RᵀR, x1 = Q1 R⁻ᵀ b and Z1 = Q2 spans null(B). A rank-deficient
+    B (some |R_ii| ≤ 1e-12 max |R_jj|) takes the least-squares formulas instead (Z1 then keeps
+    n − k columns: the dependent rows' directions are not freed).
+    """
+    w = level.w
+    k = w.shape[0]
+    Bt = np.array((level.B * w[:, None]).T, order="F")
+    qr, tau, _, info = lapack.dgeqrf(Bt, overwrite_a=True)
+    d = np.abs(qr.diagonal()[:k])
+    if info == 0 and (k > Bt.shape[0] or not d.min() > 1e-12 * d.max()):
+        info = -1  # (numerically) rank-deficient
+    if info == 0:
+        q = np.zeros((Bt.shape[0], Bt.shape[0]), order="F")
+        q[:, :k] = qr
+        Q, _, info = lapack.dorgqr(q, tau, overwrite_a=True)
+        if info == 0:  # Rᵀ y = b with R the upper triangle of qr (dtrtrs reads only that)
+            y, info = lapack.dtrtrs(qr[:k], level.b * w, lower=0, trans=1)
+    if info != 0 or not np.isfinite(y).all():  # rank-deficient B: the plain formulas
+        B = level.B * w[:, None]
+        x1 = B.T @ np.linalg.lstsq(B @ B.T, level.b * w, rcond=None)[0]
+        Q, _ = np.linalg.qr(B.T, mode="complete")
+        return FirstLevelSolution(x1, Q[:, k:])
+    return FirstLevelSolution(Q[:, :k] @ y, Q[:, k:])  # orthonormal by construction
 
 
 class FirstLevelSolution(NamedTuple):
