@@ -105,9 +105,12 @@ namespace
     }
   };
 
-  // _kernel: orthonormal basis of ker(RZ) by QR with column pivoting of RZᵀ, SVD when a |R_ii|
-  // is within three decades of the threshold.
-  MatrixXd kernel(const MatrixXd & RZ, double tol)
+  // _kernel, applied: Z ← Z N with N an orthonormal basis of ker(RZ) (Z = nullopt: the identity),
+  // from the QR with column pivoting of RZᵀ = Q R P: N = Q[:, rank:], so Z N is the last columns
+  // of Z Q, got by applying the Householder reflectors to Z (cheaper than forming Q and then
+  // multiplying). An SVD decides when some |R_ii| is within three decades of the threshold.
+  // Returns false if nothing is locked.
+  bool restrict_to_kernel(MatrixXd & Z, bool have_Z, Index n, const MatrixXd & RZ, double tol)
   {
     const Index k = RZ.rows(), z = RZ.cols(), p = std::min(k, z);
     const MatrixXd At = RZ.transpose();
@@ -124,15 +127,23 @@ namespace
     {
       Eigen::JacobiSVD<MatrixXd> svd(At, Eigen::ComputeFullU);
       const Index r = (svd.singularValues().array() > tol).count();
-      return svd.matrixU().rightCols(z - r);
+      if (r == 0)
+        return false;
+      const MatrixXd N = svd.matrixU().rightCols(z - r);
+      Z = have_Z ? MatrixXd(Z * N) : N;
+      return true;
     }
     if (rank == 0)
-      return MatrixXd::Identity(z, z);
+      return false;
     if (rank >= z)
-      return MatrixXd(z, 0);
-    MatrixXd Q = MatrixXd::Identity(z, z);
-    Q.applyOnTheLeft(qr.householderQ());
-    return Q.rightCols(z - rank);
+    {
+      Z.resize(have_Z ? Z.rows() : n, 0);
+      return true;
+    }
+    MatrixXd ZQ = have_Z ? Z : MatrixXd::Identity(n, n);
+    ZQ.applyOnTheRight(qr.householderQ());
+    Z = ZQ.rightCols(z - rank);
+    return true;
   }
 
   // _loosen_tight: rows within δ = relax_tol (1 + |C x|) of a bound, or beyond it by at most
@@ -482,10 +493,8 @@ private:
     const double scale = std::sqrt(sq_norms(rows).maxCoeff());
     if (scale == 0.0)
       return;
-    const MatrixXd N = kernel(projected, rank_tol_ * scale);
-    if (N.cols() == z_)
+    if (!restrict_to_kernel(Z_, have_Z_, n_, projected, rank_tol_ * scale))
       return;
-    Z_ = have_Z_ ? MatrixXd(Z_ * N) : N;
     have_Z_ = true;
     z_ = Z_.cols();
   }

@@ -12,7 +12,8 @@ memory on failure, so a failed x is never passed on).
 * ``quadprog`` — Goldfarb–Idnani dual active set (the method used by Herzog et al. 2016, §5):
   two-sided rows are split into two one-sided rows ``Cᵀx ≥ b``, equalities go first (``meq``).
 * ``daqp`` — dual active set on the LDP (Arnström et al. 2022): native two-sided rows,
-  equalities flagged with ``sense = 5``; infinite bounds are passed as ±1e30 (DAQP_INF). For
+  equalities flagged with ``sense = 5``; infinite bounds are passed as ±1e30 (DAQP_INF); rows are
+  scaled to unit norm and the solution is checked on the unscaled rows (see the adapter). For
   ill-conditioned H (cond ≳ 1e9, tiny ε) its infeasibility test misfires on feasible QPs; an
   "infeasible" verdict is retried once with proximal iterations (``eps_prox = 1e-6``), which
   converge to the same solution.
@@ -83,8 +84,9 @@ def solve_quadprog(H, g, A, lower, upper, **_):
     return _check_x(x, "quadprog")
 
 
-def solve_daqp(H, g, A, lower, upper, **opts):
-    """DAQP via ``daqp.solve(H, f, A, bupper, blower, sense)``; equalities have sense 5.
+def solve_daqp(H, g, A, lower, upper, raw_tol=1e-6, **opts):
+    """DAQP via ``daqp.solve(H, f, A, bupper, blower, sense)``; equalities have sense 5; rows
+    scaled to unit norm, the solution refused if a row is violated by more than ``raw_tol``.
 
     ``primal_tol`` defaults to 1e-7 instead of DAQP's 1e-6: the cascade's rows carry weights up
     to 1e4 (CoP), and a higher row left violated by 1e-6 costs its level ~1e-4 (measured on
@@ -102,9 +104,20 @@ def solve_daqp(H, g, A, lower, upper, **opts):
         lower, upper = np.full(1, -np.inf), np.full(1, np.inf)
         m = 1
     sense = np.where(lower == upper, 5, 0).astype(np.intc)
-    bu = np.minimum(upper, _DAQP_INF)
-    bl = np.maximum(lower, -_DAQP_INF)
-    H, g, A = np.ascontiguousarray(H), np.ascontiguousarray(g), np.ascontiguousarray(A)
+    # DAQP is given rows of unit norm (same feasible set): the cascade's level QPs in w = R u have
+    # row norms from ~0.1 to ~1e6 (directions without objective are scaled by 1/sqrt(eps)), and
+    # on the raw rows DAQP declared feasible QPs infeasible/cycling at degenerate vertices (94
+    # of 300 Table 1 cycles, talos double support; 15 with unit rows). Its tolerance then holds
+    # on the unit rows, i.e. ‖row‖ times looser on the raw ones (up to 0.06 measured): the
+    # solution is checked on the caller's rows and refused beyond `raw_tol` (a fallback backend
+    # then solves the QP).
+    raw_A, raw_lower, raw_upper = A, lower, upper
+    norms = np.sqrt(np.einsum("ij,ij->i", A, A))
+    norms[norms == 0.0] = 1.0
+    A = A / norms[:, None]
+    bu = np.minimum(upper / norms, _DAQP_INF)
+    bl = np.maximum(lower / norms, -_DAQP_INF)
+    H, g = np.ascontiguousarray(H), np.ascontiguousarray(g)
     x, _, flag, _ = daqp.solve(H, g, A, bu, bl, sense, **opts)
     if flag == -1 and "eps_prox" not in opts:
         # DAQP works on the LDP with R⁻¹ (H = RᵀR); for cond(H) ≳ 1e9 (tiny ε in the cascade)
@@ -113,7 +126,13 @@ def solve_daqp(H, g, A, lower, upper, **opts):
         x, _, flag, _ = daqp.solve(H, g, A, bu, bl, sense, eps_prox=1e-6, **opts)
     if flag not in (1, 2):
         return None, f"daqp: {_DAQP_EXIT.get(flag, 'exitflag')} ({flag})", False
-    return _check_x(np.array(x), "daqp")
+    x, status, ok = _check_x(np.array(x), "daqp")
+    if ok:
+        ax = raw_A @ x
+        over = float(np.max(np.maximum(raw_lower - ax, ax - raw_upper), initial=0.0))
+        if over > raw_tol:
+            return None, f"daqp: solution outside its rows by {over:.3g} (> {raw_tol:g})", False
+    return x, status, ok
 
 
 def solve_proxsuite(H, g, A, lower, upper, eps_abs=1e-9, max_iter=10_000, **opts):
