@@ -51,7 +51,8 @@ def stats(samples_s) -> str:
 
 def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: str, cycles: int,
              fallback: str | None = None, passes: int = 1):
-    """Per-cycle times (update, rows, solve, total) and the number of failed cycles.
+    """Per-cycle times (update, rows, solve, total, of which in the QP backends), the number of
+    failed cycles and the mean number of level QPs per cycle.
 
     With ``passes`` > 1 the whole state sequence is run that many times and each cycle keeps its
     fastest pass: an estimate of the uncontended time on a shared machine (single-pass
@@ -60,8 +61,9 @@ def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: s
     formulation = Formulation(robot, reduced=reduced)
     variables = Variables(robot, contacts)
     states = list(moving_states(robot, cycles))
-    best = np.full((cycles, 4), np.inf)
+    best = np.full((cycles, 5), np.inf)
     failures = 0
+    qps = 0
     for p in range(passes):
         for i, (q, v) in enumerate(states):
             t0 = time.perf_counter()
@@ -71,14 +73,17 @@ def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: s
                                      fallback_backend=fallback, diagnostics=False)
             t2 = time.perf_counter()
             failures += (not sol.ok) and p == 0
-            best[i] = np.minimum(best[i], (t1 - t0, sol.timings["rows"], sol.timings["solve"], t2 - t0))
-    return best[:, 0], best[:, 1], best[:, 2], best[:, 3], failures
+            qps += sol.timings["qps"] if p == 0 else 0
+            best[i] = np.minimum(best[i], (t1 - t0, sol.timings["rows"], sol.timings["solve"], t2 - t0,
+                                           sol.timings["qp"]))
+    return best[:, 0], best[:, 1], best[:, 2], best[:, 3], best[:, 4], failures, qps / cycles
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=2000)
-    parser.add_argument("--quick", action="store_true", help="daqp cascade only")
+    parser.add_argument("--quick", action="store_true",
+                        help="the controllers' default only (daqp cascade, quadprog fallback)")
     parser.add_argument("--passes", type=int, default=1,
                         help="run the states that many times, keep each cycle's fastest pass")
     parser.add_argument("--with-proxsuite", action="store_true",
@@ -87,7 +92,7 @@ def main() -> None:
     # (method, backend, fallback backend): without a fallback a backend failure is counted as a
     # failed cycle; "daqp+quadprog" is the controllers' default (a level QP DAQP fails on is
     # solved again by quadprog, see solve_hierarchy's fallback_backend)
-    combos = [("cascade", "daqp", None)] if args.quick else [
+    combos = [("cascade", "daqp", "quadprog")] if args.quick else [
         ("cascade", "quadprog", None), ("cascade", "daqp", None), ("cascade", "daqp", "quadprog"),
         ("daqp", "daqp", None)]
     if args.with_proxsuite:
@@ -112,16 +117,17 @@ def main() -> None:
             for reduced in (True, False):
                 label = f"{method}/{name} {'reduced' if reduced else 'full   '}"
                 try:
-                    upd, rows, solve, total, fails = run_case(robot, make_stack, contacts, reduced,
-                                                              method, backend, args.cycles, fallback,
-                                                              args.passes)
+                    upd, rows, solve, total, qp, fails, qps = run_case(
+                        robot, make_stack, contacts, reduced, method, backend, args.cycles, fallback,
+                        args.passes)
                 except Exception as exc:  # a benchmark reports, it does not stop
                     print(f"{label}: error {exc}")
                     continue
                 medians[(method, name, reduced)] = np.median(total)
                 print(f"{label:37} total {stats(total)}  failed {fails}")
                 print(f"{'':37} update {np.median(upd) * 1e6:5.0f}  rows {np.median(rows) * 1e6:5.0f}"
-                      f"  solve {np.median(solve) * 1e6:5.0f} µs (medians)")
+                      f"  solve {np.median(solve) * 1e6:5.0f} (in QP backends "
+                      f"{np.nanmedian(qp) * 1e6:4.0f}, {qps:.2f} QPs/cycle) µs (medians)")
         for method, backend, fallback in combos:
             name = backend if fallback is None else f"{backend}+{fallback}"
             r, f = medians.get((method, name, True)), medians.get((method, name, False))

@@ -248,7 +248,9 @@ class Formulation:
         if diagnostics:
             solution.tasks = self._task_reports(result.x, meta)
         solution.timings = {"rows": t_rows - t0, "solve": t_solve - t_rows,
-                            "total": time.perf_counter() - t0}
+                            "total": time.perf_counter() - t0,
+                            "qp": result.timings.get("qp", np.nan),
+                            "qps": result.timings.get("qps", 0)}
         return solution
 
     def _recover(self, x, variables: Variables, ok: bool, status: str, costs) -> Solution:

@@ -162,7 +162,8 @@ class HierarchySolution:
 
     ``costs[r] = ‖W_r(B_r x − b_r)‖² + ‖v_r‖²`` at the returned x (eq. 5 without ε);
     ``eq_residuals[r] = W_r(B_r x − b_r)``; ``ineq_violations[r] = v_r = V_r · violation ≥ 0``
-    (weighted, as it enters the cost); ``timings = {"total": s, "levels": array of s}``
+    (weighted, as it enters the cost); ``timings = {"total": s, "levels": array of s}``, and
+    for the compiled cascade also ``"qp"`` (s spent in the QP backends) and ``"qps"`` (their count)
     (per-level times are NaN for the daqp and weighted methods, which solve in one call).
     ``levels_solved`` counts the levels whose optimisation succeeded; ``nullspace_dims[r]`` is
     the number of free directions left after level r (cascade only);
@@ -363,7 +364,9 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
                            [L.name for L in levels], n, eps, x1, Z1, analytic, *tols, nnls)
     warns = []
     qp_times = np.zeros(len(levels))
+    n_qps = 0
     while (kind := run.advance()) == "qp":
+        n_qps += 1
         tq = time.perf_counter()
         r = run.level
         g, A, lower, upper = run.qp()
@@ -376,7 +379,8 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
     return HierarchySolution(
         x=run.x, costs=costs, eq_residuals=res, ineq_violations=vio,
         status="optimal" if ok else run.status, ok=ok,
-        timings={"total": time.perf_counter() - t0, "levels": np.asarray(run.times) + qp_times},
+        timings={"total": time.perf_counter() - t0, "levels": np.asarray(run.times) + qp_times,
+                 "qp": float(qp_times.sum()), "qps": n_qps},
         method="cascade", levels_solved=run.level, nullspace_dims=np.asarray(run.nullspace_dims, dtype=int),
         warnings=tuple(run.warnings) + tuple(warns),
     )
