@@ -584,7 +584,34 @@ private:
     Z1_ = Q.rightCols(n_ - p);
   }
 
-  // Level r up to its QP or implicit-equality request; true if it yields to Python.
+  // The higher rows over the current null space: HZ, without the rows that have no freedom left
+  // (_drop_frozen), their values hx at x* and bounds (hlo, hup), loosened where tight
+  // (_loosen_tight) — always with ``loosen``, else only if some row is tight. Returns whether a
+  // row is tight (or violated within tolerance).
+  bool project_higher_rows(bool loosen)
+  {
+    if (high_.empty())
+      return false;
+    HZ_ = times_Z(high_.C);
+    drop_frozen(high_, HZ_);
+    if (high_.empty())
+      return false;
+    hx_ = high_.C * x_;
+    hlo_ = high_.lower;
+    hup_ = high_.upper;
+    bool tight = false;
+    const double gap_tol = std::max(kTightTol, relax_tol_);
+    for (Index i = 0; i < hx_.size() && !tight; ++i)
+    {
+      const double gap = std::min(hx_[i] - hlo_[i], hup_[i] - hx_[i]); // < 0: violated
+      tight = !(gap > gap_tol * (1.0 + std::abs(hx_[i])));
+    }
+    if (tight || loosen)
+      loosen_tight(hx_, hlo_, hup_, relax_tol_, feas_tol_);
+    return tight;
+  }
+
+  // Level r up to its QP request; true if it yields to Python.
   bool begin_level()
   {
     const std::size_t r = r_;
@@ -618,26 +645,7 @@ private:
       return false;
     }
     // higher rows: drop those without freedom; rows tight at x* get a margin
-    tight_ = false;
-    if (!high_.empty())
-    {
-      HZ_ = times_Z(high_.C);
-      drop_frozen(high_, HZ_);
-    }
-    if (!high_.empty())
-    {
-      hx_ = high_.C * x_;
-      hlo_ = high_.lower;
-      hup_ = high_.upper;
-      const double gap_tol = std::max(kTightTol, relax_tol_);
-      for (Index i = 0; i < hx_.size() && !tight_; ++i)
-      {
-        const double gap = std::min(hx_[i] - hlo_[i], hup_[i] - hx_[i]); // < 0: violated
-        tight_ = !(gap > gap_tol * (1.0 + std::abs(hx_[i])));
-      }
-      if (tight_)
-        loosen_tight(hx_, hlo_, hup_, relax_tol_, feas_tol_);
-    }
+    tight_ = project_higher_rows(false);
     if (project_and_try())
     {
       end_level();
@@ -669,18 +677,7 @@ private:
           ++r_;
           return false;
         }
-        if (!high_.empty())
-        {
-          HZ_ = times_Z(high_.C);
-          drop_frozen(high_, HZ_);
-          if (!high_.empty())
-          {
-            hx_ = high_.C * x_;
-            hlo_ = high_.lower;
-            hup_ = high_.upper;
-            loosen_tight(hx_, hlo_, hup_, relax_tol_, feas_tol_);
-          }
-        }
+        project_higher_rows(true);
         if (project_and_try())
         {
           end_level();

@@ -542,15 +542,8 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
                         if (own is not None or high is not None) else None)
                 solved = ok and (rows is None or not _violated(rows, u))
         if not solved and rows is not None:
-            u, ok, status = _level_qp(Rc, *rows, backend, opts)
-            if not ok and fallback is not None:
-                u, ok, status2 = _level_qp(Rc, *rows, fallback, {})
-                if ok:
-                    msg = f"level {r} ({L.name!r}): {status}; solved with {fallback}"
-                    log.debug(msg)
-                    warns.append(msg)
-                else:
-                    status = f"{status}; {status2}"
+            u, ok, status = _level_qp(Rc, *rows, lambda *qp: _backend_solve(
+                *qp, backend, opts, fallback, r, levels, warns))
         if high is not None:  # the margins stay for the lower levels
             high = (high[0], hb[0], hb[1], high[3])
         if not ok:
@@ -826,8 +819,9 @@ def _unconstrained(M, r0, zx, eps):
     return u, True, "optimal", (R, c)
 
 
-def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
-    """QP of eqs. 10-11 over [u, s]: own rows lower − s/V ≤ C x ≤ upper + s/V, higher rows relaxed.
+def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, solve):
+    """QP of eqs. 10-11 over [u, s]: own rows lower − s/V ≤ C x ≤ upper + s/V, higher rows relaxed;
+    ``solve(H, g, A, lower, upper) → (y, ok, status)`` solves it (:func:`_backend_solve`).
 
     The level's cost ½‖M u + r0‖² + ε/2 ‖Zᵀx* + u‖² is ½‖R u − c‖² + const with R, c from the QR
     of the stacked system (:func:`_unconstrained`, ``Rc = (R, c)``). The backend is given the
@@ -887,12 +881,12 @@ def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, backend, opts):
         upper[nl_ + nu_ :] = hup - h0
     if nr:
         A[:, :z] = solve_triangular(R, Au.T, trans="T", lower=False, check_finite=False).T
-    y, status, ok = solve_qp(H, g, A, lower, upper, backend=backend, **opts)
+    y, ok, status = solve(H, g, A, lower, upper)
     if not ok:
         return None, False, status
     u = solve_triangular(R, y[:z], lower=False, check_finite=False)
     if not np.isfinite(u).all():
-        return None, False, f"{backend}: non-finite solution after the change of variables"
+        return None, False, f"{status}: non-finite solution after the change of variables"
     return u, True, status
 
 
