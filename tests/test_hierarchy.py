@@ -672,10 +672,18 @@ def test_compiled_cascade_matches_python_on_random_hierarchies(monkeypatch, back
     assert seen["qp"] > 200 and seen["implicit"] > 0  # both requests were exercised
 
 
-@pytest.mark.parametrize("name", ["talos14", "talos"])
+@pytest.mark.parametrize("name", ["talos14", "talos", "talos14-single"])
 def test_compiled_cascade_matches_python_on_robots(robots, monkeypatch, name):
-    """Table 2 (talos14) and Table 1 (talos) over a moving state: the same torques (1e-6 Nm)
-    and level costs (to the backend's tolerance) with the compiled cascade as with the Python cascade."""
+    """Table 2 (talos14), Table 1 (talos) and Table 4 (talos14 on its left sole, right sole a
+    6D swing task) over a moving state: the same torques (1e-6 Nm) and level costs (to the
+    backend's tolerance) with the compiled cascade as with the Python cascade.
+
+    Table 4 on these synthetic states (stance foot dragged by the moving base, swing task at
+    weight 1e4 holding its first pose) has a level-3 residual of ~1e12: a large-residual least
+    squares problem, whose solution depends on the rounding order at the cond² level. Eigen's and
+    LAPACK's QR then give torques up to 1e-2 Nm apart, with costs equal to 1e-9 (both are
+    deterministic: a 1e-13 change of the state moves either by < 1e-11 Nm; merely permuting the
+    level-3 rows moves the Python cascade's x by up to 8e-4): asserted to 0.05 Nm there."""
     import sys
     from pathlib import Path
     from conftest import native_cycle_or_skip
@@ -686,9 +694,17 @@ def test_compiled_cascade_matches_python_on_robots(robots, monkeypatch, name):
     from wholebody.variables import Variables
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from bench_wbc import moving_states
-    robot = robots[name]
-    stack = table2_stack(robot) if name == "talos14" else table1_stack(robot, robot.contact_names)
-    formulation, variables = Formulation(robot), Variables(robot)
+    from wholebody.control.stacks import table4_stack
+    robot = robots[name.split("-")[0]]
+    variables = Variables(robot)
+    if name == "talos14":
+        stack = table2_stack(robot)
+    elif name == "talos":
+        stack = table1_stack(robot, robot.contact_names)
+    else:
+        stack = table4_stack(robot, ["left_sole"], ["right_sole_link"])
+        variables = Variables(robot, ["left_sole"])
+    formulation = Formulation(robot)
     seen = _count_requests(monkeypatch)
     compiled = h._CompiledCascade
     for k, (q, v) in enumerate(moving_states(robot, 1200)):
@@ -700,7 +716,8 @@ def test_compiled_cascade_matches_python_on_robots(robots, monkeypatch, name):
         b = formulation.solve(stack, variables, diagnostics=False)
         monkeypatch.setattr(h, "_CompiledCascade", compiled)
         assert a.ok and b.ok
-        np.testing.assert_allclose(a.tau, b.tau, atol=1e-6, err_msg=f"state {k}")
+        np.testing.assert_allclose(a.tau, b.tau, atol=0.05 if name == "talos14-single" else 1e-6,
+                                   err_msg=f"state {k}")
         # a row of slack weight V (CoP: 1e4) may stay violated by DAQP's primal tolerance
         # (1e-7), i.e. cost (1e4 · 1e-7)² = 1e-6: costs agree to that, relatively to 1e-6
         np.testing.assert_allclose(a.level_costs, b.level_costs, atol=1e-6, rtol=1e-6)
