@@ -1,5 +1,5 @@
 """Builds the optional compiled parts (src/wholebody/native): the passive WBC's cycle and the
-cascade's common path. The rest of the package metadata is in pyproject.toml.
+cascade of QPs (its level QPs are solved by the backends from Python). The rest of the package metadata is in pyproject.toml.
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
 and ``cmeel-eigen``), so the extension links no Pinocchio library and needs no run-time path.
@@ -50,7 +50,7 @@ def extensions() -> list[Extension]:
                            ("BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", None),
                            ("BOOST_FUSION_INVOKE_MAX_ARITY", "12"), ("NDEBUG", None)],
             extra_compile_args=flags, language="c++", optional=True),
-        Extension(  # the cascade's common path: Eigen only
+        Extension(  # the cascade: Eigen only
             "wholebody._cascade",
             sources=["src/wholebody/native/cascade.cpp"],
             include_dirs=eigen, define_macros=[("NDEBUG", None)],
