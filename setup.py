@@ -1,5 +1,6 @@
 """Builds the optional compiled parts (src/wholebody/native): the passive WBC's cycle and the
-cascade of QPs (its level QPs are solved by the backends from Python). The rest of the package metadata is in pyproject.toml.
+cascade of QPs (its level QPs are solved by the backends from Python). The rest of the package
+metadata is in pyproject.toml.
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
 and ``cmeel-eigen``), so the extension links no Pinocchio library and needs no run-time path.
