@@ -55,9 +55,18 @@ Methods
       is wrong by O(1) for the lower levels.
     * margin. Rows still tight at x* (or violated within ``feas_tol``, what a backend's
       tolerance leaves) are loosened to include x* with a margin ``relax_tol (1 + |C x*|)``
-      (1e-9), so the next QP has an interior; costs move by O(relax_tol × multiplier). With the margin alone
-      quadprog stopped failing, but ProxQP still failed on 91 of 300 hierarchies; with both
-      devices all three backends solve all test hierarchies.
+      (1e-9), so the next QP has an interior; costs move by O(relax_tol × multiplier). With
+      the margin alone quadprog stopped failing, but ProxQP still failed on 91 of 300
+      hierarchies; with both devices all three backends solve all test hierarchies.
+
+    Compiled. ``wholebody._cascade.CascadeRun`` (src/wholebody/native/cascade.cpp) is this
+    algorithm line for line in C++ (Eigen: Householder QR, QR with column pivoting, the same
+    tolerances); it hands each level QP back to Python, where :func:`_backend_solve` calls the
+    backend (and the fallback) exactly as the Python cascade does, and calls scipy's NNLS for
+    the implicit-equality search. It is the default when built (``compiled=True``); the Python
+    cascade is the reference the tests compare it with (x to 1e-7 on the random hierarchies,
+    torques to 1e-6 Nm on Tables 1/2). Results differ only by rounding: Eigen's and LAPACK's
+    factorisations pivot alike but round differently.
 
     Nullspace by QR with column pivoting, not SVD: the kernel basis comes from LAPACK
     ``dgeqp3``/``dorgqr`` on ``(W_r B_r Z_r)ᵀ``; a direction is locked when ``|R_ii|`` exceeds
