@@ -792,6 +792,9 @@ def test_analytic_first_level_is_the_least_norm_solution(compiled):
         solve_hierarchy([Level(ineq=(np.eye(2), -np.ones(2), np.ones(2)))], first_level_solution="analytic")
     with pytest.raises(ValueError, match="expected \\(x1, Z1\\) or 'analytic'"):
         solve_hierarchy([L1], first_level_solution="qr")
+    from wholebody.solvers.hierarchy import analytic_first_level
+    with pytest.raises(ValueError, match="needs equality rows"):
+        analytic_first_level(Level(ineq=(np.eye(2), -np.ones(2), np.ones(2)), name="limits"))
 
 
 def test_daqp_alone_solves_most_table1_cycles_and_agrees_with_quadprog(robots):

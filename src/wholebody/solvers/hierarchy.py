@@ -300,7 +300,7 @@ def solve_hierarchy(
         ill-conditioned QPs (DAQP: cycling/infeasible verdicts on ~10-20 % of Table 1 cycles).
     compiled : cascade only — run the compiled cascade (``wholebody._cascade``, when built): the
         same algorithm line for line, with the level QPs still solved by ``backend`` (and
-        ``fallback_backend``) from Python; ~3-6x faster on the Tables 1/2 stacks. ``False`` runs
+        ``fallback_backend``) from Python; ~3x faster on the Tables 1/2 stacks. ``False`` runs
         the Python cascade (the reference). Warnings from the compiled cascade list its own
         (frozen rows) before the fallback notes.
 
@@ -422,6 +422,8 @@ def analytic_first_level(level: Level) -> "FirstLevelSolution":
     """
     w = level.w
     k = w.shape[0]
+    if k == 0:
+        raise ValueError(f"level {level.name!r}: the analytic first level needs equality rows")
     Bt = np.array((level.B * w[:, None]).T, order="F")
     qr, tau, _, info = lapack.dgeqrf(Bt, overwrite_a=True)
     d = np.abs(qr.diagonal()[:k])
