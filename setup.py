@@ -1,5 +1,6 @@
-"""Builds the optional compiled parts (src/wholebody/native): the passive WBC's cycle and the
-cascade of QPs (its level QPs are solved by the backends from Python). The rest of the package
+"""Builds the optional compiled parts (src/wholebody/native): the passive WBC's cycle, the
+hierarchical inverse dynamics' cycle (rigid-body terms and task rows) and the cascade of QPs (its
+level QPs are solved by the backends from Python). The rest of the package
 metadata is in pyproject.toml.
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
@@ -41,15 +42,21 @@ def extensions() -> list[Extension]:
 
     flags = ["-std=c++17", "-O2", "-g0", "-fvisibility=hidden"]
     eigen = [str(include / "eigen3"), pybind11.get_include()]
+    # Pinocchio's joint variants need larger Boost.MPL limits (its CMake exports these)
+    pinocchio_macros = [("BOOST_MPL_LIMIT_LIST_SIZE", "30"), ("BOOST_MPL_LIMIT_VECTOR_SIZE", "30"),
+                        ("BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", None),
+                        ("BOOST_FUSION_INVOKE_MAX_ARITY", "12"), ("NDEBUG", None)]
     return [
         Extension(
             "wholebody._passive_cycle",
             sources=["src/wholebody/native/passive_cycle.cpp"],
             include_dirs=[str(include)] + eigen,
-            # Pinocchio's joint variants need larger Boost.MPL limits (its CMake exports these)
-            define_macros=[("BOOST_MPL_LIMIT_LIST_SIZE", "30"), ("BOOST_MPL_LIMIT_VECTOR_SIZE", "30"),
-                           ("BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", None),
-                           ("BOOST_FUSION_INVOKE_MAX_ARITY", "12"), ("NDEBUG", None)],
+            define_macros=pinocchio_macros,
+            extra_compile_args=flags, language="c++", optional=True),
+        Extension(
+            "wholebody._hierarchy_cycle",
+            sources=["src/wholebody/native/hierarchy_cycle.cpp"],
+            include_dirs=[str(include)] + eigen, define_macros=pinocchio_macros,
             extra_compile_args=flags, language="c++", optional=True),
         Extension(  # the cascade: Eigen only
             "wholebody._cascade",

@@ -224,24 +224,8 @@ class Formulation:
             if use_analytic and not self.analytic_first_level(stack):
                 raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque "
                                  "limits")
-        # the analytic first level (eq. 17) is computed by the solver (in the compiled cascade)
-        fls = "analytic" if use_analytic and method == "cascade" else None
-        # the cascade retries a failed level QP with the fallback backend itself (one QP, not
-        # the whole cascade again); other methods are re-solved as a cascade below
-        result = solve_hierarchy(levels, method=method, backend=backend,
-                                 regularization=regularization, first_level_solution=fls,
-                                 fallback_backend=fallback_backend if method == "cascade" else None)
-        status = result.status
-        retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
-        if result.ok and retried:
-            status = f"optimal ({fallback_backend} after {backend}: {'; '.join(retried)})"
-        if not result.ok and fallback_backend and fallback_backend != backend:
-            retry = solve_hierarchy(levels, method="cascade", backend=fallback_backend,
-                                    regularization=regularization, first_level_solution=fls)
-            if retry.ok:
-                log.debug("%s failed (%s); solved with %s", backend, result.status, fallback_backend)
-                status = f"optimal ({fallback_backend} after {backend}: {result.status})"
-                result = retry
+        result, status = solve_levels(levels, use_analytic, method, backend, regularization,
+                                      fallback_backend)
         t_solve = time.perf_counter()
         x = result.x * self.scales(variables)
         solution = self._recover(x, variables, result.ok, status, result.costs)
@@ -261,16 +245,7 @@ class Formulation:
             tau = robot.M[FREE_FLYER_NV:] @ qdd + robot.h[FREE_FLYER_NV:] - J_u.T @ lam  # eq. 14
         else:
             tau = x[nv + nl:].copy()
-        lo, hi = robot.torque_bounds()
-        if not np.isfinite(tau).all():
-            ok, status, tau = False, f"{status}; non-finite torque replaced by zero", np.zeros(robot.na)
-        outside = bool(((tau < lo - 1e-6) | (tau > hi + 1e-6)).any())
-        if not ok or outside:
-            if outside and ok:
-                ok, status = False, "torque outside limits after solve; clipped"
-            tau = np.clip(tau, lo, hi)
-        forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
-        return Solution(qdd, lam, tau, forces, ok, status, np.asarray(costs), contacts=variables.contacts)
+        return make_solution(qdd, lam, tau, robot.torque_bounds(), ok, status, costs, variables)
 
     @staticmethod
     def _task_reports(x, meta, active_tol: float = 1e-7) -> list[TaskReport]:
@@ -288,6 +263,47 @@ class Formulation:
                     reports.append(TaskReport(task.name, rank, kind, len(value),
                                               float(np.linalg.norm(violation)), active))
         return reports
+
+
+def solve_levels(levels: list[Level], analytic_first_level: bool, method: str, backend: str,
+                 regularization: float, fallback_backend: str | None):
+    """The levels solved as :meth:`Formulation.solve` does → (HierarchySolution, status): the
+    analytic first level (eq. 17) when asked, a failed cascade level QP retried with
+    ``fallback_backend`` (one QP, not the whole cascade again), other methods re-solved as a
+    cascade with it."""
+    fls = "analytic" if analytic_first_level and method == "cascade" else None
+    result = solve_hierarchy(levels, method=method, backend=backend,
+                             regularization=regularization, first_level_solution=fls,
+                             fallback_backend=fallback_backend if method == "cascade" else None)
+    status = result.status
+    retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
+    if result.ok and retried:
+        status = f"optimal ({fallback_backend} after {backend}: {'; '.join(retried)})"
+    if not result.ok and fallback_backend and fallback_backend != backend:
+        retry = solve_hierarchy(levels, method="cascade", backend=fallback_backend,
+                                regularization=regularization, first_level_solution=fls)
+        if retry.ok:
+            log.debug("%s failed (%s); solved with %s", backend, result.status, fallback_backend)
+            status = f"optimal ({fallback_backend} after {backend}: {result.status})"
+            result = retry
+    return result, status
+
+
+def make_solution(qdd: np.ndarray, lam: np.ndarray, tau: np.ndarray,
+                  bounds: tuple[np.ndarray, np.ndarray], ok: bool, status: str, costs,
+                  variables: Variables) -> Solution:
+    """A :class:`Solution` whose torque is finite and within ``bounds`` = (tau_min, tau_max): a
+    failed solve's or an out-of-limits torque is clipped (and flagged), a non-finite one zeroed."""
+    lo, hi = bounds
+    if not np.isfinite(tau).all():
+        ok, status, tau = False, f"{status}; non-finite torque replaced by zero", np.zeros(tau.shape[0])
+    outside = bool(((tau < lo - 1e-6) | (tau > hi + 1e-6)).any())
+    if not ok or outside:
+        if outside and ok:
+            ok, status = False, "torque outside limits after solve; clipped"
+        tau = np.clip(tau, lo, hi)
+    forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
+    return Solution(qdd, lam, tau, forces, ok, status, np.asarray(costs), contacts=variables.contacts)
 
 
 def _signature(r: TaskRows) -> tuple:

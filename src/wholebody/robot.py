@@ -394,6 +394,21 @@ class Robot:
         v = rng.normal(scale=velocity_scale, size=self.nv)
         return q, v
 
+    def native_model_spec(self) -> dict:
+        """The model's joints, bodies and armature for the compiled cycles (``src/wholebody/native``,
+        ``add_joints``), which rebuild the same Pinocchio model from these arrays (copied)."""
+        model = self.model
+        joints = range(1, model.njoints)
+        return {
+            "parents": [int(model.parents[j]) for j in joints],
+            "kinds": [model.joints[j].shortname() for j in joints],
+            "placements": np.array([model.jointPlacements[j].homogeneous for j in joints]),
+            "masses": np.array([model.inertias[j].mass for j in joints]),
+            "levers": np.array([model.inertias[j].lever for j in joints]),
+            "inertias": np.array([model.inertias[j].inertia for j in joints]),
+            "armature": np.asarray(model.armature, float),
+        }
+
     def summary(self) -> dict:
         """Name, DoF, mass and contacts (for ``wholebody robots``)."""
         return {

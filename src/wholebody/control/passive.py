@@ -501,7 +501,6 @@ class PassiveWBC(PlannedController):
     def _native_spec(self) -> dict:
         """Model, contacts, weights, gains and limits for the compiled cycle (copied, not shared)."""
         robot, model = self.robot, self.robot.model
-        joints = range(1, model.njoints)
         frames = [model.frames[robot.contact(n).frame_id] for n in self.contacts]
         limits = robot.torque_limits
         linkage_rows, linkage_params = limits.linkage
@@ -512,14 +511,7 @@ class PassiveWBC(PlannedController):
             i = robot.joint_names.index(joint)
             cap[i] = min(cap[i], float(value))
         imp, lim = self.impedance, self.joint_limits
-        return {
-            "parents": [int(model.parents[j]) for j in joints],
-            "kinds": [model.joints[j].shortname() for j in joints],
-            "placements": np.array([model.jointPlacements[j].homogeneous for j in joints]),
-            "masses": np.array([model.inertias[j].mass for j in joints]),
-            "levers": np.array([model.inertias[j].lever for j in joints]),
-            "inertias": np.array([model.inertias[j].inertia for j in joints]),
-            "armature": np.asarray(model.armature, float),
+        return robot.native_model_spec() | {
             "contact_joints": [int(f.parentJoint) for f in frames],
             "contact_placements": np.array([f.placement.homogeneous for f in frames]),
             "radii": self._radii, "leg": [int(i) for i in self._leg],

@@ -6,7 +6,7 @@
 // senses, same formulas; tests/test_passive_native.py checks both on recorded closed-loop cycles.
 // Only the arithmetic lives here; the QP is solved by DAQP from Python and failures are handled
 // there. Python allocates every array this object writes (``bind``) so nothing is copied back.
-#include "legged_model.hpp"
+#include "native_common.hpp"
 
 #include <pinocchio/algorithm/centroidal.hpp>
 #include <pinocchio/algorithm/compute-all-terms.hpp>
@@ -26,96 +26,7 @@
 #include <vector>
 
 namespace py = pybind11;
-
-namespace
-{
-  using Eigen::Index;
-  using Eigen::Map;
-  using Eigen::Matrix3d;
-  using Eigen::MatrixXd;
-  using Eigen::Vector3d;
-  using Eigen::VectorXd;
-  using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-  using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  constexpr double kGravity = 9.81; // as wholebody.tasks.wrench.GRAVITY
-  constexpr int kEqual = 5, kFree = 0; // DAQP constraint senses
-
-  using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
-
-  std::string shape_of(const py::array & a)
-  {
-    std::string s = "(";
-    for (py::ssize_t i = 0; i < a.ndim(); ++i)
-      s += (i ? ", " : "") + std::to_string(a.shape(i));
-    return s + (a.ndim() == 1 ? ",)" : ")");
-  }
-
-  // A read-only view of an input of exactly ``size`` doubles; ValueError naming ``field``.
-  const double * input(const DoubleArray & a, py::ssize_t size, const char * field, bool finite = true)
-  {
-    if (a.size() != size)
-      throw std::invalid_argument(
-        std::string(field) + ": expected " + std::to_string(size) + " values, got shape "
-        + shape_of(a));
-    const double * p = a.data();
-    if (finite)
-      for (py::ssize_t i = 0; i < size; ++i)
-        if (!std::isfinite(p[i]))
-          throw std::invalid_argument(
-            std::string(field) + ": contains NaN or inf at index " + std::to_string(i));
-    return p;
-  }
-
-  // A writable, C-contiguous buffer owned by Python, kept alive by the holder.
-  template<typename T>
-  T * buffer(const py::dict & buffers, const char * name, py::ssize_t size, std::vector<py::object> & keep)
-  {
-    if (!buffers.contains(name))
-      throw std::invalid_argument(std::string("bind: missing buffer '") + name + "'");
-    py::object obj = buffers[name];
-    if (!py::isinstance<py::array_t<T>>(obj))
-      throw std::invalid_argument(std::string("bind: buffer '") + name + "' has the wrong dtype");
-    auto arr = py::reinterpret_borrow<py::array_t<T>>(obj);
-    if (arr.size() != size || !(arr.flags() & py::array::c_style) || !arr.writeable())
-      throw std::invalid_argument(
-        std::string("bind: buffer '") + name + "' must be a writable C-contiguous array of "
-        + std::to_string(size) + " values, got shape " + shape_of(arr));
-    keep.push_back(obj);
-    return arr.mutable_data();
-  }
-
-  template<typename T>
-  T get(const py::dict & spec, const char * key)
-  {
-    if (!spec.contains(key))
-      throw std::invalid_argument(std::string("spec: missing key '") + key + "'");
-    return spec[key].cast<T>();
-  }
-
-  VectorXd get_vector(const py::dict & spec, const char * key, Index size)
-  {
-    DoubleArray a = get<DoubleArray>(spec, key);
-    const double * p = input(a, size, key, false);
-    return Map<const VectorXd>(p, size);
-  }
-
-  pinocchio::SE3 placement_from(const double * h)
-  {
-    Eigen::Matrix<double, 4, 4, Eigen::RowMajor> m = Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(h);
-    return pinocchio::SE3(m.topLeftCorner<3, 3>(), m.topRightCorner<3, 1>());
-  }
-
-  // Unit normal and two unit tangents (t1, t2, n right-handed), as wholebody.tasks.contact.tangent_basis.
-  void tangent_basis(const Vector3d & normal, Vector3d & t1, Vector3d & t2, Vector3d & n)
-  {
-    n = normal / normal.norm();
-    const Vector3d helper = std::abs(n[0]) < 0.9 ? Vector3d::UnitX() : Vector3d::UnitY();
-    t1 = helper.cross(n);
-    t1 /= t1.norm();
-    t2 = n.cross(t1);
-  }
-} // namespace
+using namespace wholebody_native;
 
 class PassiveCycle
 {
@@ -498,50 +409,7 @@ public:
 private:
   void build_model(const py::dict & spec)
   {
-    auto parents = get<std::vector<int>>(spec, "parents");
-    auto kinds = get<std::vector<std::string>>(spec, "kinds");
-    const py::ssize_t nj = py::ssize_t(parents.size());
-    if (py::ssize_t(kinds.size()) != nj)
-      throw std::invalid_argument("spec: 'kinds' and 'parents' differ in length");
-    DoubleArray placements = get<DoubleArray>(spec, "placements");
-    DoubleArray masses = get<DoubleArray>(spec, "masses");
-    DoubleArray levers = get<DoubleArray>(spec, "levers");
-    DoubleArray inertias = get<DoubleArray>(spec, "inertias");
-    const double * pl = input(placements, 16 * nj, "placements");
-    const double * ms = input(masses, nj, "masses");
-    const double * lv = input(levers, 3 * nj, "levers");
-    const double * in = input(inertias, 9 * nj, "inertias");
-    for (py::ssize_t k = 0; k < nj; ++k)
-    {
-      const pinocchio::SE3 placement = placement_from(pl + 16 * k);
-      const std::string name = "joint" + std::to_string(k + 1);
-      const auto parent = pinocchio::JointIndex(parents[k]);
-      const std::string & kind = kinds[k];
-      pinocchio::JointIndex id;
-      if (kind == "JointModelFreeFlyer")
-        id = model_.addJoint(parent, pinocchio::JointModelFreeFlyer(), placement, name);
-      else if (kind == "JointModelRX")
-        id = model_.addJoint(parent, pinocchio::JointModelRX(), placement, name);
-      else if (kind == "JointModelRY")
-        id = model_.addJoint(parent, pinocchio::JointModelRY(), placement, name);
-      else if (kind == "JointModelRZ")
-        id = model_.addJoint(parent, pinocchio::JointModelRZ(), placement, name);
-      else if (kind == "JointModelPX")
-        id = model_.addJoint(parent, pinocchio::JointModelPX(), placement, name);
-      else if (kind == "JointModelPY")
-        id = model_.addJoint(parent, pinocchio::JointModelPY(), placement, name);
-      else if (kind == "JointModelPZ")
-        id = model_.addJoint(parent, pinocchio::JointModelPZ(), placement, name);
-      else
-        throw std::invalid_argument(
-          "spec: joint " + std::to_string(k + 1) + " is a " + kind
-          + "; the native cycle supports the free flyer and revolute/prismatic joints about x, y, z");
-      const Matrix3d I = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(in + 9 * k);
-      model_.appendBodyToJoint(
-        id, pinocchio::Inertia(ms[k], Map<const Vector3d>(lv + 3 * k), I), pinocchio::SE3::Identity());
-    }
-    if (model_.njoints < 2 || model_.joints[1].nv() != 6)
-      throw std::invalid_argument("spec: the root joint must be a free flyer");
+    add_joints(spec, model_);
     nq_ = model_.nq;
     nv_ = model_.nv;
     na_ = nv_ - 6;
@@ -613,15 +481,7 @@ private:
   void torque_bounds()
   {
     Map<VectorXd> hi(tau_hi_, na_), lo(tau_lo_, na_);
-    hi = torque_constant_;
-    for (std::size_t k = 0; k < linkage_rows_.size(); ++k)
-    {
-      const int j = linkage_rows_[k];
-      const double a = linkage_(Index(k), 0), b = linkage_(Index(k), 1);
-      const double force = linkage_(Index(k), 2), q_peak = linkage_(Index(k), 3);
-      const double t = q_[7 + j] + M_PI / 2 - q_peak;
-      hi[j] = force * a * b * std::abs(std::sin(t)) / std::sqrt(a * a + b * b - 2.0 * a * b * std::cos(t));
-    }
+    linkage_upper(q_.tail(na_), torque_constant_, linkage_rows_, linkage_, hi);
     hi *= torque_scale_;
     hi = hi.cwiseMin(torque_cap_);
     lo = -hi;

@@ -1,0 +1,178 @@
+// Helpers shared by the compiled cycles (passive_cycle.cpp, hierarchy_cycle.cpp): checked views of
+// Python inputs, Python-owned output buffers, spec access, and the Pinocchio model built from the
+// Python model's joints and inertias (see wholebody.robot.Robot.native_model_spec).
+#pragma once
+
+#include "legged_model.hpp"
+
+#include <pinocchio/spatial.hpp>
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace py = pybind11;
+
+namespace wholebody_native
+{
+  using Eigen::Index;
+  using Eigen::Map;
+  using Eigen::Matrix3d;
+  using Eigen::MatrixXd;
+  using Eigen::Vector3d;
+  using Eigen::VectorXd;
+  using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  constexpr double kGravity = 9.81; // as wholebody.tasks.wrench.GRAVITY
+  constexpr int kEqual = 5, kFree = 0; // DAQP constraint senses
+
+  using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+  inline std::string shape_of(const py::array & a)
+  {
+    std::string s = "(";
+    for (py::ssize_t i = 0; i < a.ndim(); ++i)
+      s += (i ? ", " : "") + std::to_string(a.shape(i));
+    return s + (a.ndim() == 1 ? ",)" : ")");
+  }
+
+  // A read-only view of an input of exactly ``size`` doubles; ValueError naming ``field``.
+  inline const double * input(const DoubleArray & a, py::ssize_t size, const char * field, bool finite = true)
+  {
+    if (a.size() != size)
+      throw std::invalid_argument(
+        std::string(field) + ": expected " + std::to_string(size) + " values, got shape "
+        + shape_of(a));
+    const double * p = a.data();
+    if (finite)
+      for (py::ssize_t i = 0; i < size; ++i)
+        if (!std::isfinite(p[i]))
+          throw std::invalid_argument(
+            std::string(field) + ": contains NaN or inf at index " + std::to_string(i));
+    return p;
+  }
+
+  // A writable, C-contiguous buffer owned by Python, kept alive by the holder.
+  template<typename T>
+  T * buffer(const py::dict & buffers, const char * name, py::ssize_t size, std::vector<py::object> & keep)
+  {
+    if (!buffers.contains(name))
+      throw std::invalid_argument(std::string("bind: missing buffer '") + name + "'");
+    py::object obj = buffers[name];
+    if (!py::isinstance<py::array_t<T>>(obj))
+      throw std::invalid_argument(std::string("bind: buffer '") + name + "' has the wrong dtype");
+    auto arr = py::reinterpret_borrow<py::array_t<T>>(obj);
+    if (arr.size() != size || !(arr.flags() & py::array::c_style) || !arr.writeable())
+      throw std::invalid_argument(
+        std::string("bind: buffer '") + name + "' must be a writable C-contiguous array of "
+        + std::to_string(size) + " values, got shape " + shape_of(arr));
+    keep.push_back(obj);
+    return arr.mutable_data();
+  }
+
+  template<typename T>
+  T get(const py::dict & spec, const char * key)
+  {
+    if (!spec.contains(key))
+      throw std::invalid_argument(std::string("spec: missing key '") + key + "'");
+    return spec[key].cast<T>();
+  }
+
+  inline VectorXd get_vector(const py::dict & spec, const char * key, Index size)
+  {
+    DoubleArray a = get<DoubleArray>(spec, key);
+    const double * p = input(a, size, key, false);
+    return Map<const VectorXd>(p, size);
+  }
+
+  inline pinocchio::SE3 placement_from(const double * h)
+  {
+    Eigen::Matrix<double, 4, 4, Eigen::RowMajor> m = Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(h);
+    return pinocchio::SE3(m.topLeftCorner<3, 3>(), m.topRightCorner<3, 1>());
+  }
+
+  // Unit normal and two unit tangents (t1, t2, n right-handed), as wholebody.tasks.contact.tangent_basis.
+  inline void tangent_basis(const Vector3d & normal, Vector3d & t1, Vector3d & t2, Vector3d & n)
+  {
+    n = normal / normal.norm();
+    const Vector3d helper = std::abs(n[0]) < 0.9 ? Vector3d::UnitX() : Vector3d::UnitY();
+    t1 = helper.cross(n);
+    t1 /= t1.norm();
+    t2 = n.cross(t1);
+  }
+
+  // Adds the joints and bodies of spec (keys parents, kinds, placements, masses, levers,
+  // inertias: the Python model's joints 1..njoints-1) to an empty model.
+  inline void add_joints(const py::dict & spec, wholebody::LeggedModel & model)
+  {
+    auto parents = get<std::vector<int>>(spec, "parents");
+    auto kinds = get<std::vector<std::string>>(spec, "kinds");
+    const py::ssize_t nj = py::ssize_t(parents.size());
+    if (py::ssize_t(kinds.size()) != nj)
+      throw std::invalid_argument("spec: 'kinds' and 'parents' differ in length");
+    DoubleArray placements = get<DoubleArray>(spec, "placements");
+    DoubleArray masses = get<DoubleArray>(spec, "masses");
+    DoubleArray levers = get<DoubleArray>(spec, "levers");
+    DoubleArray inertias = get<DoubleArray>(spec, "inertias");
+    const double * pl = input(placements, 16 * nj, "placements");
+    const double * ms = input(masses, nj, "masses");
+    const double * lv = input(levers, 3 * nj, "levers");
+    const double * in = input(inertias, 9 * nj, "inertias");
+    for (py::ssize_t k = 0; k < nj; ++k)
+    {
+      const pinocchio::SE3 placement = placement_from(pl + 16 * k);
+      const std::string name = "joint" + std::to_string(k + 1);
+      const auto parent = pinocchio::JointIndex(parents[k]);
+      const std::string & kind = kinds[k];
+      pinocchio::JointIndex id;
+      if (kind == "JointModelFreeFlyer")
+        id = model.addJoint(parent, pinocchio::JointModelFreeFlyer(), placement, name);
+      else if (kind == "JointModelRX")
+        id = model.addJoint(parent, pinocchio::JointModelRX(), placement, name);
+      else if (kind == "JointModelRY")
+        id = model.addJoint(parent, pinocchio::JointModelRY(), placement, name);
+      else if (kind == "JointModelRZ")
+        id = model.addJoint(parent, pinocchio::JointModelRZ(), placement, name);
+      else if (kind == "JointModelPX")
+        id = model.addJoint(parent, pinocchio::JointModelPX(), placement, name);
+      else if (kind == "JointModelPY")
+        id = model.addJoint(parent, pinocchio::JointModelPY(), placement, name);
+      else if (kind == "JointModelPZ")
+        id = model.addJoint(parent, pinocchio::JointModelPZ(), placement, name);
+      else
+        throw std::invalid_argument(
+          "spec: joint " + std::to_string(k + 1) + " is a " + kind
+          + "; the native cycle supports the free flyer and revolute/prismatic joints about x, y, z");
+      const Matrix3d I = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(in + 9 * k);
+      model.appendBodyToJoint(
+        id, pinocchio::Inertia(ms[k], Map<const Vector3d>(lv + 3 * k), I), pinocchio::SE3::Identity());
+    }
+    if (model.njoints < 2 || model.joints[1].nv() != 6)
+      throw std::invalid_argument("spec: the root joint must be a free flyer");
+  }
+
+  // tau_max(q) of the actuated joints (wholebody.robots.torque_limits.TorqueLimits.upper without
+  // its scale): the constant bound, replaced on the joints with a linkage profile
+  // [a, b, force, q_peak] (Fahmi et al. 2019, eq. 15) evaluated at the joint positions q_joints.
+  template<typename Out>
+  void linkage_upper(const Eigen::Ref<const VectorXd> & q_joints, const VectorXd & constant,
+                     const std::vector<int> & rows, const RowMatrix & linkage, Out && hi)
+  {
+    hi = constant;
+    for (std::size_t k = 0; k < rows.size(); ++k)
+    {
+      const int j = rows[k];
+      const double a = linkage(Index(k), 0), b = linkage(Index(k), 1);
+      const double force = linkage(Index(k), 2), q_peak = linkage(Index(k), 3);
+      const double t = q_joints[j] + M_PI / 2 - q_peak;
+      hi[j] = force * a * b * std::abs(std::sin(t)) / std::sqrt(a * a + b * b - 2.0 * a * b * std::cos(t));
+    }
+  }
+} // namespace wholebody_native
