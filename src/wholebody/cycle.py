@@ -285,22 +285,23 @@ class _Program:
         start = n_params = 0
         for rank, tasks in enumerate(stack.levels, start=1):
             level = {True: [], False: []}
-            for task in tasks:
+            for order, task in enumerate(tasks):
                 kind = KINDS[type(task)]
                 names = _names(task, variables) if kind.name in _PER_CONTACT else ()
                 m = self._rows(task, kind, robot, variables, names)
-                level[kind.eq].append((task, kind, names, m))
+                if m:  # a task without rows here (e.g. CoP rows of point feet) has no slot
+                    level[kind.eq].append((order, task, kind, names, m))
             first = start
             for eq in (True, False):
-                for task, kind, names, m in level[eq]:
+                for order, task, kind, names, m in level[eq]:
                     n_p = kind.n_params(task, robot, names)
                     slots.append(self._slot(task, kind, cycle, names, active, start, m, n_params))
                     self.packs.append((task, kind.pack, (start, start + m), (n_params, n_params + n_p),
                                        names))
-                    self.level_slots.append((rank, task, eq, start, start + m))
+                    self.level_slots.append((rank, order, task, eq, start, start + m))
                     start += m
                     n_params += n_p
-            self.level_slots.append((rank, None, None, first, start))
+            self.level_slots.append((rank, None, None, None, first, start))
         rows = start
         self.mat = np.zeros((rows, n))
         self.target, self.weights = np.zeros(rows), np.ones(rows)
@@ -323,17 +324,18 @@ class _Program:
         self.ineq_rows = np.zeros(rows, dtype=bool)
         self.levels, self.meta = [], []
         for rank, tasks in enumerate(stack.levels, start=1):
-            entries = [e for e in self.level_slots if e[0] == rank and e[1] is not None]
-            first, last = [(a, b) for r, t, _, a, b in self.level_slots if r == rank and t is None][0]
-            k = sum(b - a for _, _, eq, a, b in entries if eq)
+            entries = sorted(e for e in self.level_slots if e[0] == rank and e[2] is not None)
+            first, last = [(a, b) for r, _, t, _, a, b in self.level_slots if r == rank and t is None][0]
+            k = sum(b - a for _, _, _, eq, a, b in entries if eq)
             eq_rows, in_rows = slice(first, first + k), slice(first + k, last)
             self.ineq_rows[in_rows] = True
             self.levels.append(Level.trusted(
                 self.mat[eq_rows], self.target[eq_rows], self.weights[eq_rows], self.mat[in_rows],
                 self.lower[in_rows], self.upper[in_rows], self.weights[in_rows], name=f"level {rank}"))
+            # in the declared task order, as Formulation's (for the task reports)
             self.meta.append([(task, "eq", self.mat[a:b], self.target[a:b], None) if eq else
                               (task, "ineq", self.mat[a:b], self.lower[a:b], self.upper[a:b])
-                              for _, task, eq, a, b in entries])
+                              for _, _, task, eq, a, b in entries])
         self.w_min = np.where(self.ineq_rows, np.nextafter(0.0, 1.0), 0.0)
 
     @staticmethod
@@ -381,7 +383,7 @@ class _Program:
 
     def raise_invalid(self) -> None:
         """Name the task whose rows are NaN/inf, whose bounds cross or whose weight is bad."""
-        for rank, task, eq, a, b in self.level_slots:
+        for rank, _, task, eq, a, b in self.level_slots:
             if task is None:
                 continue
             rows = slice(a, b)
@@ -568,4 +570,4 @@ class HierarchyCycle:
         """The solver levels of the last cycle (views, valid until the next solve)."""
         if self.native:
             return self._program.levels
-        return self.formulation.levels(self.stack, self._default_variables())[0]
+        return [lp.level for lp in self.formulation._plan.levels]

@@ -135,8 +135,8 @@ public:
   // (LOCAL_WORLD_ALIGNED; point contacts at the bottom of the foot sphere, Robot._update_contacts).
   void update(const DoubleArray & q_in, const DoubleArray & v_in)
   {
-    const double * qp = input(q_in, nq_, "q");
-    const double * vp = input(v_in, nv_, "v");
+    const double * qp = vector_input(q_in, nq_, "q");
+    const double * vp = vector_input(v_in, nv_, "v");
     const double quat_norm = Map<const VectorXd>(qp + 3, 4).norm();
     if (std::abs(quat_norm - 1.0) > 1e-3)
       throw std::invalid_argument(

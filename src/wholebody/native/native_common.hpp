@@ -59,6 +59,16 @@ namespace wholebody_native
     return p;
   }
 
+  // input() for a state vector: also refuses arrays of another shape with that many values.
+  inline const double * vector_input(const DoubleArray & a, py::ssize_t size, const char * field)
+  {
+    if (a.ndim() != 1)
+      throw std::invalid_argument(
+        std::string(field) + ": expected a vector of size " + std::to_string(size) + ", got shape "
+        + shape_of(a));
+    return input(a, size, field);
+  }
+
   // A writable, C-contiguous buffer owned by Python, kept alive by the holder.
   template<typename T>
   T * buffer(const py::dict & buffers, const char * name, py::ssize_t size, std::vector<py::object> & keep)
