@@ -6,7 +6,13 @@ This script measures the same on `talos14` (Table 2) and `talos` (Table 1, doubl
 support) over a moving state, reduced vs full, per method/backend, and prints median, p95, p99, max
 with the breakdown. It is a benchmark, not a test: nothing here fails on time.
 
+Two engines (``wholebody.cycle.HierarchyCycle``): ``native`` — rigid-body terms and task rows
+compiled, then the compiled cascade — and ``python`` — ``Robot.update`` + ``Formulation.solve``
+(task rows in numpy, then the same compiled cascade). Same levels, same solutions
+(tests/test_cycle.py).
+
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_wbc.py [--cycles 2000] [--quick] [--passes 5]
+                                                          [--engines native,python]
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ import numpy as np  # noqa: E402
 
 import wholebody as wb  # noqa: E402
 from wholebody.control.stacks import table1_stack, table2_stack  # noqa: E402
-from wholebody.formulation import Formulation  # noqa: E402
+from wholebody.cycle import HierarchyCycle  # noqa: E402
 from wholebody.variables import Variables  # noqa: E402
 
 
@@ -50,15 +56,15 @@ def stats(samples_s) -> str:
 
 
 def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: str, cycles: int,
-             fallback: str | None = None, passes: int = 1):
+             fallback: str | None = None, passes: int = 1, engine: str = "python"):
     """Per-cycle times (update, rows, solve, total, of which in the QP backends), the number of
-    failed cycles and the mean number of level QPs per cycle.
+    failed cycles and the mean number of level QPs per cycle, for one HierarchyCycle engine.
 
     With ``passes`` > 1 the whole state sequence is run that many times and each cycle keeps its
     fastest pass: an estimate of the uncontended time on a shared machine (single-pass
     percentiles include whatever else the cores are doing)."""
-    stack = make_stack(full=not reduced)
-    formulation = Formulation(robot, reduced=reduced)
+    cycle = HierarchyCycle(robot, make_stack(full=not reduced), reduced=reduced, engine=engine,
+                           method=method, backend=backend, fallback_backend=fallback)
     variables = Variables(robot, contacts)
     states = list(moving_states(robot, cycles))
     best = np.full((cycles, 5), np.inf)
@@ -67,15 +73,12 @@ def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: s
     for p in range(passes):
         for i, (q, v) in enumerate(states):
             t0 = time.perf_counter()
-            robot.update(q, v)
+            sol = cycle.solve(q, v, variables)
             t1 = time.perf_counter()
-            sol = formulation.solve(stack, variables, method=method, backend=backend,
-                                     fallback_backend=fallback, diagnostics=False)
-            t2 = time.perf_counter()
             failures += (not sol.ok) and p == 0
             qps += sol.timings["qps"] if p == 0 else 0
-            best[i] = np.minimum(best[i], (t1 - t0, sol.timings["rows"], sol.timings["solve"], t2 - t0,
-                                           sol.timings["qp"]))
+            best[i] = np.minimum(best[i], (sol.timings["update"], sol.timings["rows"],
+                                           sol.timings["solve"], t1 - t0, sol.timings["qp"]))
     return best[:, 0], best[:, 1], best[:, 2], best[:, 3], best[:, 4], failures, qps / cycles
 
 
@@ -86,6 +89,8 @@ def main() -> None:
                         help="the controllers' default only (daqp cascade, quadprog fallback)")
     parser.add_argument("--passes", type=int, default=1,
                         help="run the states that many times, keep each cycle's fastest pass")
+    parser.add_argument("--engines", default="native,python",
+                        help="comma-separated HierarchyCycle engines (native, python)")
     parser.add_argument("--with-proxsuite", action="store_true",
                         help="also the ProxQP cascade (slow: up to 10k iterations and retries per QP)")
     args = parser.parse_args()
@@ -112,28 +117,35 @@ def main() -> None:
     for title, robot, make_stack, contacts in cases:
         print(f"\n== {title}")
         medians = {}
-        for method, backend, fallback in combos:
-            name = backend if fallback is None else f"{backend}+{fallback}"
-            for reduced in (True, False):
-                label = f"{method}/{name} {'reduced' if reduced else 'full   '}"
-                try:
-                    upd, rows, solve, total, qp, fails, qps = run_case(
-                        robot, make_stack, contacts, reduced, method, backend, args.cycles, fallback,
-                        args.passes)
-                except Exception as exc:  # a benchmark reports, it does not stop
-                    print(f"{label}: error {exc}")
-                    continue
-                medians[(method, name, reduced)] = np.median(total)
-                print(f"{label:37} total {stats(total)}  failed {fails}")
-                print(f"{'':37} update {np.median(upd) * 1e6:5.0f}  rows {np.median(rows) * 1e6:5.0f}"
-                      f"  solve {np.median(solve) * 1e6:5.0f} (in QP backends "
-                      f"{np.nanmedian(qp) * 1e6:4.0f}, {qps:.2f} QPs/cycle) µs (medians)")
-        for method, backend, fallback in combos:
-            name = backend if fallback is None else f"{backend}+{fallback}"
-            r, f = medians.get((method, name, True)), medians.get((method, name, False))
-            if r and f:
-                print(f"reduced vs full ({method}/{name}): {100 * (1 - r / f):+.0f} % time "
-                      f"(median ratio {r / f:.2f})")
+        for engine in args.engines.split(","):
+            for method, backend, fallback in combos:
+                name = backend if fallback is None else f"{backend}+{fallback}"
+                for reduced in (True, False):
+                    label = f"{engine} {method}/{name} {'reduced' if reduced else 'full   '}"
+                    try:
+                        upd, rows, solve, total, qp, fails, qps = run_case(
+                            robot, make_stack, contacts, reduced, method, backend, args.cycles,
+                            fallback, args.passes, engine)
+                    except Exception as exc:  # a benchmark reports, it does not stop
+                        print(f"{label}: error {exc}")
+                        continue
+                    medians[(engine, method, name, reduced)] = np.median(total)
+                    print(f"{label:44} total {stats(total)}  failed {fails}")
+                    print(f"{'':44} update {np.median(upd) * 1e6:5.0f}  rows "
+                          f"{np.median(rows) * 1e6:5.0f}  solve {np.median(solve) * 1e6:5.0f} "
+                          f"(in QP backends {np.nanmedian(qp) * 1e6:4.0f}, {qps:.2f} QPs/cycle) "
+                          f"µs (medians)")
+        for key in medians:
+            engine, method, name, reduced = key
+            full = medians.get((engine, method, name, False))
+            if reduced and full:
+                r = medians[key]
+                print(f"reduced vs full ({engine} {method}/{name}): {100 * (1 - r / full):+.0f} % "
+                      f"time (median ratio {r / full:.2f})")
+            python = medians.get(("python", method, name, reduced))
+            if engine == "native" and python:
+                print(f"native vs python ({method}/{name} {'reduced' if reduced else 'full'}): "
+                      f"median ratio {medians[key] / python:.2f}")
 
 
 if __name__ == "__main__":

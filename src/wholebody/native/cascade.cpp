@@ -800,9 +800,58 @@ private:
   VectorXd qp_g_, qp_lower_, qp_upper_;
 };
 
+// The rows DAQP is given (backends.solve_daqp): each row of A and its bounds divided by the row's
+// norm (zero rows kept), bounds clipped to ±1e30 (DAQP_INF), sense 5 on equality rows.
+py::tuple daqp_rows(const DoubleArray & A_in, const DoubleArray & lower_in, const DoubleArray & upper_in)
+{
+  if (A_in.ndim() != 2 || lower_in.size() != A_in.shape(0) || upper_in.size() != A_in.shape(0))
+    throw std::invalid_argument("daqp_rows: A must be m x n with m lower and upper bounds");
+  const Index m = A_in.shape(0), n = A_in.shape(1);
+  constexpr double kDaqpInf = 1e30;
+  py::array_t<double> A_out({py::ssize_t(m), py::ssize_t(n)}), bu(m), bl(m);
+  py::array_t<int32_t> sense(m);
+  const ConstRowMap A(A_in.data(), m, n);
+  Eigen::Map<RowMatrix> Au(A_out.mutable_data(), m, n);
+  const double *lo = lower_in.data(), *up = upper_in.data();
+  double *pu = bu.mutable_data(), *pl = bl.mutable_data();
+  int32_t * ps = sense.mutable_data();
+  for (Index i = 0; i < m; ++i)
+  {
+    double norm = A.row(i).norm();
+    if (norm == 0.0)
+      norm = 1.0;
+    Au.row(i) = A.row(i) / norm;
+    pu[i] = std::min(up[i] / norm, kDaqpInf);
+    pl[i] = std::max(lo[i] / norm, -kDaqpInf);
+    ps[i] = lo[i] == up[i] ? 5 : 0;
+  }
+  return py::make_tuple(A_out, bu, bl, sense);
+}
+
+// max(0, lower - A x, A x - upper) over the rows; inf if x is not finite (backends.solve_daqp).
+double row_violation(const DoubleArray & A_in, const DoubleArray & x_in, const DoubleArray & lower_in,
+                     const DoubleArray & upper_in)
+{
+  if (A_in.ndim() != 2 || x_in.size() != A_in.shape(1) || lower_in.size() != A_in.shape(0)
+      || upper_in.size() != A_in.shape(0))
+    throw std::invalid_argument("row_violation: A must be m x n with n values of x and m bounds");
+  const Index m = A_in.shape(0), n = A_in.shape(1);
+  const ConstVecMap x(x_in.data(), n);
+  if (!x.allFinite())
+    return kInf;
+  const VectorXd ax = ConstRowMap(A_in.data(), m, n) * x;
+  double over = 0.0;
+  for (Index i = 0; i < m; ++i)
+    over = std::max({over, lower_in.data()[i] - ax[i], ax[i] - upper_in.data()[i]});
+  return over;
+}
+
 PYBIND11_MODULE(_cascade, m)
 {
   m.doc() = "The cascade of wholebody.solvers.hierarchy, compiled; QPs are solved by the caller.";
+  m.def("daqp_rows", &daqp_rows, py::arg("A"), py::arg("lower"), py::arg("upper"));
+  m.def("row_violation", &row_violation, py::arg("A"), py::arg("x"), py::arg("lower"),
+        py::arg("upper"));
   py::class_<CascadeRun>(m, "CascadeRun")
     .def(py::init<std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
                   std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
