@@ -33,20 +33,9 @@ from wholebody.variables import Variables  # noqa: E402
 
 
 def moving_states(robot, cycles: int, dt: float = 1e-3):
-    """A smooth joint motion around the reference posture (q, v per cycle)."""
-    rng = np.random.default_rng(0)
-    amp = rng.uniform(0.02, 0.1, robot.na)
-    freq = rng.uniform(0.3, 1.0, robot.na)
-    phase = rng.uniform(0, 2 * np.pi, robot.na)
-    lo, hi = robot.q_min + 0.05, robot.q_max - 0.05
-    for k in range(cycles):
-        t = k * dt
-        q = robot.q_ref.copy()
-        q[7:] = np.clip(q[7:] + amp * np.sin(2 * np.pi * freq * t + phase), lo, hi)
-        v = np.zeros(robot.nv)
-        v[6:] = amp * 2 * np.pi * freq * np.cos(2 * np.pi * freq * t + phase)
-        v[:6] = 0.05 * np.sin(2 * np.pi * 0.5 * t + np.arange(6))
-        yield q, v
+    """A smooth joint motion around the reference posture (q, v per cycle):
+    :meth:`wholebody.Robot.smooth_motion`."""
+    return robot.smooth_motion(cycles, dt)
 
 
 def stats(samples_s) -> str:

@@ -124,23 +124,10 @@ def random_states(robot, rng, n):
 
 
 def moving_states(robot, n, dt=0.05):
-    """A smooth joint motion around the reference posture (benchmarks/bench_wbc.py), sampled every
-    ``dt``: feet near the ground, moderate velocities — states a controller actually sees."""
-    rng = np.random.default_rng(0)
-    amp = rng.uniform(0.02, 0.1, robot.na)
-    freq = rng.uniform(0.3, 1.0, robot.na)
-    phase = rng.uniform(0, 2 * np.pi, robot.na)
-    lo, hi = robot.q_min + 0.05, robot.q_max - 0.05
-    states = []
-    for k in range(n):
-        t = k * dt
-        q = robot.q_ref.copy()
-        q[7:] = np.clip(q[7:] + amp * np.sin(2 * np.pi * freq * t + phase), lo, hi)
-        v = np.zeros(robot.nv)
-        v[6:] = amp * 2 * np.pi * freq * np.cos(2 * np.pi * freq * t + phase)
-        v[:6] = 0.05 * np.sin(2 * np.pi * 0.5 * t + np.arange(6))
-        states.append((q, v))
-    return states
+    """A smooth joint motion around the reference posture (Robot.smooth_motion, as in
+    benchmarks/bench_wbc.py), sampled every ``dt``: feet near the ground, moderate velocities —
+    states a controller actually sees."""
+    return robot.smooth_motion(n, dt)
 
 
 # ---------------------------------------------------------------------------- stacks

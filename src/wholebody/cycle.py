@@ -32,7 +32,7 @@ from .solvers import Level
 from .tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
                     FrictionCone, FullDynamics, JointAccelerationLimits, JointTrajectoryTask,
                     MomentumForce, MomentumPD, NewtonEuler, PostureTask, TorqueLimits)
-from .tasks.base import Task
+from .tasks.base import Task, contact_subset
 from .tasks.contact import WORLD_UP, NormalForceBounds
 from .tasks.regularization import AccelerationRegularizer
 from .variables import Variables
@@ -67,13 +67,7 @@ class _Kind:
 
 
 def _names(task, variables: Variables) -> tuple[str, ...]:
-    contacts = getattr(task, "contacts", None)
-    if contacts is None:
-        return variables.contacts
-    missing = [c for c in contacts if c not in variables.lambda_slices]
-    if missing:
-        raise ValueError(f"contacts: {missing} are not active (active: {list(variables.contacts)})")
-    return tuple(contacts)
+    return contact_subset(variables, getattr(task, "contacts", None))
 
 
 def _set(view: np.ndarray, value, task: Task, field: str) -> None:

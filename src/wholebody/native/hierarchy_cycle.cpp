@@ -84,7 +84,6 @@ public:
     nq_ = model_.nq;
     nv_ = model_.nv;
     na_ = nv_ - 6;
-    model_.armature = get_vector(spec, "armature", nv_);
     auto frame_joints = get<std::vector<int>>(spec, "frame_joints");
     DoubleArray fpl = get<DoubleArray>(spec, "frame_placements");
     const double * fp = input(fpl, 16 * py::ssize_t(frame_joints.size()), "frame_placements");
@@ -109,15 +108,8 @@ public:
     radii_ = get_vector(spec, "contact_radii", nc_);
     DoubleArray hs = get<DoubleArray>(spec, "contact_half_sizes");
     half_sizes_ = Map<const RowMatrix>(input(hs, 2 * nc_, "contact_half_sizes"), nc_, 2);
-    torque_constant_ = get_vector(spec, "torque_constant", na_);
+    torque_ = TorqueProfile::from_spec(spec, na_);
     torque_scale_ = get<double>(spec, "torque_scale");
-    linkage_rows_ = get<std::vector<int>>(spec, "linkage_rows");
-    DoubleArray lp = get<DoubleArray>(spec, "linkage_params");
-    linkage_ = Map<const RowMatrix>(input(lp, 4 * py::ssize_t(linkage_rows_.size()), "linkage_params"),
-                                    Index(linkage_rows_.size()), 4);
-    for (int row : linkage_rows_)
-      if (row < 0 || row >= na_)
-        throw std::invalid_argument("linkage_rows: joint index out of range");
     q_min_ = get_vector(spec, "q_min", na_);
     q_max_ = get_vector(spec, "q_max", na_);
     mass_ = get<double>(spec, "mass");
@@ -135,19 +127,7 @@ public:
   // (LOCAL_WORLD_ALIGNED; point contacts at the bottom of the foot sphere, Robot._update_contacts).
   void update(const DoubleArray & q_in, const DoubleArray & v_in)
   {
-    const double * qp = vector_input(q_in, nq_, "q");
-    const double * vp = vector_input(v_in, nv_, "v");
-    const double quat_norm = Map<const VectorXd>(qp + 3, 4).norm();
-    if (std::abs(quat_norm - 1.0) > 1e-3)
-      throw std::invalid_argument(
-        "q: base quaternion q[3:7] must be unit, has norm " + std::to_string(quat_norm));
-    q_ = Map<const VectorXd>(qp, nq_);
-    v_ = Map<const VectorXd>(vp, nv_);
-    pinocchio::computeAllTerms(model_, data_, q_, v_);
-    pinocchio::updateFramePlacements(model_, data_);
-    A_G_dot_v_ = pinocchio::computeCentroidalMomentumTimeVariation(model_, data_).toVector();
-    data_.M.triangularView<Eigen::StrictlyLower>() =
-      data_.M.transpose().triangularView<Eigen::StrictlyLower>();
+    A_G_dot_v_ = rigid_body_pass(model_, data_, q_in, v_in, q_, v_);
     for (Index i = 0; i < nc_; ++i)
     {
       const auto fid = frames_[contact_frames_[i]];
@@ -166,16 +146,8 @@ public:
         drift = acc;
         continue;
       }
-      // J_p = J_lin - [d]x J_ang and a_f + α x d + ω x (ω x d), d = (0, 0, -r) in world axes
-      const double r = radii_[i];
-      J.topRows(3) = J6.topRows<3>();
-      J.row(0) -= r * J6.row(4);
-      J.row(1) += r * J6.row(3);
-      const Vector3d w = J6.bottomRows<3>() * v_;
-      drift.head<3>() = acc.head<3>();
-      drift[0] -= r * (acc[4] + w[0] * w[2]);
-      drift[1] += r * (acc[3] - w[1] * w[2]);
-      drift[2] += r * (w[0] * w[0] + w[1] * w[1]);
+      const double r = radii_[i]; // the bottom of the foot sphere
+      sphere_point(J6, acc.head<3>(), acc.tail<3>(), v_, r, J.topRows(3), drift.head<3>());
       points_(i, 2) -= r;
     }
     updated_ = true;
@@ -298,12 +270,7 @@ public:
   // Copies of the rigid-body terms of the last update (tests compare them with Robot.update).
   py::dict terms() const
   {
-    py::dict d;
-    d["M"] = MatrixXd(data_.M);
-    d["h"] = VectorXd(data_.nle);
-    d["com"] = Vector3d(data_.com[0]);
-    d["vcom"] = Vector3d(data_.vcom[0]);
-    d["h_G"] = Vector6d(data_.hg.toVector());
+    py::dict d = rigid_body_terms(data_);
     d["A_G"] = MatrixXd(data_.Ag);
     d["A_G_dot_v"] = A_G_dot_v_;
     d["J_com"] = MatrixXd(data_.Jcom);
@@ -364,7 +331,7 @@ private:
   template<typename Out>
   void torque_upper(Out && hi) const
   {
-    linkage_upper(q_.tail(na_), torque_constant_, linkage_rows_, linkage_, hi);
+    torque_.upper(q_.tail(na_), hi);
     hi *= torque_scale_;
   }
 
@@ -646,9 +613,10 @@ private:
   wholebody::LeggedData data_;
   Index nq_ = 0, nv_ = 0, na_ = 0, nc_ = 0;
   std::vector<pinocchio::FrameIndex> frames_;
-  std::vector<int> contact_frames_, contact_dims_, linkage_rows_;
-  VectorXd radii_, torque_constant_, q_min_, q_max_, q_, v_;
-  RowMatrix half_sizes_, linkage_;
+  std::vector<int> contact_frames_, contact_dims_;
+  VectorXd radii_, q_min_, q_max_, q_, v_;
+  RowMatrix half_sizes_;
+  TorqueProfile torque_;
   double torque_scale_ = 1.0, mass_ = 0.0;
   bool updated_ = false;
   // per-cycle terms

@@ -5,7 +5,12 @@
 
 #include "legged_model.hpp"
 
+#include <pinocchio/algorithm/centroidal.hpp>
+#include <pinocchio/algorithm/compute-all-terms.hpp>
+#include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/spatial.hpp>
+
+#include <pybind11/eigen.h>
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -119,7 +124,7 @@ namespace wholebody_native
   }
 
   // Adds the joints and bodies of spec (keys parents, kinds, placements, masses, levers,
-  // inertias: the Python model's joints 1..njoints-1) to an empty model.
+  // inertias: the Python model's joints 1..njoints-1) to an empty model, and its armature.
   inline void add_joints(const py::dict & spec, wholebody::LeggedModel & model)
   {
     auto parents = get<std::vector<int>>(spec, "parents");
@@ -166,23 +171,99 @@ namespace wholebody_native
     }
     if (model.njoints < 2 || model.joints[1].nv() != 6)
       throw std::invalid_argument("spec: the root joint must be a free flyer");
+    model.armature = get_vector(spec, "armature", model.nv);
   }
 
   // tau_max(q) of the actuated joints (wholebody.robots.torque_limits.TorqueLimits.upper without
   // its scale): the constant bound, replaced on the joints with a linkage profile
-  // [a, b, force, q_peak] (Fahmi et al. 2019, eq. 15) evaluated at the joint positions q_joints.
-  template<typename Out>
-  void linkage_upper(const Eigen::Ref<const VectorXd> & q_joints, const VectorXd & constant,
-                     const std::vector<int> & rows, const RowMatrix & linkage, Out && hi)
+  // [a, b, force, q_peak] (Fahmi et al. 2019, eq. 15) evaluated at the joint positions.
+  struct TorqueProfile
   {
-    hi = constant;
-    for (std::size_t k = 0; k < rows.size(); ++k)
+    VectorXd constant;
+    std::vector<int> rows;
+    RowMatrix linkage; // one row [a, b, force, q_peak] per entry of rows
+
+    // From spec keys torque_constant, linkage_rows, linkage_params (TorqueLimits.linkage).
+    static TorqueProfile from_spec(const py::dict & spec, Index na)
     {
-      const int j = rows[k];
-      const double a = linkage(Index(k), 0), b = linkage(Index(k), 1);
-      const double force = linkage(Index(k), 2), q_peak = linkage(Index(k), 3);
-      const double t = q_joints[j] + M_PI / 2 - q_peak;
-      hi[j] = force * a * b * std::abs(std::sin(t)) / std::sqrt(a * a + b * b - 2.0 * a * b * std::cos(t));
+      TorqueProfile t;
+      t.constant = get_vector(spec, "torque_constant", na);
+      t.rows = get<std::vector<int>>(spec, "linkage_rows");
+      const Index k = Index(t.rows.size());
+      DoubleArray params = get<DoubleArray>(spec, "linkage_params");
+      t.linkage = Map<const RowMatrix>(input(params, 4 * k, "linkage_params"), k, 4);
+      for (int row : t.rows)
+        if (row < 0 || row >= na)
+          throw std::invalid_argument("linkage_rows: joint index out of range");
+      return t;
     }
+
+    template<typename Out>
+    void upper(const Eigen::Ref<const VectorXd> & q_joints, Out && hi) const
+    {
+      hi = constant;
+      for (std::size_t k = 0; k < rows.size(); ++k)
+      {
+        const int j = rows[k];
+        const double a = linkage(Index(k), 0), b = linkage(Index(k), 1);
+        const double force = linkage(Index(k), 2), q_peak = linkage(Index(k), 3);
+        const double t = q_joints[j] + M_PI / 2 - q_peak;
+        hi[j] = force * a * b * std::abs(std::sin(t)) / std::sqrt(a * a + b * b - 2.0 * a * b * std::cos(t));
+      }
+    }
+  };
+
+  // Robot.update's Pinocchio pass: q and v checked (size, shape, NaN/inf, unit base quaternion;
+  // ValueError naming the field) and copied, then computeAllTerms, the frame placements and
+  // the centroidal momentum's rate at zero acceleration Ȧ_G v (returned); M made symmetric.
+  inline Eigen::Matrix<double, 6, 1> rigid_body_pass(
+    const wholebody::LeggedModel & model, wholebody::LeggedData & data, const DoubleArray & q_in,
+    const DoubleArray & v_in, VectorXd & q, VectorXd & v)
+  {
+    const double * qp = vector_input(q_in, model.nq, "q");
+    const double * vp = vector_input(v_in, model.nv, "v");
+    const double quat_norm = Map<const VectorXd>(qp + 3, 4).norm();
+    if (std::abs(quat_norm - 1.0) > 1e-3)
+      throw std::invalid_argument(
+        "q: base quaternion q[3:7] must be unit, has norm " + std::to_string(quat_norm));
+    q = Map<const VectorXd>(qp, model.nq);
+    v = Map<const VectorXd>(vp, model.nv);
+    pinocchio::computeAllTerms(model, data, q, v);
+    pinocchio::updateFramePlacements(model, data);
+    const Eigen::Matrix<double, 6, 1> dh =
+      pinocchio::computeCentroidalMomentumTimeVariation(model, data).toVector();
+    data.M.triangularView<Eigen::StrictlyLower>() =
+      data.M.transpose().triangularView<Eigen::StrictlyLower>();
+    return dh;
+  }
+
+  // Copies of the pass's terms that Robot.update caches (for tests against it).
+  inline py::dict rigid_body_terms(const wholebody::LeggedData & data)
+  {
+    py::dict d;
+    d["M"] = MatrixXd(data.M);
+    d["h"] = VectorXd(data.nle);
+    d["com"] = Vector3d(data.com[0]);
+    d["vcom"] = Vector3d(data.vcom[0]);
+    d["h_G"] = Eigen::Matrix<double, 6, 1>(data.hg.toVector());
+    return d;
+  }
+
+  // The material point under a foot sphere's centre, d = (0, 0, -r) in world axes
+  // (Robot._contact_jacobian / _contact_drift): its Jacobian J_p = J_lin - [d]x J_ang and drift
+  // a_f + α x d + ω x (ω x d) at velocity v, from the frame's 6D Jacobian J6 and classical
+  // acceleration (linear a_f, angular α; LOCAL_WORLD_ALIGNED).
+  template<typename JOut, typename AOut>
+  void sphere_point(const Matrix6x & J6, const Vector3d & a_f, const Vector3d & alpha,
+                    const VectorXd & v, double r, JOut && Jp, AOut && a)
+  {
+    Jp = J6.topRows<3>();
+    Jp.row(0) -= r * J6.row(4);
+    Jp.row(1) += r * J6.row(3);
+    const Vector3d w = J6.bottomRows<3>() * v;
+    a = a_f;
+    a[0] -= r * (alpha[1] + w[0] * w[2]);
+    a[1] += r * (alpha[0] - w[1] * w[2]);
+    a[2] += r * (w[0] * w[0] + w[1] * w[1]);
   }
 } // namespace wholebody_native

@@ -66,17 +66,9 @@ public:
     horizon_ = get<double>(spec, "horizon");
     a_max_ = get<double>(spec, "a_max");
     steepness_ = get<double>(spec, "steepness");
-    torque_constant_ = get_vector(spec, "torque_constant", na_);
+    torque_ = TorqueProfile::from_spec(spec, na_);
     torque_scale_ = get<double>(spec, "torque_scale");
     torque_cap_ = get_vector(spec, "torque_cap", na_);
-    linkage_rows_ = get<std::vector<int>>(spec, "linkage_rows");
-    DoubleArray params = get<DoubleArray>(spec, "linkage_params");
-    const double * p = input(params, 4 * py::ssize_t(linkage_rows_.size()), "linkage_params");
-    linkage_.resize(linkage_rows_.size(), 4);
-    linkage_ = Map<const RowMatrix>(p, Index(linkage_rows_.size()), 4);
-    for (int row : linkage_rows_)
-      if (row < 0 || row >= na_)
-        throw std::invalid_argument("linkage_rows: joint index out of range");
   }
 
   // The arrays this object writes (allocated by Python, see PassiveWBC._bind_native).
@@ -107,20 +99,8 @@ public:
   // Robot.update for this cycle: Pinocchio's terms and the contact points, Jacobians and drifts.
   void update(const DoubleArray & q_in, const DoubleArray & v_in)
   {
-    const double * qp = input(q_in, nq_, "q");
-    const double * vp = input(v_in, nv_, "v");
     require_bound();
-    q_ = Map<const VectorXd>(qp, nq_);
-    v_ = Map<const VectorXd>(vp, nv_);
-    const double quat_norm = q_.segment<4>(3).norm();
-    if (std::abs(quat_norm - 1.0) > 1e-3)
-      throw std::invalid_argument(
-        "q: base quaternion q[3:7] must be unit, has norm " + std::to_string(quat_norm));
-    pinocchio::computeAllTerms(model_, data_, q_, v_);
-    pinocchio::updateFramePlacements(model_, data_);
-    pinocchio::computeCentroidalMomentumTimeVariation(model_, data_);
-    data_.M.triangularView<Eigen::StrictlyLower>() =
-      data_.M.transpose().triangularView<Eigen::StrictlyLower>();
+    rigid_body_pass(model_, data_, q_in, v_in, q_, v_);
     for (Index i = 0; i < nc_; ++i)
     {
       Matrix6x & J6 = frame_jacobians_[i];
@@ -132,20 +112,9 @@ public:
       const Vector3d origin = data_.oMf[frame_ids_[i]].translation();
       origins_.row(i) = origin.transpose();
       Map<Vector3d>(feet_ + 3 * leg_[i]) = origin;
-      // the material point under the foot sphere's centre, d = (0, 0, -r) in world axes
-      // (Robot._contact_jacobian / _contact_drift): J_p = J_lin - [d]x J_ang
       const double r = radii_[i];
-      auto Jp = J_.middleRows(3 * i, 3);
-      Jp = J6.topRows<3>();
-      Jp.row(0) -= r * J6.row(4);
-      Jp.row(1) += r * J6.row(3);
-      const Vector3d w = J6.bottomRows<3>() * v_;
-      const Vector3d al = acc.angular();
-      Vector3d a = acc.linear();
-      a[0] -= r * (al[1] + w[0] * w[2]);
-      a[1] += r * (al[0] - w[1] * w[2]);
-      a[2] += r * (w[0] * w[0] + w[1] * w[1]);
-      drift_.segment<3>(3 * i) = a;
+      sphere_point(J6, acc.linear(), acc.angular(), v_, r, J_.middleRows(3 * i, 3),
+                   drift_.segment<3>(3 * i));
       points_.row(i) = origin.transpose();
       points_(i, 2) -= r;
     }
@@ -390,12 +359,7 @@ public:
   // Copies of the rigid-body terms of the last update (for tests against Robot.update).
   py::dict terms() const
   {
-    py::dict d;
-    d["M"] = MatrixXd(data_.M);
-    d["h"] = VectorXd(data_.nle);
-    d["com"] = Vector3d(data_.com[0]);
-    d["vcom"] = Vector3d(data_.vcom[0]);
-    d["h_G"] = Eigen::Matrix<double, 6, 1>(data_.hg.toVector());
+    py::dict d = rigid_body_terms(data_);
     d["J"] = MatrixXd(J_);
     d["drift"] = VectorXd(drift_);
     d["points"] = MatrixXd(points_);
@@ -413,7 +377,6 @@ private:
     nq_ = model_.nq;
     nv_ = model_.nv;
     na_ = nv_ - 6;
-    model_.armature = get_vector(spec, "armature", nv_);
 
     auto contact_joints = get<std::vector<int>>(spec, "contact_joints");
     leg_ = get<std::vector<int>>(spec, "leg");
@@ -481,7 +444,7 @@ private:
   void torque_bounds()
   {
     Map<VectorXd> hi(tau_hi_, na_), lo(tau_lo_, na_);
-    linkage_upper(q_.tail(na_), torque_constant_, linkage_rows_, linkage_, hi);
+    torque_.upper(q_.tail(na_), hi);
     hi *= torque_scale_;
     hi = hi.cwiseMin(torque_cap_);
     lo = -hi;
@@ -546,9 +509,8 @@ private:
   double slack_weight_ = 0, K_st_ = 0, D_st_ = 0, R_qdd_ = 0, R_force_ = 0, tangential_weight_ = 0;
   double mu_ = 0, f_min_ = 0, f_max_ = 0, swing_K_ = 0, swing_D_ = 0, mass_ = 0;
   double horizon_ = 0, a_max_ = 0, steepness_ = 0, torque_scale_ = 1;
-  VectorXd Q_, torque_weights_, K_x_, D_x_, K_theta_, D_theta_, torque_constant_, torque_cap_;
-  std::vector<int> linkage_rows_;
-  RowMatrix linkage_;
+  VectorXd Q_, torque_weights_, K_x_, D_x_, K_theta_, D_theta_, torque_cap_;
+  TorqueProfile torque_;
   // per-cycle state
   std::vector<Matrix6x> frame_jacobians_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> frame_drifts_, origins_, points_, anchors_, swing_targets_;
