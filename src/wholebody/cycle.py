@@ -194,7 +194,7 @@ def _pack_force_regularizer(task: ForceRegularizer, p, cycle, names):
         else:
             _set(p[r:r + d], target, task, f"targets['{n}']")
         r += d
-    
+
 
 def _pack_joint_trajectory(task: JointTrajectoryTask, p, cycle, names):
     k = len(task.joints)
@@ -383,7 +383,8 @@ class _Program:
             rows = slice(a, b)
             w = self.weights[rows]
             if eq:
-                good = np.isfinite(self.mat[rows].sum() + self.target[rows].sum() + w.sum()) and (w >= 0).all()
+                total = self.mat[rows].sum() + self.target[rows].sum() + w.sum()
+                good = np.isfinite(total) and (w >= 0).all()
             else:
                 lo, up = self.lower[rows], self.upper[rows]
                 good = (np.isfinite(self.mat[rows].sum() + w.sum()) and (w > 0).all()
