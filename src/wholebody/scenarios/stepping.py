@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..control.stacks import table1_stack
+from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation
 from ..report.plots import time_series_figure
 from ..sim.simulator import Simulator
@@ -63,6 +64,9 @@ PARAMETERS = (
     Parameter("contact_kd", 20.0, "damping of the contact velocities in the contact constraint "
                                   "(1/s; 0: eq. 2 as is)"),
     Parameter("formulations", "reduced,full", "formulations to run, in this order"),
+    Parameter("engine", "python", "controller's rows: 'python' (Robot.update + Formulation) or "
+                                  "'native' (wholebody.cycle.HierarchyCycle: rigid-body terms and "
+                                  "task rows compiled)"),
     Parameter("timing_warmup", 50, "first cycles left out of the timing statistics (plans, "
                                    "caches)"),
 )
@@ -99,9 +103,12 @@ class Stepping:
     """Table 1 stepping controller, ``compute(q, v, t)``, on one formulation (reduced or full).
 
     Wall time of every cycle (update + rows + solve + tau) is appended to ``cycle_times``.
+    ``engine="native"`` solves each stack with a :class:`~wholebody.cycle.HierarchyCycle` (its
+    own compiled rigid-body pass and rows); the Python ``robot.update`` still runs every cycle
+    for the phase logic and the scenario's records, and is in the cycle time.
     """
 
-    def __init__(self, robot, params: dict, reduced: bool = True):
+    def __init__(self, robot, params: dict, reduced: bool = True, engine: str = "python"):
         self.robot, self.p, self.reduced = robot, params, reduced
         self.phases = timeline(robot, params)
         self.formulation = Formulation(robot, reduced=reduced)
@@ -126,6 +133,10 @@ class Stepping:
             self.single[stance].find("contacts").kd = params["contact_kd"]
             self.single_vars[stance] = Variables(robot, [stance])
             self.swing_task[stance] = self.single[stance].find(f"swing {frame}")
+        self.cycles = None
+        if engine != "python":
+            self.cycles = {id(st): HierarchyCycle(robot, st, reduced=reduced, engine=engine)
+                           for st in [self.double, *self.single.values()]}
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_middle = robot.com.copy()
         self.sole_xy = {c: robot.frame_placement(robot.contact(c).spec.frame)[0][:2].copy()
@@ -206,7 +217,10 @@ class Stepping:
         self.com_task = com
         if stack is not self.double:  # keep the double-support CoG task's reference current
             self.double.find("com").position = c
-        sol = self.formulation.solve(stack, variables, diagnostics=False)
+        if self.cycles is None:
+            sol = self.formulation.solve(stack, variables, diagnostics=False)
+        else:
+            sol = self.cycles[id(stack)].solve(q, v, variables)
         self.cycle_times.append(time.perf_counter() - t0)
         self.timings.append(dict(sol.timings))
         self.n_contacts.append(len(variables.contacts))
@@ -225,7 +239,7 @@ def _stats(x: np.ndarray) -> dict:
 
 def run_once(robot, params: dict, reduced: bool, progress: bool = False) -> dict:
     """One closed-loop stepping run; returns measurements (simulator-based) and timings."""
-    ctrl = Stepping(robot, params, reduced=reduced)
+    ctrl = Stepping(robot, params, reduced=reduced, engine=params["engine"])
     duration = ctrl.phases[-1].end
     sim = Simulator(robot)
     names = list(robot.contact_names)
@@ -319,7 +333,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None,
         metrics["reduced_faster_by_percent_max"] = (100.0 * (1.0 - 1.0 / mx)) if mx else None
     success = all(r["success"] for r in runs.values())
     notes = [
-        "wall times are Python (NumPy/Pinocchio/DAQP) on a shared 2-core machine: noisy, "
+        f"controller engine '{params['engine']}'; wall times on a shared 2-core machine: noisy, "
         "especially the tails (p99/max) — compare medians; not asserted by any test",
         "seed 000 (Sect. 5.1, Table 1, Fig. 5; C++/Eigen, Goldfarb-Idnani, i7-2600 3.4 GHz): "
         "peak ~1 ms for the 14-DoF biped, 5 ms (full) vs 3 ms (reduced) for the 25-DoF robot; the "
@@ -359,6 +373,8 @@ def validate(robot, params: dict) -> None:
             raise ValueError(f"--set {key}: must be > 0, got {params[key]}")
     if int(params["steps"]) < 1:
         raise ValueError("--set steps: must be >= 1")
+    if params["engine"] not in ENGINES:
+        raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
     kinds = [k.strip() for k in str(params["formulations"]).split(",") if k.strip()]
     if not kinds or any(k not in ("reduced", "full") for k in kinds):
         raise ValueError(f"--set formulations: comma-separated 'reduced'/'full', got "
