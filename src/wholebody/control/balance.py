@@ -24,6 +24,7 @@ from typing import Callable, Sequence
 import numpy as np
 import pinocchio as pin
 
+from ..cycle import HierarchyCycle
 from ..formulation import Formulation, Solution
 from ..robot import Robot
 from ..variables import Variables
@@ -178,13 +179,18 @@ class MomentumBalance:
     our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
     accumulated here, one step per :meth:`compute` call with ``dt`` the time since the previous
     call, clamped to ``+-integral_limit`` (m s, anti-windup); :meth:`reset_integral` zeroes it.
+    ``engine``: ``"python"`` (default: ``Formulation.solve``) or ``"native"``/``"auto"`` — the
+    stack solved by a :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and
+    rows, the same solution); ``robot.update`` still runs every cycle for the references and
+    the LQR.
     """
 
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
                  P=None, D=None, Q=None, R=None, backend: str = "daqp",
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
                  cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
-                 q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT):
+                 q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT,
+                 engine: str = "python"):
         if gains not in GAINS:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
         if gains != "lqr" and q_integral is not None and np.any(np.asarray(q_integral) != 0):
@@ -203,6 +209,8 @@ class MomentumBalance:
                 self.momentum.D = np.asarray(D, dtype=float)
         self.formulation = Formulation(robot)
         self.backend = backend
+        self.cycle = (None if engine == "python" else
+                      HierarchyCycle(robot, self.stack, engine=engine, backend=backend))
         if com_ref is None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             com_ref = robot.com.copy()
@@ -255,5 +263,7 @@ class MomentumBalance:
             self.momentum.com_ref = self.com_ref
             self.momentum.h_ref = self.h_ref
             self.momentum.hdot_ref = self.hdot_ref
+        if self.cycle is not None:
+            return self.cycle.solve(q, v, self.variables)
         return self.formulation.solve(self.stack, self.variables, backend=self.backend,
                                       diagnostics=False)
