@@ -12,9 +12,11 @@ runs in Python only (same results).
 
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
 
 def cmeel_include() -> Path | None:
@@ -66,4 +68,40 @@ def extensions() -> list[Extension]:
     ]
 
 
-setup(ext_modules=extensions())
+def vector_flags(compiler) -> list[str]:
+    """``-mavx2 -mfma`` when the building machine has AVX2 and FMA and the compiler takes them
+    (checked by compiling a test file): Eigen's kernels then use 256-bit FMA instructions and the
+    compiled cascade is 10-15 % faster (talos Table 1 cycle, interleaved A/B, session 6).
+    The extensions are built at install on the machine that runs them; set WHOLEBODY_PORTABLE=1
+    to build for any x86-64 CPU (e.g. a wheel for other machines)."""
+    if os.environ.get("WHOLEBODY_PORTABLE"):
+        return []
+    try:
+        cpu = Path("/proc/cpuinfo").read_text()
+    except OSError:  # not Linux: no check of the CPU, no flags
+        return []
+    words = set(cpu.split())
+    if not {"avx2", "fma"} <= words:
+        return []
+    flags = ["-mavx2", "-mfma"]
+    with tempfile.TemporaryDirectory() as tmp:
+        source = Path(tmp) / "check.cpp"
+        source.write_text("int main() { return 0; }\n")
+        try:
+            compiler.compile([str(source)], output_dir=tmp, extra_postargs=flags)
+        except Exception:  # noqa: BLE001 - any compiler complaint: build without them
+            return []
+    return flags
+
+
+class BuildExt(build_ext):
+    """build_ext with :func:`vector_flags` added to every extension."""
+
+    def build_extensions(self):
+        flags = vector_flags(self.compiler)
+        for ext in self.extensions:
+            ext.extra_compile_args = list(ext.extra_compile_args or []) + flags
+        super().build_extensions()
+
+
+setup(ext_modules=extensions(), cmdclass={"build_ext": BuildExt})
