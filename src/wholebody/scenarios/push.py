@@ -15,6 +15,7 @@ import numpy as np
 from ..control.balance import MomentumBalance
 from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
+from ..cycle import ENGINES
 from ..report.plots import time_series_figure
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
@@ -33,6 +34,11 @@ LOCATIONS = {
     "hip-left": ("base_link", (0.0, -1.0, 0.0), (0.0, SURFACE, 0.0)),
 }
 
+#: the controller's engine (wholebody.cycle): shared by the push scenarios
+ENGINE = Parameter("engine", "python", "MomentumBalance engine: 'python' (Formulation) or 'native' "
+                                       "(wholebody.cycle.HierarchyCycle: compiled rows, same "
+                                       "torques)")
+
 PARAMETERS = (
     Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')"),
     Parameter("angle", 0.0, "with location=angle: force direction in the horizontal plane (deg, "
@@ -50,16 +56,17 @@ PARAMETERS = (
                                  "not the paper's); 0 = off, the paper's controller"),
     Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
               "LQR integral action: anti-windup clamp of each integral component (m s)"),
+    ENGINE,
 )
 
 
 def controller_options(controller: str, params: dict) -> dict:
     """Keyword arguments of :class:`MomentumBalance` from the scenario parameters (``q_angular``,
-    ``angular_weight``, and for LQR the integral action ``q_integral``/``integral_limit``;
+    ``angular_weight``, ``engine``, and for LQR the integral action ``q_integral``/``integral_limit``;
     missing keys take the defaults above)."""
     defaults = {p.name: p.default for p in PARAMETERS}
     get = lambda key: params.get(key, defaults[key])  # noqa: E731
-    opts = {"angular_weight": get("angular_weight")}
+    opts = {"angular_weight": get("angular_weight"), "engine": get("engine")}
     if controller == "lqr":
         opts["Q"] = np.diag([30, 30, 50, .5, .5, .5] + [get("q_angular")] * 3)
         if get("q_integral") > 0:
@@ -84,6 +91,8 @@ def make_push(params: dict) -> Push:
 
 
 def validate(robot, params: dict) -> None:
+    if params.get("engine", ENGINE.default) not in ENGINES:
+        raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
     push = make_push(params)
     if not robot.model.existFrame(push.frame):
         raise ValueError(f"robot '{robot.name}' has no frame '{push.frame}' to push at; the push "

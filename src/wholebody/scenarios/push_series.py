@@ -21,7 +21,7 @@ from tqdm import tqdm  # noqa: E402
 from ..control.lqr import DEFAULT_INTEGRAL_LIMIT  # noqa: E402
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT  # noqa: E402
 from .base import Parameter, Scenario, ScenarioResult, parse_list  # noqa: E402
-from .push import LOCATIONS, run as run_push, validate as validate_push  # noqa: E402
+from .push import ENGINE, LOCATIONS, run as run_push, validate as validate_push  # noqa: E402
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points"),
@@ -38,6 +38,7 @@ PARAMETERS = (
               "LQR integral action: anti-windup clamp of each integral component (m s)"),
     Parameter("bisection", False, "also find the largest survivable peak force per point"),
     Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)"),
+    ENGINE,
 )
 CONTROLLERS = ("pd", "lqr")
 
@@ -58,7 +59,8 @@ def _one(robot, controller, location, force, params):
     p = {"location": location, "angle": 0.0, "height": 0.1, "peak_force": force,
          "push_duration": params["push_duration"], "start": 0.5, "duration": params["duration"],
          "q_angular": params["q_angular"], "angular_weight": params["angular_weight"],
-         "q_integral": params["q_integral"], "integral_limit": params["integral_limit"]}
+         "q_integral": params["q_integral"], "integral_limit": params["integral_limit"],
+         "engine": params["engine"]}
     res = run_push(robot, controller, p, None, False)
     return res.success, res.metrics
 

@@ -36,7 +36,7 @@ from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
 from .base import Parameter, Scenario, ScenarioResult, parse_list
 from .loop import run_closed_loop
-from .push import LOCATIONS, controller_options, make_push, validate as validate_push
+from .push import ENGINE, LOCATIONS, controller_options, make_push, validate as validate_push
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +84,7 @@ PARAMETERS = (
                                  "measured without it"),
     Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
               "LQR integral action: anti-windup clamp of each integral component (m s)"),
+    ENGINE,
 )
 
 COG_TOLERANCE, RECOVERY_WINDOW = 5e-3, 3.0
