@@ -17,6 +17,18 @@ SHORT = {"steps": "1", "shift_time": "1.0", "unload_time": "0.3", "lift_time": "
          "reload_time": "0.1", "lift": "0.02"}
 
 
+def run_to(robot, controller, end):
+    """The twin driven by ``controller`` until ``end`` → (simulator, failed cycles, the right
+    sole's height above its start after every cycle)."""
+    sim = Simulator(robot)
+    z0 = sim.contact_frame_poses()["right_sole"][0][2]
+    heights = []
+    failures = run_closed_loop(sim, controller, end,
+                               on_result=lambda t, s: heights.append(
+                                   sim.contact_frame_poses()["right_sole"][0][2] - z0))
+    return sim, failures, heights
+
+
 def test_stepping_lifts_the_right_sole_and_formulations_agree(robots):
     robot = robots["talos"]
     params = get_scenario("stepping").validate(robot, SHORT)
@@ -33,12 +45,7 @@ def test_stepping_lifts_the_right_sole_and_formulations_agree(robots):
             return sol
 
     lift_off = next(ph for ph in reduced.phases if ph.kind == "single")
-    sim = Simulator(robot)
-    z0 = sim.contact_frame_poses()["right_sole"][0][2]
-    heights = []
-    failures = run_closed_loop(sim, Paired(), lift_off.end,
-                               on_result=lambda t, s: heights.append(
-                                   sim.contact_frame_poses()["right_sole"][0][2] - z0))
+    sim, failures, heights = run_to(robot, Paired(), lift_off.end)
     assert failures == 0
     for tau_r, tau_f in pairs:  # eq. 14 eliminates tau without changing the solution
         assert np.linalg.norm(tau_r - tau_f) <= 1e-6 * np.linalg.norm(tau_f)
@@ -79,12 +86,7 @@ def test_stepping_with_the_native_cycle_matches_python_in_closed_loop(robots):
             return sol
 
     lift_off = next(ph for ph in native.phases if ph.kind == "single")
-    sim = Simulator(robot)
-    z0 = sim.contact_frame_poses()["right_sole"][0][2]
-    heights = []
-    failures = run_closed_loop(sim, Paired(), lift_off.end,
-                               on_result=lambda t, s: heights.append(
-                                   sim.contact_frame_poses()["right_sole"][0][2] - z0))
+    _, failures, heights = run_to(robot, Paired(), lift_off.end)
     assert failures == 0
     assert len(diffs) > 30 and max(diffs) < 1e-6, max(diffs)
     assert max(heights) > 0.8 * params["lift"]
