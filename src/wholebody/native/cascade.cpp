@@ -274,6 +274,15 @@ namespace
         if (found[std::size_t(j)])
           rows_found.push_back(j);
       P = range_basis(rows_of(G, rows_found).transpose());
+      // a tight row in the span of implicit equalities is one too: taken at once (its
+      // projected row is ~0, a dependency of one row) rather than one NNLS each
+      for (Index j = 0; j < k; ++j)
+        if (!found[std::size_t(j)]
+            && (G.row(j) - (G.row(j) * P) * P.transpose()).norm() <= dep_tol)
+        {
+          found[std::size_t(j)] = true;
+          ++n_found;
+        }
     }
     if (n_found == 0)
       return {};

@@ -728,6 +728,12 @@ def _implicit_equalities(HZ, hx, hlo, hup, tight_tol=_TIGHT_TOL, dep_tol=1e-7):
             break
         found[rest[y > 1e-9 * y.max()]] = True
         P = _range_basis(G[found].T)
+        # a tight row in the span of implicit equalities is one too (g·d = 0 on every feasible
+        # d): taken at once rather than one NNLS each (its projected row is ~0, a dependency
+        # of one row)
+        rest = np.flatnonzero(~found)
+        spanned = _row_norms(G[rest] - (G[rest] @ P) @ P.T) <= dep_tol
+        found[rest[spanned]] = True
     if not found.any():
         return None
     out = np.zeros(m, dtype=bool)
