@@ -413,6 +413,11 @@ public:
     return py::make_tuple(qp_g_, qp_A_, qp_lower_, qp_upper_);
   }
 
+  // The pending QP's rows as DAQP takes them (g, unit rows, upper, lower, sense; see daqp_rows),
+  // and the largest violation of its unscaled rows at y (see row_violation).
+  py::tuple daqp_qp() const;
+  double qp_violation(const DoubleArray & y) const;
+
   // The solution y = [w; s] of the pending QP, or None if the backends failed (``status`` why).
   void give_qp(const std::optional<VectorXd> & y, const std::string & status)
   {
@@ -835,17 +840,14 @@ private:
 
 // The rows DAQP is given (backends.solve_daqp): each row of A and its bounds divided by the row's
 // norm (zero rows kept), bounds clipped to ±1e30 (DAQP_INF), sense 5 on equality rows.
-py::tuple daqp_rows(const DoubleArray & A_in, const DoubleArray & lower_in, const DoubleArray & upper_in)
+template <typename Matrix>
+py::tuple unit_rows(const Matrix & A, const double * lo, const double * up)
 {
-  if (A_in.ndim() != 2 || lower_in.size() != A_in.shape(0) || upper_in.size() != A_in.shape(0))
-    throw std::invalid_argument("daqp_rows: A must be m x n with m lower and upper bounds");
-  const Index m = A_in.shape(0), n = A_in.shape(1);
+  const Index m = A.rows(), n = A.cols();
   constexpr double kDaqpInf = 1e30;
   py::array_t<double> A_out({py::ssize_t(m), py::ssize_t(n)}), bu(m), bl(m);
   py::array_t<int32_t> sense(m);
-  const ConstRowMap A(A_in.data(), m, n);
   Eigen::Map<RowMatrix> Au(A_out.mutable_data(), m, n);
-  const double *lo = lower_in.data(), *up = upper_in.data();
   double *pu = bu.mutable_data(), *pl = bl.mutable_data();
   int32_t * ps = sense.mutable_data();
   for (Index i = 0; i < m; ++i)
@@ -861,7 +863,27 @@ py::tuple daqp_rows(const DoubleArray & A_in, const DoubleArray & lower_in, cons
   return py::make_tuple(A_out, bu, bl, sense);
 }
 
+py::tuple daqp_rows(const DoubleArray & A_in, const DoubleArray & lower_in, const DoubleArray & upper_in)
+{
+  if (A_in.ndim() != 2 || lower_in.size() != A_in.shape(0) || upper_in.size() != A_in.shape(0))
+    throw std::invalid_argument("daqp_rows: A must be m x n with m lower and upper bounds");
+  return unit_rows(ConstRowMap(A_in.data(), A_in.shape(0), A_in.shape(1)), lower_in.data(),
+                   upper_in.data());
+}
+
 // max(0, lower - A x, A x - upper) over the rows; inf if x is not finite (backends.solve_daqp).
+template <typename Matrix>
+double violation(const Matrix & A, const ConstVecMap & x, const double * lo, const double * up)
+{
+  if (!x.allFinite())
+    return kInf;
+  const VectorXd ax = A * x;
+  double over = 0.0;
+  for (Index i = 0; i < A.rows(); ++i)
+    over = std::max({over, lo[i] - ax[i], ax[i] - up[i]});
+  return over;
+}
+
 double row_violation(const DoubleArray & A_in, const DoubleArray & x_in, const DoubleArray & lower_in,
                      const DoubleArray & upper_in)
 {
@@ -869,14 +891,25 @@ double row_violation(const DoubleArray & A_in, const DoubleArray & x_in, const D
       || upper_in.size() != A_in.shape(0))
     throw std::invalid_argument("row_violation: A must be m x n with n values of x and m bounds");
   const Index m = A_in.shape(0), n = A_in.shape(1);
-  const ConstVecMap x(x_in.data(), n);
-  if (!x.allFinite())
-    return kInf;
-  const VectorXd ax = ConstRowMap(A_in.data(), m, n) * x;
-  double over = 0.0;
-  for (Index i = 0; i < m; ++i)
-    over = std::max({over, lower_in.data()[i] - ax[i], ax[i] - upper_in.data()[i]});
-  return over;
+  return violation(ConstRowMap(A_in.data(), m, n), ConstVecMap(x_in.data(), n), lower_in.data(),
+                   upper_in.data());
+}
+
+py::tuple CascadeRun::daqp_qp() const
+{
+  if (pending_ != Kind::QP)
+    throw std::runtime_error("CascadeRun.daqp_qp: no QP pending");
+  const py::tuple rows = unit_rows(qp_A_, qp_lower_.data(), qp_upper_.data());
+  return py::make_tuple(qp_g_, rows[0], rows[1], rows[2], rows[3]);
+}
+
+double CascadeRun::qp_violation(const DoubleArray & y) const
+{
+  if (pending_ != Kind::QP)
+    throw std::runtime_error("CascadeRun.qp_violation: no QP pending");
+  if (y.ndim() != 1 || y.size() != qp_g_.size())
+    throw std::invalid_argument("CascadeRun.qp_violation: y must have one value per QP variable");
+  return violation(qp_A_, ConstVecMap(y.data(), y.size()), qp_lower_.data(), qp_upper_.data());
 }
 
 PYBIND11_MODULE(_cascade, m)
@@ -898,6 +931,8 @@ PYBIND11_MODULE(_cascade, m)
          py::arg("nnls"))
     .def("advance", &CascadeRun::advance)
     .def("qp", &CascadeRun::qp)
+    .def("daqp_qp", &CascadeRun::daqp_qp)
+    .def("qp_violation", &CascadeRun::qp_violation, py::arg("y"))
     .def("give_qp", &CascadeRun::give_qp, py::arg("y"), py::arg("status"))
     .def("evaluate", &CascadeRun::evaluate)
     .def_property_readonly("x", &CascadeRun::x)

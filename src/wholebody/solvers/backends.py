@@ -36,6 +36,8 @@ __all__ = ["solve_qp", "BACKENDS"]
 log = logging.getLogger(__name__)
 
 _DAQP_INF = 1e30
+# what a backend may raise on bad numbers: turned into a failed (x, status, ok), never raised
+QP_ERRORS = (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError)
 _DAQP_EXIT = {
     1: "optimal",
     2: "soft optimal",
@@ -94,7 +96,6 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=1e-6, **opts):
     talos14: level-2 cost 2e-5 instead of 3e-10 with quadprog). 1e-9 is more accurate still but
     made DAQP fail (cycling/infeasible) on 17 % instead of 10 % of the Table 1 cycles.
     """
-    opts.setdefault("primal_tol", 1e-7)
     if A.shape[0] == 0:
         # DAQP needs at least one row: add a free one (not a zero row: DAQP normalises rows)
         A = np.zeros((1, H.shape[0]))
@@ -108,17 +109,32 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=1e-6, **opts):
     # solution is checked on the caller's rows and refused beyond `raw_tol` (a fallback backend
     # then solves the QP).
     unit_A, bu, bl, sense = _daqp_rows(A, lower, upper)
+    x, status = solve_daqp_unit_rows(H, g, unit_A, bu, bl, sense, **opts)
+    return daqp_verdict(x, status, _row_violation(A, x, lower, upper) if x is not None else 0.0,
+                        raw_tol)
+
+
+def solve_daqp_unit_rows(H, g, unit_A, bupper, blower, sense, **opts):
+    """DAQP on rows already scaled as :func:`solve_daqp` scales them (``_daqp_rows``) → (x, status),
+    x None on failure; an "infeasible" verdict is retried once with proximal iterations."""
+    opts.setdefault("primal_tol", 1e-7)
     H, g = np.ascontiguousarray(H), np.ascontiguousarray(g)
-    x, _, flag, _ = _daqp().solve(H, g, unit_A, bu, bl, sense, **opts)
+    x, _, flag, _ = _daqp().solve(H, g, unit_A, bupper, blower, sense, **opts)
     if flag == -1 and "eps_prox" not in opts:
         # DAQP works on the LDP with R⁻¹ (H = RᵀR); for cond(H) ≳ 1e9 (tiny ε in the cascade)
         # its infeasibility test misfires on feasible problems. Proximal-point iterations
         # (eps_prox > 0) converge to the same strictly convex QP's solution: retry once.
-        x, _, flag, _ = _daqp().solve(H, g, unit_A, bu, bl, sense, eps_prox=1e-6, **opts)
+        x, _, flag, _ = _daqp().solve(H, g, unit_A, bupper, blower, sense, eps_prox=1e-6, **opts)
     if flag not in (1, 2):
-        return None, f"daqp: {_DAQP_EXIT.get(flag, 'exitflag')} ({flag})", False
-    x = np.asarray(x)
-    over = _row_violation(A, x, lower, upper)
+        return None, f"daqp: {_DAQP_EXIT.get(flag, 'exitflag')} ({flag})"
+    return np.asarray(x), "optimal"
+
+
+def daqp_verdict(x, status: str, over: float, raw_tol: float = 1e-6):
+    """(x, status, ok) for a DAQP solution ``x`` (None: failed with ``status``) whose unscaled rows
+    are violated by ``over`` at most: refused beyond ``raw_tol`` or if not finite."""
+    if x is None:
+        return None, status, False
     if not math.isfinite(over):
         return None, "daqp: non-finite solution", False
     if over > raw_tol:
@@ -217,6 +233,6 @@ def solve_qp(H, g, A, lower, upper, backend: str = "quadprog", **options):
         raise ValueError(f"unknown backend {backend!r}; choose from {sorted(BACKENDS)}") from None
     try:
         return fn(H, g, A, lower, upper, **options)
-    except (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError) as exc:
+    except QP_ERRORS as exc:
         log.debug("backend %s failed: %s", backend, exc)
         return None, f"{backend}: {type(exc).__name__}: {exc}", False

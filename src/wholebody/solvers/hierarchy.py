@@ -147,7 +147,8 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 from scipy.optimize import nnls
 
-from .backends import BACKENDS, solve_qp
+from .backends import (BACKENDS, QP_ERRORS, daqp_verdict, solve_daqp, solve_daqp_unit_rows,
+                       solve_qp)
 from .level import Level
 
 try:  # the cascade, compiled (src/wholebody/native/cascade.cpp); optional
@@ -378,9 +379,9 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
         n_qps += 1
         tq = time.perf_counter()
         r = run.level
-        g, A, lower, upper = run.qp()
-        y, ok, status = _backend_solve(np.eye(g.shape[0]), g, A, lower, upper, backend, opts,
-                                       fallback, r, levels, warns)
+        first = _daqp_on_run(run, opts) if BACKENDS.get(backend) is solve_daqp else None
+        y, ok, status = _backend_solve(_identity_qp(run), backend, opts, fallback, r, levels,
+                                       warns, first)
         qp_times[r] += time.perf_counter() - tq  # (give_qp's end of the level is cascade work)
         run.give_qp(y if ok else None, status)
     ok = kind == "done"
@@ -395,12 +396,38 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
     )
 
 
-def _backend_solve(H, g, A, lower, upper, backend, opts, fallback, r, levels, warns):
-    """A level QP with ``backend``, then ``fallback`` if it fails → (y, ok, status); a fallback
-    success is recorded in ``warns``."""
-    y, status, ok = solve_qp(H, g, A, lower, upper, backend=backend, **opts)
+def _daqp_on_run(run, opts):
+    """DAQP on the compiled cascade's pending level QP, (y, status, ok) as ``solve_daqp`` gives
+    them: the run scales the rows (``run.daqp_qp``) and checks the unscaled ones
+    (``run.qp_violation``), which saves the generic adapter's array round trips (~10 µs a QP).
+    None when the QP has no rows (the adapter's special case)."""
+    g, unit_A, bu, bl, sense = run.daqp_qp()
+    if unit_A.shape[0] == 0:
+        return None
+    opts = dict(opts)
+    raw_tol = opts.pop("raw_tol", 1e-6)
+    try:
+        x, status = solve_daqp_unit_rows(np.eye(g.shape[0]), g, unit_A, bu, bl, sense, **opts)
+    except QP_ERRORS as exc:  # as solve_qp: never raises for numerical reasons
+        return None, f"daqp: {type(exc).__name__}: {exc}", False
+    return daqp_verdict(x, status, run.qp_violation(x) if x is not None else 0.0, raw_tol)
+
+
+def _identity_qp(run):
+    """The pending QP of a compiled run as (H, g, A, lower, upper), H = I, built when called."""
+    def qp():
+        g, A, lower, upper = run.qp()
+        return np.eye(g.shape[0]), g, A, lower, upper
+    return qp
+
+
+def _backend_solve(qp, backend, opts, fallback, r, levels, warns, first=None):
+    """The level QP ``qp()`` → (H, g, A, lower, upper) with ``backend``, then ``fallback`` if it
+    fails → (y, ok, status); a fallback success is recorded in ``warns``. ``first``, if given, is
+    the backend's (y, status, ok) already computed (then ``qp`` is called only for the fallback)."""
+    y, status, ok = first if first is not None else solve_qp(*qp(), backend=backend, **opts)
     if not ok and fallback is not None:
-        y, status2, ok = solve_qp(H, g, A, lower, upper, backend=fallback)
+        y, status2, ok = solve_qp(*qp(), backend=fallback)
         if ok:
             msg = f"level {r} ({levels[r].name!r}): {status}; solved with {fallback}"
             log.debug(msg)
@@ -554,7 +581,7 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
                 solved = ok and (rows is None or not _violated(rows, u))
         if not solved and rows is not None:
             u, ok, status = _level_qp(Rc, *rows, lambda *qp: _backend_solve(
-                *qp, backend, opts, fallback, r, levels, warns))
+                lambda: qp, backend, opts, fallback, r, levels, warns))
         if high is not None:  # the margins stay for the lower levels
             high = (high[0], hb[0], hb[1], high[3])
         if not ok:
