@@ -105,13 +105,18 @@ namespace
     }
   };
 
-  // _kernel, applied: Z ← Z N with N an orthonormal basis of ker(RZ) (Z = nullopt: the identity),
-  // from the QR with column pivoting of RZᵀ = Q R P: N = Q[:, rank:], so Z N is the last columns
-  // of Z Q, got by applying the Householder reflectors to Z (cheaper than forming Q and then
-  // multiplying). An SVD decides when some |R_ii| is within three decades of the threshold.
-  // Returns false if nothing is locked.
-  bool restrict_to_kernel(MatrixXd & Z, bool have_Z, Index n, const MatrixXd & RZ, double tol)
+  // _kernel, applied: Z ← Z N with N an orthonormal basis of ker(RZ) (have_Z false: Z is the
+  // identity), from the QR with column pivoting of RZᵀ = Q R P: N spans Q[:, rank:], so Z N is
+  // the last columns of Z Q, got by applying the Householder reflectors to Z (cheaper than forming
+  // Q and then multiplying) — only the first ``rank`` of them: the later ones map Q[:, rank:]'s
+  // span onto itself. An SVD decides when some |R_ii| is within three decades of the threshold.
+  // ``HZ`` (rows already multiplied by Z, or null) gets the same N where that is cheaper than
+  // multiplying by the new Z afresh; ``HZ_kept`` says whether it did. Returns false if nothing
+  // is locked.
+  bool restrict_to_kernel(MatrixXd & Z, bool have_Z, Index n, const MatrixXd & RZ, double tol,
+                          MatrixXd * HZ, bool & HZ_kept)
   {
+    HZ_kept = HZ != nullptr;
     const Index k = RZ.rows(), z = RZ.cols(), p = std::min(k, z);
     const MatrixXd At = RZ.transpose();
     Eigen::ColPivHouseholderQR<MatrixXd> qr(At);
@@ -131,6 +136,8 @@ namespace
         return false;
       const MatrixXd N = svd.matrixU().rightCols(z - r);
       Z = have_Z ? MatrixXd(Z * N) : N;
+      if (HZ)
+        *HZ = *HZ * N;
       return true;
     }
     if (rank == 0)
@@ -138,11 +145,22 @@ namespace
     if (rank >= z)
     {
       Z.resize(have_Z ? Z.rows() : n, 0);
+      if (HZ)
+        HZ->resize(HZ->rows(), 0);
       return true;
     }
+    auto Q = qr.householderQ();
+    Q.setLength(rank);
     MatrixXd ZQ = have_Z ? Z : MatrixXd::Identity(n, n);
-    ZQ.applyOnTheRight(qr.householderQ());
+    ZQ.applyOnTheRight(Q);
     Z = ZQ.rightCols(z - rank);
+    // per row: 4 rank z flops for the reflectors against 2 n (z - rank) for a product with Z
+    HZ_kept = HZ != nullptr && 2 * rank * z <= n * (z - rank);
+    if (HZ_kept)
+    {
+      HZ->applyOnTheRight(Q);
+      *HZ = HZ->rightCols(z - rank).eval();
+    }
     return true;
   }
 
@@ -532,7 +550,8 @@ private:
     }
   }
 
-  // _lock: Z ← Z N with N a basis of ker(rows Z); ``projected`` = rows Z.
+  // _lock: Z ← Z N with N a basis of ker(rows Z); ``projected`` = rows Z. The higher rows'
+  // projection HZ follows (or is marked for recomputing).
   void lock(const MatrixXd & rows, const MatrixXd & projected)
   {
     if (rows.rows() == 0 || z_ == 0)
@@ -540,8 +559,11 @@ private:
     const double scale = std::sqrt(sq_norms(rows).maxCoeff());
     if (scale == 0.0)
       return;
-    if (!restrict_to_kernel(Z_, have_Z_, n_, projected, rank_tol_ * scale))
+    bool kept = false;
+    if (!restrict_to_kernel(Z_, have_Z_, n_, projected, rank_tol_ * scale,
+                            HZ_valid_ ? &HZ_ : nullptr, kept))
       return;
+    HZ_valid_ = kept;
     have_Z_ = true;
     z_ = Z_.cols();
   }
@@ -630,7 +652,9 @@ private:
   {
     if (high_.empty())
       return false;
-    HZ_ = times_Z(high_.C);
+    if (!HZ_valid_)
+      HZ_ = times_Z(high_.C);
+    HZ_valid_ = true;
     drop_frozen(high_, HZ_);
     if (high_.empty())
       return false;
@@ -669,8 +693,9 @@ private:
       {
         const MatrixXd Cd = C;
         high_ = {Cd, vec(lowers_, r), vec(uppers_, r), drop2_ * Cd.rowwise().squaredNorm(), VectorXd()};
-        MatrixXd CZ1 = z_ ? MatrixXd(Cd * Z_) : MatrixXd(C.rows(), 0);
-        drop_frozen(high_, CZ1);
+        HZ_ = z_ ? MatrixXd(Cd * Z_) : MatrixXd(C.rows(), 0);
+        drop_frozen(high_, HZ_);
+        HZ_valid_ = true;
       }
       zdims_[r] = z_;
       ++r_;
@@ -706,9 +731,10 @@ private:
         (mask[std::size_t(i)] ? imp : keep).push_back(i);
       if (!imp.empty())
       {
-        const MatrixXd rows = rows_of(high_.C, imp);
-        lock(rows, times_Z(rows));
+        const MatrixXd rows = rows_of(high_.C, imp), projected = rows_of(HZ_, imp);
         high_ = high_.subset(keep);
+        HZ_ = rows_of(HZ_, keep);
+        lock(rows, projected);
         if (z_ == 0)
         {
           zdims_[r_] = 0;
@@ -797,6 +823,16 @@ private:
       const VectorXd viol = (own_.lower - cx).cwiseMax(cx - own_.upper).cwiseMax(0.0);
       own_.lower -= viol;
       own_.upper += viol;
+      if (high_.empty())
+      {
+        HZ_ = own_CZ_;
+        HZ_valid_ = true;
+      }
+      else if (HZ_valid_)
+      {
+        HZ_.conservativeResize(HZ_.rows() + own_CZ_.rows(), Eigen::NoChange);
+        HZ_.bottomRows(own_CZ_.rows()) = own_CZ_;
+      }
       high_.append(own_);
     }
     if (wB_.rows() && r + 1 < nl_)
@@ -831,6 +867,7 @@ private:
   // the level in progress
   bool tight_ = false;
   MatrixXd HZ_, wB_, M_, R_, own_CZ_;
+  bool HZ_valid_ = false; // HZ_ = high_.C Z_ (kept through the locks where that is cheaper)
   VectorXd hx_, hlo_, hup_, u_, c_;
   Rows own_;
   // its QP
