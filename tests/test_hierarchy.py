@@ -899,3 +899,47 @@ def test_implicit_equalities_match_a_linear_programming_oracle(monkeypatch):
         np.testing.assert_array_equal(got, oracle, err_msg=f"trial {trial}")
         assert oracle[np.argsort(order)[:3 + len(spanned)]].all()  # the construction holds
         assert seen["implicit"] - before <= 2, f"trial {trial}: {seen['implicit'] - before} NNLS"
+
+
+def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
+    """A BoundCascade solved again and again while its levels' arrays are overwritten in place
+    (contents of other random hierarchies of the same shapes) returns exactly what a fresh
+    solve_hierarchy returns on those contents: reset() leaves nothing of the previous solve."""
+    from conftest import native_cycle_or_skip
+    from wholebody.solvers.hierarchy import BoundCascade
+    native_cycle_or_skip("_cascade")
+    rng = np.random.default_rng(17)
+    fields = ("B", "b", "w", "C", "lower", "upper", "v")
+    for trial in range(40):
+        shape_seed = int(rng.integers(1 << 30))
+        make = lambda seed: random_hierarchy(np.random.default_rng(seed))  # noqa: E731
+        levels = make(shape_seed)
+        kw = dict(backend="daqp", regularization=1e-6, fallback_backend="quadprog")
+        bound = BoundCascade(levels, **kw)
+        for _ in range(4):
+            # same shapes, new numbers: the random draws of the same structure, perturbed
+            for L, M in zip(levels, make(shape_seed)):
+                for f in fields:
+                    a, b = getattr(L, f), getattr(M, f)
+                    noise = rng.normal(scale=0.3, size=a.shape) if f in ("B", "C", "b") else 0.0
+                    a[...] = b + noise
+            got, want = bound.solve(), solve_hierarchy(levels, **kw)
+            assert (got.ok, got.status, got.levels_solved) == (want.ok, want.status, want.levels_solved)
+            np.testing.assert_array_equal(got.x, want.x, err_msg=f"trial {trial}")
+            np.testing.assert_array_equal(got.costs, want.costs)
+            np.testing.assert_array_equal(got.nullspace_dims, want.nullspace_dims)
+            assert got.warnings == want.warnings
+
+
+def test_bound_cascade_refuses_arrays_it_would_have_to_copy():
+    from conftest import native_cycle_or_skip
+    from wholebody.solvers.hierarchy import BoundCascade
+    native_cycle_or_skip("_cascade")
+    """Level() stores C-contiguous copies; a trusted level (preallocated buffers) may hold a
+    Fortran-ordered view, which pybind11 would silently copy: refused, naming level and field."""
+    B = np.asfortranarray(np.random.default_rng(0).normal(size=(3, 5)))
+    empty = np.zeros((0, 5))
+    level = Level.trusted(B, np.ones(3), np.ones(3), empty, np.zeros(0), np.zeros(0), np.zeros(0),
+                          name="L1")
+    with pytest.raises(ValueError, match="level 'L1' B: needs a C-contiguous float64"):
+        BoundCascade([level])

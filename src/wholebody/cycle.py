@@ -29,6 +29,7 @@ import numpy as np
 from .formulation import Formulation, Solution, Stack, make_solution, solve_levels
 from .robot import FREE_FLYER_NQ, Robot
 from .solvers import Level
+from .solvers.hierarchy import BoundCascade
 from .tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
                     FrictionCone, FullDynamics, JointAccelerationLimits, JointTrajectoryTask,
                     MomentumForce, MomentumPD, NewtonEuler, PostureTask, TorqueLimits)
@@ -331,6 +332,7 @@ class _Program:
                               (task, "ineq", self.mat[a:b], self.lower[a:b], self.upper[a:b])
                               for _, _, task, eq, a, b in entries])
         self.w_min = np.where(self.ineq_rows, np.nextafter(0.0, 1.0), 0.0)
+        self.bound: BoundCascade | None = None  # the compiled cascade on self.levels (cycle sets it)
 
     @staticmethod
     def _rows(task, kind: _Kind, robot: Robot, variables: Variables, names) -> int:
@@ -531,7 +533,7 @@ class HierarchyCycle:
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
         t_rows = time.perf_counter()
         result, status = solve_levels(program.levels, self.analytic, self.method, self.backend,
-                                      self.regularization, self.fallback_backend)
+                                      self.regularization, self.fallback_backend, program.bound)
         t_solve = time.perf_counter()
         self.engine.recover(program.id, result.x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),
@@ -557,6 +559,11 @@ class HierarchyCycle:
             program = self._programs.get(key)
             if program is None:
                 program = self._programs[key] = _Program(self, variables, key)
+                if self.method == "cascade" and BoundCascade.available:
+                    program.bound = BoundCascade(
+                        program.levels, self.backend, self.regularization,
+                        first_level_solution="analytic" if self.analytic else None,
+                        fallback_backend=self.fallback_backend)
             self._program = program
         return program
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from .robot import FREE_FLYER_NV, Robot
 from .solvers import Level, solve_hierarchy
-from .solvers.hierarchy import analytic_first_level
+from .solvers.hierarchy import BoundCascade, analytic_first_level
 from .tasks.base import Task, TaskRows
 from .tasks.dynamics import FullDynamics, NewtonEuler
 from .tasks.limits import TorqueLimits
@@ -266,15 +266,18 @@ class Formulation:
 
 
 def solve_levels(levels: list[Level], analytic_first_level: bool, method: str, backend: str,
-                 regularization: float, fallback_backend: str | None):
+                 regularization: float, fallback_backend: str | None,
+                 bound: BoundCascade | None = None):
     """The levels solved as :meth:`Formulation.solve` does → (HierarchySolution, status): the
     analytic first level (eq. 17) when asked, a failed cascade level QP retried with
     ``fallback_backend`` (one QP, not the whole cascade again), other methods re-solved as a
-    cascade with it."""
+    cascade with it. ``bound``: a :class:`BoundCascade` made with these same arguments on these
+    levels' arrays, used for the first attempt (a control loop's fast path)."""
     fls = "analytic" if analytic_first_level and method == "cascade" else None
-    result = solve_hierarchy(levels, method=method, backend=backend,
-                             regularization=regularization, first_level_solution=fls,
-                             fallback_backend=fallback_backend if method == "cascade" else None)
+    result = bound.solve() if bound is not None else solve_hierarchy(
+        levels, method=method, backend=backend, regularization=regularization,
+        first_level_solution=fls,
+        fallback_backend=fallback_backend if method == "cascade" else None)
     status = result.status
     retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
     if result.ok and retried:

@@ -11,6 +11,7 @@
 // hierarchy._solve_compiled):
 //   run = CascadeRun(B, b, w, C, lower, upper, V, names, n, eps, x1, Z1, tolerances..., nnls)
 //   while run.advance() == "qp": run.give_qp(y, status)
+//   run.reset()  # and again, on the arrays' new contents
 #include <Eigen/Dense>
 
 #include <pybind11/eigen.h>
@@ -391,10 +392,29 @@ public:
           || rows_of_level(Cs_, r) != Vs_[r].size())
         throw std::invalid_argument("CascadeRun: level " + std::to_string(r)
                                     + ": row counts of its arrays differ");
-    x_ = VectorXd::Zero(n);
-    z_ = n;
+    reset();
+  }
+
+  // Back to the first level, for another solve on the same arrays (whose contents may have
+  // changed in place: a control loop's level buffers); an analytic first level is recomputed.
+  void reset()
+  {
+    r_ = 0;
+    x_ = VectorXd::Zero(n_);
+    have_Z_ = false;
+    Z_.resize(n_, 0);
+    z_ = n_;
+    high_ = Rows();
+    HZ_valid_ = false;
     zdims_.assign(nl_, 0);
     times_.assign(nl_, 0.0);
+    warns_.clear();
+    status_ = "optimal";
+    finished_ = failed_ = false;
+    pending_ = Kind::Done;
+    tight_ = false;
+    if (analytic_first_)
+      have_first_ = false;
   }
 
   // Runs until the cascade needs a level QP solved or ends: "qp", "done" or "failed".
@@ -963,6 +983,7 @@ PYBIND11_MODULE(_cascade, m)
          py::arg("analytic_first"),
          py::arg("rank_tol"), py::arg("drop_tol"), py::arg("relax_tol"), py::arg("feas_tol"),
          py::arg("nnls"))
+    .def("reset", &CascadeRun::reset)
     .def("advance", &CascadeRun::advance)
     .def("qp", &CascadeRun::qp)
     .def("daqp_qp", &CascadeRun::daqp_qp)

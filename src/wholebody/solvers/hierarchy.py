@@ -157,7 +157,7 @@ except ImportError:  # not built (no C++ compiler at install): the Python cascad
     _CompiledCascade = None
 
 __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
-           "row_normalised", "analytic_first_level"]
+           "row_normalised", "analytic_first_level", "BoundCascade"]
 
 log = logging.getLogger(__name__)
 
@@ -253,6 +253,39 @@ def _finish(levels, x, status, ok, t_start, level_times, method, solved, zdims, 
 
 
 # ---------------------------------------------------------------------------- public API
+def _checked_arguments(levels, method, backend, regularization, first_level_solution,
+                       fallback_backend):
+    """solve_hierarchy's argument checks → (levels as a list, n, first_level_solution,
+    fallback_backend); ValueError naming what is wrong."""
+    levels = [levels] if isinstance(levels, Level) else list(levels)
+    if method not in _METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {_METHODS}")
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; choose from {sorted(BACKENDS)}")
+    if fallback_backend is not None and fallback_backend not in BACKENDS:
+        raise ValueError(f"unknown fallback_backend {fallback_backend!r}; choose from {sorted(BACKENDS)}")
+    if fallback_backend == backend:
+        fallback_backend = None
+    if not (np.isfinite(regularization) and regularization > 0):
+        raise ValueError(f"regularization must be finite and > 0, got {regularization!r}")
+    n_hint = None
+    analytic = isinstance(first_level_solution, str)
+    if first_level_solution is not None:
+        if method != "cascade":
+            raise ValueError("first_level_solution is only supported by method='cascade'")
+        if analytic:
+            if first_level_solution != "analytic":
+                raise ValueError(f"first_level_solution: expected (x1, Z1) or 'analytic', got "
+                                 f"{first_level_solution!r}")
+            if not levels or not isinstance(levels[0], Level) or levels[0].n_eq == 0:
+                raise ValueError("first_level_solution='analytic' needs equality rows in level 1")
+        else:
+            first_level_solution = _check_first_level(first_level_solution)
+            n_hint = first_level_solution[0].shape[0]
+    n = _check_levels(levels, n_hint)
+    return levels, n, first_level_solution, fallback_backend
+
+
 def solve_hierarchy(
     levels,
     method: str = "cascade",
@@ -310,32 +343,9 @@ def solve_hierarchy(
     (``ok=False``, ``status`` says why) and ``x`` is the last successful level's (finite) x.
     """
     t0 = time.perf_counter()
-    levels = [levels] if isinstance(levels, Level) else list(levels)
-    if method not in _METHODS:
-        raise ValueError(f"unknown method {method!r}; choose from {_METHODS}")
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; choose from {sorted(BACKENDS)}")
-    if fallback_backend is not None and fallback_backend not in BACKENDS:
-        raise ValueError(f"unknown fallback_backend {fallback_backend!r}; choose from {sorted(BACKENDS)}")
-    if fallback_backend == backend:
-        fallback_backend = None
-    if not (np.isfinite(regularization) and regularization > 0):
-        raise ValueError(f"regularization must be finite and > 0, got {regularization!r}")
-    n_hint = None
+    levels, n, first_level_solution, fallback_backend = _checked_arguments(
+        levels, method, backend, regularization, first_level_solution, fallback_backend)
     analytic = isinstance(first_level_solution, str)
-    if first_level_solution is not None:
-        if method != "cascade":
-            raise ValueError("first_level_solution is only supported by method='cascade'")
-        if analytic:
-            if first_level_solution != "analytic":
-                raise ValueError(f"first_level_solution: expected (x1, Z1) or 'analytic', got "
-                                 f"{first_level_solution!r}")
-            if not levels or not isinstance(levels[0], Level) or levels[0].n_eq == 0:
-                raise ValueError("first_level_solution='analytic' needs equality rows in level 1")
-        else:
-            first_level_solution = _check_first_level(first_level_solution)
-            n_hint = first_level_solution[0].shape[0]
-    n = _check_levels(levels, n_hint)
     opts = dict(backend_options or {})
     tols = (rank_tol, drop_tol, relax_tol, feas_tol)
 
@@ -366,20 +376,31 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
     :func:`_solve_cascade`, including :func:`_implicit_equalities` with scipy's NNLS passed in):
     it runs the levels and hands back each level QP, solved here by ``backend``, then
     ``fallback``, exactly as the Python cascade does."""
+    return _run_compiled(_new_run(levels, n, eps, fls, tols), levels, backend, opts, fallback, t0)
+
+
+def _new_run(levels, n, eps, fls, tols):
+    """A compiled cascade run on the arrays of ``levels`` (held, not copied)."""
     analytic = isinstance(fls, str)
     x1, Z1 = fls if fls is not None and not analytic else (None, None)
-    run = _CompiledCascade([L.B for L in levels], [L.b for L in levels], [L.w for L in levels],
-                           [L.C for L in levels], [L.lower for L in levels],
-                           [L.upper for L in levels], [L.v for L in levels],
-                           [L.name for L in levels], n, eps, x1, Z1, analytic, *tols, nnls)
+    return _CompiledCascade([L.B for L in levels], [L.b for L in levels], [L.w for L in levels],
+                            [L.C for L in levels], [L.lower for L in levels],
+                            [L.upper for L in levels], [L.v for L in levels],
+                            [L.name for L in levels], n, eps, x1, Z1, analytic, *tols, nnls)
+
+
+def _run_compiled(run, levels, backend, opts, fallback, t0):
+    """Drives a compiled run from its first level: its level QPs solved by ``backend``, then
+    ``fallback`` → HierarchySolution."""
     warns = []
     qp_times = np.zeros(len(levels))
     n_qps = 0
+    direct_daqp = BACKENDS.get(backend) is solve_daqp
     while (kind := run.advance()) == "qp":
         n_qps += 1
         tq = time.perf_counter()
         r = run.level
-        first = _daqp_on_run(run, opts) if BACKENDS.get(backend) is solve_daqp else None
+        first = _daqp_on_run(run, opts) if direct_daqp else None
         y, ok, status = _backend_solve(_identity_qp(run), backend, opts, fallback, r, levels,
                                        warns, first)
         qp_times[r] += time.perf_counter() - tq  # (give_qp's end of the level is cascade work)
@@ -394,6 +415,48 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
         method="cascade", levels_solved=run.level, nullspace_dims=np.asarray(run.nullspace_dims, dtype=int),
         warnings=tuple(run.warnings) + tuple(warns),
     )
+
+
+class BoundCascade:
+    """The compiled cascade bound to the arrays of ``levels``: solve, change the arrays'
+    contents in place, solve again — a control loop's level buffers (see
+    :class:`wholebody.cycle.HierarchyCycle`) — without :func:`solve_hierarchy`'s per-call
+    argument checks and array hand-over (~15 µs a Table 1 cycle).
+
+    Arguments as :func:`solve_hierarchy` with ``method="cascade"``; :meth:`solve` returns what
+    ``solve_hierarchy(levels, ...)`` would for the arrays' current contents. The arrays must keep
+    their shapes and stay finite (checked by the caller: nothing is copied or re-checked here).
+    Needs the compiled cascade (:data:`available`).
+    """
+
+    available = _CompiledCascade is not None
+
+    def __init__(self, levels, backend: str = "quadprog", regularization: float = 1e-4, *,
+                 first_level_solution=None, fallback_backend: str | None = None,
+                 rank_tol: float = 1e-9, drop_tol: float = 1e-9, relax_tol: float = 1e-9,
+                 feas_tol: float = 1e-6, backend_options: dict | None = None):
+        if _CompiledCascade is None:
+            raise RuntimeError("BoundCascade needs the compiled cascade (wholebody._cascade), "
+                               "which is not built")
+        levels, n, fls, fallback = _checked_arguments(
+            levels, "cascade", backend, regularization, first_level_solution, fallback_backend)
+        for L in levels:  # held, not copied: a converted copy would never see the new contents
+            for field_name in ("B", "b", "w", "C", "lower", "upper", "v"):
+                a = getattr(L, field_name)
+                if a.dtype != np.float64 or not a.flags.c_contiguous:
+                    raise ValueError(f"BoundCascade: level {L.name!r} {field_name}: needs a "
+                                     f"C-contiguous float64 array (it is held, not copied)")
+        self.levels, self.backend, self.fallback_backend = levels, backend, fallback
+        self._opts = dict(backend_options or {})
+        self._run = _new_run(levels, n, regularization, fls,
+                             (rank_tol, drop_tol, relax_tol, feas_tol))
+
+    def solve(self) -> HierarchySolution:
+        """The cascade on the arrays' current contents."""
+        t0 = time.perf_counter()
+        self._run.reset()
+        return _run_compiled(self._run, self.levels, self.backend, self._opts,
+                             self.fallback_backend, t0)
 
 
 def _daqp_on_run(run, opts):
