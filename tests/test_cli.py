@@ -72,6 +72,8 @@ def test_run_with_robot_file(tmp_path):
     (["run", "stand", "--controller", "mpc"], "no controller 'mpc'"),
     (["run", "stand", "--robot", "missing.toml"], "robot file not found"),
     (["run", "crawl", "--robot", "hyq", "--set", "engine=gpu"], "--set engine: expected one of"),
+    *[(["run", name, "--set", "engine=gpu"], "--set engine: expected one of")
+      for name in ("push", "platform", "tilt-board", "squat", "stepping")],
 ])
 def test_bad_input_exit_2(argv, needle, capsys):
     assert main(argv) == 2

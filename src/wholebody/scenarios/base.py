@@ -11,6 +11,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..cycle import ENGINES
+
 log = logging.getLogger(__name__)
 
 
@@ -34,6 +36,19 @@ class Parameter:
         except ValueError:
             raise ValueError(f"--set {self.name}: expected a {kind.__name__}, got '{text}'") from None
 
+
+
+#: the controller's engine, for the scenarios that take one (momentum balance, stepping)
+ENGINE = Parameter("engine", "python", "controller engine: 'python' (Robot.update + Formulation) "
+                                       "or 'native' (wholebody.cycle.HierarchyCycle: rigid-body "
+                                       "terms and task rows compiled, same torques)")
+
+
+def check_engine(params: dict) -> None:
+    """ValueError naming ``--set engine`` if it is not a HierarchyCycle engine."""
+    engine = params.get("engine", ENGINE.default)
+    if engine not in ENGINES:
+        raise ValueError(f"--set engine: expected one of {ENGINES}, got '{engine}'")
 
 @dataclass
 class ScenarioResult:

@@ -58,7 +58,7 @@ from ..control.balance import MomentumBalance, SoleFrameReference
 from ..report.plots import time_series_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import Parameter, Scenario, ScenarioResult
+from .base import ENGINE, Parameter, Scenario, ScenarioResult, check_engine
 from .loop import run_closed_loop
 
 COP_MIN_FORCE = 50.0  # N: a CoP (predicted or measured) is counted only while the sole carries this
@@ -317,12 +317,14 @@ PARAMETERS = (
     Parameter("cop_margin", 0.0, "shrink the admissible CoP rectangle by this fraction (0: the "
                                  "whole sole)"),
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)"),
+    ENGINE,
 )
 
 WAYPOINTS = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0), (0.0, 0.0))
 
 
 def validate_biped(robot, params: dict) -> None:
+    check_engine(params)
     if len(robot.contact_names) != 2 or any(c.spec.type != "rectangle" for c in robot.contacts):
         raise ValueError(f"robot '{robot.name}': momentum balance on a board needs a biped with "
                          f"two rectangular soles (talos14, talos)")
@@ -366,7 +368,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     reference = SoleFrameReference(robot, support_acceleration=support_acc)
     ctrl = MomentumBalance(robot, gains=controller, reference=reference,
                            Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
-                           cop_margin=params["cop_margin"])
+                           cop_margin=params["cop_margin"], engine=params["engine"])
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=params["cop_margin"])
     duration = motion.end + params["settle"]
     failures = run_closed_loop(sim, ctrl, duration, progress=progress, on_result=monitor)

@@ -15,11 +15,10 @@ import numpy as np
 from ..control.balance import MomentumBalance
 from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
-from ..cycle import ENGINES
 from ..report.plots import time_series_figure
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
-from .base import Parameter, Scenario, ScenarioResult
+from .base import ENGINE, Parameter, Scenario, ScenarioResult, check_engine
 from .loop import run_closed_loop
 
 # location -> (frame, direction of the force, point of application in the frame)
@@ -33,11 +32,6 @@ LOCATIONS = {
     "hip-right": ("base_link", (0.0, 1.0, 0.0), (0.0, -SURFACE, 0.0)),
     "hip-left": ("base_link", (0.0, -1.0, 0.0), (0.0, SURFACE, 0.0)),
 }
-
-#: the controller's engine (wholebody.cycle): shared by the push scenarios
-ENGINE = Parameter("engine", "python", "MomentumBalance engine: 'python' (Formulation) or 'native' "
-                                       "(wholebody.cycle.HierarchyCycle: compiled rows, same "
-                                       "torques)")
 
 PARAMETERS = (
     Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')"),
@@ -91,8 +85,7 @@ def make_push(params: dict) -> Push:
 
 
 def validate(robot, params: dict) -> None:
-    if params.get("engine", ENGINE.default) not in ENGINES:
-        raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
+    check_engine(params)
     push = make_push(params)
     if not robot.model.existFrame(push.frame):
         raise ValueError(f"robot '{robot.name}' has no frame '{push.frame}' to push at; the push "

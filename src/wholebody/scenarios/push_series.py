@@ -20,8 +20,8 @@ from tqdm import tqdm  # noqa: E402
 
 from ..control.lqr import DEFAULT_INTEGRAL_LIMIT  # noqa: E402
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT  # noqa: E402
-from .base import Parameter, Scenario, ScenarioResult, parse_list  # noqa: E402
-from .push import ENGINE, LOCATIONS, run as run_push, validate as validate_push  # noqa: E402
+from .base import ENGINE, Parameter, Scenario, ScenarioResult, parse_list  # noqa: E402
+from .push import LOCATIONS, run as run_push, validate as validate_push  # noqa: E402
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points"),

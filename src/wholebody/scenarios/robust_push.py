@@ -34,9 +34,9 @@ from ..report.plots import grouped_bar_figure, time_series_figure
 from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
-from .base import Parameter, Scenario, ScenarioResult, parse_list
+from .base import ENGINE, Parameter, Scenario, ScenarioResult, parse_list
 from .loop import run_closed_loop
-from .push import ENGINE, LOCATIONS, controller_options, make_push, validate as validate_push
+from .push import LOCATIONS, controller_options, make_push, validate as validate_push
 
 log = logging.getLogger(__name__)
 

@@ -41,7 +41,7 @@ import numpy as np
 from ..control.balance import CoMSineReference, MomentumBalance
 from ..report.plots import time_series_figure
 from ..sim.simulator import Simulator
-from .base import Parameter, Scenario, ScenarioResult
+from .base import ENGINE, Parameter, Scenario, ScenarioResult
 from .loop import run_closed_loop
 from .platform import (COP_SKIP, SLIP_LIMIT_M, TILT_LIMIT_DEG, BalanceMonitor, _mm, limit_notes,
                        lqr_q, validate_biped)
@@ -61,6 +61,7 @@ PARAMETERS = (
     Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)"),
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
                                     "cop-active"),
+    ENGINE,
 )
 
 
@@ -82,7 +83,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
-                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None)
+                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
+                           engine=params["engine"])
     sim = Simulator(robot)
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=margin)
     vel = []

@@ -37,13 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from ..control.stacks import table1_stack
-from ..cycle import ENGINES, HierarchyCycle
+from ..cycle import HierarchyCycle
 from ..formulation import Formulation
 from ..report.plots import time_series_figure
 from ..sim.simulator import Simulator
 from ..tasks import ForceRegularizer
 from ..variables import Variables
-from .base import Parameter, Scenario, ScenarioResult
+from .base import ENGINE, Parameter, Scenario, ScenarioResult, check_engine
 from .loop import run_closed_loop
 from .single_support import MAX_SLIP, MAX_TILT_DEG, smootherstep, smoothstep
 
@@ -64,9 +64,7 @@ PARAMETERS = (
     Parameter("contact_kd", 20.0, "damping of the contact velocities in the contact constraint "
                                   "(1/s; 0: eq. 2 as is)"),
     Parameter("formulations", "reduced,full", "formulations to run, in this order"),
-    Parameter("engine", "python", "controller's rows: 'python' (Robot.update + Formulation) or "
-                                  "'native' (wholebody.cycle.HierarchyCycle: rigid-body terms and "
-                                  "task rows compiled)"),
+    ENGINE,
     Parameter("timing_warmup", 50, "first cycles left out of the timing statistics (plans, "
                                    "caches)"),
 )
@@ -373,8 +371,7 @@ def validate(robot, params: dict) -> None:
             raise ValueError(f"--set {key}: must be > 0, got {params[key]}")
     if int(params["steps"]) < 1:
         raise ValueError("--set steps: must be >= 1")
-    if params["engine"] not in ENGINES:
-        raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
+    check_engine(params)
     kinds = [k.strip() for k in str(params["formulations"]).split(",") if k.strip()]
     if not kinds or any(k not in ("reduced", "full") for k in kinds):
         raise ValueError(f"--set formulations: comma-separated 'reduced'/'full', got "

@@ -39,7 +39,7 @@ import pinocchio as pin
 from ..control.balance import MomentumBalance, SoleFrameReference
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import Parameter, Scenario, ScenarioResult
+from .base import ENGINE, Parameter, Scenario, ScenarioResult
 from .loop import run_closed_loop
 from .platform import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, TILT_LIMIT_DEG,
                        BalanceMonitor, WaypointMotion, _mm, limit_notes, lqr_q, sole_midpoint,
@@ -63,6 +63,7 @@ PARAMETERS = (
     Parameter("settle", 2.0, "simulated time after the last move or the impact (s)"),
     Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)"),
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)"),
+    ENGINE,
 )
 
 
@@ -133,7 +134,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                                         motion=board))
     sim = Simulator(robot, env)
     ctrl = MomentumBalance(robot, gains=controller, reference=SoleFrameReference(robot),
-                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None)
+                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
+                           engine=params["engine"])
     monitor = BalanceMonitor(robot, sim, ctrl)
     failures = run_closed_loop(sim, ctrl, board.end + params["settle"], progress=progress,
                                on_result=monitor)
