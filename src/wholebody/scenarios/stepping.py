@@ -102,8 +102,9 @@ class Stepping:
 
     Wall time of every cycle (update + rows + solve + tau) is appended to ``cycle_times``.
     ``engine="native"`` solves each stack with a :class:`~wholebody.cycle.HierarchyCycle` (its
-    own compiled rigid-body pass and rows); the Python ``robot.update`` still runs every cycle
-    for the phase logic and the scenario's records, and is in the cycle time.
+    own compiled rigid-body pass and rows); the Python ``robot.update`` then runs only when a
+    phase begins (the swing foot's lift-off placement), so ``robot``'s cached terms are those
+    of that cycle — the scenario's records update it themselves, outside the cycle time.
     """
 
     def __init__(self, robot, params: dict, reduced: bool = True, engine: str = "python"):
@@ -172,9 +173,10 @@ class Stepping:
     def compute(self, q, v, t: float):
         t0 = time.perf_counter()
         robot, p = self.robot, self.p
-        robot.update(q, v)
         ph = self.phase(t)
         index = self.phases.index(ph)
+        if self.cycles is None or index != self._phase_index:  # (the native cycles need no
+            robot.update(q, v)                                  # Python terms but at phase entry)
         if index != self._phase_index:  # entering a phase
             if ph.kind in ("shift", "center", "final"):
                 self.com_from = self.com_task.position.copy() if self._phase_index >= 0 \
@@ -255,7 +257,10 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False) -> dict
             swing_z[n].append(pos[2] - start_poses[n][0][2])
             tilt[n].append(np.degrees(np.arccos(np.clip(R[2, 2], -1.0, 1.0))))
             slip[n].append(np.linalg.norm((pos - start_poses[n][0])[:2]))
-        base_z.append(robot.q[2])
+        q, v = sim.state()  # the state the controller just saw
+        if ctrl.cycles is not None:  # the native controller left robot's terms stale
+            robot.update(q, v)
+        base_z.append(q[2])
         com.append(robot.com.copy())
 
     failures = run_closed_loop(sim, ctrl, duration, progress=progress, on_result=observe)
