@@ -733,3 +733,22 @@ def test_diagnostics_with_a_zero_row_task(robots):
     a = HierarchyCycle(robot, build(), engine="native", **kw).solve(q, v, diagnostics=True)
     b = HierarchyCycle(robot, build(), engine="python", **kw).solve(q, v, diagnostics=True)
     assert [t.name for t in a.tasks] == [t.name for t in b.tasks]
+
+
+@native
+def test_solver_settings_changed_after_the_first_cycle_take_effect(robots):
+    """The native cycle keeps its compiled cascade bound to the program's level arrays; settings
+    changed on the cycle afterwards (regularization, backend) are used from the next solve on —
+    the same torques as a cycle built with them."""
+    robot = robots["talos14"]
+    variables = Variables(robot)
+    q, v = next(iter(moving_states(robot, 3)))
+    cycle = HierarchyCycle(robot, table2_stack(robot), engine="native")
+    first = cycle.solve(q, v, variables)
+    cycle.regularization, cycle.backend, cycle.fallback_backend = 1e-3, "quadprog", None
+    changed = cycle.solve(q, v, variables)
+    fresh = HierarchyCycle(robot, table2_stack(robot), engine="native", regularization=1e-3,
+                           backend="quadprog", fallback_backend=None).solve(q, v, variables)
+    assert changed.ok and fresh.ok
+    np.testing.assert_array_equal(changed.tau, fresh.tau)
+    assert np.abs(changed.tau - first.tau).max() > 1e-3  # ε = 1e-3 trades the tasks off visibly

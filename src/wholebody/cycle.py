@@ -332,7 +332,22 @@ class _Program:
                               (task, "ineq", self.mat[a:b], self.lower[a:b], self.upper[a:b])
                               for _, _, task, eq, a, b in entries])
         self.w_min = np.where(self.ineq_rows, np.nextafter(0.0, 1.0), 0.0)
-        self.bound: BoundCascade | None = None  # the compiled cascade on self.levels (cycle sets it)
+        self._bound: BoundCascade | None = None  # the compiled cascade on self.levels
+        self._bound_key = None
+
+    def bound(self, cycle: "HierarchyCycle") -> BoundCascade | None:
+        """The compiled cascade bound to these levels for the cycle's current solver settings
+        (rebuilt if they changed), None where it does not apply (another method, not built)."""
+        key = (cycle.method, cycle.backend, cycle.regularization, cycle.fallback_backend,
+               cycle.analytic)
+        if key != self._bound_key:
+            self._bound_key, self._bound = key, None
+            if cycle.method == "cascade" and BoundCascade.available:
+                self._bound = BoundCascade(
+                    self.levels, cycle.backend, cycle.regularization,
+                    first_level_solution="analytic" if cycle.analytic else None,
+                    fallback_backend=cycle.fallback_backend)
+        return self._bound
 
     @staticmethod
     def _rows(task, kind: _Kind, robot: Robot, variables: Variables, names) -> int:
@@ -533,7 +548,8 @@ class HierarchyCycle:
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
         t_rows = time.perf_counter()
         result, status = solve_levels(program.levels, self.analytic, self.method, self.backend,
-                                      self.regularization, self.fallback_backend, program.bound)
+                                      self.regularization, self.fallback_backend,
+                                      program.bound(self))
         t_solve = time.perf_counter()
         self.engine.recover(program.id, result.x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),
@@ -559,11 +575,6 @@ class HierarchyCycle:
             program = self._programs.get(key)
             if program is None:
                 program = self._programs[key] = _Program(self, variables, key)
-                if self.method == "cascade" and BoundCascade.available:
-                    program.bound = BoundCascade(
-                        program.levels, self.backend, self.regularization,
-                        first_level_solution="analytic" if self.analytic else None,
-                        fallback_backend=self.fallback_backend)
             self._program = program
         return program
 
