@@ -111,12 +111,10 @@ namespace
   // Z Q[:, rank:], with Q[:, rank:] formed from the first ``rank`` reflectors only (the later ones
   // map its span onto itself). An SVD decides when some |R_ii| is within three decades of the
   // threshold. ``HZ`` (rows already multiplied by Z, or null) gets the same N (cheaper than
-  // multiplying by the new Z afresh: z ≤ n); ``HZ_kept`` says whether it did. Returns false if
-  // nothing is locked.
+  // multiplying by the new Z afresh: z ≤ n). Returns false if nothing is locked.
   bool restrict_to_kernel(MatrixXd & Z, bool have_Z, Index n, const MatrixXd & RZ, double tol,
-                          MatrixXd * HZ, bool & HZ_kept)
+                          MatrixXd * HZ)
   {
-    HZ_kept = HZ != nullptr;
     const Index k = RZ.rows(), z = RZ.cols(), p = std::min(k, z);
     const MatrixXd At = RZ.transpose();
     Eigen::ColPivHouseholderQR<MatrixXd> qr(At);
@@ -568,7 +566,7 @@ private:
   }
 
   // _lock: Z ← Z N with N a basis of ker(rows Z); ``projected`` = rows Z. The higher rows'
-  // projection HZ follows (or is marked for recomputing).
+  // projection HZ (when current) follows.
   void lock(const MatrixXd & rows, const MatrixXd & projected)
   {
     if (rows.rows() == 0 || z_ == 0)
@@ -576,11 +574,9 @@ private:
     const double scale = std::sqrt(sq_norms(rows).maxCoeff());
     if (scale == 0.0)
       return;
-    bool kept = false;
     if (!restrict_to_kernel(Z_, have_Z_, n_, projected, rank_tol_ * scale,
-                            HZ_valid_ ? &HZ_ : nullptr, kept))
+                            HZ_valid_ ? &HZ_ : nullptr))
       return;
-    HZ_valid_ = kept;
     have_Z_ = true;
     z_ = Z_.cols();
   }
@@ -884,7 +880,7 @@ private:
   // the level in progress
   bool tight_ = false;
   MatrixXd HZ_, wB_, M_, R_, own_CZ_;
-  bool HZ_valid_ = false; // HZ_ = high_.C Z_ (kept through the locks where that is cheaper)
+  bool HZ_valid_ = false; // HZ_ = high_.C Z_ (kept through the locks)
   VectorXd hx_, hlo_, hup_, u_, c_;
   Rows own_;
   // its QP
