@@ -607,28 +607,43 @@ def _python_only(monkeypatch):
 
 
 def _count_requests(monkeypatch):
-    """Count the level QPs the compiled cascade hands back and the NNLS solves of its
-    implicit-equality searches."""
+    """Count the level QPs the compiled cascade solves (from Python, or DAQP's in the run itself:
+    ``timings["qps"]``) and the NNLS solves of its implicit-equality searches."""
     import wholebody.solvers.hierarchy as h
     seen = {"qp": 0, "implicit": 0}
-    solve, nnls, on_run = h.solve_qp, h.nnls, h._daqp_on_run
+    run_compiled, nnls = h._run_compiled, h.nnls
 
-    def counting_solve(*args, **kwargs):
-        seen["qp"] += 1
-        return solve(*args, **kwargs)
-
-    def counting_on_run(*args):  # the compiled cascade's DAQP path (no solve_qp unless it fails)
-        seen["qp"] += 1
-        return on_run(*args)
+    def counting_run(*args, **kwargs):
+        sol = run_compiled(*args, **kwargs)
+        seen["qp"] += sol.timings["qps"]
+        return sol
 
     def counting_nnls(*args):
         seen["implicit"] += 1
         return nnls(*args)
 
-    monkeypatch.setattr(h, "solve_qp", counting_solve)
+    monkeypatch.setattr(h, "_run_compiled", counting_run)
     monkeypatch.setattr(h, "nnls", counting_nnls)
-    monkeypatch.setattr(h, "_daqp_on_run", counting_on_run)
     return seen
+
+
+def _daqp_from_python(monkeypatch):
+    """The compiled cascade's DAQP QPs solved from Python (``_daqp_on_run``), not in the run."""
+    import wholebody.solvers.hierarchy as h
+    monkeypatch.setattr(h, "_daqp_in_cascade", lambda backend, opts: None)
+
+
+def _daqp_in_run_or_skip():
+    """Skip unless DAQP's C interface as declared in cascade.cpp is usable here; fail if the
+    installed daqp is the declared version and the layout check still refuses it."""
+    import importlib.metadata
+    from conftest import native_cycle_or_skip
+    import wholebody.solvers.hierarchy as h
+    native_cycle_or_skip("_cascade")
+    version = importlib.metadata.version("daqp")
+    if version != h._DAQP_C_VERSION:
+        pytest.skip(f"daqp {version} installed, cascade.cpp declares {h._DAQP_C_VERSION}'s C API")
+    assert h._daqp_c_module() is not None, "layout check failed for the declared daqp version"
 
 
 def test_daqp_on_the_compiled_run_solves_its_qp_as_the_adapter(monkeypatch):
@@ -639,6 +654,7 @@ def test_daqp_on_the_compiled_run_solves_its_qp_as_the_adapter(monkeypatch):
     from conftest import native_cycle_or_skip
     import wholebody.solvers.hierarchy as h
     native_cycle_or_skip("_cascade")
+    _daqp_from_python(monkeypatch)
     on_run, compared = h._daqp_on_run, []
 
     def compare(run, opts):
@@ -657,6 +673,73 @@ def test_daqp_on_the_compiled_run_solves_its_qp_as_the_adapter(monkeypatch):
     for _ in range(150):
         solve_hierarchy(random_hierarchy(rng), backend="daqp")
     assert len(compared) > 150 and sum(compared) > 100
+
+
+@pytest.mark.parametrize("case", ["default", "daqp-fails", "verdict-refuses", "tiny-eps"])
+def test_daqp_in_the_run_gives_what_python_gives(monkeypatch, case):
+    """DAQP called by the compiled run itself (its C interface, ``CascadeRun.advance_daqp``) and
+    DAQP called from Python (``daqp.solve`` via ``_daqp_on_run``) on 200 random hierarchies:
+    bitwise the same x, the same status, warnings and QP count, and as many DAQP calls — also
+    when DAQP fails (iteration limit 2: the fallback quadprog solves, with the same warning),
+    when the verdict on the unscaled rows refuses its solution (raw_tol 1e-15), and with ε =
+    1e-10, where DAQP's "infeasible" misfires and is retried with proximal iterations."""
+    import daqp
+    import wholebody.solvers.hierarchy as h
+    _daqp_in_run_or_skip()
+    options = {"daqp-fails": {"iter_limit": 2}, "verdict-refuses": {"raw_tol": 1e-15}}.get(case, {})
+    rng = np.random.default_rng(8)
+    problems = [random_hierarchy(rng) for _ in range(200)]
+    kwargs = dict(backend="daqp", fallback_backend="quadprog", backend_options=options,
+                  regularization=1e-10 if case == "tiny-eps" else 1e-4)
+    solvers, make_solver = [], h._daqp_in_cascade
+
+    def recording(backend, opts):
+        solvers.append(make_solver(backend, opts))
+        return solvers[-1]
+
+    monkeypatch.setattr(h, "_daqp_in_cascade", recording)
+    in_run = [solve_hierarchy(levels, **kwargs) for levels in problems]
+    assert all(s is not None for s in solvers)
+    calls_in_run = sum(s.calls for s in solvers)
+    _daqp_from_python(monkeypatch)
+    calls, daqp_solve = [], daqp.solve
+    monkeypatch.setattr(daqp, "solve", lambda *a, **k: calls.append(k) or daqp_solve(*a, **k))
+    from_python = [solve_hierarchy(levels, **kwargs) for levels in problems]
+    for i, (a, b) in enumerate(zip(in_run, from_python)):
+        np.testing.assert_array_equal(a.x, b.x, err_msg=str(i))
+        assert (a.ok, a.status, a.warnings, a.timings["qps"]) == \
+            (b.ok, b.status, b.warnings, b.timings["qps"]), i
+    assert calls_in_run == len(calls)
+    assert sum(s.timings["qps"] for s in in_run) > 300
+    fallbacks = sum("solved with quadprog" in w for s in in_run for w in s.warnings)
+    if case == "default":
+        assert fallbacks == 0
+    else:  # the failure paths were taken (DAQP refused, quadprog solved)
+        reason = {"daqp-fails": "iteration limit (-4)", "verdict-refuses": "outside its rows",
+                  "tiny-eps": "infeasible (-1)"}[case]
+        assert fallbacks > 20 and any(reason in w for s in in_run for w in s.warnings)
+    if case == "tiny-eps":  # retried with proximal iterations
+        assert sum("eps_prox" in k for k in calls) > 20
+
+
+def test_daqp_in_the_run_is_used_only_where_it_is_the_adapter():
+    """The run solves DAQP's QPs itself only with the stock adapter and DAQP settings: another
+    backend, an option that is no DAQP setting, or a non-number setting go through Python; the
+    solver refuses an unknown setting by name and a library that is not loaded."""
+    import daqp
+    import wholebody.solvers.hierarchy as h
+    _daqp_in_run_or_skip()
+    assert h._daqp_in_cascade("daqp", {"primal_tol": 1e-8, "raw_tol": 1e-7}) is not None
+    assert h._daqp_in_cascade("quadprog", {}) is None
+    assert h._daqp_in_cascade("daqp", {"primal_start": np.zeros(3)}) is None
+    assert h._daqp_in_cascade("daqp", {"no_such_setting": 1.0}) is None
+    with pytest.raises(ValueError, match="no_such_setting"):
+        h._DaqpSolver(daqp.__file__, {"no_such_setting": 1.0}, {}, 1e-6)
+    with pytest.raises(ValueError, match="not a loaded library"):
+        h._DaqpSolver("/nonexistent/daqp.so", {}, {}, 1e-6)
+    # the settings read through cascade.cpp's declaration are daqp.solve's, given ones applied
+    solver = h._DaqpSolver(daqp.__file__, {"iter_limit": 7, "eps_prox": 1e-3}, {}, 1e-6)
+    assert solver.settings()["iter_limit"] == 7 and solver.settings()["eps_prox"] == 1e-3
 
 
 def test_compiled_cascade_matches_python_on_equality_levels():

@@ -11,6 +11,7 @@
 // hierarchy._solve_compiled):
 //   run = CascadeRun(B, b, w, C, lower, upper, V, names, n, eps, x1, Z1, tolerances..., nnls)
 //   while run.advance() == "qp": run.give_qp(y, status)
+//   (or run.advance_daqp(DaqpSolver(...)): the level QPs solved by DAQP here, see DaqpSolver)
 //   run.reset()  # and again, on the arrays' new contents
 #include <Eigen/Dense>
 
@@ -20,10 +21,12 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <dlfcn.h>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -63,10 +66,10 @@ namespace
     return out;
   }
 
-  std::string format_g(double value)
+  std::string format_g(double value, const char * format = "%.3g")
   {
     char buf[32];
-    std::snprintf(buf, sizeof buf, "%.3g", value);
+    std::snprintf(buf, sizeof buf, format, value);
     return buf;
   }
 
@@ -346,7 +349,205 @@ namespace
     const VectorXd v = A * u + a0;
     return ((v.array() < lo.array()) || (v.array() > up.array())).any();
   }
+  // The rows DAQP is given (backends.solve_daqp): each row of A and its bounds divided by the
+  // row's norm (zero rows kept), bounds clipped to ±1e30 (DAQP_INF), sense 5 on equality rows.
+  template <typename Matrix, typename Out>
+  void scale_rows(const Matrix & A, const double * lo, const double * up, Out & Au, double * bu,
+                  double * bl, int32_t * sense)
+  {
+    constexpr double kDaqpInf = 1e30;
+    for (Index i = 0; i < A.rows(); ++i)
+    {
+      double norm = A.row(i).norm();
+      if (norm == 0.0)
+        norm = 1.0;
+      Au.row(i) = A.row(i) / norm;
+      bu[i] = std::min(up[i] / norm, kDaqpInf);
+      bl[i] = std::max(lo[i] / norm, -kDaqpInf);
+      sense[i] = lo[i] == up[i] ? 5 : 0;
+    }
+  }
+
+  // max(0, lower - A x, A x - upper) over the rows; inf if x is not finite (backends.solve_daqp).
+  template <typename Matrix, typename Vector>
+  double violation(const Matrix & A, const Vector & x, const double * lo, const double * up)
+  {
+    if (!x.allFinite())
+      return kInf;
+    const VectorXd ax = A * x;
+    double over = 0.0;
+    for (Index i = 0; i < A.rows(); ++i)
+      over = std::max({over, lo[i] - ax[i], ax[i] - up[i]});
+    return over;
+  }
 } // namespace
+
+// DAQP's C interface, declared as daqp 0.11.0 defines it (csrc/include/types.h and api.h of its
+// source distribution) and reached through the symbols the installed daqp Python module exports:
+// the cascade's level QPs are then solved without a trip through Python (~20 µs a QP of argument
+// conversion, result packing and the verdict). hierarchy._daqp_in_cascade uses this only for
+// that daqp version and after checking the layout (daqp_default_settings read through these
+// declarations must equal daqp.solve's keyword defaults); otherwise the QPs go through Python.
+namespace daqp_c
+{
+  constexpr const char * kVersion = "0.11.0";
+  extern "C" {
+  struct Problem
+  {
+    int n, m, ms;
+    double *H, *f, *A, *bupper, *blower;
+    int * sense;
+    int * break_points;
+    int nh;
+    int problem_type;
+  };
+  struct Settings
+  {
+    double primal_tol, dual_tol, zero_tol, pivot_tol, progress_tol;
+    int cycle_tol, iter_limit;
+    double fval_bound, eps_prox, eta_prox, rho_soft, rel_subopt, abs_subopt, sing_tol,
+      refactor_tol, time_limit, w_soft;
+    int eq_reduction, presolve;
+  };
+  struct Result
+  {
+    double *x, *lam;
+    double fval, soft_slack;
+    int exitflag, iter, nodes;
+    double solve_time, setup_time;
+  };
+  }
+  using QuadprogFn = void (*)(Result *, Problem *, Settings *);
+  using DefaultsFn = void (*)(Settings *);
+
+  // The settings by name (daqp.solve's keywords), as pointers to the double or int member.
+  struct Field
+  {
+    const char * name;
+    double Settings::*real;
+    int Settings::*integer;
+  };
+  const Field kFields[] = {
+    {"primal_tol", &Settings::primal_tol, nullptr}, {"dual_tol", &Settings::dual_tol, nullptr},
+    {"zero_tol", &Settings::zero_tol, nullptr}, {"pivot_tol", &Settings::pivot_tol, nullptr},
+    {"progress_tol", &Settings::progress_tol, nullptr}, {"cycle_tol", nullptr, &Settings::cycle_tol},
+    {"iter_limit", nullptr, &Settings::iter_limit}, {"fval_bound", &Settings::fval_bound, nullptr},
+    {"eps_prox", &Settings::eps_prox, nullptr}, {"eta_prox", &Settings::eta_prox, nullptr},
+    {"rho_soft", &Settings::rho_soft, nullptr}, {"rel_subopt", &Settings::rel_subopt, nullptr},
+    {"abs_subopt", &Settings::abs_subopt, nullptr}, {"sing_tol", &Settings::sing_tol, nullptr},
+    {"refactor_tol", &Settings::refactor_tol, nullptr},
+    {"time_limit", &Settings::time_limit, nullptr}, {"w_soft", &Settings::w_soft, nullptr},
+    {"eq_reduction", nullptr, &Settings::eq_reduction}, {"presolve", nullptr, &Settings::presolve},
+  };
+} // namespace daqp_c
+
+// backends.solve_daqp on a level QP (Hessian I), in C++: the rows scaled as scale_rows does, the
+// settings daqp.solve would use, one retry with proximal iterations after an "infeasible" verdict
+// (solve_daqp_unit_rows) and the check of the unscaled rows (daqp_verdict). The caller (Python)
+// gives the settings it would have passed, the exit-flag names and raw_tol.
+class DaqpSolver
+{
+public:
+  DaqpSolver(const std::string & module_path, const std::map<std::string, double> & settings,
+             std::map<int, std::string> exit_names, double raw_tol)
+  : exit_names_(std::move(exit_names)), raw_tol_(raw_tol)
+  {
+    // the module is loaded (imported by the caller): RTLD_NOLOAD only looks it up
+    void * handle = dlopen(module_path.c_str(), RTLD_NOW | RTLD_NOLOAD);
+    if (!handle)
+      throw std::invalid_argument("DaqpSolver: " + module_path + " is not a loaded library");
+    quadprog_ = reinterpret_cast<daqp_c::QuadprogFn>(dlsym(handle, "daqp_quadprog"));
+    const auto defaults = reinterpret_cast<daqp_c::DefaultsFn>(dlsym(handle, "daqp_default_settings"));
+    dlclose(handle); // drops the reference taken above; the module stays loaded by Python
+    if (!quadprog_ || !defaults)
+      throw std::invalid_argument("DaqpSolver: " + module_path + " exports no DAQP C interface");
+    defaults(&settings_);
+    for (const auto & [name, value] : settings)
+    {
+      const daqp_c::Field * field = find(name);
+      if (!field)
+        throw std::invalid_argument("DaqpSolver: unknown DAQP setting '" + name + "'");
+      if (field->real)
+        settings_.*(field->real) = value;
+      else
+        settings_.*(field->integer) = int(value);
+    }
+    prox_retry_ = settings.count("eps_prox") == 0;
+  }
+
+  // The settings in use, by name (the caller compares the defaults with daqp.solve's).
+  std::map<std::string, double> settings() const
+  {
+    std::map<std::string, double> out;
+    for (const auto & field : daqp_c::kFields)
+      out[field.name] = field.real ? settings_.*(field.real) : double(settings_.*(field.integer));
+    return out;
+  }
+
+  // How often DAQP was called (retries included).
+  long calls() const { return calls_; }
+
+  // Solves min ½‖y‖² + gᵀy s.t. lower ≤ A y ≤ upper (A has rows); "" and y, or why it failed.
+  std::string solve(const VectorXd & g, const MatrixXd & A, const VectorXd & lower,
+                    const VectorXd & upper, VectorXd & y)
+  {
+    const Index m = A.rows(), n = A.cols();
+    unit_A_.resize(m, n);
+    bu_.resize(m);
+    bl_.resize(m);
+    sense_.resize(std::size_t(m));
+    scale_rows(A, lower.data(), upper.data(), unit_A_, bu_.data(), bl_.data(), sense_.data());
+    if (H_.rows() != n)
+      H_ = RowMatrix::Identity(n, n);
+    y.resize(n);
+    lam_.resize(m);
+    gradient_ = g;
+    daqp_c::Problem problem{int(n), int(m), 0, H_.data(), gradient_.data(), unit_A_.data(),
+                            bu_.data(), bl_.data(), sense_.data(), nullptr, 0, 0};
+    daqp_c::Result result{y.data(), lam_.data(), 0.0, 0.0, 0, 0, 0, 0.0, 0.0};
+    daqp_c::Settings settings = settings_;
+    quadprog_(&result, &problem, &settings);
+    ++calls_;
+    if (result.exitflag == -1 && prox_retry_) // see backends.solve_daqp_unit_rows
+    {
+      settings.eps_prox = 1e-6;
+      quadprog_(&result, &problem, &settings);
+      ++calls_;
+    }
+    if (result.exitflag != 1 && result.exitflag != 2)
+    {
+      const auto name = exit_names_.find(result.exitflag);
+      return "daqp: " + (name == exit_names_.end() ? std::string("exitflag") : name->second) + " ("
+             + std::to_string(result.exitflag) + ")";
+    }
+    const double over = violation(A, y, lower.data(), upper.data());
+    if (!std::isfinite(over))
+      return "daqp: non-finite solution";
+    if (over > raw_tol_)
+      return "daqp: solution outside its rows by " + format_g(over, "%.3g") + " (> "
+             + format_g(raw_tol_, "%g") + ")";
+    return "";
+  }
+
+private:
+  static const daqp_c::Field * find(const std::string & name)
+  {
+    for (const auto & field : daqp_c::kFields)
+      if (name == field.name)
+        return &field;
+    return nullptr;
+  }
+
+  daqp_c::QuadprogFn quadprog_ = nullptr;
+  daqp_c::Settings settings_{};
+  bool prox_retry_ = true;
+  long calls_ = 0;
+  std::map<int, std::string> exit_names_;
+  double raw_tol_;
+  RowMatrix unit_A_, H_;
+  VectorXd bu_, bl_, lam_, gradient_;
+  std::vector<int32_t> sense_;
+};
 
 class CascadeRun
 {
@@ -406,6 +607,9 @@ public:
     HZ_valid_ = false;
     zdims_.assign(nl_, 0);
     times_.assign(nl_, 0.0);
+    qp_times_.assign(nl_, 0.0);
+    qp_count_ = 0;
+    daqp_status_.clear();
     warns_.clear();
     status_ = "optimal";
     finished_ = failed_ = false;
@@ -435,6 +639,29 @@ public:
     }
     finished_ = true;
     return "done";
+  }
+
+  // advance() with the level QPs solved here by ``daqp`` (backends.solve_daqp, in C++): "done",
+  // "failed", or "qp" when a level QP is left to the caller: DAQP failed on it (daqp_status
+  // says why; the caller's fallback backend may solve it) or it has no rows (daqp_status empty:
+  // the adapter's special case). qp_count and qp_times count the QPs DAQP was given here.
+  std::string advance_daqp(DaqpSolver & daqp)
+  {
+    std::string kind;
+    while ((kind = advance()) == "qp")
+    {
+      daqp_status_.clear();
+      if (qp_A_.rows() == 0)
+        break;
+      const auto t0 = Clock::now();
+      ++qp_count_;
+      daqp_status_ = daqp.solve(qp_g_, qp_A_, qp_lower_, qp_upper_, qp_y_);
+      qp_times_[r_] += seconds_since(t0);
+      if (!daqp_status_.empty())
+        break;
+      give_qp(qp_y_, "optimal");
+    }
+    return kind;
   }
 
   // The QP of the pending level (hierarchy._level_qp): Hessian I (not returned), gradient g,
@@ -502,6 +729,9 @@ public:
   const std::string & status() const { return status_; }
   std::size_t level() const { return r_; }
   std::vector<double> times() const { return times_; }
+  std::vector<double> qp_times() const { return qp_times_; }
+  int qp_count() const { return qp_count_; }
+  const std::string & daqp_status() const { return daqp_status_; }
 
 private:
   static double seconds_since(Clock::time_point t0)
@@ -872,7 +1102,9 @@ private:
   Index z_ = 0;
   Rows high_;
   std::vector<Index> zdims_;
-  std::vector<double> times_;
+  std::vector<double> times_, qp_times_;
+  int qp_count_ = 0;
+  std::string daqp_status_;
   std::vector<std::string> warns_;
   std::string status_ = "optimal";
   bool finished_ = false, failed_ = false;
@@ -885,31 +1117,18 @@ private:
   Rows own_;
   // its QP
   MatrixXd qp_A_;
-  VectorXd qp_g_, qp_lower_, qp_upper_;
+  VectorXd qp_g_, qp_lower_, qp_upper_, qp_y_;
 };
 
-// The rows DAQP is given (backends.solve_daqp): each row of A and its bounds divided by the row's
-// norm (zero rows kept), bounds clipped to ±1e30 (DAQP_INF), sense 5 on equality rows.
+// The rows DAQP is given, as a tuple of new arrays (backends.solve_daqp; see scale_rows).
 template <typename Matrix>
 py::tuple unit_rows(const Matrix & A, const double * lo, const double * up)
 {
   const Index m = A.rows(), n = A.cols();
-  constexpr double kDaqpInf = 1e30;
   py::array_t<double> A_out({py::ssize_t(m), py::ssize_t(n)}), bu(m), bl(m);
   py::array_t<int32_t> sense(m);
   Eigen::Map<RowMatrix> Au(A_out.mutable_data(), m, n);
-  double *pu = bu.mutable_data(), *pl = bl.mutable_data();
-  int32_t * ps = sense.mutable_data();
-  for (Index i = 0; i < m; ++i)
-  {
-    double norm = A.row(i).norm();
-    if (norm == 0.0)
-      norm = 1.0;
-    Au.row(i) = A.row(i) / norm;
-    pu[i] = std::min(up[i] / norm, kDaqpInf);
-    pl[i] = std::max(lo[i] / norm, -kDaqpInf);
-    ps[i] = lo[i] == up[i] ? 5 : 0;
-  }
+  scale_rows(A, lo, up, Au, bu.mutable_data(), bl.mutable_data(), sense.mutable_data());
   return py::make_tuple(A_out, bu, bl, sense);
 }
 
@@ -919,19 +1138,6 @@ py::tuple daqp_rows(const DoubleArray & A_in, const DoubleArray & lower_in, cons
     throw std::invalid_argument("daqp_rows: A must be m x n with m lower and upper bounds");
   return unit_rows(ConstRowMap(A_in.data(), A_in.shape(0), A_in.shape(1)), lower_in.data(),
                    upper_in.data());
-}
-
-// max(0, lower - A x, A x - upper) over the rows; inf if x is not finite (backends.solve_daqp).
-template <typename Matrix>
-double violation(const Matrix & A, const ConstVecMap & x, const double * lo, const double * up)
-{
-  if (!x.allFinite())
-    return kInf;
-  const VectorXd ax = A * x;
-  double over = 0.0;
-  for (Index i = 0; i < A.rows(); ++i)
-    over = std::max({over, lo[i] - ax[i], ax[i] - up[i]});
-  return over;
 }
 
 double row_violation(const DoubleArray & A_in, const DoubleArray & x_in, const DoubleArray & lower_in,
@@ -968,6 +1174,13 @@ PYBIND11_MODULE(_cascade, m)
   m.def("daqp_rows", &daqp_rows, py::arg("A"), py::arg("lower"), py::arg("upper"));
   m.def("row_violation", &row_violation, py::arg("A"), py::arg("x"), py::arg("lower"),
         py::arg("upper"));
+  m.attr("DAQP_C_VERSION") = daqp_c::kVersion;
+  py::class_<DaqpSolver>(m, "DaqpSolver")
+    .def(py::init<const std::string &, const std::map<std::string, double> &,
+                  std::map<int, std::string>, double>(),
+         py::arg("module_path"), py::arg("settings"), py::arg("exit_names"), py::arg("raw_tol"))
+    .def("settings", &DaqpSolver::settings)
+    .def_property_readonly("calls", &DaqpSolver::calls);
   py::class_<CascadeRun>(m, "CascadeRun")
     .def(py::init<std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
                   std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
@@ -981,6 +1194,7 @@ PYBIND11_MODULE(_cascade, m)
          py::arg("nnls"))
     .def("reset", &CascadeRun::reset)
     .def("advance", &CascadeRun::advance)
+    .def("advance_daqp", &CascadeRun::advance_daqp, py::arg("daqp"))
     .def("qp", &CascadeRun::qp)
     .def("daqp_qp", &CascadeRun::daqp_qp)
     .def("qp_violation", &CascadeRun::qp_violation, py::arg("y"))
@@ -991,5 +1205,8 @@ PYBIND11_MODULE(_cascade, m)
     .def_property_readonly("warnings", &CascadeRun::warnings)
     .def_property_readonly("status", &CascadeRun::status)
     .def_property_readonly("level", &CascadeRun::level)
-    .def_property_readonly("times", &CascadeRun::times);
+    .def_property_readonly("times", &CascadeRun::times)
+    .def_property_readonly("qp_times", &CascadeRun::qp_times)
+    .def_property_readonly("qp_count", &CascadeRun::qp_count)
+    .def_property_readonly("daqp_status", &CascadeRun::daqp_status);
 }

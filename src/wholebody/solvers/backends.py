@@ -38,7 +38,7 @@ log = logging.getLogger(__name__)
 _DAQP_INF = 1e30
 # what a backend may raise on bad numbers: turned into a failed (x, status, ok), never raised
 QP_ERRORS = (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError)
-_DAQP_EXIT = {
+DAQP_EXIT = {  # DAQP's exit flags by name
     1: "optimal",
     2: "soft optimal",
     -1: "infeasible",
@@ -49,6 +49,8 @@ _DAQP_EXIT = {
     -6: "overdetermined initial active set (inconsistent equalities)",
     -7: "time limit",
 }
+DAQP_PRIMAL_TOL = 1e-7  # DAQP's primal_tol unless given (solve_daqp says why)
+DAQP_RAW_TOL = 1e-6  # largest violation of an unscaled row a DAQP solution may have
 
 
 def _split_rows(lower: np.ndarray, upper: np.ndarray):
@@ -87,7 +89,7 @@ def solve_quadprog(H, g, A, lower, upper, **_):
     return _check_x(x, "quadprog")
 
 
-def solve_daqp(H, g, A, lower, upper, raw_tol=1e-6, **opts):
+def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
     """DAQP via ``daqp.solve(H, f, A, bupper, blower, sense)``; equalities have sense 5; rows
     scaled to unit norm, the solution refused if a row is violated by more than ``raw_tol``.
 
@@ -117,7 +119,7 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=1e-6, **opts):
 def solve_daqp_unit_rows(H, g, unit_A, bupper, blower, sense, **opts):
     """DAQP on rows already scaled as :func:`solve_daqp` scales them (``_daqp_rows``) → (x, status),
     x None on failure; an "infeasible" verdict is retried once with proximal iterations."""
-    opts.setdefault("primal_tol", 1e-7)
+    opts.setdefault("primal_tol", DAQP_PRIMAL_TOL)
     H, g = np.ascontiguousarray(H), np.ascontiguousarray(g)
     x, _, flag, _ = _daqp().solve(H, g, unit_A, bupper, blower, sense, **opts)
     if flag == -1 and "eps_prox" not in opts:
@@ -126,11 +128,11 @@ def solve_daqp_unit_rows(H, g, unit_A, bupper, blower, sense, **opts):
         # (eps_prox > 0) converge to the same strictly convex QP's solution: retry once.
         x, _, flag, _ = _daqp().solve(H, g, unit_A, bupper, blower, sense, eps_prox=1e-6, **opts)
     if flag not in (1, 2):
-        return None, f"daqp: {_DAQP_EXIT.get(flag, 'exitflag')} ({flag})"
+        return None, f"daqp: {DAQP_EXIT.get(flag, 'exitflag')} ({flag})"
     return np.asarray(x), "optimal"
 
 
-def daqp_verdict(x, status: str, over: float, raw_tol: float = 1e-6):
+def daqp_verdict(x, status: str, over: float, raw_tol: float = DAQP_RAW_TOL):
     """(x, status, ok) for a DAQP solution ``x`` (None: failed with ``status``) whose unscaled rows
     are violated by ``over`` at most: refused beyond ``raw_tol`` or if not finite."""
     if x is None:

@@ -137,6 +137,9 @@ Methods
 
 from __future__ import annotations
 
+import functools
+import importlib.metadata
+import inspect
 import logging
 import math
 import time
@@ -147,14 +150,16 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 from scipy.optimize import nnls
 
-from .backends import (BACKENDS, QP_ERRORS, daqp_verdict, solve_daqp, solve_daqp_unit_rows,
-                       solve_qp)
+from .backends import (BACKENDS, DAQP_EXIT, DAQP_PRIMAL_TOL, DAQP_RAW_TOL, QP_ERRORS,
+                       daqp_verdict, solve_daqp, solve_daqp_unit_rows, solve_qp)
 from .level import Level
 
 try:  # the cascade, compiled (src/wholebody/native/cascade.cpp); optional
     from .._cascade import CascadeRun as _CompiledCascade
+    from .._cascade import DAQP_C_VERSION as _DAQP_C_VERSION
+    from .._cascade import DaqpSolver as _DaqpSolver
 except ImportError:  # not built (no C++ compiler at install): the Python cascade does everything
-    _CompiledCascade = None
+    _CompiledCascade = _DaqpSolver = _DAQP_C_VERSION = None
 
 __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
            "row_normalised", "analytic_first_level", "BoundCascade"]
@@ -375,8 +380,10 @@ def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None)
     """The cascade compiled (``wholebody._cascade.CascadeRun``, a line-for-line mirror of
     :func:`_solve_cascade`, including :func:`_implicit_equalities` with scipy's NNLS passed in):
     it runs the levels and hands back each level QP, solved here by ``backend``, then
-    ``fallback``, exactly as the Python cascade does."""
-    return _run_compiled(_new_run(levels, n, eps, fls, tols), levels, backend, opts, fallback, t0)
+    ``fallback``, exactly as the Python cascade does (DAQP's QPs are solved in C++ when
+    :func:`_daqp_in_cascade` allows it, with the same rows, settings and verdict)."""
+    return _run_compiled(_new_run(levels, n, eps, fls, tols), levels, backend, opts, fallback, t0,
+                         _daqp_in_cascade(backend, opts))
 
 
 def _new_run(levels, n, eps, fls, tols):
@@ -389,22 +396,30 @@ def _new_run(levels, n, eps, fls, tols):
                             [L.name for L in levels], n, eps, x1, Z1, analytic, *tols, nnls)
 
 
-def _run_compiled(run, levels, backend, opts, fallback, t0):
+def _run_compiled(run, levels, backend, opts, fallback, t0, daqp=None):
     """Drives a compiled run from its first level: its level QPs solved by ``backend``, then
-    ``fallback`` → HierarchySolution."""
+    ``fallback`` → HierarchySolution. ``daqp`` (a :func:`_daqp_in_cascade` solver) lets the run
+    solve them with DAQP itself; the QPs it leaves (DAQP failed, or no rows) come back here."""
     warns = []
     qp_times = np.zeros(len(levels))
     n_qps = 0
     direct_daqp = BACKENDS.get(backend) is solve_daqp
-    while (kind := run.advance()) == "qp":
-        n_qps += 1
+    daqp = daqp if direct_daqp else None  # a test may have replaced the adapter since
+    advance = run.advance if daqp is None else functools.partial(run.advance_daqp, daqp)
+    while (kind := advance()) == "qp":
         tq = time.perf_counter()
         r = run.level
-        first = _daqp_on_run(run, opts) if direct_daqp else None
+        if daqp is not None and run.daqp_status:  # DAQP failed on it in the run (counted there)
+            first = (None, run.daqp_status, False)
+        else:
+            n_qps += 1
+            first = _daqp_on_run(run, opts) if direct_daqp else None
         y, ok, status = _backend_solve(_identity_qp(run), backend, opts, fallback, r, levels,
                                        warns, first)
         qp_times[r] += time.perf_counter() - tq  # (give_qp's end of the level is cascade work)
         run.give_qp(y if ok else None, status)
+    qp_times += run.qp_times
+    n_qps += run.qp_count
     ok = kind == "done"
     costs, res, vio = run.evaluate()
     return HierarchySolution(
@@ -450,13 +465,14 @@ class BoundCascade:
         self._opts = dict(backend_options or {})
         self._run = _new_run(levels, n, regularization, fls,
                              (rank_tol, drop_tol, relax_tol, feas_tol))
+        self._daqp = _daqp_in_cascade(backend, self._opts)
 
     def solve(self) -> HierarchySolution:
         """The cascade on the arrays' current contents."""
         t0 = time.perf_counter()
         self._run.reset()
         return _run_compiled(self._run, self.levels, self.backend, self._opts,
-                             self.fallback_backend, t0)
+                             self.fallback_backend, t0, self._daqp)
 
 
 def _daqp_on_run(run, opts):
@@ -468,12 +484,63 @@ def _daqp_on_run(run, opts):
     if unit_A.shape[0] == 0:
         return None
     opts = dict(opts)
-    raw_tol = opts.pop("raw_tol", 1e-6)
+    raw_tol = opts.pop("raw_tol", DAQP_RAW_TOL)
     try:
         x, status = solve_daqp_unit_rows(np.eye(g.shape[0]), g, unit_A, bu, bl, sense, **opts)
     except QP_ERRORS as exc:  # as solve_qp: never raises for numerical reasons
         return None, f"daqp: {type(exc).__name__}: {exc}", False
     return daqp_verdict(x, status, run.qp_violation(x) if x is not None else 0.0, raw_tol)
+
+
+def _daqp_in_cascade(backend, opts):
+    """A ``wholebody._cascade.DaqpSolver`` with which a compiled run solves its level QPs itself
+    (``CascadeRun.advance_daqp``: the stock DAQP adapter's rows, settings, retry and verdict in
+    C++, ~20 µs less a QP than :func:`_daqp_on_run`), or None: ``backend`` is not the stock DAQP
+    adapter, an option is not a DAQP setting, or DAQP's C interface is not usable
+    (:func:`_daqp_c_module`). Then the QPs are solved from Python, with the same results."""
+    if BACKENDS.get(backend) is not solve_daqp or (path := _daqp_c_module()) is None:
+        return None
+    settings = dict(opts)
+    raw_tol = settings.pop("raw_tol", DAQP_RAW_TOL)
+    settings.setdefault("primal_tol", DAQP_PRIMAL_TOL)
+    try:
+        return _DaqpSolver(path, settings, DAQP_EXIT, raw_tol)
+    except (ValueError, TypeError):  # e.g. an option daqp.solve takes that is no setting
+        return None
+
+
+@functools.cache
+def _daqp_c_module() -> str | None:
+    """The file of the daqp module whose C solver the compiled cascade may call, or None.
+
+    ``cascade.cpp`` declares DAQP's C structures as one daqp version defines them
+    (``DAQP_C_VERSION``); they are used only with that version installed, and only if the
+    defaults read through them (``daqp_default_settings``) equal ``daqp.solve``'s keyword
+    defaults, field by field: a layout that differs would show there first."""
+    if _DaqpSolver is None:
+        return None
+    try:
+        import daqp
+
+        version = importlib.metadata.version("daqp")
+    except (ImportError, importlib.metadata.PackageNotFoundError):
+        return None
+    if version != _DAQP_C_VERSION:
+        log.info("daqp %s: level QPs go through Python (DAQP's C interface is declared for %s)",
+                 version, _DAQP_C_VERSION)
+        return None
+    try:
+        read = _DaqpSolver(daqp.__file__, {}, {}, DAQP_RAW_TOL).settings()
+        defaults = inspect.signature(daqp.solve).parameters
+        expected = {name: float(defaults[name].default) for name in read}
+    except (ValueError, TypeError, KeyError) as exc:
+        log.warning("DAQP's C interface not usable (%s): level QPs go through Python", exc)
+        return None
+    if read != expected:
+        log.warning("DAQP's C settings differ from daqp.solve's defaults (%s vs %s): level QPs go "
+                    "through Python", read, expected)
+        return None
+    return daqp.__file__
 
 
 def _identity_qp(run):
