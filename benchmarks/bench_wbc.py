@@ -13,6 +13,14 @@ compiled, then the compiled cascade — and ``python`` — ``Robot.update`` + ``
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_wbc.py [--cycles 2000] [--quick] [--passes 5]
                                                           [--engines native,python]
+
+This machine is shared: the same code runs up to ~1.8x slower in some minutes than in others, and
+single cycles stall for milliseconds when the host takes the core. Each case therefore also
+times a fixed reference workload after every cycle (a matrix product and a Cholesky factor at
+the cascade's sizes, a short Python loop: no wholebody code), whose median says how fast the
+machine was during that case, and ``--passes N`` runs the states N times: the
+first pass is what a single run sees, the per-cycle best of the N passes estimates the
+uncontended time (a host stall rarely hits the same cycle twice).
 """
 
 from __future__ import annotations
@@ -38,6 +46,18 @@ def moving_states(robot, cycles: int, dt: float = 1e-3):
     return robot.smooth_motion(cycles, dt)
 
 
+_REFERENCE = np.random.default_rng(0).standard_normal((50, 44))
+
+
+def reference_workload() -> float:
+    """Seconds for a fixed workload of the cascade's kind (a 44 × 50 by 50 × 44 product and its
+    Cholesky factor, a 300-step Python loop): the machine's speed at this moment."""
+    t0 = time.perf_counter()
+    np.linalg.cholesky(_REFERENCE.T @ _REFERENCE)
+    sum(range(300))
+    return time.perf_counter() - t0
+
+
 def stats(samples_s) -> str:
     us = np.asarray(samples_s) * 1e6
     return (f"median {np.median(us):7.0f}  p95 {np.percentile(us, 95):7.0f}  "
@@ -46,17 +66,16 @@ def stats(samples_s) -> str:
 
 def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: str, cycles: int,
              fallback: str | None = None, passes: int = 1, engine: str = "python"):
-    """Per-cycle times (update, rows, solve, total, of which in the QP backends), the number of
-    failed cycles and the mean number of level QPs per cycle, for one HierarchyCycle engine.
-
-    With ``passes`` > 1 the whole state sequence is run that many times and each cycle keeps its
-    fastest pass: an estimate of the uncontended time on a shared machine (single-pass
-    percentiles include whatever else the cores are doing)."""
+    """Per-cycle times (update, rows, solve, total, of which in the QP backends) as arrays of
+    shape (passes, cycles, 5), the number of failed cycles, the mean number of level QPs per
+    cycle and the reference workload's times (:func:`reference_workload`, one after each
+    cycle), for one HierarchyCycle engine."""
     cycle = HierarchyCycle(robot, make_stack(full=not reduced), reduced=reduced, engine=engine,
                            method=method, backend=backend, fallback_backend=fallback)
     variables = Variables(robot, contacts)
     states = list(moving_states(robot, cycles))
-    best = np.full((cycles, 5), np.inf)
+    times = np.empty((passes, cycles, 5))
+    reference = np.empty((passes, cycles))
     failures = 0
     qps = 0
     for p in range(passes):
@@ -66,9 +85,10 @@ def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: s
             t1 = time.perf_counter()
             failures += (not sol.ok) and p == 0
             qps += sol.timings["qps"] if p == 0 else 0
-            best[i] = np.minimum(best[i], (sol.timings["update"], sol.timings["rows"],
-                                           sol.timings["solve"], t1 - t0, sol.timings["qp"]))
-    return best[:, 0], best[:, 1], best[:, 2], best[:, 3], best[:, 4], failures, qps / cycles
+            times[p, i] = (sol.timings["update"], sol.timings["rows"], sol.timings["solve"],
+                           t1 - t0, sol.timings["qp"])
+            reference[p, i] = reference_workload()
+    return times, failures, qps / cycles, reference
 
 
 def main() -> None:
@@ -112,18 +132,23 @@ def main() -> None:
                 for reduced in (True, False):
                     label = f"{engine} {method}/{name} {'reduced' if reduced else 'full   '}"
                     try:
-                        upd, rows, solve, total, qp, fails, qps = run_case(
+                        times, fails, qps, reference = run_case(
                             robot, make_stack, contacts, reduced, method, backend, args.cycles,
                             fallback, args.passes, engine)
                     except Exception as exc:  # a benchmark reports, it does not stop
                         print(f"{label}: error {exc}")
                         continue
+                    best = times.min(axis=0)  # each cycle's fastest pass
+                    upd, rows, solve, total, qp = best.T
                     medians[(engine, method, name, reduced)] = np.median(total)
+                    if args.passes > 1:
+                        print(f"{label:44} total {stats(times[0, :, 3])}  (first pass)")
+                        label = f"  each cycle's best of {args.passes} passes"
                     print(f"{label:44} total {stats(total)}  failed {fails}")
                     print(f"{'':44} update {np.median(upd) * 1e6:5.0f}  rows "
                           f"{np.median(rows) * 1e6:5.0f}  solve {np.median(solve) * 1e6:5.0f} "
                           f"(in QP backends {np.nanmedian(qp) * 1e6:4.0f}, {qps:.2f} QPs/cycle) "
-                          f"µs (medians)")
+                          f"µs (medians); reference workload {np.median(reference) * 1e6:.0f} µs")
         for key in medians:
             engine, method, name, reduced = key
             full = medians.get((engine, method, name, False))

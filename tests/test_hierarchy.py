@@ -987,7 +987,9 @@ def test_implicit_equalities_match_a_linear_programming_oracle(monkeypatch):
 def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
     """A BoundCascade solved again and again while its levels' arrays are overwritten in place
     (contents of other random hierarchies of the same shapes) returns exactly what a fresh
-    solve_hierarchy returns on those contents: reset() leaves nothing of the previous solve."""
+    solve_hierarchy returns on those contents: reset() leaves nothing of the previous solve, and
+    a returned solution keeps its values when the next solve runs (its x once was a view of the
+    run's buffer and changed under its holder)."""
     from conftest import native_cycle_or_skip
     from wholebody.solvers.hierarchy import BoundCascade
     native_cycle_or_skip("_cascade")
@@ -999,6 +1001,7 @@ def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
         levels = make(shape_seed)
         kw = dict(backend="daqp", regularization=1e-6, fallback_backend="quadprog")
         bound = BoundCascade(levels, **kw)
+        previous = None
         for _ in range(4):
             # same shapes, new numbers: the random draws of the same structure, perturbed
             for L, M in zip(levels, make(shape_seed)):
@@ -1012,6 +1015,10 @@ def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
             np.testing.assert_array_equal(got.costs, want.costs)
             np.testing.assert_array_equal(got.nullspace_dims, want.nullspace_dims)
             assert got.warnings == want.warnings
+            if previous is not None:
+                np.testing.assert_array_equal(previous[0].x, previous[1])
+                np.testing.assert_array_equal(previous[0].costs, previous[2])
+            previous = (got, got.x.copy(), got.costs.copy())
 
 
 def test_bound_cascade_refuses_arrays_it_would_have_to_copy():

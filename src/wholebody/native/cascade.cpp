@@ -1,9 +1,10 @@
 // The cascade of QPs (Herzog et al. 2016, eqs. 8-11), compiled: a line-for-line mirror of
-// wholebody.solvers.hierarchy._solve_cascade (the reference, run with compiled=False) that hands
-// the QP solves back to Python: each level QP (eqs. 10-11, posed in w = R u, see _level_qp) is
-// solved by the caller with the chosen backend (and the fallback backend) and given back — the QP
-// solvers stay the library's backends, called as everywhere else; the NNLS of the
-// implicit-equality search is the caller's too (scipy.optimize.nnls, passed in).
+// wholebody.solvers.hierarchy._solve_cascade (the reference, run with compiled=False). Each level
+// QP (eqs. 10-11, posed in w = R u, see _level_qp) is either handed back to Python, solved there
+// by the chosen backend (and the fallback backend) as everywhere else, or — DAQP — solved here
+// through DAQP's C interface with the adapter's rows, settings and verdict (DaqpSolver; a QP it
+// fails on still goes back to Python for the fallback). The NNLS of the implicit-equality
+// search is the caller's (scipy.optimize.nnls, passed in).
 // Everything else — the analytic first level's rows, dropping frozen rows, loosening tight rows,
 // projecting each level onto the remaining null space, its regularised least-squares minimiser
 // (Householder QR of [√ε I; M], structured), the implicit-equality search, the QP's rows, locking
@@ -11,6 +12,7 @@
 // hierarchy._solve_compiled):
 //   run = CascadeRun(B, b, w, C, lower, upper, V, names, n, eps, x1, Z1, tolerances..., nnls)
 //   while run.advance() == "qp": run.give_qp(y, status)
+//   x, costs, ... = run.result()
 //   (or run.advance_daqp(DaqpSolver(...)): the level QPs solved by DAQP here, see DaqpSolver)
 //   run.reset()  # and again, on the arrays' new contents
 #include <Eigen/Dense>
@@ -720,17 +722,32 @@ public:
     return py::make_tuple(costs, res, vio);
   }
 
-  const VectorXd & x() const { return x_; }
+  // Everything a HierarchySolution takes from the run, in one call (a control loop pays per
+  // call): (x, costs, residuals, violations — see evaluate —, per-level seconds with the QPs
+  // solved here, seconds in those QPs, their count, null-space dimensions, warnings, levels
+  // solved, status).
+  py::tuple result() const
+  {
+    const py::tuple ev = evaluate();
+    VectorXd level_times = VectorXd::Zero(Index(nl_));
+    double qp = 0.0;
+    for (std::size_t r = 0; r < nl_; ++r)
+    {
+      level_times[Index(r)] = times_[r] + qp_times_[r];
+      qp += qp_times_[r];
+    }
+    const std::vector<Index> dims = nullspace_dims();
+    py::array_t<Index> dims_out(py::ssize_t(dims.size()));
+    std::copy(dims.begin(), dims.end(), dims_out.mutable_data());
+    return py::make_tuple(VectorXd(x_), ev[0], ev[1], ev[2], level_times, qp, qp_count_, dims_out,
+                          py::tuple(py::cast(warns_)), r_, status_);
+  }
+
   std::vector<Index> nullspace_dims() const
   {
     return std::vector<Index>(zdims_.begin(), zdims_.begin() + Index(std::min(r_, nl_)));
   }
-  const std::vector<std::string> & warnings() const { return warns_; }
-  const std::string & status() const { return status_; }
   std::size_t level() const { return r_; }
-  std::vector<double> times() const { return times_; }
-  std::vector<double> qp_times() const { return qp_times_; }
-  int qp_count() const { return qp_count_; }
   const std::string & daqp_status() const { return daqp_status_; }
 
 private:
@@ -1199,14 +1216,7 @@ PYBIND11_MODULE(_cascade, m)
     .def("daqp_qp", &CascadeRun::daqp_qp)
     .def("qp_violation", &CascadeRun::qp_violation, py::arg("y"))
     .def("give_qp", &CascadeRun::give_qp, py::arg("y"), py::arg("status"))
-    .def("evaluate", &CascadeRun::evaluate)
-    .def_property_readonly("x", &CascadeRun::x)
-    .def_property_readonly("nullspace_dims", &CascadeRun::nullspace_dims)
-    .def_property_readonly("warnings", &CascadeRun::warnings)
-    .def_property_readonly("status", &CascadeRun::status)
+    .def("result", &CascadeRun::result)
     .def_property_readonly("level", &CascadeRun::level)
-    .def_property_readonly("times", &CascadeRun::times)
-    .def_property_readonly("qp_times", &CascadeRun::qp_times)
-    .def_property_readonly("qp_count", &CascadeRun::qp_count)
     .def_property_readonly("daqp_status", &CascadeRun::daqp_status);
 }

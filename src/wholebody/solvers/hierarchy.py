@@ -401,7 +401,7 @@ def _run_compiled(run, levels, backend, opts, fallback, t0, daqp=None):
     ``fallback`` → HierarchySolution. ``daqp`` (a :func:`_daqp_in_cascade` solver) lets the run
     solve them with DAQP itself; the QPs it leaves (DAQP failed, or no rows) come back here."""
     warns = []
-    qp_times = np.zeros(len(levels))
+    qp_times = None  # of the QPs solved here (not by the run), per level
     n_qps = 0
     direct_daqp = BACKENDS.get(backend) is solve_daqp
     daqp = daqp if direct_daqp else None  # a test may have replaced the adapter since
@@ -416,19 +416,22 @@ def _run_compiled(run, levels, backend, opts, fallback, t0, daqp=None):
             first = _daqp_on_run(run, opts) if direct_daqp else None
         y, ok, status = _backend_solve(_identity_qp(run), backend, opts, fallback, r, levels,
                                        warns, first)
+        if qp_times is None:
+            qp_times = np.zeros(len(levels))
         qp_times[r] += time.perf_counter() - tq  # (give_qp's end of the level is cascade work)
         run.give_qp(y if ok else None, status)
-    qp_times += run.qp_times
-    n_qps += run.qp_count
+    x, costs, res, vio, level_times, qp_time, run_qps, dims, run_warns, level, status = run.result()
+    if qp_times is not None:
+        level_times += qp_times
+        qp_time += float(qp_times.sum())
     ok = kind == "done"
-    costs, res, vio = run.evaluate()
     return HierarchySolution(
-        x=run.x, costs=costs, eq_residuals=res, ineq_violations=vio,
-        status="optimal" if ok else run.status, ok=ok,
-        timings={"total": time.perf_counter() - t0, "levels": np.asarray(run.times) + qp_times,
-                 "qp": float(qp_times.sum()), "qps": n_qps},
-        method="cascade", levels_solved=run.level, nullspace_dims=np.asarray(run.nullspace_dims, dtype=int),
-        warnings=tuple(run.warnings) + tuple(warns),
+        x=x, costs=costs, eq_residuals=res, ineq_violations=vio,
+        status="optimal" if ok else status, ok=ok,
+        timings={"total": time.perf_counter() - t0, "levels": level_times, "qp": qp_time,
+                 "qps": n_qps + run_qps},
+        method="cascade", levels_solved=level, nullspace_dims=dims,
+        warnings=run_warns + tuple(warns) if warns else run_warns,
     )
 
 
