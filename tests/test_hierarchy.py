@@ -686,7 +686,8 @@ def test_daqp_in_the_run_gives_what_python_gives(monkeypatch, case):
     import daqp
     import wholebody.solvers.hierarchy as h
     _daqp_in_run_or_skip()
-    options = {"daqp-fails": {"iter_limit": 2}, "verdict-refuses": {"raw_tol": 1e-15}}.get(case, {})
+    options = {"daqp-fails": {"iter_limit": 2}, "verdict-refuses": {"raw_tol": 1e-15},
+               "tiny-eps": {"sing_tol": 3.7e-11, "primal_tol": 1e-7}}.get(case, {})
     rng = np.random.default_rng(8)
     problems = [random_hierarchy(rng) for _ in range(200)]
     kwargs = dict(backend="daqp", fallback_backend="quadprog", backend_options=options,
@@ -786,6 +787,37 @@ def test_compiled_cascade_matches_python_on_random_hierarchies(monkeypatch, back
         np.testing.assert_array_equal(compiled.nullspace_dims, python.nullspace_dims)
         assert sorted(compiled.warnings) == sorted(python.warnings)
     assert seen["qp"] > 200 and seen["implicit"] > 0  # both requests were exercised
+
+
+def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots, monkeypatch):
+    """With the adapter's DAQP settings (``backends.DAQP_DEFAULTS``: sing_tol 1e-14, primal_tol
+    1e-9) DAQP solves every level QP of Table 1 (talos, double support, the first 700 moving
+    states of bench_wbc): no cycle falls back to quadprog, and the torques equal those of a
+    cycle solved by quadprog alone to 1e-6 Nm (measured 9e-8). With DAQP's own sing_tol and the
+    earlier primal_tol 1e-7 the same states leave QPs to quadprog ("infeasible" on nearly
+    dependent active rows, or solutions refused on the raw rows): the case the settings are for."""
+    from wholebody.control.stacks import table1_stack
+    from wholebody.cycle import HierarchyCycle
+    from wholebody.solvers.backends import DAQP_DEFAULTS
+    from wholebody.variables import Variables
+    robot = robots["talos"]
+    variables = Variables(robot)
+    states = list(robot.smooth_motion(2000, 1e-3))[:700]
+
+    def cycle(backend):
+        return HierarchyCycle(robot, table1_stack(robot, robot.contact_names), backend=backend,
+                              fallback_backend="quadprog" if backend == "daqp" else None)
+
+    daqp, quadprog = cycle("daqp"), cycle("quadprog")
+    for q, v in states:
+        a, b = daqp.solve(q, v, variables), quadprog.solve(q, v, variables)
+        assert a.ok and a.status == "optimal", a.status
+        np.testing.assert_allclose(a.tau, b.tau, atol=1e-6, rtol=0)
+    monkeypatch.setitem(DAQP_DEFAULTS, "sing_tol", 3.7e-11)
+    monkeypatch.setitem(DAQP_DEFAULTS, "primal_tol", 1e-7)
+    before = cycle("daqp")
+    fallbacks = sum("solved with quadprog" in before.solve(q, v, variables).status for q, v in states)
+    assert fallbacks >= 5
 
 
 @pytest.mark.parametrize("name", ["talos14", "talos", "talos14-single"])

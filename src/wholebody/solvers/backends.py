@@ -49,7 +49,7 @@ DAQP_EXIT = {  # DAQP's exit flags by name
     -6: "overdetermined initial active set (inconsistent equalities)",
     -7: "time limit",
 }
-DAQP_PRIMAL_TOL = 1e-7  # DAQP's primal_tol unless given (solve_daqp says why)
+DAQP_DEFAULTS = {"primal_tol": 1e-9, "sing_tol": 1e-14}  # DAQP settings unless given (see solve_daqp)
 DAQP_RAW_TOL = 1e-6  # largest violation of an unscaled row a DAQP solution may have
 
 
@@ -93,10 +93,24 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
     """DAQP via ``daqp.solve(H, f, A, bupper, blower, sense)``; equalities have sense 5; rows
     scaled to unit norm, the solution refused if a row is violated by more than ``raw_tol``.
 
-    ``primal_tol`` defaults to 1e-7 instead of DAQP's 1e-6: the cascade's rows carry weights up
-    to 1e4 (CoP), and a higher row left violated by 1e-6 costs its level ~1e-4 (measured on
-    talos14: level-2 cost 2e-5 instead of 3e-10 with quadprog). 1e-9 is more accurate still but
-    made DAQP fail (cycling/infeasible) on 17 % instead of 10 % of the Table 1 cycles.
+    Two settings differ from DAQP's defaults (``DAQP_DEFAULTS``, measured on the cascade's level
+    QPs, which keep higher-priority rows active at their relaxed bounds):
+
+    * ``sing_tol`` (the smallest pivot DAQP accepts in the LDLᵀ of its active rows): 1e-14
+      instead of 3.7e-11 (1e-14 is the floor DAQP itself uses in branch and bound). On unit rows
+      a pivot is about σ_min² of the active rows; nearly dependent active rows (σ_min ~ 3e-6,
+      pivots ~ 1e-11) were taken for dependent, and the QP declared "infeasible". talos Table
+      1, double support, 2000 moving states: 37 of 3947 level QPs "infeasible" → 0 (they then
+      agree with quadprog to 2e-9; the other solutions moved by ≤ 2.7e-12).
+    * ``primal_tol``: 1e-9 instead of 1e-6. DAQP's tolerance holds on the unit rows, i.e. ‖row‖
+      times looser on the caller's (norms up to ~1e6): at 1e-7, 16 of 9366 Table 1 level QPs
+      (double and single support) were refused by the check on the raw rows (violations 3e-3 to
+      36), at 1e-9 none (they agree with quadprog to 4e-11), for ~6 % more time per QP. (With
+      the default ``sing_tol``, 1e-9 had made DAQP fail more often, 17 % instead of 10 % of the
+      Table 1 cycles: the same false "infeasible".)
+
+    Random hierarchies (tests/test_hierarchy.py's generator, 300, DAQP then quadprog): level QPs
+    left to quadprog at ε = 1e-10: 161 with DAQP's defaults, 10 with these; at ε = 1e-8: 17 → 1.
     """
     if A.shape[0] == 0:
         # DAQP needs at least one row: add a free one (not a zero row: DAQP normalises rows)
@@ -119,7 +133,7 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
 def solve_daqp_unit_rows(H, g, unit_A, bupper, blower, sense, **opts):
     """DAQP on rows already scaled as :func:`solve_daqp` scales them (``_daqp_rows``) → (x, status),
     x None on failure; an "infeasible" verdict is retried once with proximal iterations."""
-    opts.setdefault("primal_tol", DAQP_PRIMAL_TOL)
+    opts = {**DAQP_DEFAULTS, **opts}
     H, g = np.ascontiguousarray(H), np.ascontiguousarray(g)
     x, _, flag, _ = _daqp().solve(H, g, unit_A, bupper, blower, sense, **opts)
     if flag == -1 and "eps_prox" not in opts:

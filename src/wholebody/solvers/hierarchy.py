@@ -150,7 +150,7 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 from scipy.optimize import nnls
 
-from .backends import (BACKENDS, DAQP_EXIT, DAQP_PRIMAL_TOL, DAQP_RAW_TOL, QP_ERRORS,
+from .backends import (BACKENDS, DAQP_DEFAULTS, DAQP_EXIT, DAQP_RAW_TOL, QP_ERRORS,
                        daqp_verdict, solve_daqp, solve_daqp_unit_rows, solve_qp)
 from .level import Level
 
@@ -503,9 +503,8 @@ def _daqp_in_cascade(backend, opts):
     (:func:`_daqp_c_module`). Then the QPs are solved from Python, with the same results."""
     if BACKENDS.get(backend) is not solve_daqp or (path := _daqp_c_module()) is None:
         return None
-    settings = dict(opts)
+    settings = {**DAQP_DEFAULTS, **opts}
     raw_tol = settings.pop("raw_tol", DAQP_RAW_TOL)
-    settings.setdefault("primal_tol", DAQP_PRIMAL_TOL)
     try:
         return _DaqpSolver(path, settings, DAQP_EXIT, raw_tol)
     except (ValueError, TypeError):  # e.g. an option daqp.solve takes that is no setting
@@ -1016,11 +1015,13 @@ def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, solve):
     optimum's cost (3.0e-4 vs 1.9e-5); the problem in w keeps only the right sole's row active
     (left row 15.5 inside its bound), and 82 N no longer jump between the feet (largest
     cycle-to-cycle torque change in [1.3, 1.4] s: 0.05 Nm).
-    Open: DAQP without fallback fails more often on Table 1 (talos, double support, reduced:
-    210 instead of 88 of 500 bench cycles, "infeasible"/"cycling" at level 4; quadprog and
-    proxsuite solve the same QPs). The failing QPs have 7 active rows, nearly (σ_min 3e-6) or
-    exactly dependent after normalisation, with a margin (``relax_tol``) far below DAQP's
-    tolerances in the normalised metric; widening the rows by 1e-5 ‖row‖ makes DAQP solve all.
+    DAQP without fallback used to fail on Table 1 (talos, double support, reduced: 210 instead
+    of 88 of 500 bench cycles, "infeasible"/"cycling" at level 4; quadprog and proxsuite solve
+    the same QPs). The failing QPs have 7 active rows, nearly (σ_min 3e-6) dependent after
+    normalisation: pivots ~1e-11 in DAQP's LDLᵀ, below its ``sing_tol`` (3.7e-11), so it took
+    them for dependent. With ``sing_tol`` 1e-14 and ``primal_tol`` 1e-9 (session 8,
+    ``backends.DAQP_DEFAULTS``) DAQP solves all 9366 level QPs of 2000 double- and 2000
+    single-support bench cycles (``test_daqp_settings_leave_no_table1_level_qp_to_the_fallback``).
 
     ``s ≥ 0`` is not imposed: it holds at the optimum (a negative slack only tightens its row
     and costs s², so it is never better than s = 0).
