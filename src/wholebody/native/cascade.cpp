@@ -23,7 +23,6 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
-#include <dlfcn.h>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -32,6 +31,10 @@
 #include <optional>
 #include <string>
 #include <vector>
+
+#ifndef _WIN32
+#include <dlfcn.h> // DaqpSolver finds DAQP's C functions in the loaded daqp module
+#endif
 
 namespace py = pybind11;
 
@@ -454,6 +457,9 @@ public:
              std::map<int, std::string> exit_names, double raw_tol)
   : exit_names_(std::move(exit_names)), raw_tol_(raw_tol)
   {
+#ifdef _WIN32
+    throw std::invalid_argument("DaqpSolver: not available on this platform (no dlopen)");
+#else
     // the module is loaded (imported by the caller): RTLD_NOLOAD only looks it up
     void * handle = dlopen(module_path.c_str(), RTLD_NOW | RTLD_NOLOAD);
     if (!handle)
@@ -464,6 +470,7 @@ public:
     if (!quadprog_ || !defaults)
       throw std::invalid_argument("DaqpSolver: " + module_path + " exports no DAQP C interface");
     defaults(&settings_);
+#endif
     for (const auto & [name, value] : settings)
     {
       const daqp_c::Field * field = find(name);
