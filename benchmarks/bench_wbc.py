@@ -145,10 +145,12 @@ def main() -> None:
                         print(f"{label:44} total {stats(times[0, :, 3])}  (first pass)")
                         label = f"  each cycle's best of {args.passes} passes"
                     print(f"{label:44} total {stats(total)}  failed {fails}")
+                    in_qps = ("all levels in one QP" if np.isnan(qp).all() else
+                              f"in QP backends {np.nanmedian(qp) * 1e6:4.0f}, {qps:.2f} QPs/cycle")
                     print(f"{'':44} update {np.median(upd) * 1e6:5.0f}  rows "
                           f"{np.median(rows) * 1e6:5.0f}  solve {np.median(solve) * 1e6:5.0f} "
-                          f"(in QP backends {np.nanmedian(qp) * 1e6:4.0f}, {qps:.2f} QPs/cycle) "
-                          f"µs (medians); reference workload {np.median(reference) * 1e6:.0f} µs")
+                          f"({in_qps}) µs (medians); reference workload "
+                          f"{np.median(reference) * 1e6:.0f} µs")
         for key in medians:
             engine, method, name, reduced = key
             full = medians.get((engine, method, name, False))
