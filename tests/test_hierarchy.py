@@ -789,6 +789,46 @@ def test_compiled_cascade_matches_python_on_random_hierarchies(monkeypatch, back
     assert seen["qp"] > 200 and seen["implicit"] > 0  # both requests were exercised
 
 
+def test_daqp_c_interface_is_refused_for_another_version_or_layout(monkeypatch, caplog, request):
+    """DAQP's C structures are declared for one daqp version: with another version installed, or
+    with daqp.solve's defaults differing from those read through the declaration (a layout that
+    moved), the compiled run is not given a DaqpSolver and the level QPs go through Python, with
+    a log line saying why; the results stay the stock path's."""
+    import importlib.metadata
+    import inspect
+    import daqp
+    import wholebody.solvers.hierarchy as h
+    _daqp_in_run_or_skip()
+    request.addfinalizer(h._daqp_c_module.cache_clear)  # runs after monkeypatch's undo
+    levels = random_hierarchy(np.random.default_rng(3))
+    reference = solve_hierarchy(levels, backend="daqp")
+    version = importlib.metadata.version
+    monkeypatch.setattr(importlib.metadata, "version",
+                        lambda name: "0.10.3" if name == "daqp" else version(name))
+    h._daqp_c_module.cache_clear()
+    with caplog.at_level("INFO", logger=h.log.name):
+        assert h._daqp_c_module() is None and h._daqp_in_cascade("daqp", {}) is None
+    assert "declared for 0.11.0" in caplog.text
+    np.testing.assert_array_equal(solve_hierarchy(levels, backend="daqp").x, reference.x)
+    monkeypatch.setattr(importlib.metadata, "version", version)
+    solve = daqp.solve
+
+    def moved(*args, **kwargs):  # daqp.solve, one of whose defaults the C side does not read
+        return solve(*args, **kwargs)
+
+    signature = inspect.signature(solve)
+    moved.__signature__ = signature.replace(parameters=[
+        p.replace(default=7) if p.name == "iter_limit" else p
+        for p in signature.parameters.values()])
+    monkeypatch.setattr(daqp, "solve", moved)
+    h._daqp_c_module.cache_clear()
+    assert h._daqp_c_module() is None
+    assert "differ from daqp.solve's defaults" in caplog.text
+    monkeypatch.setattr(daqp, "solve", solve)
+    h._daqp_c_module.cache_clear()
+    assert h._daqp_c_module() is not None
+
+
 def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots, monkeypatch):
     """With the adapter's DAQP settings (``backends.DAQP_DEFAULTS``: sing_tol 1e-14, primal_tol
     1e-9) DAQP solves every level QP of Table 1 (talos, double support, the first 700 moving
