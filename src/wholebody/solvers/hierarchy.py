@@ -62,8 +62,10 @@ Methods
     Compiled. ``wholebody._cascade.CascadeRun`` (src/wholebody/native/cascade.cpp) is this
     algorithm line for line in C++ (Eigen: Householder QR, QR with column pivoting, the same
     tolerances); it hands each level QP back to Python, where :func:`_backend_solve` calls the
-    backend (and the fallback) exactly as the Python cascade does, and calls scipy's NNLS for
-    the implicit-equality search. It is the default when built (``compiled=True``); the Python
+    backend (and the fallback) exactly as the Python cascade does — except DAQP's, which it
+    solves itself through DAQP's C interface with the adapter's rows, settings and verdict
+    (:func:`_daqp_in_cascade`; bitwise the same results) — and calls scipy's NNLS for the
+    implicit-equality search. It is the default when built (``compiled=True``); the Python
     cascade is the reference the tests compare it with (x to 1e-7 on the random hierarchies,
     torques to 1e-6 Nm on Tables 1/2). Results differ only by rounding: Eigen's and LAPACK's
     factorisations pivot alike but round differently.
