@@ -519,6 +519,7 @@ public:
     ++calls_;
     if (result.exitflag == -1 && prox_retry_) // see backends.solve_daqp_unit_rows
     {
+      settings = settings_; // fresh, as daqp.solve's (DAQP gets a pointer to it)
       settings.eps_prox = 1e-6;
       quadprog_(&result, &problem, &settings);
       ++calls_;
