@@ -38,7 +38,10 @@ log = logging.getLogger(__name__)
 _DAQP_INF = 1e30
 # what a backend may raise on bad numbers: turned into a failed (x, status, ok), never raised
 QP_ERRORS = (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError)
-DAQP_EXIT = {  # DAQP's exit flags by name
+DAQP_EXIT = {  # DAQP's exit flags by name (daqp 0.11's constants.h)
+    5: "feasible, optimality not proven",
+    4: "optimal only at the rounding level (a row violated beyond primal_tol)",
+    3: "constrained point",
     1: "optimal",
     2: "soft optimal",
     -1: "infeasible",
@@ -48,6 +51,7 @@ DAQP_EXIT = {  # DAQP's exit flags by name
     -5: "nonconvex (H not positive definite)",
     -6: "overdetermined initial active set (inconsistent equalities)",
     -7: "time limit",
+    -8: "unsupported",
 }
 DAQP_DEFAULTS = {"primal_tol": 1e-9, "sing_tol": 1e-14}  # DAQP settings unless given (see solve_daqp)
 DAQP_RAW_TOL = 1e-6  # largest violation of an unscaled row a DAQP solution may have
