@@ -738,8 +738,8 @@ def test_diagnostics_with_a_zero_row_task(robots):
 @native
 def test_solver_settings_changed_after_the_first_cycle_take_effect(robots):
     """The native cycle keeps its compiled cascade bound to the program's level arrays; settings
-    changed on the cycle afterwards (regularization, backend) are used from the next solve on —
-    the same torques as a cycle built with them."""
+    changed on the cycle afterwards (regularization, backend, backend options) are used from the
+    next solve on — the same torques as a cycle built with them."""
     robot = robots["talos14"]
     variables = Variables(robot)
     q, v = next(iter(moving_states(robot, 3)))
@@ -752,3 +752,13 @@ def test_solver_settings_changed_after_the_first_cycle_take_effect(robots):
     assert changed.ok and fresh.ok
     np.testing.assert_array_equal(changed.tau, fresh.tau)
     assert np.abs(changed.tau - first.tau).max() > 1e-3  # ε = 1e-3 trades the tasks off visibly
+    # backend options too: an iteration limit of 1 makes DAQP fail, the fallback solves (on a
+    # state whose cascade needs a level QP)
+    cycle.backend, cycle.fallback_backend, cycle.regularization = "daqp", "quadprog", 1e-6
+    q, v = next((q, v) for q, v in moving_states(robot, 400)
+                if cycle.solve(q, v, variables).timings["qps"])
+    cycle.backend_options = {"iter_limit": 1}
+    limited = cycle.solve(q, v, variables)
+    assert limited.ok and "iteration limit" in limited.status
+    cycle.backend_options = {}
+    assert "iteration limit" not in cycle.solve(q, v, variables).status

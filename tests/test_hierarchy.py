@@ -829,35 +829,36 @@ def test_daqp_c_interface_is_refused_for_another_version_or_layout(monkeypatch, 
     assert h._daqp_c_module() is not None
 
 
-def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots, monkeypatch):
+def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots):
     """With the adapter's DAQP settings (``backends.DAQP_DEFAULTS``: sing_tol 1e-14, primal_tol
     1e-9) DAQP solves every level QP of Table 1 (talos, double support, the first 700 moving
     states of bench_wbc): no cycle falls back to quadprog, and the torques equal those of a
     cycle solved by quadprog alone to 1e-6 Nm (measured 9e-8). With DAQP's own sing_tol and the
-    earlier primal_tol 1e-7 the same states leave QPs to quadprog ("infeasible" on nearly
-    dependent active rows, or solutions refused on the raw rows): the case the settings are for."""
+    earlier primal_tol 1e-7 (``backend_options``, both engines) the same states leave QPs to
+    quadprog ("infeasible" on nearly dependent active rows, or solutions refused on the raw
+    rows): the case the settings are for."""
     from wholebody.control.stacks import table1_stack
     from wholebody.cycle import HierarchyCycle
-    from wholebody.solvers.backends import DAQP_DEFAULTS
     from wholebody.variables import Variables
     robot = robots["talos"]
     variables = Variables(robot)
     states = list(robot.smooth_motion(2000, 1e-3))[:700]
 
-    def cycle(backend):
+    def cycle(backend, engine="auto", **options):
         return HierarchyCycle(robot, table1_stack(robot, robot.contact_names), backend=backend,
-                              fallback_backend="quadprog" if backend == "daqp" else None)
+                              fallback_backend="quadprog" if backend == "daqp" else None,
+                              engine=engine, backend_options=options)
 
     daqp, quadprog = cycle("daqp"), cycle("quadprog")
     for q, v in states:
         a, b = daqp.solve(q, v, variables), quadprog.solve(q, v, variables)
         assert a.ok and a.status == "optimal", a.status
         np.testing.assert_allclose(a.tau, b.tau, atol=1e-6, rtol=0)
-    monkeypatch.setitem(DAQP_DEFAULTS, "sing_tol", 3.7e-11)
-    monkeypatch.setitem(DAQP_DEFAULTS, "primal_tol", 1e-7)
-    before = cycle("daqp")
-    fallbacks = sum("solved with quadprog" in before.solve(q, v, variables).status for q, v in states)
-    assert fallbacks >= 5
+    for engine in ("native", "python"):
+        before = cycle("daqp", engine, sing_tol=3.7e-11, primal_tol=1e-7)
+        fallbacks = sum("solved with quadprog" in before.solve(q, v, variables).status
+                        for q, v in states[:400])
+        assert fallbacks >= 5, engine
 
 
 @pytest.mark.parametrize("name", ["talos14", "talos", "talos14-single"])

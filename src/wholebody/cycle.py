@@ -339,14 +339,15 @@ class _Program:
         """The compiled cascade bound to these levels for the cycle's current solver settings
         (rebuilt if they changed), None where it does not apply (another method, not built)."""
         key = (cycle.method, cycle.backend, cycle.regularization, cycle.fallback_backend,
-               cycle.analytic)
+               cycle.analytic, tuple(sorted(cycle.backend_options.items())))
         if key != self._bound_key:
             self._bound_key, self._bound = key, None
             if cycle.method == "cascade" and BoundCascade.available:
                 self._bound = BoundCascade(
                     self.levels, cycle.backend, cycle.regularization,
                     first_level_solution="analytic" if cycle.analytic else None,
-                    fallback_backend=cycle.fallback_backend)
+                    fallback_backend=cycle.fallback_backend,
+                    backend_options=cycle.backend_options)
         return self._bound
 
     @staticmethod
@@ -422,12 +423,16 @@ class HierarchyCycle:
     engine : ``"native"`` (compiled rigid-body terms and rows; every task must be in ``KINDS``),
         ``"python"`` (``robot.update`` + :meth:`Formulation.solve`, the reference) or ``"auto"``
         (native when built and supported).
-    method, backend, fallback_backend, regularization : as :meth:`Formulation.solve`.
+    method, backend, fallback_backend, regularization, backend_options : as
+        :meth:`Formulation.solve` (``backend_options`` with scalar values, e.g. DAQP's
+        ``{"primal_tol": 1e-7}``); ``backend``, ``fallback_backend``, ``regularization`` and
+        ``backend_options`` may be changed between cycles.
     """
 
     def __init__(self, robot: Robot, stack: Stack, reduced: bool = True, engine: str = "auto",
                  method: str = "cascade", backend: str = "daqp",
-                 fallback_backend: str | None = "quadprog", regularization: float = 1e-6):
+                 fallback_backend: str | None = "quadprog", regularization: float = 1e-6,
+                 backend_options: dict | None = None):
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got '{engine}'")
         missing = unsupported_tasks(stack)
@@ -445,6 +450,7 @@ class HierarchyCycle:
         self.formulation = Formulation(robot, reduced=reduced)
         self.method, self.backend = method, backend
         self.fallback_backend, self.regularization = fallback_backend, regularization
+        self.backend_options = dict(backend_options or {})
         self.analytic = Formulation.analytic_first_level(stack) and method == "cascade"
         for task in stack.tasks():
             if reduced and isinstance(task, FullDynamics):
@@ -532,7 +538,8 @@ class HierarchyCycle:
             sol = self.formulation.solve(self.stack, variables, method=self.method,
                                          backend=self.backend, regularization=self.regularization,
                                          fallback_backend=self.fallback_backend,
-                                         diagnostics=diagnostics)
+                                         diagnostics=diagnostics,
+                                         backend_options=self.backend_options)
             sol.timings["update"] = t1 - t0
             sol.timings["total"] = time.perf_counter() - t0
             return sol
@@ -549,7 +556,7 @@ class HierarchyCycle:
         t_rows = time.perf_counter()
         result, status = solve_levels(program.levels, self.analytic, self.method, self.backend,
                                       self.regularization, self.fallback_backend,
-                                      program.bound(self))
+                                      program.bound(self), self.backend_options)
         t_solve = time.perf_counter()
         self.engine.recover(program.id, result.x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),

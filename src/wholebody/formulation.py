@@ -200,12 +200,13 @@ class Formulation:
     def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
               backend: str = "daqp", regularization: float = 1e-6,
               analytic_first_level: bool | None = None, fallback_backend: str | None = "quadprog",
-              diagnostics: bool = True) -> Solution:
+              diagnostics: bool = True, backend_options: dict | None = None) -> Solution:
         """Solve the stack at the robot's cached state (call ``robot.update`` first).
 
-        ``backend`` solves the QPs; if it fails, the cycle is solved again with
-        ``fallback_backend`` (each backend has rare failure modes of its own on these
-        ill-conditioned cascades — measured in ``benchmarks/bench_wbc.py``). ``diagnostics``
+        ``backend`` solves the QPs (``backend_options``: its settings, e.g. DAQP's
+        ``primal_tol``; see :func:`~wholebody.solvers.hierarchy.solve_hierarchy`); if it fails,
+        the cycle is solved again with ``fallback_backend`` (each backend has rare failure modes
+        of its own on these ill-conditioned cascades — measured in ``benchmarks/bench_wbc.py``). ``diagnostics``
         computes the per-task report (a few tens of µs). Never raises for numerical reasons: a
         failed solve returns ``ok=False`` with the reason and a torque computed from the best
         available solution, clipped to the torque limits. ``regularization`` is the eps of eq. 5
@@ -225,7 +226,7 @@ class Formulation:
                 raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque "
                                  "limits")
         result, status = solve_levels(levels, use_analytic, method, backend, regularization,
-                                      fallback_backend)
+                                      fallback_backend, backend_options=backend_options)
         t_solve = time.perf_counter()
         x = result.x * self.scales(variables)
         solution = self._recover(x, variables, result.ok, status, result.costs)
@@ -267,17 +268,19 @@ class Formulation:
 
 def solve_levels(levels: list[Level], analytic_first_level: bool, method: str, backend: str,
                  regularization: float, fallback_backend: str | None,
-                 bound: BoundCascade | None = None):
+                 bound: BoundCascade | None = None, backend_options: dict | None = None):
     """The levels solved as :meth:`Formulation.solve` does → (HierarchySolution, status): the
     analytic first level (eq. 17) when asked, a failed cascade level QP retried with
     ``fallback_backend`` (one QP, not the whole cascade again), other methods re-solved as a
     cascade with it. ``bound``: a :class:`BoundCascade` made with these same arguments on these
-    levels' arrays, used for the first attempt (a control loop's fast path)."""
+    levels' arrays, used for the first attempt (a control loop's fast path).
+    ``backend_options`` are ``backend``'s (not passed to the fallback backend)."""
     fls = "analytic" if analytic_first_level and method == "cascade" else None
     result = bound.solve() if bound is not None else solve_hierarchy(
         levels, method=method, backend=backend, regularization=regularization,
         first_level_solution=fls,
-        fallback_backend=fallback_backend if method == "cascade" else None)
+        fallback_backend=fallback_backend if method == "cascade" else None,
+        backend_options=backend_options)
     status = result.status
     retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
     if result.ok and retried:
