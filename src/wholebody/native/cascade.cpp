@@ -435,7 +435,8 @@ namespace daqp_c
   const Field kFields[] = {
     {"primal_tol", &Settings::primal_tol, nullptr}, {"dual_tol", &Settings::dual_tol, nullptr},
     {"zero_tol", &Settings::zero_tol, nullptr}, {"pivot_tol", &Settings::pivot_tol, nullptr},
-    {"progress_tol", &Settings::progress_tol, nullptr}, {"cycle_tol", nullptr, &Settings::cycle_tol},
+    {"progress_tol", &Settings::progress_tol, nullptr},
+    {"cycle_tol", nullptr, &Settings::cycle_tol},
     {"iter_limit", nullptr, &Settings::iter_limit}, {"fval_bound", &Settings::fval_bound, nullptr},
     {"eps_prox", &Settings::eps_prox, nullptr}, {"eta_prox", &Settings::eta_prox, nullptr},
     {"rho_soft", &Settings::rho_soft, nullptr}, {"rel_subopt", &Settings::rel_subopt, nullptr},
@@ -465,7 +466,8 @@ public:
     if (!handle)
       throw std::invalid_argument("DaqpSolver: " + module_path + " is not a loaded library");
     quadprog_ = reinterpret_cast<daqp_c::QuadprogFn>(dlsym(handle, "daqp_quadprog"));
-    const auto defaults = reinterpret_cast<daqp_c::DefaultsFn>(dlsym(handle, "daqp_default_settings"));
+    const auto defaults =
+      reinterpret_cast<daqp_c::DefaultsFn>(dlsym(handle, "daqp_default_settings"));
     dlclose(handle); // drops the reference taken above; the module stays loaded by Python
     if (!quadprog_ || !defaults)
       throw std::invalid_argument("DaqpSolver: " + module_path + " exports no DAQP C interface");

@@ -53,7 +53,8 @@ DAQP_EXIT = {  # DAQP's exit flags by name (daqp 0.11's constants.h)
     -7: "time limit",
     -8: "unsupported",
 }
-DAQP_DEFAULTS = {"primal_tol": 1e-9, "sing_tol": 1e-14}  # DAQP settings unless given (see solve_daqp)
+# DAQP's settings where the caller gives none (solve_daqp says why)
+DAQP_DEFAULTS = {"primal_tol": 1e-9, "sing_tol": 1e-14}
 DAQP_RAW_TOL = 1e-6  # largest violation of an unscaled row a DAQP solution may have
 
 
