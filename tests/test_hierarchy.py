@@ -799,7 +799,7 @@ def test_daqp_c_interface_is_refused_for_another_version_or_layout(monkeypatch, 
     import daqp
     import wholebody.solvers.hierarchy as h
     _daqp_in_run_or_skip()
-    request.addfinalizer(h._daqp_c_module.cache_clear)  # runs after monkeypatch's undo
+    request.addfinalizer(h._daqp_c_module.cache_clear)  # nothing stale left for other tests
     levels = random_hierarchy(np.random.default_rng(3))
     reference = solve_hierarchy(levels, backend="daqp")
     version = importlib.metadata.version
