@@ -1,42 +1,85 @@
-"""Interleaved A/B timing of two checkouts of wholebody (not a test).
+"""Interleaved A/B timing of two source trees of wholebody (not a test).
 
-Two source trees are imported under different names (symlinks ``wb_main``/``wb_speed`` in
-PKGS_DIR pointing at ``.../src/wholebody``) and solve the same moving states alternately in one
-process, so both see the same load on a shared machine; prints each one's percentiles and the
-median of the paired per-cycle ratios.
+Both trees are imported in one process under different package names (``wb_a``, ``wb_b``: symlinks
+made in a temporary folder) and solve the same moving states alternately, so both see the same load
+on a shared machine. Prints each one's percentiles and the median of the paired per-cycle ratios.
+Each tree needs its compiled modules built in place (``pip install -e`` there).
 
-    PKGS_DIR=/tmp/pkgs python benchmarks/bench_ab.py t2|t1 daqp|quadprog r|f [fallback|none] [cycles]
+    python benchmarks/bench_ab.py A/src/wholebody B/src/wholebody --case t2|t1 \
+        [--backend daqp|quadprog] [--full] [--fallback quadprog|none] [--cycles 2000]
 """
-import os, sys, time, importlib
+import argparse
+import importlib
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
 os.environ["OPENBLAS_NUM_THREADS"] = "1"
-sys.path.insert(0, os.environ.get("PKGS_DIR", "/tmp/pkgs"))
-import numpy as np
-case, backend, red = sys.argv[1], sys.argv[2], sys.argv[3] == "r"
-fallback = sys.argv[4] if len(sys.argv) > 4 and sys.argv[4] != "none" else None
-cycles = int(sys.argv[5]) if len(sys.argv) > 5 else 2000
-vers = {}
-for tag in ("wb_main", "wb_speed"):
+import numpy as np  # noqa: E402
+
+parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser.add_argument("a", type=Path, help="first package folder (…/src/wholebody)")
+parser.add_argument("b", type=Path, help="second package folder (…/src/wholebody)")
+parser.add_argument("--case", choices=("t2", "t1"), default="t1",
+                    help="t2: talos14 Table 2; t1: talos Table 1")
+parser.add_argument("--backend", default="daqp")
+parser.add_argument("--full", action="store_true", help="full formulation (default: reduced)")
+parser.add_argument("--fallback", default="quadprog", help="fallback backend or 'none'")
+parser.add_argument("--cycles", type=int, default=2000)
+args = parser.parse_args()
+fallback = None if args.fallback == "none" else args.fallback
+reduced = not args.full
+
+links = Path(tempfile.mkdtemp(prefix="wholebody-ab-"))
+for tag, tree in (("wb_a", args.a), ("wb_b", args.b)):
+    if not (tree / "__init__.py").exists():
+        parser.error(f"{tree} is not a wholebody package folder (no __init__.py)")
+    (links / tag).symlink_to(tree.resolve(), target_is_directory=True)
+sys.path.insert(0, str(links))
+
+versions = {}
+for tag in ("wb_a", "wb_b"):
     wb = importlib.import_module(tag)
     stacks = importlib.import_module(tag + ".control.stacks")
-    F = importlib.import_module(tag + ".formulation"); V = importlib.import_module(tag + ".variables")
-    r = wb.load_robot("talos14" if case == "t2" else "talos")
-    st = stacks.table2_stack(r, full=not red) if case == "t2" else stacks.table1_stack(r, r.contact_names, full=not red)
-    vers[tag] = (r, st, F.Formulation(r, reduced=red), V.Variables(r))
+    formulation = importlib.import_module(tag + ".formulation")
+    variables = importlib.import_module(tag + ".variables")
+    robot = wb.load_robot("talos14" if args.case == "t2" else "talos")
+    stack = (stacks.table2_stack(robot, full=not reduced) if args.case == "t2"
+             else stacks.table1_stack(robot, robot.contact_names, full=not reduced))
+    versions[tag] = (robot, stack, formulation.Formulation(robot, reduced=reduced),
+                     variables.Variables(robot))
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_wbc import moving_states
-states = list(moving_states(vers["wb_main"][0], cycles))
-T = {k: np.zeros((cycles, 4)) for k in vers}; fails = {k: 0 for k in vers}
-order = list(vers)
+from bench_wbc import moving_states  # noqa: E402
+
+states = list(moving_states(versions["wb_a"][0], args.cycles))
+times = {k: np.zeros((args.cycles, 4)) for k in versions}
+failures = {k: 0 for k in versions}
+order = list(versions)
 for i, (q, v) in enumerate(states):
     for tag in (order if i % 2 == 0 else order[::-1]):
-        r, st, f, var = vers[tag]
-        t0 = time.perf_counter(); r.update(q, v); t1 = time.perf_counter()
-        s = f.solve(st, var, backend=backend, fallback_backend=fallback, diagnostics=False)
+        robot, stack, form, var = versions[tag]
+        t0 = time.perf_counter()
+        robot.update(q, v)
+        t1 = time.perf_counter()
+        sol = form.solve(stack, var, backend=args.backend, fallback_backend=fallback,
+                         diagnostics=False)
         t2 = time.perf_counter()
-        T[tag][i] = (t1 - t0, s.timings["rows"], s.timings["solve"], t2 - t0); fails[tag] += not s.ok
-lab = f"{case} cascade/{backend}{'+' + fallback if fallback else ''} {'reduced' if red else 'full'}"
-for tag in vers:
-    t = T[tag] * 1e6; tot = t[:, 3]
-    print(f"{lab:34} {tag[3:]:5} median {np.median(tot):6.0f} p95 {np.percentile(tot,95):6.0f} p99 {np.percentile(tot,99):6.0f} max {tot.max():7.0f} | upd {np.median(t[:,0]):4.0f} rows {np.median(t[:,1]):4.0f} solve {np.median(t[:,2]):5.0f} | failed {fails[tag]}")
-ratio = T["wb_speed"][:, 3] / T["wb_main"][:, 3]
-print(f"{lab:34} speed/main: median of paired ratios {np.median(ratio):.2f}, ratio of medians {np.median(T['wb_speed'][:,3])/np.median(T['wb_main'][:,3]):.2f}   load {os.getloadavg()[0]:.1f}")
+        times[tag][i] = (t1 - t0, sol.timings["rows"], sol.timings["solve"], t2 - t0)
+        failures[tag] += not sol.ok
+
+label = (f"{args.case} cascade/{args.backend}{'+' + fallback if fallback else ''} "
+         f"{'reduced' if reduced else 'full'}")
+for tag in versions:
+    t = times[tag] * 1e6
+    total = t[:, 3]
+    print(f"{label:34} {tag[3:]:2} median {np.median(total):6.0f} p95 {np.percentile(total, 95):6.0f} "
+          f"p99 {np.percentile(total, 99):6.0f} max {total.max():7.0f} | update "
+          f"{np.median(t[:, 0]):4.0f} rows {np.median(t[:, 1]):4.0f} solve {np.median(t[:, 2]):5.0f}"
+          f" µs | failed {failures[tag]}")
+ratio = times["wb_b"][:, 3] / times["wb_a"][:, 3]
+print(f"{label:34} b/a: median of paired ratios {np.median(ratio):.2f}, ratio of medians "
+      f"{np.median(times['wb_b'][:, 3]) / np.median(times['wb_a'][:, 3]):.2f}   "
+      f"load {os.getloadavg()[0]:.1f}")

@@ -5,7 +5,7 @@ Random problems of realistic whole-body size: n = 50 variables, 4 levels, ~60 in
 then motion tasks with acceleration bounds, a posture task, a force regulariser). Every
 method/backend solves the same problems; we print median, p95, p99 and max wall time in µs.
 
-    cd /work/main && PYTHONPATH=src python benchmarks/bench_hierarchy.py [--solves 1000]
+    python benchmarks/bench_hierarchy.py [--solves 1000]     (from the project root, wholebody installed)
 """
 
 import os

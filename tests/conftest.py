@@ -34,3 +34,11 @@ def native_cycle_or_skip(module: str = "_passive_cycle"):
             pytest.skip(f"wholebody.{module} not built here (no C++ compiler '{compiler}' or "
                         "WHOLEBODY_NO_NATIVE set)", allow_module_level=True)
         raise
+
+
+def pytest_collection_modifyitems(config, items):
+    """Every test under tests/closed_loop/ runs the MuJoCo twin for seconds: marked slow, so the
+    fast subset is ``pytest -m "not slow"``."""
+    for item in items:
+        if "closed_loop" in item.path.parts:
+            item.add_marker(pytest.mark.slow)

@@ -465,7 +465,7 @@ class HierarchyCycle:
                 self._frames.setdefault(c.frame_id, len(self._frames))
             for task in stack.tasks():
                 if isinstance(task, FrameTask):
-                    fid = robot._frame_id(task.frame, f"task '{task.name}'.frame")
+                    fid = robot.frame_id(task.frame, f"task '{task.name}'.frame")
                     self._frames.setdefault(fid, len(self._frames))
             self.engine = _hierarchy_cycle.HierarchyCycle(self._spec())
 
@@ -504,13 +504,13 @@ class HierarchyCycle:
         return self.engine.h_G if self.native else self.robot.h_G.copy()
 
     def frame_index(self, frame: str) -> int:
-        return self._frames[self.robot._frame_id(frame, "frame")]
+        return self._frames[self.robot.frame_id(frame, "frame")]
 
     def frame_placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
         """(position, rotation) of a contact frame or a FrameTask's frame at the last state."""
         if not self.native:
             return self.robot.frame_placement(frame)
-        fid = self.robot._frame_id(frame, "frame")
+        fid = self.robot.frame_id(frame, "frame")
         if fid not in self._frames:
             raise ValueError(f"frame: '{frame}' is neither a contact's nor a FrameTask's frame")
         return self.engine.frame_placement(self._frames[fid])
@@ -563,7 +563,7 @@ class HierarchyCycle:
                                  (program.tau_lo, program.tau_hi), result.ok, status, result.costs,
                                  variables)
         if diagnostics:
-            solution.tasks = Formulation._task_reports(result.x, program.meta)
+            solution.tasks = Formulation.task_reports(result.x, program.meta)
         solution.timings = {"update": t1 - t0, "rows": t_rows - t1, "solve": t_solve - t_rows,
                             "total": time.perf_counter() - t0,
                             "qp": result.timings.get("qp", np.nan),

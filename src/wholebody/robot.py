@@ -23,7 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from .robots.description import ContactSpec, RobotDescription
-from .robots.torque_limits import TorqueLimits
+from .robots.torque_limits import TorqueProfile
 
 log = logging.getLogger(__name__)
 
@@ -94,7 +94,7 @@ class Robot:
         self.mass = float(pin.computeTotalMass(model))
 
         self.contacts: tuple[Contact, ...] = tuple(
-            Contact(spec, self._frame_id(spec.frame, f"contacts '{spec.name}'.frame"))
+            Contact(spec, self.frame_id(spec.frame, f"contacts '{spec.name}'.frame"))
             for spec in description.contacts)
         self.contact_names = tuple(c.name for c in self.contacts)
         self._contacts_by_name = {c.name: c for c in self.contacts}
@@ -116,7 +116,7 @@ class Robot:
         self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
         self.q_max = model.upperPositionLimit[FREE_FLYER_NQ:].copy()
         self.v_max = model.velocityLimit[FREE_FLYER_NV:].copy()
-        self.torque_limits = TorqueLimits(self.joint_names, model.effortLimit[FREE_FLYER_NV:],
+        self.torque_limits = TorqueProfile(self.joint_names, model.effortLimit[FREE_FLYER_NV:],
                                           description.torque_limits)
         self.q_ref = self._rest_on_ground(self._reduce_posture(full, model, q_posture))
 
@@ -185,7 +185,8 @@ class Robot:
             arm[FREE_FLYER_NV:] = float(armature)
         self.model.armature = arm
 
-    def _frame_id(self, frame: str, field: str) -> int:
+    def frame_id(self, frame: str, field: str = "frame") -> int:
+        """The model's id of ``frame``; ValueError naming ``field`` if the model has no such frame."""
         if not self.model.existFrame(frame):
             raise ValueError(f"robot '{self.name}': {field} = '{frame}' is not a frame of the model")
         return int(self.model.getFrameId(frame))
@@ -326,7 +327,7 @@ class Robot:
         """6×nv Jacobian [linear; angular] of ``frame`` (LOCAL_WORLD_ALIGNED), cached per cycle."""
         key = (frame, 0)
         if key not in self._frame_cache:
-            fid = self._frame_id(frame, "frame")
+            fid = self.frame_id(frame, "frame")
             self._frame_cache[key] = pin.getFrameJacobian(self.model, self.data, fid,
                                                           pin.LOCAL_WORLD_ALIGNED)
         return self._frame_cache[key]
@@ -335,19 +336,19 @@ class Robot:
         """Classical acceleration [linear; angular] of ``frame`` at zero qdd (J̇v), cached per cycle."""
         key = (frame, 1)
         if key not in self._frame_cache:
-            fid = self._frame_id(frame, "frame")
+            fid = self.frame_id(frame, "frame")
             self._frame_cache[key] = pin.getFrameClassicalAcceleration(
                 self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED).vector.copy()
         return self._frame_cache[key]
 
     def frame_placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
         """(position, rotation matrix) of ``frame`` in the world."""
-        oMf = self.data.oMf[self._frame_id(frame, "frame")]
+        oMf = self.data.oMf[self.frame_id(frame, "frame")]
         return oMf.translation.copy(), oMf.rotation.copy()
 
     def frame_velocity(self, frame: str) -> np.ndarray:
         """Spatial velocity [linear; angular] of ``frame`` (LOCAL_WORLD_ALIGNED)."""
-        return pin.getFrameVelocity(self.model, self.data, self._frame_id(frame, "frame"),
+        return pin.getFrameVelocity(self.model, self.data, self.frame_id(frame, "frame"),
                                     pin.LOCAL_WORLD_ALIGNED).vector.copy()
 
     def contact(self, name: str) -> Contact:

@@ -1,6 +1,6 @@
 """LQR design of the momentum feedback law (Herzog et al. 2016, Sect. 3.2).
 
-The centroidal model (eq. 21) with state ``s = [x_cog (3); h (6)]`` (``h = [h_lin; h_ang]``, the
+The centroidal model (eq. 21, :mod:`wholebody.control.momentum_model`) with state ``s = [x_cog (3); h (6)]`` (``h = [h_lin; h_ang]``, the
 linear and angular momentum about the CoM, world axes, as in eq. 19) and input ``u = lambda``
 (the stacked contact forces/wrenches, eq. 21's generalized external forces)::
 
@@ -38,11 +38,11 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from ..tasks.momentum import centroidal_map, skew
+from ..validation import contact_dims, positive, vector, weight_matrix
+from .momentum_model import STATE_DIM, MomentumModel, balancing_forces, momentum_model
 
 log = logging.getLogger(__name__)
 
-STATE_DIM = 9
 #: Herzog et al. 2016, Sect. 5.2.2 (eq. 26): state cost on [x_cog; h_lin; h_ang].
 DEFAULT_Q_DIAG = np.array([30.0, 30.0, 50.0, 0.5, 0.5, 0.5, 0.1, 0.1, 0.1])
 #: Herzog et al. 2016, Sect. 5.2.2 (eq. 26): input cost of one contact wrench [f; tau]; a point
@@ -56,58 +56,6 @@ DEFAULT_R_DIAG = np.array([0.1, 0.1, 0.01, 2.0, 2.0, 2.0])
 DEFAULT_INTEGRAL_LIMIT = 0.01
 
 
-# ---------------------------------------------------------------------------------------- helpers
-def _vector(value, size: int, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: expected a numeric vector of size {size}") from exc
-    if arr.shape != (size,):
-        raise ValueError(f"{name}: expected a vector of size {size}, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: contains NaN or inf")
-    return arr
-
-
-def _check_dims(dims, n_contacts: int | None, name: str = "dims") -> tuple[int, ...]:
-    try:
-        out = tuple(int(d) for d in dims)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: expected a list of per-contact dimensions (3 or 6)") from exc
-    if any(d not in (3, 6) for d in out):
-        raise ValueError(f"{name}: every contact dimension must be 3 (point force) or 6 (wrench), "
-                         f"got {list(out)}")
-    if n_contacts is not None and len(out) != n_contacts:
-        raise ValueError(f"{name}: {len(out)} entries for {n_contacts} contacts")
-    return out
-
-
-def _square(value, size: int, name: str, definite: bool) -> np.ndarray:
-    """A symmetric (size x size) weight from a matrix or the vector of its diagonal."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: expected a {size}x{size} matrix or its diagonal") from exc
-    if arr.shape == (size,):
-        arr = np.diag(arr)
-    if arr.shape != (size, size):
-        raise ValueError(f"{name}: expected a {size}x{size} matrix or a diagonal of size {size}, "
-                         f"got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: contains NaN or inf")
-    if not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12):
-        raise ValueError(f"{name}: must be symmetric")
-    arr = 0.5 * (arr + arr.T)
-    eig_min = float(np.linalg.eigvalsh(arr).min()) if size else 1.0
-    tol = 1e-12 * max(1.0, float(np.abs(arr).max()) if size else 1.0)
-    if definite and eig_min <= tol:
-        raise ValueError(f"{name}: must be positive definite (smallest eigenvalue {eig_min:.3g})")
-    if not definite and eig_min < -tol:
-        raise ValueError(f"{name}: must be positive semi-definite (smallest eigenvalue "
-                         f"{eig_min:.3g})")
-    return arr
-
-
 def contact_cost(dims: Sequence[int], R=None) -> np.ndarray:
     """Block-diagonal input cost of eq. 26 for contacts of dimensions ``dims``.
 
@@ -115,178 +63,9 @@ def contact_cost(dims: Sequence[int], R=None) -> np.ndarray:
     (default ``diag(.1, .1, .01, 2, 2, 2)``, Sect. 5.2.2). A 3D point contact uses its top-left 3x3
     block (the force part).
     """
-    dims = _check_dims(dims, None)
-    R6 = _square(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
+    dims = contact_dims(dims, None)
+    R6 = weight_matrix(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
     return scipy.linalg.block_diag(*[R6[:d, :d] for d in dims]) if dims else np.zeros((0, 0))
-
-
-def _weighted_least_norm(G: np.ndarray, w: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable)."""
-    L = np.linalg.cholesky(W)  # W = L L^T; lambda = L^-T mu, min |mu|
-    GL = np.linalg.solve(L, G.T).T  # G L^-T
-    mu, *_ = np.linalg.lstsq(GL, w, rcond=None)
-    return np.linalg.solve(L.T, mu)
-
-
-def _gravity_wrench(mass: float, gravity: float) -> np.ndarray:
-    """[m g; 0] of eq. 21 with g = (0, 0, -gravity)."""
-    return np.array([0.0, 0.0, -mass * gravity, 0.0, 0.0, 0.0])
-
-
-def _contact_positions(value, name: str = "contact_positions") -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: expected an (n_contacts, 3) array of positions") from exc
-    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] == 0:
-        raise ValueError(f"{name}: expected an (n_contacts, 3) array with n_contacts >= 1, "
-                         f"got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: contains NaN or inf")
-    return arr
-
-
-def _positive(value, name: str) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: expected a positive number, got {value!r}") from exc
-    if not np.isfinite(out) or out <= 0.0:
-        raise ValueError(f"{name}: expected a positive number, got {value!r}")
-    return out
-
-
-def _model_arguments(contact_positions, dims, com, mass, gravity):
-    """Validated (positions, dims, com, mass, gravity) of the centroidal model (eq. 21)."""
-    X = _contact_positions(contact_positions)
-    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
-    return X, dims, _vector(com, 3, "com"), _positive(mass, "mass"), _positive(gravity, "gravity")
-
-
-def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | None = None,
-                     gravity: float = 9.81, weight=None, hdot=None) -> np.ndarray:
-    """Contact forces that make eq. 21 give ``h' = hdot`` (default 0: gravity balanced).
-
-    The minimiser of ``lambda^T W lambda`` subject to ``G(com) lambda + [m g; 0] = hdot``, with
-    ``W = weight`` (n_lambda x n_lambda or its diagonal; default identity = the least-norm
-    distribution). If the wrench cannot be produced by these contacts (rank-deficient ``G``, e.g. a
-    single point foot not below the CoM) the least-squares solution is returned and a warning logged.
-    """
-    X, dims, com, mass, gravity = _model_arguments(contact_positions, dims, com, mass, gravity)
-    n = sum(dims)
-    W = np.eye(n) if weight is None else _square(weight, n, "weight", definite=True)
-    hdot = np.zeros(6) if hdot is None else _vector(hdot, 6, "hdot")
-    G = centroidal_map(X, com, dims)
-    w = hdot - _gravity_wrench(mass, gravity)
-    lam = _weighted_least_norm(G, w, W)
-    residual = float(np.linalg.norm(G @ lam - w))
-    if residual > 1e-6 * max(1.0, float(np.linalg.norm(w))):
-        log.debug("balancing_forces: the contacts cannot balance the wrench %s exactly "
-                    "(residual %.3g)", np.round(w, 3), residual)
-    fz = [lam[s + 2] for s in np.cumsum((0,) + dims[:-1])]
-    if min(fz) < 0.0:
-        log.debug("balancing_forces: negative normal force %s (CoM outside the support?)",
-                    np.round(fz, 3))
-    return lam
-
-
-# ---------------------------------------------------------------------------------- the model
-def centroidal_dynamics(s, lam, contact_positions, mass: float, dims: Sequence[int] | None = None,
-                        gravity: float = 9.81) -> np.ndarray:
-    """The nonlinear centroidal model s' = f(s, lambda) of eqs. 20-21 (contacts fixed in place)."""
-    X = _contact_positions(contact_positions)
-    dims = (6,) * len(X) if dims is None else _check_dims(dims, len(X))
-    s = _vector(s, STATE_DIM, "s")
-    lam = _vector(lam, sum(dims), "lam")
-    mass = _positive(mass, "mass")
-    gravity = _positive(gravity, "gravity")
-    G = centroidal_map(X, s[:3], dims)
-    return np.concatenate([s[3:6] / mass, G @ lam + _gravity_wrench(mass, gravity)])
-
-
-@dataclass(frozen=True)
-class MomentumModel:
-    """Linearised centroidal model ``s' ≈ A s + B lambda + c`` (Herzog et al. 2016, eq. 21).
-
-    Unpacks as ``A, B, c = model``. Also carries the linearisation point (``com0``, ``lambda0``),
-    the contact ``dims``, ``mass``, ``gravity`` and ``contact_positions``.
-    """
-
-    A: np.ndarray
-    B: np.ndarray
-    c: np.ndarray
-    com0: np.ndarray
-    lambda0: np.ndarray
-    dims: tuple[int, ...]
-    mass: float
-    gravity: float
-    contact_positions: np.ndarray
-
-    def __iter__(self):
-        return iter((self.A, self.B, self.c))
-
-    @property
-    def n_lambda(self) -> int:
-        return int(sum(self.dims))
-
-
-def momentum_model(contact_positions, com, mass: float, nominal_forces=None,
-                   gravity: float = 9.81, dims: Sequence[int] | None = None) -> MomentumModel:
-    """Linearise the centroidal model of eq. 21 at ``(x_cog0 = com, lambda0)``.
-
-    Parameters
-    ----------
-    contact_positions : (n_c, 3) positions ``x_i`` of the contact frame origins (world).
-    com : CoM position ``x_cog0`` at which to linearise.
-    mass : total mass ``m``.
-    nominal_forces : ``lambda0`` (size ``sum(dims)``); default: the least-norm distribution that
-        balances gravity, ``G(x_cog0) lambda0 + [m g; 0] = 0`` (see :func:`balancing_forces`).
-    gravity : magnitude of g; the gravity vector is ``(0, 0, -gravity)``.
-    dims : per-contact dimensions, 3 (point force) or 6 (wrench ``[f; tau]``); default all 6.
-
-    Returns
-    -------
-    MomentumModel ``(A, B, c)`` with state ``s = [x_cog; h_lin; h_ang]`` and input ``lambda`` such
-    that ``s' = A s + B lambda + c`` is the first-order expansion of eq. 21 at ``(s0, lambda0)``
-    (exact at that point; ``c = f(s0, lambda0) - A s0 - B lambda0``).
-
-    Derivation. ``x_cog' = h_lin / m`` is linear. ``h_lin' = sum f_i + m g`` is linear. The
-    angular rows ``h_ang' = sum_i (x_i - x_cog) × f_i + sum tau_i`` are bilinear in (x_cog, f_i);
-    with ``x_cog = x_cog0 + dx`` and ``f_i = f_i0 + df_i``::
-
-        (x_i - x_cog0 - dx) × (f_i0 + df_i)
-          ≈ (x_i - x_cog0) × f_i0 + (x_i - x_cog0) × df_i - dx × f_i0
-          = ... + [x_i - x_cog0]x df_i + [f_i0]x dx        (since -dx × f = f × dx)
-
-    so ``d h_ang' / d x_cog = + sum_i [f_i0]x = +[F0]x`` with ``F0`` the total nominal contact force
-    (``F0 = -m g = (0, 0, m |g|)`` when gravity is balanced), ``B = [0; G(x_cog0)]`` and::
-
-        A = [[0, I/m, 0],
-             [0,  0,  0],
-             [[F0]x, 0, 0]]
-
-    Moving the CoM by dx under unchanged contact forces changes the moment of those forces about
-    the CoM by ``F0 × dx`` (e.g. dx = +y with F0 = +z m|g| gives ``h_ang_x' = -m|g| dy``).
-    """
-    X, dims, com, mass, gravity = _model_arguments(contact_positions, dims, com, mass, gravity)
-    n = sum(dims)
-    if nominal_forces is None:
-        lam0 = balancing_forces(X, com, mass, dims, gravity)
-    else:
-        lam0 = _vector(nominal_forces, n, "nominal_forces")
-    G = centroidal_map(X, com, dims)
-    starts = np.cumsum((0,) + dims[:-1])
-    F0 = np.sum([lam0[s:s + 3] for s in starts], axis=0)
-
-    A = np.zeros((STATE_DIM, STATE_DIM))
-    A[0:3, 3:6] = np.eye(3) / mass
-    A[6:9, 0:3] = skew(F0)
-    B = np.zeros((STATE_DIM, n))
-    B[3:9] = G
-    s0 = np.concatenate([com, np.zeros(6)])
-    f0 = np.concatenate([np.zeros(3), G @ lam0 + _gravity_wrench(mass, gravity)])
-    c = f0 - A @ s0 - B @ lam0
-    return MomentumModel(A, B, c, com.copy(), lam0.copy(), dims, mass, gravity, X.copy())
 
 
 # ------------------------------------------------------------------------------------ the LQR
@@ -391,12 +170,12 @@ def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool 
         if n != STATE_DIM:
             raise ValueError(f"Q: no default for a {n}-dimensional state; pass Q")
         Q = DEFAULT_Q_DIAG
-    Q = _square(Q, n, "Q", definite=False)
+    Q = weight_matrix(Q, n, "Q", definite=False)
     if R is None:
         if not isinstance(model, MomentumModel):
             raise ValueError("R: no default without contact dims; pass R or a MomentumModel")
         R = contact_cost(model.dims)
-    R = _square(R, m, "R", definite=True)
+    R = weight_matrix(R, m, "R", definite=True)
     axes = None
     if _integral_weight(q_integral) is not None:
         if n < 3:
@@ -410,7 +189,7 @@ def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool 
             P = scipy.linalg.solve_continuous_are(A, B, Q, R)
             K = np.linalg.solve(R, B.T @ P)
         else:
-            dt = _positive(dt, "dt")
+            dt = positive(dt, "dt")
             E = np.zeros((n + m, n + m))
             E[:n, :n], E[:n, n:] = A, B
             Phi = scipy.linalg.expm(E * dt)
@@ -559,14 +338,14 @@ class MomentumLQR:
                  gravity: float | None = None, q_integral=None,
                  integral_limit: float = DEFAULT_INTEGRAL_LIMIT):
         self.contacts = self._check_contacts(robot, contacts)
-        self.Q = _square(DEFAULT_Q_DIAG if Q is None else Q, STATE_DIM, "Q", definite=False)
-        self.R = _square(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
-        self.dt = None if dt is None else _positive(dt, "dt")
+        self.Q = weight_matrix(DEFAULT_Q_DIAG if Q is None else Q, STATE_DIM, "Q", definite=False)
+        self.R = weight_matrix(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
+        self.dt = None if dt is None else positive(dt, "dt")
         if gravity is None:
             gravity = float(np.linalg.norm(robot.model.gravity.linear))
-        self.gravity = _positive(gravity, "gravity")
+        self.gravity = positive(gravity, "gravity")
         self.q_integral = _integral_weight(q_integral)
-        self.integral_limit = _positive(integral_limit, "integral_limit")
+        self.integral_limit = positive(integral_limit, "integral_limit")
         self._cache: dict[tuple[str, ...], ContactGains] = {}
 
     @property
@@ -576,7 +355,7 @@ class MomentumLQR:
 
     def clamp_integral(self, z) -> np.ndarray:
         """The CoG-error integral clamped elementwise to ``+-integral_limit`` (anti-windup)."""
-        return np.clip(_vector(z, 3, "integral"), -self.integral_limit, self.integral_limit)
+        return np.clip(vector(z, 3, "integral"), -self.integral_limit, self.integral_limit)
 
     @staticmethod
     def _check_contacts(robot, contacts) -> tuple[str, ...]:
@@ -651,9 +430,9 @@ class MomentumLQR:
         = hdot_ref`` with the robot's current contact positions; for a blend, the same weighted
         sum of its components' re-balanced forces (a leaving contact keeps its fading share).
         """
-        com_ref = _vector(com_ref, 3, "com_ref")
+        com_ref = vector(com_ref, 3, "com_ref")
         if hdot_ref is not None:
-            hdot_ref = _vector(hdot_ref, 6, "hdot_ref")
+            hdot_ref = vector(hdot_ref, 6, "hdot_ref")
         parts = gains.components or ((1.0, gains),)
         lam = np.zeros(gains.n_lambda)
         for w, g in parts:
@@ -681,8 +460,8 @@ class MomentumLQR:
         configuration). Shapes ``(n_lambda, 9)`` and ``(n_lambda,)`` in the order of the gains'
         contacts, ready for ``MomentumForce(K, k, contacts=gains.contacts)``.
         """
-        com_ref = _vector(com_ref, 3, "com_ref")
-        h_ref = np.zeros(6) if h_ref is None else _vector(h_ref, 6, "h_ref")
+        com_ref = vector(com_ref, 3, "com_ref")
+        h_ref = np.zeros(6) if h_ref is None else vector(h_ref, 6, "h_ref")
         if gains is None:
             gains = self.gains(robot, contacts)
         elif not isinstance(gains, ContactGains):

@@ -174,7 +174,7 @@ namespace wholebody_native
     model.armature = get_vector(spec, "armature", model.nv);
   }
 
-  // tau_max(q) of the actuated joints (wholebody.robots.torque_limits.TorqueLimits.upper without
+  // tau_max(q) of the actuated joints (wholebody.robots.torque_limits.TorqueProfile.upper without
   // its scale): the constant bound, replaced on the joints with a linkage profile
   // [a, b, force, q_peak] (Fahmi et al. 2019, eq. 15) evaluated at the joint positions.
   struct TorqueProfile

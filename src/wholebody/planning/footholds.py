@@ -109,11 +109,6 @@ class Footprint:
     def n_legs(self) -> int:
         return len(self.legs)
 
-    @property
-    def com_height(self) -> float:
-        """Nominal CoM height above the ground."""
-        return self.base_height + float(self.com[2])
-
     def centered_on_com(self) -> "Footprint":
         """The same stance shifted horizontally so that the feet's centroid lies under the CoM.
 

@@ -114,10 +114,6 @@ class GaitSchedule:
         """duty * period: how long ``leg`` stays in stance between two swings (T_stance)."""
         return self.duty[self.index(leg)] * self.period
 
-    def with_start(self, start: float) -> "GaitSchedule":
-        """The same gait starting at ``start`` (all legs in stance before it)."""
-        return dataclasses.replace(self, start=start)
-
     def _cycle(self, i: int, t: float) -> tuple[int, float]:
         x = (t - self.start) / self.period - self.offsets[i] + _EPS
         k = math.floor(x)
@@ -137,13 +133,6 @@ class GaitSchedule:
     def in_stance(self, leg: str | int, t: float) -> bool:
         """True if ``leg`` is (scheduled to be) on the ground at time ``t``."""
         return not self.in_swing(leg, t)
-
-    def contact_mask(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
-        """Boolean stance flags of all legs (order of ``legs``); written into ``out`` if given."""
-        out = np.empty(self.n_legs, dtype=bool) if out is None else out
-        for i in range(self.n_legs):
-            out[i] = not self.in_swing(i, t)
-        return out
 
     def stance_legs(self, t: float) -> tuple[str, ...]:
         return tuple(leg for i, leg in enumerate(self.legs) if not self.in_swing(i, t))

@@ -20,7 +20,7 @@ import numpy as np
 from .description import DescriptionError
 
 
-class TorqueLimits:
+class TorqueProfile:
     """Joint-dependent symmetric torque bounds for the actuated joints, in model joint order."""
 
     def __init__(self, joint_names: Sequence[str], urdf_max: np.ndarray,

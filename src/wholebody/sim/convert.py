@@ -70,9 +70,3 @@ def bias_to_pin(q: np.ndarray, v: np.ndarray, M_mj: np.ndarray, bias_mj: np.ndar
     tdot_v[:3] = T[:3, :3] @ np.cross(v[3:6], v[:3])
     return T.T @ (bias_mj + M_mj @ tdot_v)
 
-
-def generalized_force_to_mj(q: np.ndarray, f_pin: np.ndarray) -> np.ndarray:
-    """A generalised force in Pinocchio coordinates -> MuJoCo coordinates (f_mj = T^-T f_pin)."""
-    f = np.array(f_pin, dtype=float)
-    f[:3] = quat_to_matrix(q[3:7]) @ f_pin[:3]
-    return f

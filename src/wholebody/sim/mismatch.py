@@ -43,11 +43,6 @@ class Mismatch:
         if self.torque_delay < 0 or int(self.torque_delay) != self.torque_delay:
             raise ValueError("mismatch.torque_delay must be a whole number of steps >= 0")
 
-    @property
-    def is_exact(self) -> bool:
-        return (self.mass_scale == 1.0 and self.mass_noise == 0.0 and self.com_offset == 0.0
-                and self.torque_delay == 0 and self.torque_noise == 0.0 and self.joint_damping == 0.0)
-
     def link_perturbations(self, n_links: int) -> tuple[np.ndarray, np.ndarray]:
         """Per-link (mass factor, CoM offset vector) drawn from ``seed``."""
         rng = np.random.default_rng(self.seed)

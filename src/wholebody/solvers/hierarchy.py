@@ -1011,19 +1011,13 @@ def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, solve):
     state). The row values A u are the same in both parametrisations, so the backends'
     feasibility tolerances keep their meaning.
 
-    Measured: the 15 Nm torque step of the single-support scenario (t = 1.358 s, PD, DAQP) was
-    such a mis-solved QP, not a change of the problem: at level 3 DAQP on Hu (cond 1.8e13) put
-    the left sole's lateral CoP row (a level-2 row) into its active set, at 16× the true
-    optimum's cost (3.0e-4 vs 1.9e-5); the problem in w keeps only the right sole's row active
-    (left row 15.5 inside its bound), and 82 N no longer jump between the feet (largest
-    cycle-to-cycle torque change in [1.3, 1.4] s: 0.05 Nm).
-    DAQP without fallback used to fail on Table 1 (talos, double support, reduced: 210 instead
-    of 88 of 500 bench cycles, "infeasible"/"cycling" at level 4; quadprog and proxsuite solve
-    the same QPs). The failing QPs have 7 active rows, nearly (σ_min 3e-6) dependent after
-    normalisation: pivots ~1e-11 in DAQP's LDLᵀ, below its ``sing_tol`` (3.7e-11), so it took
-    them for dependent. With ``sing_tol`` 1e-14 and ``primal_tol`` 1e-9 (session 8,
-    ``backends.DAQP_DEFAULTS``) DAQP solves all 9366 level QPs of 2000 double- and 2000
-    single-support bench cycles (``test_daqp_settings_leave_no_table1_level_qp_to_the_fallback``).
+    On the normal equations a weakly weighted direction can put a row of a higher level into
+    the backend's active set at many times the true optimum's cost (a torque step between two
+    cycles whose states differ by rounding); the problem in w does not.
+    Nearly dependent active rows after normalisation give LDLᵀ pivots far below DAQP's stock
+    ``sing_tol``, which it then takes for dependent ("infeasible"): hence ``sing_tol`` 1e-14 and
+    ``primal_tol`` 1e-9 in ``backends.DAQP_DEFAULTS``
+    (``test_daqp_settings_leave_no_table1_level_qp_to_the_fallback``).
 
     ``s ≥ 0`` is not imposed: it holds at the optimum (a negative slack only tightens its row
     and costs s², so it is never better than s = 0).
