@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 import wholebody as wb
-from wholebody.control.lqr import (ContactGains, MomentumLQR, blend_gains, contact_cost,
-                                   lqr_gains, momentum_model)
+from wholebody.control.lqr import ContactGains, MomentumLQR, blend_gains, contact_cost, lqr_gains
+from wholebody.control.momentum_model import momentum_model
 from wholebody.tasks.momentum import MomentumForce
 from wholebody.variables import Variables
 
@@ -406,22 +406,54 @@ def simulate_biased(ctl, robot, pos, dims, true_mass, t_end, integral: bool):
     """Eq. 21 written in this file, for a robot whose true mass differs from the controller's
     model (gravity m_true g and x_cog' = h_lin / m_true): a constant unknown vertical force bias.
     The controller's force law is taken from ``ctl.feedback`` every evaluation; the integral z of
-    (x_cog - x_ref) is the ODE's 10th-12th state, clamped as the controller clamps it."""
+    (x_cog - x_ref) is the ODE's 10th-12th state. An axis of z that reaches the controller's clamp
+    stops growing there: the integration stops at that event and goes on with the axis frozen, so
+    the integrator never steps across the switch (an ODE with a discontinuous right-hand side)."""
     com_ref = robot.com.copy()
+    limit = ctl.integral_limit if integral else np.inf
+    frozen = np.zeros(3, dtype=bool)
 
     def rhs(_t, y):
         s, z = y[:9], y[9:]
         K, k = ctl.feedback(robot, com_ref, integral=z if integral else None)
-        dz = s[:3] - com_ref
-        zc = ctl.clamp_integral(z) if integral else z
-        dz = np.where(np.abs(z - zc) > 0, 0.0, dz)  # no further growth past the clamp
+        dz = np.where(frozen, 0.0, s[:3] - com_ref)
         return np.concatenate([centroidal_rhs(s, k - K @ s, pos, dims, true_mass), dz])
 
-    y0 = np.concatenate([com_ref, np.zeros(9)])
-    sol = solve_ivp(rhs, (0.0, t_end), y0, method="LSODA", rtol=1e-8, atol=1e-10,
-                    dense_output=True)
-    assert sol.success
-    return sol, com_ref
+    def reaches_clamp(axis):
+        def event(_t, y):
+            return 1.0 if frozen[axis] else limit - abs(y[9 + axis])
+        event.terminal = True
+        return event
+
+    events = [reaches_clamp(i) for i in range(3)] if integral else None
+    t0, y0, pieces = 0.0, np.concatenate([com_ref, np.zeros(9)]), []
+    while True:
+        sol = solve_ivp(rhs, (t0, t_end), y0, method="LSODA", rtol=1e-8, atol=1e-10,
+                        dense_output=True, events=events)
+        assert sol.success
+        pieces.append(sol)
+        if sol.status == 0:  # reached t_end
+            break
+        hit = [i for i in range(3) if sol.t_events[i].size]
+        frozen[hit] = True
+        t0, y0 = sol.t[-1], sol.y[:, -1].copy()
+        y0[9:] = np.clip(y0[9:], -limit, limit)
+    return _Joined(pieces), com_ref
+
+
+class _Joined:
+    """Several solve_ivp pieces as one solution: ``y`` of the last piece, ``sol(t)`` over all."""
+
+    def __init__(self, pieces):
+        self.pieces, self.y, self.success = pieces, pieces[-1].y, True
+
+    def sol(self, t):
+        t = np.atleast_1d(t)
+        out = np.empty((self.y.shape[0], t.size))
+        for piece in self.pieces:
+            inside = (t >= piece.t[0]) & (t <= piece.t[-1])
+            out[:, inside] = piece.sol(t[inside])
+        return out
 
 
 def test_integral_removes_cog_offset_of_a_mass_error(talos):
