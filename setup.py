@@ -1,13 +1,18 @@
-"""Builds the optional compiled parts (src/wholebody/native): the passive WBC's cycle, the
-hierarchical inverse dynamics' cycle (rigid-body terms and task rows) and the cascade of QPs (its
-level QPs are solved by the backends from Python). The rest of the package
-metadata is in pyproject.toml.
+"""Builds the optional compiled extensions from src/wholebody/native (the rest of the package
+metadata is in pyproject.toml):
+
+- ``wholebody._passive_cycle``: the passive WBC's whole cycle (``PassiveWBC(engine="native")``);
+- ``wholebody._hierarchy_cycle``: the rigid-body terms and task rows of ``HierarchyCycle``;
+- ``wholebody._cascade``: the cascade of QPs, which solves DAQP's level QPs itself and hands the
+  other backends' level QPs to Python.
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
-and ``cmeel-eigen``), so the extension links no Pinocchio library and needs no run-time path.
-The extension is optional: without a C++ compiler (or with WHOLEBODY_NO_NATIVE=1) the package
-installs without them: ``PassiveWBC(engine="native")`` then raises a clear error and the cascade
-runs in Python only (same results).
+and ``cmeel-eigen``; the cascade needs Eigen only), so the extensions link no Pinocchio library and
+need no run-time path. ``BuildExt`` adds ``-mavx2 -mfma`` when the building machine has AVX2 and
+FMA (``WHOLEBODY_PORTABLE=1`` builds for any x86-64 CPU). The extensions are optional: without a
+C++ compiler, without the headers or pybind11, or with ``WHOLEBODY_NO_NATIVE=1``, the package
+installs without them; ``engine="native"`` then raises a clear error and everything else runs in
+Python with the same results.
 """
 
 import os
@@ -71,7 +76,7 @@ def extensions() -> list[Extension]:
 def vector_flags(compiler) -> list[str]:
     """``-mavx2 -mfma`` when the building machine has AVX2 and FMA and the compiler takes them
     (checked by compiling a test file): Eigen's kernels then use 256-bit FMA instructions and the
-    compiled cascade is 10-15 % faster (talos Table 1 cycle, interleaved A/B, session 6).
+    compiled cascade runs faster.
     The extensions are built at install on the machine that runs them; set WHOLEBODY_PORTABLE=1
     to build for any x86-64 CPU (e.g. a wheel for other machines)."""
     if os.environ.get("WHOLEBODY_PORTABLE"):

@@ -49,6 +49,52 @@ class Stack:
                 return t
         raise ValueError(f"task: no task named '{name}' in the stack")
 
+    def locate(self, name: str) -> tuple[int, int]:
+        """(level index, position in the level) of the task named ``name``; ValueError if absent."""
+        for i, level in enumerate(self.levels):
+            for j, t in enumerate(level):
+                if t.name == name:
+                    return i, j
+        raise ValueError(f"task: no task named '{name}' in the stack")
+
+    def insert(self, level: int, task: Task, before: str | None = None,
+               after: str | None = None) -> Task:
+        """Add ``task`` to ``levels[level]`` (0 = the highest priority): at the end of the level, or
+        just before / after the task named ``before`` / ``after``, which must be on that level.
+        Task names stay unique (ValueError otherwise). Returns ``task``."""
+        if before is not None and after is not None:
+            raise ValueError("insert: give 'before' or 'after', not both")
+        if not 0 <= level < len(self.levels):
+            raise ValueError(f"insert: level {level} is not in 0..{len(self.levels) - 1}")
+        if any(t.name == task.name for t in self.tasks()):
+            raise ValueError(f"insert: the stack already has a task named '{task.name}'")
+        tasks = self.levels[level]
+        position = len(tasks)
+        anchor = before if before is not None else after
+        if anchor is not None:
+            i, j = self.locate(anchor)
+            if i != level:
+                raise ValueError(f"insert: task '{anchor}' is on level {i}, not {level}")
+            position = j if before is not None else j + 1
+        tasks.insert(position, task)
+        return task
+
+    def remove(self, name: str) -> Task:
+        """Remove the task named ``name`` and return it; a level left empty is an error."""
+        i, j = self.locate(name)
+        if len(self.levels[i]) == 1:
+            raise ValueError(f"remove: '{name}' is the only task of level {i}; a stack has no "
+                             f"empty level")
+        return self.levels[i].pop(j)
+
+    def replace(self, name: str, task: Task) -> Task:
+        """Put ``task`` in the place of the task named ``name`` and return the replaced task."""
+        i, j = self.locate(name)
+        if task.name != name and any(t.name == task.name for t in self.tasks()):
+            raise ValueError(f"replace: the stack already has a task named '{task.name}'")
+        old, self.levels[i][j] = self.levels[i][j], task
+        return old
+
     def table(self, robot: Robot, variables: Variables) -> str:
         """The stack as a table: rank, number of eq/ineq rows, task names (at the robot's state)."""
         lines = [f"{'rank':<5} {'rows':<14} task", "-" * 48]
@@ -127,39 +173,6 @@ class Formulation:
         return self._scales
 
     # ------------------------------------------------------------------ rows -> x
-    def map_rows(self, rows: TaskRows, variables: Variables, out: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
-        """(A_x, offset) with A y = A_x x + offset for the chosen (unscaled) decision vector.
-
-        ``out`` (rows.m x size, zero where the task has no block) is filled in place if given.
-        """
-        robot, nv, nl = self.robot, variables.nv, variables.n_lambda
-        A = np.zeros((rows.m, self.size(variables))) if out is None else out
-        offset = None
-        if rows.qdd is not None:
-            A[:, :nv] = rows.qdd
-        if rows.lam is not None:
-            A[:, nv:nv + nl] = rows.lam
-        if rows.tau is not None:
-            if self.reduced:  # eq. 14
-                J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
-                M_u, h_u = robot.M[FREE_FLYER_NV:], robot.h[FREE_FLYER_NV:]
-                if rows.tau_identity:
-                    tau_qdd, tau_lam, offset = M_u, -J_u.T, h_u
-                else:
-                    tau_qdd, tau_lam, offset = rows.tau @ M_u, -(rows.tau @ J_u.T), rows.tau @ h_u
-                if rows.qdd is None:
-                    A[:, :nv] = tau_qdd
-                else:
-                    A[:, :nv] += tau_qdd
-                if rows.lam is None:
-                    A[:, nv:nv + nl] = tau_lam
-                else:
-                    A[:, nv:nv + nl] += tau_lam
-            else:
-                A[:, nv + nl:] = rows.tau
-        return A, (np.zeros(rows.m) if offset is None else offset)
-
     def levels(self, stack: Stack, variables: Variables) -> tuple[list[Level], list[list[tuple]]]:
         """Solver levels over the scaled x, plus per level (task, kind, A, rhs...) for diagnostics.
 
@@ -232,7 +245,7 @@ class Formulation:
         x = result.x * self.scales(variables)
         solution = self._recover(x, variables, result.ok, status, result.costs)
         if diagnostics:
-            solution.tasks = self._task_reports(result.x, meta)
+            solution.tasks = self.task_reports(result.x, meta)
         solution.timings = {"rows": t_rows - t0, "solve": t_solve - t_rows,
                             "total": time.perf_counter() - t0,
                             "qp": result.timings.get("qp", np.nan),
@@ -250,7 +263,7 @@ class Formulation:
         return make_solution(qdd, lam, tau, robot.torque_bounds(), ok, status, costs, variables)
 
     @staticmethod
-    def _task_reports(x, meta, active_tol: float = 1e-7) -> list[TaskReport]:
+    def task_reports(x, meta, active_tol: float = 1e-7) -> list[TaskReport]:
         reports = []
         for rank, level_meta in enumerate(meta, start=1):
             for task, kind, A, first, second in level_meta:

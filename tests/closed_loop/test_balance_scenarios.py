@@ -11,8 +11,9 @@ import pinocchio as pin
 import pytest
 
 from wholebody.control.balance import CoMSineReference, MomentumBalance, SoleFrameReference
+from wholebody.planning.blend import WaypointMotion
 from wholebody.scenarios import get_scenario
-from wholebody.scenarios.platform import WaypointMotion, cop_in_sole
+from wholebody.scenarios.measures import cop_in_sole
 from wholebody.scenarios.tilt_board import BoardMotion
 
 
@@ -227,14 +228,9 @@ def test_squat_tracks_the_cog_sine_with_flat_feet(robots):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "paper claim (Sect. 5.3, Fig. 10) not reproduced on talos14: once the CoP rows (level 2) are "
-    "active, level 3 keeps the CoG on its reference (error < 1 mm) through angular momentum — the "
-    "base pitch acceleration grows to ~6 rad/s^2 within 0.75 s, the posture (weight 1e-1) cannot "
-    "compete with momentum rows at 1e4 — until a sole unloads (t ~ 0.87 s) and the robot falls; "
-    "measured with PD, margin 0.7, also with momentum weights (linear, angular) = (1, 1), (1, 0.1) "
-    "(earlier, with the single weight 1e4: PD and LQR, margins 0.6-0.8, daqp and quadprog). "
-    "Meanwhile opposite yaw moments of 100-2500 Nm appear on the soles (nothing in Table 2 bounds "
-    "them); FrictionCone(torsion=True) holds them at ~16 Nm, the fall is unchanged"))
+    "paper claim (Sect. 5.3, Fig. 10) not reproduced on talos14: with the CoP rows active the "
+    "momentum rows keep the CoG on its reference through trunk rotation until a sole unloads "
+    "and the robot falls (docs/results.md gives the numbers and the cause)"))
 def test_squat_with_active_cop_constraints_keeps_balance(robots):
     """Fig. 10: with the admissible CoP region shrunk (cop-active variant) the CoP constraints
     become active, the feet do not tilt and the CoG keeps tracking reasonably."""

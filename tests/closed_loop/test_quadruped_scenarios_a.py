@@ -13,7 +13,9 @@ from wholebody.control.passive import PassiveWBC
 from wholebody.planning.gait import crawl
 from wholebody.planning.planner import GaitPlanner
 from wholebody.robot import FREE_FLYER_NQ
-from wholebody.scenarios.friction_mismatch import crawl_run, slip_events, stance_phases
+from wholebody.scenarios.friction_mismatch import crawl_run
+from wholebody.scenarios.gait_measures import (intervals, outcome, settled_stance, slip_events,
+                                               stance_phases)
 from wholebody.scenarios.joint_limit import controller_joint_limits, limit_run, swing_tracking
 from wholebody.scenarios.regularization import grf_measures, regularization_run
 from wholebody.scenarios.weak_joint import leg_load, weak_joint_runs
@@ -42,6 +44,20 @@ def test_slip_events_threshold_duration_and_impact_skip():
     assert [(e["leg"], round(e["duration_s"], 3)) for e in events] == [(0, 0.04), (1, 0.04)]
     assert events[1]["start_after_touchdown_s"] == pytest.approx(0.02, abs=1e-9)
     assert [p[0] for p in stance_phases(t, stance)] == [0, 1]
+
+
+def test_intervals_settled_stance_and_outcome():
+    t = np.arange(10) * 0.25
+    flags = np.array([0, 1, 1, 0, 0, 1, 1, 1, 0, 0], dtype=bool)
+    assert intervals(t, flags) == [(0.25, 0.75), (1.25, 2.0)]
+    stance = np.stack([~flags, np.ones(10, dtype=bool)], axis=1)
+    settled = settled_stance(t, stance, skip=0.25)  # the first sample of each stance dropped
+    assert np.flatnonzero(settled[:, 0]).tolist() == [4, 9]
+    assert np.flatnonzero(settled[:, 1]).tolist() == list(range(1, 10))
+
+    class Run:
+        fell, failures, distance = False, np.int64(2), 0.5
+    assert outcome(Run) == {"fell": False, "failed_cycles": 2, "distance_m": 0.5}
 
 
 def test_controller_joint_limits_touch_only_the_controller_side(hyq):

@@ -10,12 +10,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from wholebody.control.passivity import (StorageMeter, SwingFeedForwardOff,
+                                         desired_generalized_velocity)
+from wholebody.planning.courses import CoursePlanner, build_course, gap_course, ramp_course
 from wholebody.planning.planner import GaitPlanner
 from wholebody.planning.trunk import VelocityCommand
-from wholebody.scenarios.courses import CoursePlanner, build_course, gap_course, ramp_course
-from wholebody.scenarios.locomotion import make_schedule, run_gait
-from wholebody.scenarios.passivity import (StorageMeter, SwingFeedForwardOff,
-                                           desired_generalized_velocity, energy_balance, summarize)
+from wholebody.scenarios.locomotion import course_environment, make_schedule, run_gait
+from wholebody.scenarios.passivity import energy_balance, summarize
 from wholebody.scenarios.unstable_foothold import PARAMETERS as UF_PARAMETERS
 from wholebody.scenarios.unstable_foothold import environment as stone_environment
 from wholebody.scenarios.unstable_foothold import stone_site, walk
@@ -50,7 +51,7 @@ def _ray_height(sim, x, y, top=3.0):
 def test_simulator_surface_is_the_planner_terrain(hyq, course):
     """Ray casts onto the twin's boxes give the planner's height everywhere (holes: no hit), and
     the planner's normal is the slope of the simulated surface."""
-    sim = Simulator(hyq, course.environment)
+    sim = Simulator(hyq, course_environment(course))
     for x in np.linspace(-1.5, 6.0, 301):
         for y in (-0.7, 0.3):
             z = _ray_height(sim, x, y)
@@ -124,7 +125,7 @@ def test_trot_climbs_a_15_degree_ramp_with_roll_pitch_error_below_0_2_rad(hyq):
         rpy.append((pin.rpy.matrixToRpy(np.asarray(ctrl.last_plan.trunk.rotation)),
                     pin.rpy.matrixToRpy(R)))
 
-    run = run_gait(hyq, "passive", duration=8.0, environment=course.environment,
+    run = run_gait(hyq, "passive", duration=8.0, environment=course_environment(course),
                    planner=planner, on_cycle=record)
     q, _ = run.sim.state()
     assert not run.fell and run.failures == 0
@@ -143,7 +144,7 @@ def test_crawl_front_legs_cross_the_gap_onto_the_step(hyq):
     course = gap_course(0.22, 0.07, x_start=0.5)
     command = VelocityCommand.speed_ramp(0.0, 0.1, 1.0, 3.0)
     planner = CoursePlanner.on_course(hyq, make_schedule("crawl", 1.0), command, course)
-    run = run_gait(hyq, "passive", duration=9.0, environment=course.environment,
+    run = run_gait(hyq, "passive", duration=9.0, environment=course_environment(course),
                    planner=planner)
     assert not run.fell and run.failures == 0
     a, b = course.gaps[0]

@@ -1,4 +1,4 @@
-"""robust-push: push recovery on mismatched twins (issue #4, Robustness).
+"""robust-push: push recovery on mismatched twins (Herzog et al. 2016, robustness of the momentum gains).
 
 The CoG judged is the simulated robot's own CoM (from the mismatched MuJoCo model), checked here
 against Pinocchio on the exact twin and shown to differ from the controller's estimate on a

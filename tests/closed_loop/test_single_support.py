@@ -8,25 +8,26 @@ import numpy as np
 import pytest
 
 from wholebody.scenarios import get_scenario
-from wholebody.scenarios.single_support import Timeline, smootherstep
+from wholebody.planning.blend import quintic_blend
+from wholebody.scenarios.single_support import timeline
 
 NO_EXTRAS = {"push_forces": "", "sine_time": "0", "settle": "0.5"}
 
 
-def test_smootherstep_has_zero_rate_and_acceleration_at_both_ends():
+def test_quintic_blend_has_zero_rate_and_acceleration_at_both_ends():
     for u in (0.0, 1.0):
-        _, ds, dds = smootherstep(u, 2.0)
+        _, ds, dds = quintic_blend(u, 2.0)
         assert ds == 0.0 and dds == 0.0
     h = 1e-6
-    s0, ds, dds = smootherstep(0.3, 2.0)
-    s1, ds1, _ = smootherstep(0.3 + h / 2.0, 2.0)
+    s0, ds, dds = quintic_blend(0.3, 2.0)
+    s1, ds1, _ = quintic_blend(0.3 + h / 2.0, 2.0)
     assert ds == pytest.approx((s1 - s0) / h, rel=1e-4)
     assert dds == pytest.approx((ds1 - ds) / h, rel=1e-4)
 
 
-def test_timeline_orders_the_phases():
+def test_timeline_orders_the_phases(robots):
     p = get_scenario("single-support").resolve({"push_forces": "50,150"})
-    tl = Timeline.from_params(p)
+    tl = timeline(robots["talos14"], p)
     assert tl.shift_end < tl.switch < tl.lift_end < tl.pushes[0][0] < tl.pushes[1][0]
     assert [f for _, f in tl.pushes] == [50.0, 150.0]
     assert tl.pushes[1][0] < tl.sine_start < tl.sine_push < tl.end

@@ -10,7 +10,8 @@ import pytest
 
 from wholebody.scenarios import get_scenario
 from wholebody.scenarios.loop import run_closed_loop
-from wholebody.scenarios.stepping import Stepping
+from wholebody.control.stepping import Stepping
+from wholebody.scenarios.stepping import config
 from wholebody.sim.simulator import Simulator
 
 SHORT = {"steps": "1", "shift_time": "1.0", "unload_time": "0.3", "lift_time": "0.4",
@@ -32,7 +33,8 @@ def run_to(robot, controller, end):
 def test_stepping_lifts_the_right_sole_and_formulations_agree(robots):
     robot = robots["talos"]
     params = get_scenario("stepping").validate(robot, SHORT)
-    reduced, full = Stepping(robot, params, reduced=True), Stepping(robot, params, reduced=False)
+    cfg = config(robot, params)
+    reduced, full = Stepping(robot, cfg, reduced=True), Stepping(robot, cfg, reduced=False)
     pairs = []
 
     class Paired:
@@ -70,8 +72,8 @@ def test_stepping_with_the_native_cycle_matches_python_in_closed_loop(robots):
     pytest.importorskip("wholebody._hierarchy_cycle")
     robot = robots["talos"]
     params = get_scenario("stepping").validate(robot, SHORT)
-    native = Stepping(robot, params, reduced=True, engine="native")
-    python = Stepping(robot, params, reduced=True, engine="python")
+    native = Stepping(robot, config(robot, params), reduced=True, engine="native")
+    python = Stepping(robot, config(robot, params), reduced=True, engine="python")
     assert all(c.native for c in native.cycles.values())
     diffs = []
 

@@ -21,6 +21,7 @@ def run(robot, controller, steps, push=None):
     return np.array(com_error), failures
 
 
+@pytest.mark.slow  # closed loop in the twin
 @pytest.mark.parametrize("gains", ["pd", "lqr"])
 def test_balance_holds_still(robots, gains):
     robot = robots["talos14"]
@@ -28,6 +29,7 @@ def test_balance_holds_still(robots, gains):
     assert failures == 0 and np.abs(err).max() < 1e-3
 
 
+@pytest.mark.slow  # closed loop in the twin
 def test_push_scenario_recovers_and_detects_a_fall(robots):
     """Sect. 5.2.2 protocol, one push: 100 N x 0.1 s (6.4 Ns, Δv = 0.07 m/s on 90 kg) from the
     front above the hip is survived (CoG back within 5 mm, feet flat and in place); 350 N is not,
@@ -49,6 +51,7 @@ def test_push_scenario_recovers_and_detects_a_fall(robots):
     assert not bad.success
 
 
+@pytest.mark.slow  # closed loop in the twin
 def test_push_series_table_and_claim(robots, tmp_path):
     """A one-point, one-force slice of the Sect. 5.2.2 protocol: both controllers run, Table 3 holds
     the strongest survived push per controller and point, the LQR-vs-PD claim is measured."""
@@ -105,6 +108,7 @@ def test_integral_action_is_accumulated_clamped_and_off_by_default(robots):
     assert np.abs(k0 - k_plain).max() > 1e-3  # the integral design also changes the state gains
 
 
+@pytest.mark.slow  # closed loop in the twin
 @pytest.mark.parametrize("gains", ["pd", "lqr"])
 def test_native_engine_gives_the_python_engines_torques_through_a_push(robots, gains):
     """MomentumBalance(engine="native") — the Table 2 stack solved by HierarchyCycle's compiled
@@ -132,3 +136,30 @@ def test_native_engine_gives_the_python_engines_torques_through_a_push(robots, g
         sim.step(sol.tau)
     assert max(diffs) < 1e-6, max(diffs)
     assert max(com_error) > 5e-3 and com_error[-1] < 5e-3
+
+
+def test_measures_tilt_slip_and_recovery():
+    """The shared measures: tilt of a rotation, horizontal slip, CoG recovery after a push."""
+    import pinocchio as pin
+
+    from wholebody.scenarios.measures import (COG_TOLERANCE_M, cog_recovered, feet_in_place,
+                                              sole_slip, tilt_deg)
+
+    assert tilt_deg(pin.rpy.rpyToMatrix(0.0, np.radians(3.0), 0.0)) == pytest.approx(3.0)
+    assert sole_slip(np.array([0.003, 0.004, 0.5]), np.zeros(3)) == pytest.approx(0.005)
+    assert feet_in_place(1.9, 0.009) and not feet_in_place(2.0, 0.0)
+    t = np.arange(0.0, 5.0, 0.001)
+    err = np.where((t > 0.6) & (t < 1.5), 2 * COG_TOLERANCE_M, 0.0)
+    recovered, recovery = cog_recovered(t, err, end=0.6)
+    assert recovered and recovery == pytest.approx(0.9, abs=2e-3)
+    assert not cog_recovered(t, np.full_like(t, 1.0), end=0.6)[0]
+
+
+def test_quintic_blend_scalar_and_array_agree():
+    from wholebody.planning.blend import quintic_blend
+
+    u = np.linspace(-0.5, 1.5, 41)
+    s, ds, dds = quintic_blend(u, 2.0)
+    for i, x in enumerate(u):
+        assert quintic_blend(float(x), 2.0) == (s[i], ds[i], dds[i])
+    assert quintic_blend(0.5) == (0.5, 1.875, 0.0)

@@ -31,6 +31,7 @@ def test_observer_converges_to_the_external_wrench_of_known_centroidal_dynamics(
                                                rel=1e-6)
 
 
+@pytest.mark.slow  # closed loop in the twin
 def test_observer_rejects_a_constant_push_on_hyq_in_the_twin(robots):
     """A constant 80 N lateral push on the trunk for 2 s while HyQ stands: with the observer the
     estimate finds the push (the controller is not told about it) and the CoM offset that the

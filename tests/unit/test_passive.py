@@ -175,6 +175,7 @@ def test_point_feet_required(robots):
         PassiveWBC(robots["talos14"])
 
 
+@pytest.mark.slow  # closed loop in the twin
 @pytest.mark.parametrize("controller", ["passive", "quasi-static"])
 def test_crawl_in_the_twin(robots, controller):
     """Closed loop, 250 Hz WBC / 1 kHz twin: HyQ crawls forward without falling or slipping; the

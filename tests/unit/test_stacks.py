@@ -81,6 +81,7 @@ def test_table4_single_support_with_lqr_placeholder(robots):
         Formulation(robot).solve(table4_stack(robot, ["left_sole"], lqr=True), variables)
 
 
+@pytest.mark.slow  # closed loop in the twin
 @pytest.mark.parametrize("name", ["talos14", "hyq"])
 def test_table2_hierarchy_stands_in_twin(robots, name):
     """Closed loop in MuJoCo, the hierarchy's torques as the only command (no joint PD, as in the

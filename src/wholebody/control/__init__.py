@@ -1,12 +1,29 @@
 """Controllers and their building blocks: each controller turns a robot state into joint torques
-(``compute(q, v, t)``); ``stacks`` builds the hierarchies of Herzog et al. 2016; ``lqr`` computes
-its momentum gains."""
+(``compute(q, v, t)``).
 
+- humanoid (Herzog et al. 2016): :class:`MomentumBalance` (Tables 1/2/4 with PD or LQR momentum
+  gains), :class:`ContactSwitch` (double -> single support), :class:`Stepping`; ``stacks`` builds
+  the hierarchies, ``lqr`` and ``momentum_model`` the momentum gains;
+- quadruped (Fahmi et al. 2019): :class:`PassiveWBC` and the :class:`QuasiStaticController`
+  baseline;
+- any robot: :class:`StandingController`.
+"""
+
+from .balance import MomentumBalance, lqr_q
 from .base import ControlResult
-from .lqr import MomentumLQR, lqr_gains, momentum_model
+from .contact_switch import ContactSwitch, ContactSwitchConfig
+from .lqr import MomentumLQR, lqr_gains
+from .momentum_model import momentum_model
 from .observer import MomentumObserver
+from .passive import PassiveConfig, PassiveWBC, SwingGains
+from .passivity import StorageMeter, SwingFeedForwardOff
+from .quasi_static import QuasiStaticController
 from .stacks import table1_stack, table2_stack, table4_stack
 from .standing import StandingController
+from .stepping import Stepping, SteppingConfig
 
-__all__ = ["ControlResult", "MomentumLQR", "MomentumObserver", "lqr_gains", "momentum_model", "StandingController",
-           "table1_stack", "table2_stack", "table4_stack"]
+__all__ = ["ContactSwitch", "ContactSwitchConfig", "ControlResult", "MomentumBalance",
+           "MomentumLQR", "MomentumObserver", "PassiveConfig", "PassiveWBC",
+           "QuasiStaticController", "StandingController", "StorageMeter", "SwingFeedForwardOff", "Stepping", "SteppingConfig",
+           "SwingGains", "lqr_gains", "lqr_q", "momentum_model", "table1_stack", "table2_stack",
+           "table4_stack"]

@@ -28,7 +28,8 @@ from ..cycle import HierarchyCycle
 from ..formulation import Formulation, Solution
 from ..robot import Robot
 from ..variables import Variables
-from .lqr import DEFAULT_INTEGRAL_LIMIT, MomentumLQR
+from ..planning.blend import quintic_blend
+from .lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_DIAG, MomentumLQR
 from .stacks import ANGULAR_MOMENTUM_WEIGHT, table2_stack
 
 GAINS = ("lqr", "pd")
@@ -46,16 +47,10 @@ class BalanceReference:
     base: np.ndarray | None = None
 
 
-def _smoothstep_terms(s: float, duration: float) -> tuple[float, float, float]:
-    """Quintic ramp 0 -> 1 over ``duration`` and its first two time derivatives at s = t/duration."""
-    if s <= 0.0 or duration <= 0.0:
-        return (0.0 if duration > 0.0 else 1.0), 0.0, 0.0
-    if s >= 1.0:
-        return 1.0, 0.0, 0.0
-    e = s ** 3 * (10 - 15 * s + 6 * s ** 2)
-    de = 30 * s ** 2 * (1 - s) ** 2 / duration
-    dde = 60 * s * (1 - s) * (1 - 2 * s) / duration ** 2
-    return e, de, dde
+def lqr_q(q_angular: float) -> np.ndarray:
+    """Eq. 26's Q (:data:`~wholebody.control.lqr.DEFAULT_Q_DIAG`) with the angular-momentum weight
+    replaced by ``q_angular``."""
+    return np.diag(np.r_[DEFAULT_Q_DIAG[:6], [q_angular] * 3])
 
 
 class CoMSineReference:
@@ -91,7 +86,7 @@ class CoMSineReference:
         tau = t - self.start
         if tau <= 0.0:
             return self.x0.copy(), np.zeros(3), np.zeros(3)
-        e, de, dde = _smoothstep_terms(tau / self.ramp if self.ramp > 0 else 1.0, self.ramp)
+        e, de, dde = quintic_blend(tau / self.ramp, self.ramp) if self.ramp > 0 else (1.0, 0.0, 0.0)
         w = 2 * np.pi * self.frequency
         s, c = np.sin(w * tau), np.cos(w * tau)
         a = self.amplitude

@@ -13,12 +13,12 @@ from __future__ import annotations
 import logging
 import time
 
-import daqp
 import numpy as np
 import pinocchio as pin
 
 from ..formulation import Solution, TaskReport
 from ..robot import Robot
+from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE, solve_daqp_qp
 from ..tasks.contact import friction_faces, tangent_basis
 from ..tasks.limits import TorqueLimits
 from ..tasks.wrench import TrunkImpedance, contact_wrench_map
@@ -26,8 +26,6 @@ from .base import PlannedController
 from .passive import default_planner
 
 log = logging.getLogger(__name__)
-
-_EQ, _FREE = 5, 0
 
 
 class QuasiStaticController(PlannedController):
@@ -89,16 +87,17 @@ class QuasiStaticController(PlannedController):
                 up[n + rr:n + rr + 4], lo[n + rr:n + rr + 4] = 0.0, -np.inf
                 up[n + rr + 4], lo[n + rr + 4] = self.f_max, self.f_min
                 up[fi:fi + 3], lo[fi:fi + 3] = np.inf, -np.inf
-                sense[fi:fi + 3] = _FREE
-                H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * (np.outer(t1, t1) + np.outer(t2, t2))
+                sense[fi:fi + 3] = FREE
+                tangential = np.outer(t1, t1) + np.outer(t2, t2)
+                H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * tangential
             else:
                 up[n + rr:n + rr + 5], lo[n + rr:n + rr + 5] = np.inf, -np.inf
                 up[fi:fi + 3] = lo[fi:fi + 3] = 0.0
-                sense[fi:fi + 3] = _EQ
-        x, _, flag, _ = daqp.solve(H, g, self.A, up, lo, sense)
+                sense[fi:fi + 3] = EQ
+        result = solve_daqp_qp(H, g, self.A, up, lo, sense)
         t1 = time.perf_counter()
-        ok = flag in (1, 2) and np.all(np.isfinite(x))
-        F = np.array(x) if ok else np.zeros(nf)
+        ok = result.ok
+        F = np.array(result.x) if ok else np.zeros(nf)
         gravity = pin.computeGeneralizedGravity(robot.model, robot.data, robot.q)[6:]
         tau = gravity - J[:, 6:].T @ F
         swing_errors = []
@@ -110,10 +109,11 @@ class QuasiStaticController(PlannedController):
             pos = robot.data.oMf[robot.contact(name).frame_id].translation
             error = plan.foot_position[leg] - pos
             force = self.swing_K * error + self.swing_D * (plan.foot_velocity[leg] - Ji @ robot.v)
-            tau += Ji[:, 6:].T @ force  # eq. 5 (no feed-forward): only this leg's columns are nonzero
-            swing_errors.append(TaskReport(f"swing {name}", 1, "eq", 3, float(np.linalg.norm(error))))
+            tau += Ji[:, 6:].T @ force  # eq. 5, no feed-forward (only this leg's columns nonzero)
+            swing_errors.append(TaskReport(f"swing {name}", 1, "eq", 3,
+                                           float(np.linalg.norm(error))))
         lo_tau, hi_tau = self.torque_limits.bounds(robot)
-        status = "solved" if ok else f"daqp exit flag {flag}: zero forces"
+        status = "solved" if ok else f"{result.status}: zero forces"
         if not ok:
             log.warning("quasi-static cycle %d: %s", robot.cycle, status)
         tau = np.clip(tau, lo_tau, hi_tau)

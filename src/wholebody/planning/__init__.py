@@ -17,6 +17,7 @@ Typical use::
     plan.contact, plan.foot_position, plan.trunk.position, plan.trunk.rotation, ...
 """
 
+from .courses import Course, CoursePlanner, build_course, gap_course, ramp_course
 from .footholds import Foothold, Footprint, raibert_foothold
 from .gait import HYQ_LEGS, GaitEvent, GaitSchedule, Swing, crawl, stand, trot
 from .planner import GaitPlanner, PlanState
@@ -24,10 +25,9 @@ from .swing import SwingTrajectory, quintic_blend, swing_trajectory
 from .terrain import Terrain
 from .trunk import CrawlSway, TrunkReference, TrunkState, VelocityCommand
 
-FootstepPlanner = GaitPlanner  # alias
-
 __all__ = [
-    "CrawlSway", "Foothold", "Footprint", "FootstepPlanner", "GaitEvent", "GaitPlanner",
+    "Course", "CoursePlanner", "build_course", "gap_course", "ramp_course",
+    "CrawlSway", "Foothold", "Footprint", "GaitEvent", "GaitPlanner",
     "GaitSchedule", "HYQ_LEGS", "PlanState", "Swing", "SwingTrajectory", "Terrain",
     "TrunkReference", "TrunkState", "VelocityCommand", "crawl", "quintic_blend",
     "raibert_foothold", "stand", "swing_trajectory", "trot",

@@ -19,7 +19,6 @@ time it is in stance (a tolerance of 1e-9 cycle absorbs rounding).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence

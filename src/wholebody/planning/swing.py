@@ -16,20 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .blend import quintic_blend
 
-def quintic_blend(u):
-    """Minimum-jerk blend s(u) = 10u^3 - 15u^4 + 6u^5 and its first two derivatives in u.
+__all__ = ["SwingTrajectory", "quintic_blend", "swing_trajectory"]
 
-    ``u`` is clipped to [0, 1] (outside it the blend is held: s' = s'' = 0). Scalar or array in,
-    same shape out.
-    """
-    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
-    u2 = u * u
-    u3 = u2 * u
-    s = u3 * (10.0 + u * (-15.0 + 6.0 * u))
-    ds = 30.0 * u2 * (1.0 - u) ** 2
-    dds = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u)
-    return s, ds, dds
+_blend_scalar = quintic_blend  # the scalar form, still imported by planning.trunk
 
 
 class SwingTrajectory:
@@ -93,7 +84,7 @@ class SwingTrajectory:
         """Scalar-time evaluation written into three preallocated 3-vectors (for control loops)."""
         T = self.duration
         tau = min(max((t - self.t0) / T, 0.0), 1.0)
-        s, ds, dds = _blend_scalar(tau)
+        s, ds, dds = quintic_blend(tau)
         pos[0] = self.p0[0] + s * self._dxy[0]
         pos[1] = self.p0[1] + s * self._dxy[1]
         vel[0] = ds / T * self._dxy[0]
@@ -104,7 +95,7 @@ class SwingTrajectory:
             base, delta, sigma = self.p0[2], self._rise, 2.0 * tau
         else:
             base, delta, sigma = self.apex_height, self._fall, 2.0 * tau - 1.0
-        s, ds, dds = _blend_scalar(sigma)
+        s, ds, dds = quintic_blend(sigma)
         pos[2] = base + delta * s
         vel[2] = delta * ds * (2.0 / T)
         acc[2] = delta * dds * (4.0 / T**2)
@@ -117,13 +108,6 @@ class SwingTrajectory:
 
     def acceleration(self, t):
         return self.evaluate(t)[2]
-
-
-def _blend_scalar(u: float) -> tuple[float, float, float]:
-    u = min(max(u, 0.0), 1.0)
-    v = 1.0 - u
-    return (u * u * u * (10.0 + u * (-15.0 + 6.0 * u)), 30.0 * u * u * v * v,
-            60.0 * u * v * (1.0 - 2.0 * u))
 
 
 def swing_trajectory(p0, p1, duration: float, t, clearance: float = 0.1):

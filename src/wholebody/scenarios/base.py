@@ -50,6 +50,28 @@ def check_engine(params: dict) -> None:
     if engine not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{engine}'")
 
+
+#: eq. 26's angular-momentum weight of the LQR cost, for the momentum-balance scenarios
+Q_ANGULAR = Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)")
+
+
+def duration_parameter(default: float, help: str = "simulated time (s)") -> Parameter:
+    """The ``duration`` parameter (simulated time) with a scenario's default."""
+    return Parameter("duration", default, help)
+
+
+def check_biped(robot, params: dict) -> None:
+    """ValueError unless the engine is known and ``robot`` has exactly two rectangular soles."""
+    check_engine(params)
+    if len(robot.contact_names) != 2 or any(c.spec.type != "rectangle" for c in robot.contacts):
+        raise ValueError(f"robot '{robot.name}': momentum balance on a board needs a biped with "
+                         f"two rectangular soles (talos14, talos)")
+
+
+def format_mm(value) -> str:
+    """A length in m as millimetres with one decimal for notes ("n/a" for None)."""
+    return "n/a" if value is None else f"{1000 * value:.1f}"
+
 @dataclass
 class ScenarioResult:
     """What a scenario run produced: success, metrics, the simulation log and figure paths."""

@@ -19,16 +19,17 @@ import numpy as np
 
 from ..control.passive import ENGINES
 from ..planning.trunk import VelocityCommand
-from ..report.plots import time_series_figure
+from ..report.locomotion_figures import crawl_tracking_figure
 from .base import Parameter, Scenario, ScenarioResult
-from .locomotion import run_gait
+from .gait_measures import outcome
+from .locomotion import GAIT, check_gait, check_quadruped, run_gait
 
 PARAMETERS = (
     Parameter("speed_start", 0.04, "forward speed at the start of the ramp (m/s)"),
     Parameter("speed_end", 0.15, "forward speed at the end of the ramp (m/s)"),
     Parameter("ramp_time", 10.0, "duration of the speed ramp (s), after 1 s of standing"),
     Parameter("duration", 12.0, "simulated time (s)"),
-    Parameter("gait", "crawl", "crawl or trot"),
+    GAIT,
     Parameter("engine", "python", "passive WBC engine: python, or native (the compiled cycle)"),
 )
 
@@ -42,11 +43,8 @@ def commanded_distance(params: dict) -> float:
 
 
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': the crawl scenario needs a quadruped with point "
-                         "feet (hyq)")
-    if params["gait"] not in ("crawl", "trot"):
-        raise ValueError(f"--set gait: expected crawl or trot, got '{params['gait']}'")
+    check_quadruped(robot, "the crawl scenario")
+    check_gait(params)
     if params["engine"] not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
 
@@ -62,9 +60,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     expected = commanded_distance(params)
     metrics, success, notes = {}, True, []
     for name, r in runs.items():
-        statuses = [s for s in r.log["ok"] if not s]
-        metrics[name] = {**r.tracking(t_from=1.0), "fell": r.fell, "failed_cycles": len(statuses),
-                         "distance_m": r.distance, "commanded_distance_m": expected,
+        metrics[name] = {**r.tracking(t_from=1.0), **outcome(r), "commanded_distance_m": expected,
                          "max_stance_slip_m": float(r.stance_slip().max()),
                          "cycle_time_median_us": float(np.median(r.log["cycle_time"]) * 1e6)}
         success &= (not r.fell) and r.failures == 0 and r.distance > 0.5 * expected
@@ -81,16 +77,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                      f"({100 * ang:+.0f} %); paper: ~50 % reduction")
     figures = []
     if out_dir is not None:
-        t = next(iter(runs.values())).log["t"]
-        n = min(len(r.log["t"]) for r in runs.values())
-        panels = [("linear trunk error (Fig. 5 top)", "||e_x|| (m)",
-                   {k: np.linalg.norm(r.log["com_error"][:n], axis=1) for k, r in runs.items()}),
-                  ("angular trunk error (Fig. 5 bottom)", "||e_theta|| (rad)",
-                   {k: np.linalg.norm(r.log["orientation_error"][:n], axis=1)
-                    for k, r in runs.items()})]
-        figures.append(str(time_series_figure(Path(out_dir) / "crawl_tracking.png", t[:n], panels,
-                                              f"HyQ {params['gait']}, speed ramp "
-                                              f"{params['speed_start']}->{params['speed_end']} m/s")))
+        figures.append(str(crawl_tracking_figure(
+            Path(out_dir) / "crawl_tracking.png", runs, f"HyQ {params['gait']}, speed ramp "
+            f"{params['speed_start']}->{params['speed_end']} m/s")))
     return ScenarioResult("crawl", robot.name, controller, success, metrics, params, notes,
                           figures=figures)
 

@@ -39,20 +39,21 @@ from pathlib import Path
 
 import numpy as np
 
-from ..planning.trunk import VelocityCommand
-from ..report.plots import time_series_figure
+from ..report.locomotion_figures import friction_mismatch_figure
 from ..sim.environment import Environment
 from .base import Parameter, Scenario, ScenarioResult
-from .locomotion import run_gait
+from .gait_measures import IMPACT_SKIP, outcome, settled_stance, slip_events
+from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_positive, check_quadruped, run_gait,
+                         steady_command)
 
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
     Parameter("floor_mu", 0.4, "friction coefficient of the simulated floor"),
     Parameter("controller_mu", 1.0, "friction coefficient in the WBC's cones (the wrong estimate)"),
-    Parameter("speed", 0.11, "forward crawl speed (m/s), reached 1 s after the gait starts"),
+    CRAWL_SPEED,
     Parameter("fast_speed", 0.16, "speed of the corrected-mu run at higher speed (m/s)"),
-    Parameter("duration", 10.0, "simulated time per run (s); the crawl starts at 1 s"),
+    RUN_DURATION,
     Parameter("K_st", 200.0, "stance-task stiffness of eq. 32 (1/s^2) in the stance-task runs"),
     Parameter("D_st", 30.0, "stance-task damping of eq. 32 (1/s)"),
     Parameter("slip_speed", 0.02, "slip-event threshold on the contact-point speed (m/s)"),
@@ -60,51 +61,14 @@ PARAMETERS = (
     Parameter("slip_bound", 0.25, "largest per-stance slip (m) accepted as 'bounded'"),
 )
 
-IMPACT_SKIP = 0.02  # s after touchdown ignored by the slip measures (impact)
-
-
-def stance_phases(t: np.ndarray, stance: np.ndarray) -> list[tuple[int, int, int]]:
-    """(leg, first index, end index) of every stance phase in a (cycles, legs) stance-flag log."""
-    out = []
-    for leg in range(stance.shape[1]):
-        col = np.concatenate([[False], stance[:, leg].astype(bool), [False]])
-        edges = np.flatnonzero(np.diff(col.astype(int)))
-        out.extend((leg, int(a), int(b)) for a, b in zip(edges[::2], edges[1::2]))
-    return out
-
-
-def slip_events(log: dict, slip_speed: float = 0.02, slip_time: float = 0.02,
-                skip: float = IMPACT_SKIP) -> list[dict]:
-    """Slip events (see the module docstring) from a :class:`GaitRun` log: each with the leg, the
-    touchdown time, the start relative to touchdown, the duration and the peak speed."""
-    t, speed = log["t"], log["contact_speed"]
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    events = []
-    for leg, a, b in stance_phases(t, log["stance"]):
-        k0 = a + int(np.searchsorted(t[a:b], t[a] + skip - 1e-9))
-        fast = speed[k0:b, leg] > slip_speed
-        col = np.concatenate([[False], fast, [False]]).astype(int)
-        edges = np.flatnonzero(np.diff(col))
-        for s, e in zip(edges[::2], edges[1::2]):
-            duration = (e - s) * period
-            if duration >= slip_time - 1e-9:
-                events.append({"leg": leg, "touchdown_s": float(t[a]),
-                               "start_after_touchdown_s": float(t[k0 + s] - t[a]),
-                               "duration_s": float(duration),
-                               "peak_speed_m_s": float(speed[k0 + s:k0 + e, leg].max())})
-    return events
-
 
 def slip_metrics(run, params: dict, commanded: float) -> dict:
     """Fall, cycles, distance, tracking and slip measures of one :class:`GaitRun`."""
     events = slip_events(run.log, params["slip_speed"], params["slip_time"])
     slip = run.stance_slip(skip=IMPACT_SKIP)
-    t, speed, stance = run.log["t"], run.log["contact_speed"], run.log["stance"]
-    late = np.zeros_like(stance, dtype=bool)
-    for leg, a, b in stance_phases(t, stance):
-        late[a:b, leg] = t[a:b] - t[a] >= IMPACT_SKIP
-    return {"fell": run.fell, "failed_cycles": int(np.sum(~run.log["ok"].astype(bool))),
-            "distance_m": run.distance, "commanded_distance_m": commanded,
+    speed = run.log["contact_speed"]
+    late = settled_stance(run.log["t"], run.log["stance"])
+    return {**outcome(run), "commanded_distance_m": commanded,
             **run.tracking(t_from=1.0),
             "max_stance_slip_m": float(slip.max()), "stance_slip_per_leg_m": slip,
             "slip_events": len(events),
@@ -119,13 +83,9 @@ def _commanded(speed: float, duration: float) -> float:
 
 
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': friction-mismatch needs a quadruped with point "
-                         "feet (hyq)")
-    for key in ("floor_mu", "controller_mu", "speed", "fast_speed", "duration", "slip_speed",
-                "slip_time", "slip_bound"):
-        if not params[key] > 0:
-            raise ValueError(f"--set {key}: must be positive, got {params[key]}")
+    check_quadruped(robot, "friction-mismatch")
+    check_positive(params, ("floor_mu", "controller_mu", "speed", "fast_speed", "duration",
+                            "slip_speed", "slip_time", "slip_bound"))
     if params["K_st"] <= 0 or params["D_st"] < 0:
         raise ValueError("--set K_st, D_st: the stance-task runs need K_st > 0, D_st >= 0")
 
@@ -133,8 +93,7 @@ def validate(robot, params: dict) -> None:
 def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, duration: float,
               K_st: float, D_st: float, progress: bool = False):
     """One passive-WBC crawl at constant ``speed`` on a floor of ``floor_mu`` (see module doc)."""
-    command = VelocityCommand((0.0, 0.0), (speed, 0.0), (1.0, 2.0))
-    return run_gait(robot, "passive", "crawl", command, duration,
+    return run_gait(robot, "passive", "crawl", steady_command(speed), duration,
                     environment=Environment(floor_friction=floor_mu),
                     controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st},
                     progress=progress)
@@ -192,36 +151,15 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     ]
     figures = []
     if out_dir is not None:
-        figures.append(str(_figure(Path(out_dir) / "friction_mismatch.png", runs, p)))
+        n = min(len(r.log["t"]) for r in runs.values())
+        stance_speed = {k: np.where(settled_stance(r.log["t"][:n], r.log["stance"][:n]),
+                                    r.log["contact_speed"][:n], 0.0).max(axis=1)
+                        for k, r in runs.items()}
+        figures.append(str(friction_mismatch_figure(Path(out_dir) / "friction_mismatch.png", runs,
+                                                    stance_speed, p["floor_mu"],
+                                                    p["controller_mu"])))
     return ScenarioResult("friction-mismatch", robot.name, controller, success, metrics, params,
                           notes, figures=figures)
-
-
-def _figure(path: Path, runs: dict, p: dict) -> Path:
-    """Stance-foot contact-point speed (worst foot, impact excluded) and CoM error per run."""
-    n = min(len(r.log["t"]) for r in runs.values())
-    t = next(iter(runs.values())).log["t"][:n]
-
-    def stance_speed(r):
-        s = r.log["contact_speed"][:n].copy()
-        mask = np.zeros_like(s, dtype=bool)
-        for leg, a, b in stance_phases(r.log["t"][:n], r.log["stance"][:n]):
-            mask[a:b, leg] = r.log["t"][a:b] - r.log["t"][a] >= IMPACT_SKIP
-        return np.where(mask, s, 0.0).max(axis=1)
-
-    first = ("mismatch", "mismatch, no stance task")
-    rest = ("corrected mu", "corrected, inscribed", "corrected, fast", "reference: matched floor")
-    panels = [
-        (f"floor mu {p['floor_mu']}, WBC mu {p['controller_mu']}: stance task on/off (eq. 32)",
-         "slip speed (m/s)", {k: np.minimum(stance_speed(runs[k]), 1.0) for k in first}),
-        ("WBC mu corrected; matched-floor reference", "slip speed (m/s)",
-         {k: stance_speed(runs[k]) for k in rest}),
-        ("CoM tracking error", "||e_x|| (m)",
-         {k: np.minimum(np.linalg.norm(r.log["com_error"][:n], axis=1), 0.1)
-          for k, r in runs.items()}),
-    ]
-    return time_series_figure(path, t, panels, "HyQ crawl on a slippery floor (Sect. V-B): largest "
-                                               "contact-point speed of the stance feet")
 
 
 SCENARIO = Scenario(

@@ -48,12 +48,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..planning.trunk import VelocityCommand
-from ..report.plots import time_series_figure
+from ..report.locomotion_figures import joint_limit_figure
 from ..robot import FREE_FLYER_NQ
 from .base import Parameter, Scenario, ScenarioResult
-from .locomotion import run_gait
-from .weak_joint import intervals
+from .gait_measures import intervals, outcome
+from .locomotion import (CRAWL_SPEED, check_joint, check_positive, check_quadruped, run_gait,
+                         steady_command)
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,7 @@ PARAMETERS = (
     Parameter("joint", "lh_hfe_joint", "the joint whose limit is changed in the controller"),
     Parameter("side", "lower", "which of its limits is changed: lower or upper"),
     Parameter("limit", -0.85, "the changed limit in the controller (rad), inside the real range"),
-    Parameter("speed", 0.11, "forward crawl speed (m/s), reached 1 s after the gait starts"),
+    CRAWL_SPEED,
     Parameter("duration", 8.5, "simulated time per run (s); the crawl starts at 1 s"),
     Parameter("slack_weight", 1e4, "slack weight alpha of eq. 33 (the PassiveWBC default)"),
     Parameter("low_slack_weight", 10.0, "a lower alpha, run for comparison"),
@@ -70,7 +70,6 @@ PARAMETERS = (
     Parameter("slack_active", 0.5, "swing residual (m/s^2) above which the slack is 'active' "
                                    "(figure shading, time counts)"),
 )
-
 
 
 @contextlib.contextmanager
@@ -98,12 +97,9 @@ def controller_joint_limits(robot, joint: str, lower: float | None = None,
 
 
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': joint-limit needs a quadruped with point feet (hyq)")
+    check_quadruped(robot, "joint-limit")
     joint = params["joint"]
-    if joint not in robot.joint_names:
-        raise ValueError(f"--set joint: unknown joint '{joint}'; joints: "
-                         f"{', '.join(robot.joint_names)}")
+    check_joint(robot, joint)
     if f"{joint.split('_')[0]}_foot" not in robot.contact_names:
         raise ValueError(f"--set joint: '{joint}' is not a joint of a leg with a foot contact")
     i = robot.joint_names.index(joint)
@@ -112,10 +108,8 @@ def validate(robot, params: dict) -> None:
     if not robot.q_min[i] < params["limit"] < robot.q_max[i]:
         raise ValueError(f"--set limit: must lie inside the real range [{robot.q_min[i]:.3f}, "
                          f"{robot.q_max[i]:.3f}] of {joint}, got {params['limit']}")
-    for key in ("speed", "duration", "at_limit", "overshoot", "slack_active", "slack_weight",
-                "low_slack_weight"):
-        if not params[key] > 0:
-            raise ValueError(f"--set {key}: must be positive, got {params[key]}")
+    check_positive(params, ("speed", "duration", "at_limit", "overshoot", "slack_active",
+                            "slack_weight", "low_slack_weight"))
 
 
 def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duration: float,
@@ -124,7 +118,7 @@ def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duratio
 
     Returns the :class:`GaitRun` with two extra per-cycle arrays in its log: ``foot_ref`` (legs, 3)
     the planner's foot references and ``swing_residual`` (legs,) the swing-task residuals."""
-    command = VelocityCommand((0.0, 0.0), (speed, 0.0), (1.0, 2.0))
+    command = steady_command(speed)
     refs, residuals = [], []
     legs = None
 
@@ -167,8 +161,7 @@ def run_metrics(r, i: int, leg: int, lim_lo: float, lim_hi: float, p: dict) -> d
     tr = swing_tracking(r, leg)
     res = r.log["swing_residual"][:, leg]
     period = float(np.median(np.diff(r.log["t"])))
-    return {"fell": r.fell, "failed_cycles": int(np.sum(~r.log["ok"].astype(bool))),
-            "distance_m": r.distance, **r.tracking(t_from=1.0),
+    return {**outcome(r), **r.tracking(t_from=1.0),
             "joint_min_rad": float(qs.min()), "joint_max_rad": float(qs.max()),
             "beyond_controller_limit_max_rad": beyond,
             "time_at_limit_s": float(at.sum() * r.sim.dt),
@@ -263,39 +256,18 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                   for a in alphas.values())
     figures = []
     if out_dir is not None:
-        figures.append(str(_figure(Path(out_dir) / "joint_limit.png", runs, alphas, leg, i,
-                                   lim_lo, lim_hi, joint, contact, p)))
+        low = runs[("low", "per-direction")]
+        shown = {f"per-direction, alpha={alphas['low']:g}": low,
+                 f"single, alpha={alphas['low']:g}": runs[("low", "single")],
+                 f"per-direction, alpha={alphas['high']:g}": runs[("high", "per-direction")]}
+        n = min(len(x.log["t"]) for x in runs.values())
+        active = low.log["swing_residual"][:n, leg] > p["slack_active"]
+        figures.append(str(joint_limit_figure(
+            Path(out_dir) / "joint_limit.png", low, shown, leg, FREE_FLYER_NQ + i,
+            lim_lo if np.isfinite(lim_lo) else lim_hi, joint, contact, alphas["low"],
+            intervals(low.log["t"][:n], active))))
     return ScenarioResult("joint-limit", robot.name, controller, success, metrics, params, notes,
                           figures=figures)
-
-
-def _figure(path, runs, alphas, leg, i, lo, hi, joint, contact, p) -> Path:
-    """Fig. 2 style: the foot's X, Y, Z (reference and actual) and the joint against its limit,
-    low slack weight (per-direction, single) and high (per-direction); trunk orientation error;
-    shaded where the low-weight per-direction slack is active."""
-    r = runs[("low", "per-direction")]
-    n = min(len(x.log["t"]) for x in runs.values())
-    t = r.log["t"][:n]
-    shown = {f"per-direction, alpha={alphas['low']:g}": runs[("low", "per-direction")],
-             f"single, alpha={alphas['low']:g}": runs[("low", "single")],
-             f"per-direction, alpha={alphas['high']:g}": runs[("high", "per-direction")]}
-    panels = []
-    for axis, name in enumerate("XYZ"):
-        series = {"reference": r.log["foot_ref"][:n, leg, axis]}
-        series.update({k: x.log["feet"][:n, leg, axis] for k, x in shown.items()})
-        panels.append((f"{contact} {name}", f"{name.lower()} (m)", series))
-    sim_t = r.sim.log.arrays()["t"]
-    k = np.clip(np.searchsorted(sim_t, t), 0, len(sim_t) - 1)
-    joint_series = {name: x.sim.log.arrays()["q"][k, FREE_FLYER_NQ + i] for name, x in shown.items()}
-    joint_series["controller limit"] = np.full(n, lo if np.isfinite(lo) else hi)
-    panels.append((f"{joint} position", "q (rad)", joint_series))
-    panels.append(("trunk orientation error", "||e_theta|| (rad)",
-                   {name: np.linalg.norm(x.log["orientation_error"][:n], axis=1)
-                    for name, x in shown.items()}))
-    active = r.log["swing_residual"][:n, leg] > p["slack_active"]
-    return time_series_figure(path, t, panels, f"HyQ crawl, {joint} limit changed in the WBC "
-                              f"(Fig. 2; shaded: slack active, alpha={alphas['low']:g})",
-                              shaded=intervals(t, active))
 
 
 SCENARIO = Scenario(

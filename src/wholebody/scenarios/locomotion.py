@@ -6,10 +6,16 @@ baseline of Sect. V-E), and a MuJoCo twin with the given environment; it runs th
 ``control_period`` (250 Hz, Sect. V) with the simulator at 1 kHz holding the last torque, and
 records a :class:`GaitLog`. Everything measured for success criteria (feet slip, fall, torques
 sent) comes from the simulator, not from the controller's own model.
+
+Also shared by the quadruped scenarios: their common parameters (``GAIT``, ``CRAWL_SPEED``,
+``DURATION``, ``RUN_DURATION``), checks of the robot and of the parameters, the two velocity
+commands (:func:`steady_command`, :func:`ramped_command`) and the simulator's world for a terrain
+course (:func:`course_environment`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,14 +27,72 @@ from ..planning.gait import crawl, stand, trot
 from ..planning.planner import GaitPlanner
 from ..planning.terrain import Terrain
 from ..planning.trunk import VelocityCommand
-from ..sim.environment import Environment
+from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
+from .base import Parameter
 from .loop import run_closed_loop
 
 CONTROLLERS = ("passive", "quasi-static")
 GAITS = ("crawl", "trot", "stand")
 FALL_HEIGHT = 0.3  # base closer than this to the planner's terrain under it (m): fallen
 FALL_TILT = np.radians(45.0)
+COURSE_BOX_THICKNESS = 1.0  # thickness of the simulator's level ground boxes of a course (m)
+COURSE_SLOPE_THICKNESS = 0.1  # thickness of the simulator's ramp boxes of a course (m)
+
+#: parameters declared alike by several quadruped scenarios
+GAIT = Parameter("gait", "crawl", "crawl or trot")
+CRAWL_SPEED = Parameter("speed", 0.11,
+                        "forward crawl speed (m/s), reached 1 s after the gait starts")
+DURATION = Parameter("duration", 10.0, "simulated time (s)")
+RUN_DURATION = Parameter("duration", 10.0, "simulated time per run (s); the crawl starts at 1 s")
+
+
+def check_quadruped(robot, scenario: str) -> None:
+    """ValueError unless ``robot`` has four point-foot contacts."""
+    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
+        raise ValueError(f"robot '{robot.name}': {scenario} needs a quadruped with point feet "
+                         "(hyq)")
+
+
+def check_joint(robot, joint: str) -> None:
+    """ValueError naming ``--set joint`` unless ``joint`` is one of the robot's joints."""
+    if joint not in robot.joint_names:
+        raise ValueError(f"--set joint: unknown joint '{joint}'; joints: "
+                         f"{', '.join(robot.joint_names)}")
+
+
+def check_gait(params: dict, gaits=("crawl", "trot")) -> None:
+    """ValueError naming ``--set gait`` unless it is one of ``gaits``."""
+    if params["gait"] not in gaits:
+        raise ValueError(f"--set gait: expected {' or '.join(gaits)}, got '{params['gait']}'")
+
+
+def check_positive(params: dict, keys) -> None:
+    """ValueError naming the first of ``keys`` whose value is not positive."""
+    for key in keys:
+        if not params[key] > 0:
+            raise ValueError(f"--set {key}: must be positive, got {params[key]}")
+
+
+def parse_positive_floats(text, name: str, allow_empty: bool = False) -> list[float]:
+    """A comma-separated ``--set name=...`` value as positive finite floats (ValueError naming it)."""
+    try:
+        values = [float(x) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"--set {name}: expected comma-separated numbers, got '{text}'") from None
+    if (not values and not allow_empty) or any(not (np.isfinite(v) and v > 0) for v in values):
+        raise ValueError(f"--set {name}: need positive numbers, got '{text}'")
+    return values
+
+
+def steady_command(speed: float) -> VelocityCommand:
+    """Forward ``speed`` reached by a linear ramp over [1, 2] s (the gaits start at 1 s)."""
+    return VelocityCommand((0.0, 0.0), (speed, 0.0), (1.0, 2.0))
+
+
+def ramped_command(speed: float) -> VelocityCommand:
+    """Forward ``speed`` reached by a linear ramp over [1, 3] s."""
+    return VelocityCommand.speed_ramp(0.0, speed, 1.0, 3.0)
 
 
 def make_schedule(gait: str, start: float = 1.0):
@@ -47,6 +111,26 @@ def make_controller(robot, name: str, planner, **options):
     if name == "quasi-static":
         return QuasiStaticController(robot, planner, **options)
     raise ValueError(f"controller: expected one of {CONTROLLERS}, got '{name}'")
+
+
+def course_environment(course) -> Environment:
+    """The simulator's world for a :class:`~wholebody.planning.courses.Course`: no floor plane, one
+    box per surface strip (so a gap is a real hole) with the course's width and friction. Level
+    strips are deep boxes, slopes thin ones (a tilted box's end face leans over its neighbour; next
+    to a gap it narrows the hole, but only below 5 cm under the surface)."""
+    boxes = [_strip_box(s, course.width, COURSE_BOX_THICKNESS if s.z0 == s.z1
+                        else COURSE_SLOPE_THICKNESS) for s in course.strips]
+    return Environment(floor_friction=course.friction, floor=False, boxes=boxes)
+
+
+def _strip_box(s, width: float, thickness: float) -> Box:
+    """A box whose top face is the strip (tilted by its slope), ``thickness`` deep."""
+    angle = math.atan2(s.z1 - s.z0, s.x1 - s.x0)
+    length = math.hypot(s.x1 - s.x0, s.z1 - s.z0)
+    n = np.array([-math.sin(angle), 0.0, math.cos(angle)])
+    top_mid = np.array([0.5 * (s.x0 + s.x1), 0.0, 0.5 * (s.z0 + s.z1)])
+    centre = top_mid - 0.5 * thickness * n
+    return Box(tuple(centre), (0.5 * length, 0.5 * width, 0.5 * thickness), (0.0, -angle, 0.0))
 
 
 @dataclass

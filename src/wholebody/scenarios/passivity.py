@@ -9,7 +9,8 @@ function V = V_com + V_sw (eq. 23) satisfies eq. 31,
 
 This scenario runs HyQ with the feed-forward terms off (W_ff of eq. 4 via
 ``TrunkImpedance(feedforward=False)``, and v̇_sw,ff of eq. 6 zeroed in the plan the controller sees,
-:class:`SwingFeedForwardOff`) and measures, every WBC cycle, on the simulator's state:
+:class:`~wholebody.control.passivity.SwingFeedForwardOff`) and measures, every WBC cycle, on the
+simulator's state (:class:`~wholebody.control.passivity.StorageMeter`):
 
 * V_com = ½ Δxᵀ K_x Δx + ½ Δθᵀ K_θ Δθ + m g Δz — the CoM/trunk impedance potential plus the
   gravity potential whose gradient is ∇V_com,g = m g (eq. 4, footnote 6; as a function of the
@@ -40,18 +41,19 @@ measurement, reported in ``metrics`` and ``notes``, never asserted.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
+from ..control.passive import SwingGains
+from ..control.passivity import StorageMeter, SwingFeedForwardOff
 from ..planning.planner import GaitPlanner
-from ..planning.trunk import VelocityCommand
-from ..report.plots import time_series_figure
-from ..tasks.wrench import GRAVITY, TrunkImpedance
+from ..report.locomotion_figures import passivity_figure
+from ..tasks.wrench import TrunkImpedance
 from .base import Parameter, Scenario, ScenarioResult
-from .locomotion import make_schedule, run_gait
+from .gait_measures import intervals, outcome
+from .locomotion import (DURATION, GAIT, check_gait, check_quadruped, make_schedule,
+                         ramped_command, run_gait)
 
 log = logging.getLogger(__name__)
 
@@ -59,126 +61,11 @@ TOLERANCE = 1.0  # W: violations smaller than this are reported apart (finite di
 NEAR_SWITCH = 0.05  # s: "right after a lift-off or touchdown"
 
 PARAMETERS = (
-    Parameter("gait", "crawl", "crawl or trot"),
+    GAIT,
     Parameter("speed", 0.1, "forward speed after the ramp-up (m/s)"),
-    Parameter("duration", 10.0, "simulated time (s)"),
+    DURATION,
     Parameter("feedforward", False, "keep the feed-forward terms on (Assumption 2 needs them off)"),
 )
-
-
-class SwingFeedForwardOff:
-    """A planner wrapper whose plans carry no swing feed-forward acceleration: the controller's
-    eq. 6 becomes v̇_sw,d = K_sw Δx_sw + D_sw Δv_sw (Assumption 2, "we do not consider the
-    feed-forward terms in (4a) and (5)"). Everything else is the wrapped planner's."""
-
-    def __init__(self, planner: GaitPlanner):
-        self.planner = planner
-
-    def __getattr__(self, name):
-        return getattr(self.planner, name)
-
-    def update(self, t, feet=None, com_velocity=None):
-        state = self.planner.update(t, feet, com_velocity)
-        state.foot_acceleration[:] = 0.0
-        return state
-
-
-def desired_generalized_velocity(robot, plan, legs) -> tuple[np.ndarray, float]:
-    """ν_d solving [J_com; S_ω; J_feet] ν_d = [ẋ_com,d; ω_d; v_feet,d] at the robot's cached state
-    (stance feet: contact-point Jacobian, v = 0; swing feet: foot-frame Jacobian, the planner's
-    velocity). Returns (ν_d, relative residual of the solve)."""
-    nv = robot.nv
-    rows = [robot.J_com]
-    rhs = [np.asarray(plan.trunk.velocity, dtype=float)]
-    R = pin.Quaternion(robot.q[3:7]).normalized().toRotationMatrix()
-    S = np.zeros((3, nv))
-    S[:, 3:6] = R  # world angular velocity of the base = R v[3:6]
-    rows.append(S)
-    rhs.append(np.asarray(plan.trunk.angular_velocity, dtype=float))
-    for i, name in enumerate(legs):
-        if plan.contact[i]:
-            rows.append(robot.contact_jacobians[name])
-            rhs.append(np.zeros(3))
-        else:
-            rows.append(robot.frame_jacobian(robot.contact(name).spec.frame)[:3])
-            rhs.append(np.asarray(plan.foot_velocity[i], dtype=float))
-    A, b = np.vstack(rows), np.concatenate(rhs)
-    nu, *_ = np.linalg.lstsq(A, b, rcond=None)
-    scale = max(1e-9, float(np.linalg.norm(b)))
-    return nu, float(np.linalg.norm(A @ nu - b) / scale)
-
-
-@dataclass
-class StorageLog:
-    """One row per WBC cycle (see the module docstring for the definitions)."""
-
-    t: list = field(default_factory=list)
-    V_position: list = field(default_factory=list)  # ½ Δxᵀ K_x Δx
-    V_orientation: list = field(default_factory=list)  # ½ Δθᵀ K_θ Δθ
-    V_gravity: list = field(default_factory=list)  # m g Δz
-    V_swing: list = field(default_factory=list)  # ½ Δxᵀ Λ K_sw Δx, summed over swing feet
-    V_swing_raw: list = field(default_factory=list)  # ½ K_sw |Δx|² (m²/s², no Λ)
-    rate_analytic: list = field(default_factory=list)  # Δv_comᵀ∇V_com + Δv_swᵀ∇V_sw
-    dissipation: list = field(default_factory=list)  # Δvᵀ D Δv (CoM) + Δv_swᵀ Λ D_sw Δv_sw
-    qd_des: list = field(default_factory=list)  # q̇_j,d
-    solve_residual: list = field(default_factory=list)
-    wrench_error: list = field(default_factory=list)  # ‖W_com − W_com,d‖ of the QP solution
-    stance: list = field(default_factory=list)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {k: np.asarray(v) for k, v in self.__dict__.items()}
-
-
-class StorageMeter:
-    """``on_cycle`` callback of :func:`run_gait` recording the storage function and q̇_j,d."""
-
-    def __init__(self, robot, impedance: TrunkImpedance, K_sw: float, D_sw: float):
-        self.robot = robot
-        self.imp = impedance
-        self.K_sw, self.D_sw = float(K_sw), float(D_sw)
-        self.log = StorageLog()
-
-    def __call__(self, t, result, ctrl, sim) -> None:
-        robot, plan, imp, L = self.robot, ctrl.last_plan, self.imp, self.log
-        legs = ctrl.planner.legs
-        R = pin.Quaternion(robot.q[3:7]).normalized().toRotationMatrix()
-        ref = plan.trunk
-        dx = np.asarray(ref.position) - robot.com
-        dth = pin.log3(np.asarray(ref.rotation) @ R.T)
-        dv = np.asarray(ref.velocity) - robot.vcom
-        dw = np.asarray(ref.angular_velocity) - R @ robot.v[3:6]
-        mg = robot.mass * GRAVITY
-        L.t.append(t)
-        L.V_position.append(0.5 * float(dx @ (imp.K_x * dx)))
-        L.V_orientation.append(0.5 * float(dth @ (imp.K_theta * dth)))
-        L.V_gravity.append(mg * float(dx[2]))
-        rate = float(dv @ (imp.K_x * dx)) + mg * float(dv[2]) + float(dw @ (imp.K_theta * dth))
-        diss = float(dv @ (imp.D_x * dv)) + float(dw @ (imp.D_theta * dw))
-        V_sw = V_raw = 0.0
-        Minv = None
-        for i, name in enumerate(legs):
-            if plan.contact[i]:
-                continue
-            frame = robot.contact(name).spec.frame
-            J = robot.frame_jacobian(frame)[:3]
-            if Minv is None:
-                Minv = np.linalg.inv(robot.M)
-            Lam = np.linalg.inv(J @ Minv @ J.T)
-            e = np.asarray(plan.foot_position[i]) - robot.data.oMf[robot.contact(name).frame_id].translation
-            de = np.asarray(plan.foot_velocity[i]) - J @ robot.v
-            V_sw += 0.5 * self.K_sw * float(e @ Lam @ e)
-            V_raw += 0.5 * self.K_sw * float(e @ e)
-            rate += self.K_sw * float(de @ Lam @ e)
-            diss += self.D_sw * float(de @ Lam @ de)
-        L.V_swing.append(V_sw)
-        L.V_swing_raw.append(V_raw)
-        L.rate_analytic.append(rate)
-        L.dissipation.append(diss)
-        nu, res = desired_generalized_velocity(robot, plan, legs)
-        L.qd_des.append(nu[6:].copy())
-        L.solve_residual.append(res)
-        L.wrench_error.append(float(result.tasks[0].error) if result.tasks else np.nan)
-        L.stance.append(np.array(plan.contact, dtype=bool))
 
 
 def energy_balance(storage: dict, sim_log: dict, nq_base: int = 7, nv_base: int = 6) -> dict:
@@ -267,11 +154,8 @@ def summarize(balance: dict, t_from: float = 0.0) -> dict:
 
 
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': the passivity scenario needs a quadruped with "
-                         "point feet (hyq)")
-    if params["gait"] not in ("crawl", "trot"):
-        raise ValueError(f"--set gait: expected crawl or trot, got '{params['gait']}'")
+    check_quadruped(robot, "the passivity scenario")
+    check_gait(params)
     if not 2.0 <= params["duration"]:
         raise ValueError("--set duration: need at least 2 s")
 
@@ -279,12 +163,10 @@ def validate(robot, params: dict) -> None:
 def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10.0,
             feedforward: bool = False, progress: bool = False):
     """Run the gait and return (run, storage arrays, energy balance)."""
-    command = VelocityCommand.speed_ramp(0.0, speed, 1.0, 3.0)
-    planner = GaitPlanner.for_robot(robot, make_schedule(gait, 1.0), command)
+    planner = GaitPlanner.for_robot(robot, make_schedule(gait, 1.0), ramped_command(speed))
     if not feedforward:
         planner = SwingFeedForwardOff(planner)
     impedance = TrunkImpedance(feedforward=feedforward)
-    from ..control.passive import SwingGains
     swing = SwingGains()
     meter = StorageMeter(robot, impedance, swing.K, swing.D)
     run = run_gait(robot, "passive", duration=duration, planner=planner, progress=progress,
@@ -301,8 +183,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     stats = summarize(balance, t_from=0.5)
     we = storage["wrench_error"]
     metrics = {
-        "fell": gait_run.fell, "failed_cycles": int(gait_run.failures),
-        "distance_m": gait_run.distance, **gait_run.tracking(1.0),
+        **outcome(gait_run), **gait_run.tracking(1.0),
         "passivity": stats,
         "storage": {"V_position_max_J": float(storage["V_position"].max()),
                     "V_orientation_max_J": float(storage["V_orientation"].max()),
@@ -354,54 +235,14 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     success = (not gait_run.fell) and gait_run.failures == 0 and check_ok
     figures = []
     if out_dir is not None:
-        figures.append(str(_figure(Path(out_dir) / "passivity.png", storage, balance, params)))
+        margin = balance["supply"] - balance["Vdot"]
+        violations = intervals(balance["t"], (margin < -TOLERANCE) & ~balance["switched"])
+        title = (f"HyQ {params['gait']} {params['speed']} m/s, feed-forward "
+                 f"{'on' if params['feedforward'] else 'off'} (Assumption 2)")
+        figures.append(str(passivity_figure(Path(out_dir) / "passivity.png", storage, balance,
+                                            title, TOLERANCE, violations)))
     return ScenarioResult("passivity", robot.name, controller, success, metrics, params, notes,
                           figures=figures)
-
-
-def _figure(path: Path, storage: dict, balance: dict, params: dict) -> Path:
-    tb = balance["t"]
-    margin = balance["supply"] - balance["Vdot"]
-    viol = (margin < -TOLERANCE) & ~balance["switched"]
-    shaded = _intervals(tb, viol, balance["dt"])
-    V0 = storage["V_gravity"][0]
-    panels = [
-        ("storage function V (eq. 23)", "J",
-         {"V_com,K (position)": storage["V_position"],
-          "V_com,K (orientation)": storage["V_orientation"],
-          "V_com,g = m g dz": storage["V_gravity"] - V0,
-          "V_sw (Lambda K_sw)": storage["V_swing"]}),
-        ("rate vs supply (eq. 31)", "W",
-         {"dV/dt": _smooth(balance["Vdot"]), "supply dq_j^T tau": _smooth(balance["supply"])}),
-        (f"margin supply - dV/dt vs predicted dissipation (grey: violations > {TOLERANCE:.0f} W)",
-         "W",
-         {"margin": _smooth(margin), "dissipation (eq. 31)": balance["dissipation"]}),
-    ]
-    n = len(tb)
-    panels = [(a, b, {k: (v[:n] if len(v) > n else v) for k, v in s.items()}) for a, b, s in panels]
-    return time_series_figure(path, tb, panels,
-                              f"HyQ {params['gait']} {params['speed']} m/s, feed-forward "
-                              f"{'on' if params['feedforward'] else 'off'} (Assumption 2)",
-                              shaded=shaded)
-
-
-def _smooth(x: np.ndarray, n: int = 5) -> np.ndarray:
-    """Centred moving average over n WBC intervals (display only)."""
-    x = np.nan_to_num(x)
-    return np.convolve(x, np.ones(n) / n, mode="same")
-
-
-def _intervals(t: np.ndarray, mask: np.ndarray, dt: np.ndarray) -> list[tuple[float, float]]:
-    out, start = [], None
-    for k in range(len(t)):
-        if mask[k] and start is None:
-            start = t[k]
-        if not mask[k] and start is not None:
-            out.append((start, t[k]))
-            start = None
-    if start is not None:
-        out.append((start, t[-1] + dt[-1]))
-    return out
 
 
 SCENARIO = Scenario(

@@ -11,31 +11,24 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from tqdm import tqdm
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from ..control.lqr import DEFAULT_INTEGRAL_LIMIT  # noqa: E402
-from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT  # noqa: E402
-from .base import ENGINE, Parameter, Scenario, ScenarioResult, parse_list  # noqa: E402
-from .push import LOCATIONS, run as run_push, validate as validate_push  # noqa: E402
+from ..report.balance_figures import push_series_figure
+from .base import (ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, duration_parameter,
+                   parse_list)
+from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
+                     check_locations, check_push, push_trial)
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points"),
     Parameter("forces", "60,100,140,180", "comma-separated peak forces (N), increasing"),
     Parameter("push_duration", 0.1, "duration of each push (s)"),
-    Parameter("duration", 3.5, "simulated time per push (s)"),
-    Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)"),
-    Parameter("angular_weight", ANGULAR_MOMENTUM_WEIGHT,
-              "weight of the momentum task's angular rows in Table 2 (1e4: the paper's single "
-              "momentum weight)"),
-    Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error integral (our extension); 0 = "
-                                 "off"),
-    Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
-              "LQR integral action: anti-windup clamp of each integral component (m s)"),
+    duration_parameter(3.5, "simulated time per push (s)"),
+    Q_ANGULAR,
+    ANGULAR_WEIGHT,
+    Q_INTEGRAL,
+    INTEGRAL_LIMIT,
     Parameter("bisection", False, "also find the largest survivable peak force per point"),
     Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)"),
     ENGINE,
@@ -44,25 +37,22 @@ CONTROLLERS = ("pd", "lqr")
 
 
 def validate(robot, params: dict) -> None:
-    for location in parse_list(params["locations"], str, "locations"):
-        if location not in LOCATIONS:
-            raise ValueError(f"--set locations: '{location}' is not one of {', '.join(LOCATIONS)}")
+    check_locations(parse_list(params["locations"], str, "locations"))
     forces = parse_list(params["forces"], float, "forces")
     if any(f <= 0 for f in forces):
         raise ValueError("--set forces: peak forces must be > 0")
-    validate_push(robot, {"location": "front", "angle": 0.0, "height": 0.1,
-                          "peak_force": forces[0], "start": 0.5,
-                          "push_duration": params["push_duration"]})
+    check_push(robot, {**FIXED_PUSH, "location": "front", "peak_force": forces[0], "start": 0.5,
+                       "push_duration": params["push_duration"]})
 
 
 def _one(robot, controller, location, force, params):
-    p = {"location": location, "angle": 0.0, "height": 0.1, "peak_force": force,
+    p = {**FIXED_PUSH, "location": location, "peak_force": force,
          "push_duration": params["push_duration"], "start": 0.5, "duration": params["duration"],
          "q_angular": params["q_angular"], "angular_weight": params["angular_weight"],
          "q_integral": params["q_integral"], "integral_limit": params["integral_limit"],
          "engine": params["engine"]}
-    res = run_push(robot, controller, p, None, False)
-    return res.success, res.metrics
+    trial = push_trial(robot, controller, p)
+    return trial.success, trial.metrics
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
@@ -124,38 +114,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
 
     result = ScenarioResult("push-series", robot.name, "pd+lqr", True, metrics, params, notes)
     if out_dir is not None:
-        result.figures = [str(_figure(trials, locations, Path(out_dir), robot.name))]
+        result.figures = [str(push_series_figure(Path(out_dir) / "push_series.png", trials,
+                                                 locations, CONTROLLERS, robot.name))]
     return result
-
-
-def _figure(trials, locations, out_dir: Path, robot_name: str) -> Path:
-    """Fig. 6 style: peak force vs max CoG error and max angular momentum, per controller."""
-    fig, axes = plt.subplots(4, 1, figsize=(7, 10), sharex=True)
-    for row, (key, label, scale) in enumerate((("max_cog_error_m", "max CoG error (cm)", 100.0),
-                                              ("max_angular_momentum_Nms", "max ang. mom. (N m s)",
-                                               1.0))):
-        for col, c in enumerate(CONTROLLERS):
-            ax = axes[2 * row + col]
-            for loc in locations:
-                pts = [(t[2], scale * t[4][key], t[3]) for t in trials if t[0] == c and t[1] == loc]
-                f = [p[0] for p in pts]
-                ax.plot(f, [p[1] for p in pts], "o-", label=loc, markersize=4)
-                fell = [p for p in pts if not p[2]]
-                if fell:
-                    ax.plot([p[0] for p in fell], [p[1] for p in fell], "kx", markersize=8)
-            ax.set_ylabel(label, fontsize=8)
-            ax.set_title(f"{c.upper()} momentum gains (x = fell)", fontsize=9)
-            ax.grid(True, alpha=0.3)
-            ax.set_yscale("log")
-    axes[0].legend(fontsize=7, ncol=4)
-    axes[-1].set_xlabel("peak force (N)")
-    fig.suptitle(f"push series — {robot_name}", fontsize=10)
-    fig.tight_layout()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / "push_series.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 SCENARIO = Scenario(

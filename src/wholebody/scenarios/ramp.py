@@ -7,13 +7,13 @@
   whole course.
 * ``course=gap``: crawl across a 22 cm gap followed by a 7 cm step (Fig. 7, left column). The
   paper's footholds come from an optimiser on an online terrain map (Sect. V-G, ref. [4]); our
-  planner's Raibert targets do land in the gap, so :class:`~wholebody.scenarios.courses.CoursePlanner`
+  planner's Raibert targets do land in the gap, so :class:`~wholebody.planning.courses.CoursePlanner`
   moves any target within 6 cm of the gap to the nearest safe point (reported: how many were moved).
 
 The simulator sees the course as boxes (a real hole under the gap, no floor plane) and the planner
 the same course as a height map with exact per-strip normals for the friction cones (footnote 17);
 the trunk reference follows the course smoothed over the hip-to-hip length
-(:mod:`~wholebody.scenarios.courses`).
+(:mod:`~wholebody.planning.courses`).
 
 Success: no fall, every WBC cycle solved, the whole robot past the course (simulator feet), and for
 the ramp, roll and pitch errors below 0.2 rad throughout; for the gap, no foot ever below the
@@ -28,10 +28,12 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..planning.trunk import VelocityCommand
+from ..planning.courses import Course, CoursePlanner, gap_course, ramp_course
+from ..report.locomotion_figures import course_side_view, ramp_figure
 from .base import Parameter, Scenario, ScenarioResult
-from .courses import Course, CoursePlanner, gap_course, ramp_course
-from .locomotion import make_schedule, run_gait
+from .gait_measures import outcome
+from .locomotion import (check_quadruped, course_environment, make_schedule, ramped_command,
+                         run_gait)
 
 log = logging.getLogger(__name__)
 
@@ -74,9 +76,7 @@ def course_end(course: Course) -> float:
 
 
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': the ramp scenario needs a quadruped with point "
-                         "feet (hyq)")
+    check_quadruped(robot, "the ramp scenario")
     if params["course"] not in COURSES:
         raise ValueError(f"--set course: expected one of {COURSES}, got '{params['course']}'")
     if params["gait"] not in ("auto", "crawl", "trot"):
@@ -101,17 +101,17 @@ class _Recorder:
 
 
 def crossing(robot, params: dict, progress: bool = False):
-    """Run one course; returns (run, course, recorder, planner)."""
+    """Run one course; returns (run, course, recorder, planner, resolved parameters, duration)."""
     p = resolve(params)
     course = build(p)
     end = course_end(course)
     duration = p["duration"]
     if duration <= 0.0:  # the hind feet (~0.4 m behind the CoM) past the end, plus margin
         duration = 3.0 + (end + 0.6) / p["speed"] + 2.0
-    command = VelocityCommand.speed_ramp(0.0, p["speed"], 1.0, 3.0)
-    planner = CoursePlanner.on_course(robot, make_schedule(p["gait"], 1.0), command, course)
+    planner = CoursePlanner.on_course(robot, make_schedule(p["gait"], 1.0),
+                                      ramped_command(p["speed"]), course)
     rec = _Recorder()
-    run = run_gait(robot, "passive", duration=duration, environment=course.environment,
+    run = run_gait(robot, "passive", duration=duration, environment=course_environment(course),
                    planner=planner, on_cycle=rec, progress=progress)
     return run, course, rec, planner, p, duration
 
@@ -135,8 +135,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     crossed = bool(np.all(final_feet_x > end + 0.05))
     metrics = {
         "course": p["course"], "gait": p["gait"], "speed_mps": p["speed"],
-        "duration_s": duration, "fell": gait_run.fell, "failed_cycles": int(gait_run.failures),
-        "distance_m": gait_run.distance, "course_end_x_m": end,
+        "duration_s": duration, **outcome(gait_run), "course_end_x_m": end,
         "final_feet_x_m": final_feet_x, "crossed": crossed,
         "roll_error_max_rad": float(np.abs(err[after, 0]).max()),
         "pitch_error_max_rad": float(np.abs(err[after, 1]).max()),
@@ -173,7 +172,6 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         z_edge = min(course.height(gap_x0 - 1e-6, 0.0), course.height(gap_x1 + 1e-6, 0.0))
         lowest = float(feet[:, :, 2][over].min()) if np.any(over) else float("nan")
         in_hole = bool(np.any(over) and lowest < z_edge + radius - 0.01)
-        # stance feet on the far side must stand on the step (simulator height)
         metrics["gap"] = {"x0_m": gap_x0, "x1_m": gap_x1, "footholds_moved": int(planner.adjusted),
                           "lowest_foot_over_gap_m": lowest, "foot_entered_hole": in_hole,
                           "final_feet_z_m": feet[-1, :, 2]}
@@ -187,95 +185,16 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     if out_dir is not None:
         out_dir = Path(out_dir)
         if p["course"] == "ramp":
-            figures.append(str(_ramp_figure(out_dir / "ramp_roll_pitch.png", t, desired, actual,
-                                            com, course, p)))
-        figures.append(str(_side_view(out_dir / f"{p['course']}_side_view.png", robot, gait_run,
-                                      course, p)))
+            figures.append(str(ramp_figure(out_dir / "ramp_roll_pitch.png", t, desired, actual,
+                                           com, course, p["gait"], p["speed"], p["angle"],
+                                           ERROR_LIMIT)))
+        what = (f"{p['angle']:.0f} deg ramp" if p["course"] == "ramp" else
+                f"{p['gap'] * 100:.0f} cm gap + {p['step'] * 100:.0f} cm step")
+        figures.append(str(course_side_view(
+            out_dir / f"{p['course']}_side_view.png", robot, gait_run, course,
+            f"HyQ {p['gait']} {p['speed']} m/s across a {what} (simulator; cf. Fig. 7)")))
     return ScenarioResult("ramp", robot.name, controller, success, metrics, p, notes,
                           figures=figures)
-
-
-def _ramp_figure(path: Path, t, desired, actual, com, course: Course, p: dict) -> Path:
-    """Fig. 8 style: roll and pitch, desired vs actual, and the course under the CoM."""
-    from ..report.plots import plt, save_figure  # the headless (Agg) pyplot
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5))
-    for ax, k, name in ((axes[0], 0, "roll"), (axes[1], 1, "pitch")):
-        ax.plot(t, desired[:, k], "k--", linewidth=1.0, label="desired")
-        ax.plot(t, actual[:, k], color="tab:blue", linewidth=1.0, label="actual (simulator)")
-        ax.fill_between(t, desired[:, k] - ERROR_LIMIT, desired[:, k] + ERROR_LIMIT,
-                        color="0.9", zorder=0, label="±0.2 rad")
-        ax.set_ylabel(f"{name} (rad)", fontsize=8)
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right", ncol=3)
-    axes[2].plot(t, [course.height(x, 0.0) for x in com[:, 0]], color="0.4",
-                 label="terrain under the CoM")
-    axes[2].plot(t, com[:, 2], color="tab:green", label="CoM height")
-    axes[2].set_ylabel("z (m)", fontsize=8)
-    axes[2].set_xlabel("time (s)")
-    axes[2].grid(True, alpha=0.3)
-    axes[2].legend(fontsize=7)
-    fig.suptitle(f"HyQ {p['gait']} {p['speed']} m/s over a {p['angle']:.0f} deg ramp: roll and "
-                 "pitch tracking (Fig. 8)", fontsize=10)
-    return save_figure(fig, path)
-
-
-LEG_JOINTS = {"lf": ("lf_hfe_joint", "lf_kfe_joint"), "rf": ("rf_hfe_joint", "rf_kfe_joint"),
-              "lh": ("lh_hfe_joint", "lh_kfe_joint"), "rh": ("rh_hfe_joint", "rh_kfe_joint")}
-
-
-def _side_view(path: Path, robot, gait_run, course: Course, p: dict, snapshots: int = 6) -> Path:
-    """Fig. 7 style side view: the course, the CoM path, the feet paths and stick-figure
-    snapshots of the robot (left legs solid, right legs dashed), all from the simulator."""
-    from ..report.plots import plt, save_figure  # the headless (Agg) pyplot
-    sim_log = gait_run.sim.log
-    qs = np.asarray(sim_log.q)
-    ts = np.asarray(sim_log.t)
-    L = gait_run.log
-    model, data = robot.model, robot.model.createData()
-    x_lo = float(min(L["feet"][:, :, 0].min(), 0.0)) - 0.3
-    x_hi = float(L["feet"][:, :, 0].max()) + 0.3
-    fig, ax = plt.subplots(figsize=(10, 3.8))
-    xs, zs = course.profile(x_lo, x_hi)
-    surface = [course.height(x) for x in np.linspace(x_lo, x_hi, 400) if not course.in_gap(x)]
-    z_lo = min(surface) - 0.25  # holes are drawn down to here
-    ax.fill_between(xs, np.maximum(zs, z_lo), z_lo, color="0.85")
-    ax.plot(xs, zs, color="0.3", linewidth=1.0)
-    ax.plot(L["com"][:, 0], L["com"][:, 2], color="tab:green", linewidth=1.0, label="CoM")
-    colors = {"lf": "tab:blue", "rf": "tab:orange", "lh": "tab:purple", "rh": "tab:red"}
-    for i, leg in enumerate(("lf", "rf", "lh", "rh")):
-        ax.plot(L["feet"][:, i, 0], L["feet"][:, i, 2], color=colors[leg], linewidth=0.6,
-                alpha=0.7, label=f"{leg.upper()} foot")
-    jid = {n: model.getJointId(n) for pair in LEG_JOINTS.values() for n in pair}
-    fid = {leg: robot.contact(f"{leg}_foot").frame_id for leg in LEG_JOINTS}
-    times = np.linspace(ts[0] + 1.0, ts[-1], snapshots)
-    for k, tk in enumerate(times):
-        q = qs[min(int(np.searchsorted(ts, tk)), len(qs) - 1)]
-        pin.framesForwardKinematics(model, data, q)
-        shade = 0.15 + 0.6 * k / max(1, snapshots - 1)
-        hips = []
-        for leg, (hfe, kfe) in LEG_JOINTS.items():
-            pts = np.array([data.oMi[jid[hfe]].translation, data.oMi[jid[kfe]].translation,
-                            data.oMf[fid[leg]].translation])
-            hips.append(pts[0])
-            ax.plot(pts[:, 0], pts[:, 2], "-" if leg[0] == "l" else "--", color=str(1 - shade),
-                    linewidth=1.2)
-        hips = np.array(hips)
-        ax.plot([hips[:, 0].min(), hips[:, 0].max()],
-                [hips[np.argmin(hips[:, 0]), 2], hips[np.argmax(hips[:, 0]), 2]],
-                color=str(1 - shade), linewidth=3.0, solid_capstyle="round")
-        ax.annotate(f"{tk:.0f} s", (hips[:, 0].mean(), hips[:, 2].max() + 0.06), fontsize=7,
-                    ha="center", color=str(1 - shade))
-    ax.set_aspect("equal")
-    ax.set_xlim(x_lo, x_hi)
-    ax.set_ylim(z_lo, float(L["com"][:, 2].max()) + 0.2)
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("z (m)")
-    ax.legend(fontsize=6, loc="upper left", ncol=5)
-    what = (f"{p['angle']:.0f} deg ramp" if p["course"] == "ramp" else
-            f"{p['gap'] * 100:.0f} cm gap + {p['step'] * 100:.0f} cm step")
-    ax.set_title(f"HyQ {p['gait']} {p['speed']} m/s across a {what} (simulator; cf. Fig. 7)",
-                 fontsize=9)
-    return save_figure(fig, path)
 
 
 SCENARIO = Scenario(

@@ -31,10 +31,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..planning.trunk import VelocityCommand
-from ..report.plots import save_figure
+from ..report.locomotion_figures import regularization_figure
 from .base import Parameter, Scenario, ScenarioResult
-from .locomotion import run_gait
+from .locomotion import check_gait, check_quadruped, parse_positive_floats, run_gait, steady_command
 
 log = logging.getLogger(__name__)
 
@@ -48,24 +47,12 @@ PARAMETERS = (
 )
 
 
-def parse_weights(text: str) -> list[float]:
-    try:
-        values = [float(x) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise ValueError(f"--set kfe_weights: expected comma-separated numbers, got '{text}'") from None
-    if not values or any(not (np.isfinite(v) and v > 0) for v in values):
-        raise ValueError(f"--set kfe_weights: need positive numbers, got '{text}'")
-    return values
-
-
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': regularization needs a quadruped with point feet")
+    check_quadruped(robot, "regularization")
     if not any(j.endswith("kfe_joint") for j in robot.joint_names):
         raise ValueError(f"robot '{robot.name}': no *_kfe_joint to weight")
-    parse_weights(params["kfe_weights"])
-    if params["gait"] not in ("stand", "crawl"):
-        raise ValueError(f"--set gait: expected stand or crawl, got '{params['gait']}'")
+    parse_positive_floats(params["kfe_weights"], "kfe_weights")
+    check_gait(params, ("stand", "crawl"))
     if not (params["other_weight"] > 0 and params["duration"] > params["window"] > 0):
         raise ValueError("--set other_weight > 0 and duration > window > 0 required")
 
@@ -123,15 +110,14 @@ def regularization_run(robot, scheme: str, weights: np.ndarray | None, params: d
     options = {"regularization": scheme}
     if weights is not None:
         options["torque_weights"] = weights
-    command = VelocityCommand((0.0, 0.0), (params["speed"], 0.0), (1.0, 2.0)) \
-        if params["gait"] == "crawl" else None
+    command = steady_command(params["speed"]) if params["gait"] == "crawl" else None
     return run_gait(robot, "passive", params["gait"], command, params["duration"],
                     controller_options=options, progress=progress)
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     p = params
-    kfe_weights = parse_weights(p["kfe_weights"])
+    kfe_weights = parse_positive_floats(p["kfe_weights"], "kfe_weights")
     kfe = np.array([j.endswith("kfe_joint") for j in robot.joint_names])
     runs, metrics = {}, {}
     runs["force-normal"] = regularization_run(robot, "force-normal", None, p, progress)
@@ -174,38 +160,11 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                  f"over KFE weights {kfe_weights[0]:g} -> {kfe_weights[-1]:g}")
     figures = []
     if out_dir is not None:
-        figures.append(str(_figure(Path(out_dir) / "regularization.png", kfe_weights, metrics,
-                                   p)))
+        figures.append(str(regularization_figure(
+            Path(out_dir) / "regularization.png", kfe_weights, metrics["force-normal"],
+            metrics["sweep"], p["gait"], p["other_weight"])))
     return ScenarioResult("regularization", robot.name, controller, success, metrics, params,
                           notes, figures=figures)
-
-
-def _figure(path: Path, weights, metrics, p) -> Path:
-    """GRF angle (from the vertical and from the knee direction) and mean joint torques against
-    the KFE weight (log axis); the force-normal scheme as horizontal lines."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fn, s = metrics["force-normal"], metrics["sweep"]
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 5.6))
-    ax1.semilogx(weights, s["grf_angle_from_vertical_deg"], "o-", label="from vertical, torque")
-    ax1.semilogx(weights, s["grf_angle_to_knee_deg"], "s--", label="from knee direction, torque")
-    ax1.axhline(fn["grf_angle_from_vertical_deg"], color="k", lw=0.8,
-                label="from vertical, force-normal")
-    ax1.set_ylabel("GRF angle (deg)")
-    ax1.set_title("simulator contact forces, mean over the feet", fontsize=9)
-    ax2.semilogx(weights, s["mean_abs_tau_kfe_Nm"], "o-", label="KFE, torque")
-    ax2.semilogx(weights, s["mean_abs_tau_hfe_Nm"], "s-", label="HFE, torque")
-    ax2.axhline(fn["mean_abs_tau_kfe_Nm"], color="k", lw=0.8, label="KFE, force-normal")
-    ax2.set_ylabel("mean |tau| (Nm)")
-    ax2.set_xlabel("KFE weight of R_tau (other joints: %g)" % p["other_weight"])
-    for ax in (ax1, ax2):
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    fig.suptitle(f"HyQ {p['gait']}: torque regularisation (Sect. V-D, footnote 16)", fontsize=10)
-    return save_figure(fig, path)
 
 
 SCENARIO = Scenario(

@@ -1,5 +1,5 @@
-"""``robust-push``: push recovery with a mismatched twin (issue #4, "Robustness"; Herzog et al. 2016
-Sect. 5.2.2 protocol).
+"""``robust-push``: push recovery with a mismatched twin (robustness; Herzog et al. 2016 Sect. 5.2.2
+protocol).
 
 The controller (:class:`~wholebody.control.balance.MomentumBalance`, Table 2, PD eq. 22 or LQR
 eqs. 23-24, no joint PD) keeps the nominal Pinocchio model; the simulated robot differs from it
@@ -22,39 +22,38 @@ within 5 mm of its pre-push position within 3 s of the end of the push.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from ..control.balance import MomentumBalance
-from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
-from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
-from ..report.plots import grouped_bar_figure, time_series_figure
+from ..report.balance_figures import robust_push_location_figure, robust_push_summary_figure
 from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
-from .base import ENGINE, Parameter, Scenario, ScenarioResult, parse_list
+from .base import ENGINE, Parameter, Scenario, ScenarioResult, duration_parameter, parse_list
 from .loop import run_closed_loop
-from .push import LOCATIONS, controller_options, make_push, validate as validate_push
+from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
+from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
+                     check_locations, check_push, controller_options, make_push)
 
 log = logging.getLogger(__name__)
 
 #: Largest peak force (N) survived on the exact twin (front/back/left/right above the hip, 0.1 s
 #: half-sine), measured with ``push`` in 10 N steps up to the first failure (LQR with
-#: q_angular=10, this scenario's default), re-measured in session 5 with the current cascade (the
-#: session-3 values, PD 160/150/190/190 and LQR 150/130/240/240 N, were 72-84 % of these).
+#: q_angular=10, this scenario's default) with the current cascade.
 #: The LQR values are the plain LQR's also when ``q_integral`` (our integral action) is set.
 NOMINAL = {
     "pd": {"front": 190.0, "back": 180.0, "left": 250.0, "right": 260.0},
     "lqr": {"front": 190.0, "back": 180.0, "left": 310.0, "right": 310.0},
 }
-#: The same with the paper's single momentum weight (``--set angular_weight=1e4``), re-measured in
-#: session 8 with the same protocol as ``NOMINAL`` (``push``, 10 N steps up to the first failure,
-#: LQR with q_angular=10, engine native); the old values, from ``push`` and the coarse
-#: ``push-series`` (60/100/140/180 N), were PD 150/100/180/180 and LQR 100/140/180/180 N.
-#: PD's first failures are foot slip (13-49 mm) with the CoG recovered; LQR left/right survive
-#: 320-330 N with 1-2 failed solver cycles (``push`` does not count them: 310/320 N otherwise).
+#: The same with the paper's single momentum weight (``--set angular_weight=1e4``), with the same
+#: protocol as ``NOMINAL`` (``push``, 10 N steps up to the first failure, LQR with q_angular=10,
+#: engine native). PD's first failures are foot slip (13-49 mm) with the CoG recovered; LQR
+#: left/right survive 320-330 N with 1-2 failed solver cycles (``push`` does not count them:
+#: 310/320 N otherwise).
 NOMINAL_SINGLE_MOMENTUM_WEIGHT = {
     "pd": {"front": 150.0, "back": 130.0, "left": 210.0, "right": 200.0},
     "lqr": {"front": 100.0, "back": 220.0, "left": 330.0, "right": 330.0},
@@ -74,25 +73,16 @@ PARAMETERS = (
     Parameter("torque_delay", "1,2", "torque delay in steps of 1 ms, cycled over the seeds"),
     Parameter("torque_noise", 1.0, "std of the Gaussian torque noise (Nm)"),
     Parameter("start", 1.0, "time of the push (s); before it the robot settles on the mismatch"),
-    Parameter("duration", 4.5, "simulated time per run (s)"),
+    duration_parameter(4.5, "simulated time per run (s)"),
     Parameter("baseline", True, "also run every mismatch draw without a push, to tell push "
                                 "failures from the mismatch alone"),
     Parameter("q_angular", 10.0, "LQR weight on angular momentum (the nominal LQR forces were "
                                  "measured with 10; eq. 26 uses 0.1)"),
-    Parameter("angular_weight", ANGULAR_MOMENTUM_WEIGHT,
-              "weight of the momentum task's angular rows in Table 2 (1e4: the paper's single "
-              "momentum weight, which lets the pelvis drift under model errors)"),
-    Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error integral (LQI; our extension, "
-                                 "not the paper's); 0 = off, the paper's controller. NOMINAL was "
-                                 "measured without it"),
-    Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
-              "LQR integral action: anti-windup clamp of each integral component (m s)"),
+    ANGULAR_WEIGHT,
+    replace(Q_INTEGRAL, help=Q_INTEGRAL.help + ". NOMINAL was measured without it"),
+    INTEGRAL_LIMIT,
     ENGINE,
 )
-
-COG_TOLERANCE, RECOVERY_WINDOW = 5e-3, 3.0
-MAX_TILT_DEG, MAX_SLIP = 2.0, 0.01
-
 
 def nominal_force(controller: str, location: str, params: dict) -> float:
     """The nominal largest survived peak force: ``--set nominal_force`` or the measured default
@@ -117,9 +107,7 @@ def mismatch_for(params: dict, i: int) -> Mismatch:
 
 
 def validate(robot, params: dict) -> None:
-    for location in parse_list(params["locations"], str, "locations"):
-        if location not in LOCATIONS:
-            raise ValueError(f"--set locations: '{location}' is not one of {', '.join(LOCATIONS)}")
+    check_locations(parse_list(params["locations"], str, "locations"))
     if not 0 < params["fraction"]:
         raise ValueError("--set fraction: must be > 0")
     if params["seeds"] < 1:
@@ -127,8 +115,8 @@ def validate(robot, params: dict) -> None:
     if not params["start"] + params["push_duration"] < params["duration"]:
         raise ValueError("--set start/duration: the push must end before the run does")
     mismatch_for(params, 0)  # checks the mismatch values
-    validate_push(robot, {"location": "front", "angle": 0.0, "height": 0.1, "peak_force": 1.0,
-                          "start": params["start"], "push_duration": params["push_duration"]})
+    check_push(robot, {**FIXED_PUSH, "location": "front", "peak_force": 1.0,
+                       "start": params["start"], "push_duration": params["push_duration"]})
 
 
 def one_run(robot, controller: str, location: str, force: float, mismatch: Mismatch,
@@ -149,12 +137,11 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
         com.append(true_com())
         model_com.append(robot.com.copy())  # the controller's estimate (nominal model)
         poses = sim.contact_frame_poses()
-        tilt.append(max(np.degrees(np.arccos(np.clip(R[2, 2], -1, 1))) for _, R in poses.values()))
+        tilt.append(max(tilt_deg(R) for _, R in poses.values()))
         if time < push.start:  # feet "in place" is judged from where they are when pushed
             feet_at_push.update({n: pose[0] for n, pose in poses.items()})
-        slip.append(max(np.linalg.norm((poses[n][0] - feet_at_push[n])[:2]) for n in poses))
-        settle_slip.append(max(np.linalg.norm((poses[n][0] - start_feet[n][0])[:2])
-                               for n in poses))
+        slip.append(max(sole_slip(poses[n][0], feet_at_push[n]) for n in poses))
+        settle_slip.append(max(sole_slip(poses[n][0], start_feet[n][0]) for n in poses))
         force_log.append(push.magnitude(time))
 
     failures = run_closed_loop(sim, ctrl, params["duration"], on_result=observe)
@@ -162,11 +149,7 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
     before = (t >= push.start - 0.2) & (t < push.start)
     pre = com[before].mean(axis=0)
     err = np.linalg.norm(com - pre, axis=1)
-    end = push.start + push.duration
-    after = t >= end
-    outside = np.flatnonzero(after & (err > COG_TOLERANCE))
-    recovered = bool(outside.size == 0 or t[outside[-1]] < min(end + RECOVERY_WINDOW,
-                                                                t[-1] - 0.2))
+    recovered, recovery = cog_recovered(t, err, push.start + push.duration)
     metrics = {
         "seed": mismatch.seed,
         "torque_delay_ms": mismatch.torque_delay * sim.dt * 1e3,
@@ -179,7 +162,7 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
                                                            axis=1).max()),
         "final_vertical_cog_error_m": float((com - pre)[-1, 2]),
         "final_cog_error_m": float(err[-1]),
-        "cog_recovery_time_s": 0.0 if outside.size == 0 else float(t[outside[-1]] - end),
+        "cog_recovery_time_s": recovery,
         "static_cog_offset_m": float(np.linalg.norm(pre - ctrl.com_ref)),
         "final_true_vs_reference_m": float(np.linalg.norm(com[-1] - ctrl.com_ref)),
         "final_model_vs_reference_m": float(np.linalg.norm(model_com[-1] - ctrl.com_ref)),
@@ -190,8 +173,8 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
         "max_foot_slip_from_start_m": float(max(settle_slip)),
         "failed_cycles": failures,
     }
-    metrics["survived"] = bool(recovered and metrics["max_foot_tilt_deg"] < MAX_TILT_DEG
-                               and metrics["max_foot_slip_m"] < MAX_SLIP)
+    metrics["survived"] = bool(recovered and feet_in_place(metrics["max_foot_tilt_deg"],
+                                                           metrics["max_foot_slip_m"]))
     return {"metrics": metrics, "t": t, "cog_error": com - pre, "push": np.array(force_log),
             "tilt": tilt}
 
@@ -262,35 +245,16 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     result = ScenarioResult("robust-push", robot.name, controller, rate == 1.0, metrics, params,
                             notes)
     if out_dir is not None:
-        figures = []
-        for loc, rs in runs.items():
-            t = rs[0]["t"]
-            figures.append(time_series_figure(
-                Path(out_dir) / f"robust_push_{loc}.png", t,
-                [("push force", "N", {"|F|": rs[0]["push"]}),
-                 ("true CoG error from its pre-push position (horizontal norm, clipped at 5 cm)",
-                  "cm",
-                  {f"seed {r['metrics']['seed']}" + ("" if r["metrics"]["survived"] else
-                                                     " (failed)"):
-                   np.minimum(100 * np.linalg.norm(r["cog_error"][:, :2], axis=1), 5.0)
-                   for r in rs}),
-                 ("true CoG error, vertical (clipped at ±5 cm)", "cm",
-                  {f"seed {r['metrics']['seed']}": np.clip(100 * r["cog_error"][:, 2], -5, 5)
-                   for r in rs}),
-                 ("largest foot tilt (simulator; 2 deg = failure; clipped at 10)", "deg",
-                  {f"seed {r['metrics']['seed']}": np.minimum(r["tilt"], 10.0) for r in rs})],
-                title=f"robust push {loc}, {rs[0]['metrics']['peak_force_N']:.0f} N "
-                      f"({params['fraction']:.0%} of nominal) — {robot.name}, {controller}, "
-                      f"mass ±{params['mass_noise']:.0%}, CoM {100 * params['com_offset']:.0f} cm, "
-                      f"delay {params['torque_delay']} ms, noise {params['torque_noise']} Nm",
-                shaded=[(params["start"], params["start"] + params["push_duration"])]))
-        figures.append(grouped_bar_figure(
-            Path(out_dir) / "robust_push_summary.png", locations,
-            {"success rate (%)": [100 * per_location[loc]["success_rate"] for loc in locations],
-             "max CoG error of the survivors (mm)": [
-                 np.nan_to_num(1000 * per_location[loc]["survivors_max_cog_error_m"])
-                 for loc in locations],
-             "peak force (N / 10)": [per_location[loc]["peak_force_N"] / 10 for loc in locations]},
+        mismatch = (f"mass ±{params['mass_noise']:.0%}, CoM {100 * params['com_offset']:.0f} cm, "
+                    f"delay {params['torque_delay']} ms, noise {params['torque_noise']} Nm")
+        figures = [robust_push_location_figure(
+            Path(out_dir) / f"robust_push_{loc}.png", rs,
+            title=f"robust push {loc}, {rs[0]['metrics']['peak_force_N']:.0f} N "
+                  f"({params['fraction']:.0%} of nominal) — {robot.name}, {controller}, {mismatch}",
+            shaded=[(params["start"], params["start"] + params["push_duration"])])
+            for loc, rs in runs.items()]
+        figures.append(robust_push_summary_figure(
+            Path(out_dir) / "robust_push_summary.png", locations, per_location,
             title=f"robust push — {robot.name}, {controller}, {int(params['seeds'])} mismatch "
                   f"draws per point"))
         result.figures = [str(f) for f in figures]

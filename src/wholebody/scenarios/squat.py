@@ -21,7 +21,8 @@ Variants:
   with 0.6, 0.7 and 0.8, PD and LQR gains alike, the robot falls within about a second of the
   first activation (see the summary notes and the issue report).
 
-Metrics: those of :mod:`wholebody.scenarios.platform` (CoG error, momentum deviation from h_ref,
+Metrics: those of :mod:`wholebody.scenarios.platform` (measured by
+:class:`~wholebody.scenarios.measures.BalanceMonitor`: CoG error, momentum deviation from h_ref,
 foot tilt and slip on the floor, predicted vs measured CoP, fraction of cycles with an active CoP
 constraint), plus per axis ``max/rms_cog_error_{x,z}_m``, ``rms_cog_velocity_error_mps`` (|x_cog' -
 x_ref'|), ``max_cop_bound_ratio`` (max of |measured CoP| / admissible half-size; <= 1 means the real
@@ -38,13 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..control.balance import CoMSineReference, MomentumBalance
-from ..report.plots import time_series_figure
+from ..control.balance import CoMSineReference, MomentumBalance, lqr_q
+from ..report.balance_figures import squat_figure
 from ..sim.simulator import Simulator
-from .base import ENGINE, Parameter, Scenario, ScenarioResult
+from .base import ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, check_biped, format_mm
 from .loop import run_closed_loop
-from .platform import (COP_SKIP, SLIP_LIMIT_M, TILT_LIMIT_DEG, BalanceMonitor, _mm, limit_notes,
-                       lqr_q, validate_biped)
+from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
 
 VARIANTS = ("tracking", "cop-active")
 
@@ -58,7 +58,7 @@ PARAMETERS = (
     Parameter("ramp", 1.0, "amplitude ramp-in time (s)"),
     Parameter("active_margin", 0.7, "cop-active: fraction by which the admissible CoP half-sizes "
                                     "shrink"),
-    Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)"),
+    Q_ANGULAR,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
                                     "cop-active"),
     ENGINE,
@@ -66,7 +66,7 @@ PARAMETERS = (
 
 
 def validate(robot, params: dict) -> None:
-    validate_biped(robot, params)
+    check_biped(robot, params)
     if params["variant"] not in VARIANTS:
         raise ValueError(f"--set variant: expected one of {', '.join(VARIANTS)}, got "
                          f"'{params['variant']}'")
@@ -114,15 +114,15 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     metrics["max_cop_bound_ratio"] = float(np.nanmax(ratio)) if np.isfinite(ratio).any() else None
     metrics["failed_cycles"] = failures
     metrics["cop_margin"] = margin
-    success = bool(failures == 0 and metrics["max_foot_tilt_deg"] < TILT_LIMIT_DEG
-                   and metrics["max_foot_slip_m"] < SLIP_LIMIT_M
+    success = bool(failures == 0
+                   and feet_in_place(metrics["max_foot_tilt_deg"], metrics["max_foot_slip_m"])
                    and metrics["max_cog_error_m"] < bound)
     notes = [f"CoG error bound for success: {100 * bound:.1f} cm"]
     m = metrics
     measured = (f"max CoG error {1000 * m['max_cog_error_m']:.1f} mm (RMS x "
                 f"{1000 * m['rms_cog_error_x_m']:.2f}, z {1000 * m['rms_cog_error_z_m']:.2f} mm), "
                 f"CoP constraints active {100 * m['cop_active_fraction']:.0f} % of the time, "
-                f"predicted-vs-measured CoP RMS {_mm(m['cop_rms_error_m'])} mm, measured CoP up to "
+                f"predicted-vs-measured CoP RMS {format_mm(m['cop_rms_error_m'])} mm, measured CoP up to "
                 f"{m['max_cop_bound_ratio'] or 0:.2f} of the admissible half-size, foot tilt "
                 f"{m['max_foot_tilt_deg']:.2f} deg, largest posture deviation "
                 f"{m['max_joint_deviation_rad']:.2f} rad ({m['max_deviation_joint']})")
@@ -133,7 +133,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     else:
         notes.append("paper: the CoG tracks 0.3/0.5 Hz sines of 2 cm forward and 3 cm vertical "
                      "(video only); measured: " + measured)
-    if m["max_cog_error_m"] > 0.1:
+    if m["max_cog_error_m"] > FALL_COG_ERROR_M:
         notes.append("the robot fell (CoG error > 10 cm)")
     if controller == "lqr" and params["q_angular"] == 0.1:
         notes.append("eq. 26's Q (0.1 on angular momentum) leaves talos14's trunk poorly damped; "
@@ -142,28 +142,11 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     result = ScenarioResult("squat", robot.name, controller, success, metrics, params, notes,
                             log=sim.log)
     if out_dir is not None:
-        active = a["active"]
-        edges = np.flatnonzero(np.diff(np.r_[0, active.astype(int), 0]))
-        shaded = [(t[s], t[min(e, len(t) - 1)]) for s, e in zip(edges[::2], edges[1::2])]
-        ref = a["com_ref"]
-        cop = {}
-        for j, n in enumerate(monitor.names):
-            short = n.split("_")[0][0].upper()
-            cop[f"{short} predicted"] = 100 * a["cop_pred"][:, j, 0]
-            cop[f"{short} measured"] = 100 * a["cop_meas"][:, j, 0]
-        result.figures = [str(time_series_figure(
-            Path(out_dir) / "squat.png", t,
-            [("CoG vertical position", "cm", {"desired": 100 * ref[:, 2], "actual": 100 * com[:, 2]}),
-             ("CoG vertical velocity", "cm/s", {"desired": 100 * vel[:, 1, 2],
-                                                "actual": 100 * vel[:, 0, 2]}),
-             ("CoG forward position", "cm", {"desired": 100 * ref[:, 0], "actual": 100 * com[:, 0]}),
-             ("joint deviation from the posture", "rad",
-              {metrics["max_deviation_joint"]: a["joints"][:, robot.joint_names.index(
-                  metrics["max_deviation_joint"])]}),
-             (f"CoP x in the sole (admissible ±{100 * bounds[0, 0]:.1f} cm; grey: a CoP constraint "
-              f"active)", "cm", cop)],
-            title=f"squat {params['variant']} {f} Hz — {robot.name}, {controller} momentum gains",
-            shaded=shaded))]
+        joint = metrics["max_deviation_joint"]
+        result.figures = [str(squat_figure(
+            Path(out_dir) / "squat.png", monitor, vel, joint, robot.joint_names.index(joint),
+            bounds[0, 0], title=f"squat {params['variant']} {f} Hz — {robot.name}, {controller} "
+                                f"momentum gains"))]
     return result
 
 

@@ -8,14 +8,15 @@ import numpy as np
 import pinocchio as pin
 
 from ..control.standing import StandingController
-from ..report.plots import time_series_figure
+from ..report.balance_figures import stand_figure
 from ..sim.environment import Environment
 from ..sim.simulator import Simulator
-from .base import Parameter, Scenario, ScenarioResult
+from .base import Parameter, Scenario, ScenarioResult, duration_parameter
 from .loop import run_closed_loop
+from .measures import fallen, sole_slip, tilt_deg
 
 PARAMETERS = (
-    Parameter("duration", 5.0, "simulated time (s)"),
+    duration_parameter(5.0),
     Parameter("kp", 1000.0, "joint stiffness of the PD (Nm/rad)"),
     Parameter("kd", 30.0, "joint damping of the PD (Nm s/rad)"),
     Parameter("friction", 1.0, "floor friction coefficient"),
@@ -28,8 +29,7 @@ def standing_metrics(arrays: dict, robot) -> dict:
     q = arrays["q"]
     base = q[:, :3]
     drift = np.linalg.norm(base - base[0], axis=1)
-    tilt = np.array([np.degrees(np.arccos(np.clip(pin.Quaternion(qi[6], *qi[3:6])
-                                                  .toRotationMatrix()[2, 2], -1, 1))) for qi in q])
+    tilt = np.array([tilt_deg(pin.Quaternion(qi[6], *qi[3:6]).toRotationMatrix()) for qi in q])
     wrenches = arrays["contact_wrenches"]
     return {
         "base_drift_max_m": float(drift.max()),
@@ -52,7 +52,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
 
     def observe(t, result):
         for n, (p, _) in sim.contact_frame_poses().items():
-            slip[n] = max(slip[n], float(np.linalg.norm((p - start_sites[n])[:2])))
+            slip[n] = max(slip[n], float(sole_slip(p, start_sites[n])))
         if t > 0.5:  # after settling: the controller's contact forces vs the simulator's
             measured = sim.contact_wrenches()
             force_error.append(max(np.linalg.norm(result.contact_forces[n][:3] - measured[n][:3])
@@ -65,31 +65,15 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     metrics["contact_force_prediction_error_max_N"] = float(max(force_error, default=0.0))
     metrics["torque_saturated_cycles"] = failures
     metrics["simulated_s"] = float(arrays["t"][-1] + sim.dt)
-    fell = metrics["base_tilt_max_deg"] > 30 or metrics["base_height_min_m"] < 0.5 * robot.q_ref[2]
+    fell = fallen(metrics["base_tilt_max_deg"], metrics["base_height_min_m"], robot.q_ref[2])
     metrics["fell"] = bool(fell)
     success = (not fell) and metrics["base_drift_max_m"] < params["drift_tolerance"]
     result = ScenarioResult("stand", robot.name, controller, success, metrics, params,
                             log=sim.log)
     if out_dir is not None:
-        result.figures = [str(p) for p in plot(arrays, robot, Path(out_dir))]
+        result.figures = [str(stand_figure(Path(out_dir) / "stand.png", arrays, robot.joint_names,
+                                           robot.contact_names, title=f"stand — {robot.name}"))]
     return result
-
-
-def plot(arrays: dict, robot, out_dir: Path) -> list[Path]:
-    t = arrays["t"]
-    base = arrays["q"][:, :3]
-    err = 1000 * (base - base[0])
-    wrenches = arrays["contact_wrenches"]
-    tau = arrays["tau_applied"]
-    joint_panels = {robot.joint_names[i]: tau[:, i] for i in np.argsort(-np.abs(tau).max(0))[:6]}
-    path = time_series_figure(
-        out_dir / "stand.png", t,
-        [("base position change", "mm", {"x": err[:, 0], "y": err[:, 1], "z": err[:, 2]}),
-         ("contact normal forces (simulator)", "N",
-          {n: wrenches[:, i, 2] for i, n in enumerate(robot.contact_names)}),
-         ("largest joint torques", "Nm", joint_panels)],
-        title=f"stand — {robot.name}")
-    return [path]
 
 
 SCENARIO = Scenario(

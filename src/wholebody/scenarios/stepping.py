@@ -8,19 +8,8 @@ formulation of Sect. 2.3 (x = [qdd, lambda], Newton-Euler rows only, eq. 13/14) 
 one (y = [qdd, lambda, tau], all rows of eq. 1), and the controller's wall time per cycle
 (``robot.update`` + task rows + hierarchical solve + tau) is recorded, as in Fig. 5.
 
-Per step (stance sole s, swing sole w; from the second step on, the CoG first returns over the
-middle of the feet), reusing the contact-switch pattern of
-:mod:`~wholebody.scenarios.single_support`:
-
-1. shift: the CoG reference moves (quintic, velocity and acceleration as feedforward) over s;
-2. unload: a force regulariser on level 3 drives w's wrench from its value at the start of the phase
-   to zero (a ramp of the target);
-3. single support (c = 1): w is dropped from the contacts, the swing-foot task lifts it by ``lift``
-   and puts it back (1 mm below its lift-off height, so that it surely touches);
-4. touch-down: double support again; over ``reload_time`` the regulariser ramps w's normal force
-   target from zero to ``preload`` of the weight (with eq. 2 alone a sole that stopped a fraction
-   of a millimetre above the floor hovers there, and the next shift then drops the robot), and is
-   released; the next shift moves the weight onto w.
+The controller is :class:`~wholebody.control.stepping.Stepping` (its docstring lists the phases of
+one step).
 
 Success is measured on the simulator: every cycle solved, each swing sole lifted by >= 80 % of
 ``lift`` with zero normal force while up, both soles flat (< 2 deg) and in place (< 1 cm) whenever
@@ -30,22 +19,16 @@ in contact, and no fall (base height within 10 cm of its start, final CoG over t
 from __future__ import annotations
 
 import logging
-import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..control.stacks import table1_stack
-from ..cycle import HierarchyCycle
-from ..formulation import Formulation
-from ..report.plots import time_series_figure
+from ..control.stepping import Stepping, SteppingConfig
+from ..report.balance_figures import stepping_timing_figure
 from ..sim.simulator import Simulator
-from ..tasks import ForceRegularizer
-from ..variables import Variables
 from .base import ENGINE, Parameter, Scenario, ScenarioResult, check_engine
 from .loop import run_closed_loop
-from .single_support import MAX_SLIP, MAX_TILT_DEG, smootherstep, smoothstep
+from .measures import MAX_BASE_DROP_M, feet_in_place, sole_slip, tilt_deg
 
 log = logging.getLogger(__name__)
 
@@ -69,163 +52,19 @@ PARAMETERS = (
                                    "caches)"),
 )
 
-@dataclass
-class Phase:
-    kind: str  # "shift", "unload", "single", "reload", "center", "final"
-    start: float
-    end: float
-    stance: str | None = None  # the sole carrying the robot in unload/single/reload
-    swing: str | None = None
 
-
-def timeline(robot, p: dict) -> list[Phase]:
-    """The phases of the stepping motion (see the module docstring)."""
+def config(robot, params: dict) -> SteppingConfig:
+    """The :class:`SteppingConfig` of the scenario parameters (the left sole is the first stance,
+    by the contact names)."""
     left, right = robot.contact_names[0], robot.contact_names[1]
     if "right" in left:
         left, right = right, left
-    phases, t = [], 0.0
-    for k in range(int(p["steps"])):
-        stance, swing = (left, right) if k % 2 == 0 else (right, left)
-        if k > 0:  # back over the middle first (one shift over the whole stance width dropped it)
-            phases.append(Phase("center", t, t + p["shift_time"]))
-            t += p["shift_time"]
-        for kind, dur in (("shift", p["shift_time"]), ("unload", p["unload_time"]),
-                          ("single", 2.0 * p["lift_time"]), ("reload", p["reload_time"])):
-            phases.append(Phase(kind, t, t + dur, stance, swing))
-            t += dur
-    phases.append(Phase("final", t, t + p["shift_time"] + p["settle"]))
-    return phases
-
-
-class Stepping:
-    """Table 1 stepping controller, ``compute(q, v, t)``, on one formulation (reduced or full).
-
-    Wall time of every cycle (update + rows + solve + tau) is appended to ``cycle_times``.
-    ``engine="native"`` solves each stack with a :class:`~wholebody.cycle.HierarchyCycle` (its
-    own compiled rigid-body pass and rows); the Python ``robot.update`` then runs only when a
-    phase begins (the swing foot's lift-off placement), so ``robot``'s cached terms are those
-    of that cycle — the scenario's records update it themselves, outside the cycle time.
-    """
-
-    def __init__(self, robot, params: dict, reduced: bool = True, engine: str = "python"):
-        self.robot, self.p, self.reduced = robot, params, reduced
-        self.phases = timeline(robot, params)
-        self.formulation = Formulation(robot, reduced=reduced)
-        full = not reduced
-        contacts = tuple(robot.contact_names)
-        self.double = table1_stack(robot, contacts, full=full)
-        self.double_vars = Variables(robot, contacts)
-        # eq. 2 keeps whatever velocity a sole has at touch-down (J qdd + Jdot v = 0): with both
-        # soles on the ground a residual landing velocity made the whole robot roll over in closed
-        # loop, so the contact accelerations also damp the contact velocities (-kd J v)
-        self.double.find("contacts").kd = params["contact_kd"]
-        # one unloading regulariser per sole, with the CoG task on level 3 (fixed contact sets, so
-        # the formulation's row plan is reused)
-        self.unload = {c: ForceRegularizer(name=f"unload {c}", contacts=[c], weight=0.0)
-                       for c in contacts}
-        self.double.levels[2].extend(self.unload.values())
-        self.single, self.single_vars, self.swing_task = {}, {}, {}
-        for stance in contacts:
-            swing = next(c for c in contacts if c != stance)
-            frame = robot.contact(swing).spec.frame
-            self.single[stance] = table1_stack(robot, [stance], [frame], full=full)
-            self.single[stance].find("contacts").kd = params["contact_kd"]
-            self.single_vars[stance] = Variables(robot, [stance])
-            self.swing_task[stance] = self.single[stance].find(f"swing {frame}")
-        self.cycles = None
-        if engine != "python":
-            self.cycles = {id(st): HierarchyCycle(robot, st, reduced=reduced, engine=engine)
-                           for st in [self.double, *self.single.values()]}
-        robot.update(robot.q_ref, np.zeros(robot.nv))
-        self.com_middle = robot.com.copy()
-        self.sole_xy = {c: robot.frame_placement(robot.contact(c).spec.frame)[0][:2].copy()
-                        for c in contacts}
-        self.com_task = self.double.find("com")
-        self.com_from = self.com_middle.copy()
-        self._phase_index = -1
-        self.unload_start = None
-        self.lift_start = None
-        self.last = None
-        self.cycle_times: list[float] = []
-        self.timings: list[dict] = []
-        self.n_contacts: list[int] = []
-
-    def phase(self, t: float) -> Phase:
-        for ph in self.phases:
-            if t < ph.end:
-                return ph
-        return self.phases[-1]
-
-    def com_target(self, ph: Phase) -> np.ndarray:
-        if ph.kind in ("final", "center"):
-            return self.com_middle
-        xy = self.sole_xy[ph.stance]
-        return np.array([xy[0], xy[1], self.com_middle[2]])
-
-    def com_reference(self, t: float, ph: Phase):
-        """Quintic shift from the CoG reference at the start of a shift phase to its target."""
-        if ph.kind in ("shift", "center", "final"):
-            s, ds, dds = smootherstep((t - ph.start) / self.p["shift_time"], self.p["shift_time"])
-            delta = self.com_target(ph) - self.com_from
-            return self.com_from + s * delta, ds * delta, dds * delta
-        return self.com_target(ph), np.zeros(3), np.zeros(3)
-
-    def compute(self, q, v, t: float):
-        t0 = time.perf_counter()
-        robot, p = self.robot, self.p
-        ph = self.phase(t)
-        index = self.phases.index(ph)
-        if self.cycles is None or index != self._phase_index:  # (the native cycles need no
-            robot.update(q, v)                                  # Python terms but at phase entry)
-        if index != self._phase_index:  # entering a phase
-            if ph.kind in ("shift", "center", "final"):
-                self.com_from = self.com_task.position.copy() if self._phase_index >= 0 \
-                    else self.com_middle.copy()
-                for task in self.unload.values():
-                    task.weight = 0.0
-            elif ph.kind == "unload":
-                self.unload_start = self.last.forces[ph.swing].copy()
-                self.unload[ph.swing].targets[ph.swing] = self.unload_start.copy()
-                self.unload[ph.swing].weight = 1.0
-            elif ph.kind == "single":
-                frame = robot.contact(ph.swing).spec.frame
-                self.lift_start, rotation = robot.frame_placement(frame)
-                self.swing_task[ph.stance].rotation = rotation
-            elif ph.kind == "reload":  # touch-down: the new contact's wrench ramps to a preload
-                self.unload[ph.swing].weight = 1.0
-            self._phase_index = index
-        c, dc, ddc = self.com_reference(t, ph)
-        if ph.kind == "single":
-            stack, variables = self.single[ph.stance], self.single_vars[ph.stance]
-            task = self.swing_task[ph.stance]
-            u = (t - ph.start) / p["lift_time"]  # up over [0, 1], down over [1, 2]
-            z = smoothstep(u) if u <= 1.0 else 1.0 - smoothstep(u - 1.0)
-            depth = p["touchdown_depth"] * smoothstep(u - 1.0)  # zero while going up
-            task.position = self.lift_start + np.array([0.0, 0.0, p["lift"] * z - depth])
-        else:
-            stack, variables = self.double, self.double_vars
-            if ph.kind == "unload":
-                alpha = smoothstep((t - ph.start) / p["unload_time"])
-                self.unload[ph.swing].targets[ph.swing] = (1.0 - alpha) * self.unload_start
-            elif ph.kind == "reload":
-                preload = np.zeros_like(self.unload_start)
-                preload[2] = p["preload"] * robot.mass * 9.81
-                alpha = smoothstep((t - ph.start) / p["reload_time"])
-                self.unload[ph.swing].targets[ph.swing] = alpha * preload
-        com = stack.find("com")
-        com.position, com.velocity, com.acceleration = c, dc, ddc
-        self.com_task = com
-        if stack is not self.double:  # keep the double-support CoG task's reference current
-            self.double.find("com").position = c
-        if self.cycles is None:
-            sol = self.formulation.solve(stack, variables, diagnostics=False)
-        else:
-            sol = self.cycles[id(stack)].solve(q, v, variables)
-        self.cycle_times.append(time.perf_counter() - t0)
-        self.timings.append(dict(sol.timings))
-        self.n_contacts.append(len(variables.contacts))
-        self.last = sol
-        return sol
+    return SteppingConfig(
+        stance_order=(left, right), steps=int(params["steps"]), shift_time=params["shift_time"],
+        unload_time=params["unload_time"], lift_time=params["lift_time"],
+        reload_time=params["reload_time"], preload=params["preload"], lift=params["lift"],
+        touchdown_depth=params["touchdown_depth"], settle=params["settle"],
+        contact_kd=params["contact_kd"])
 
 
 def _stats(x: np.ndarray) -> dict:
@@ -239,7 +78,7 @@ def _stats(x: np.ndarray) -> dict:
 
 def run_once(robot, params: dict, reduced: bool, progress: bool = False) -> dict:
     """One closed-loop stepping run; returns measurements (simulator-based) and timings."""
-    ctrl = Stepping(robot, params, reduced=reduced, engine=params["engine"])
+    ctrl = Stepping(robot, config(robot, params), reduced=reduced, engine=params["engine"])
     duration = ctrl.phases[-1].end
     sim = Simulator(robot)
     names = list(robot.contact_names)
@@ -255,8 +94,8 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False) -> dict
         for n in names:
             pos, R = poses[n]
             swing_z[n].append(pos[2] - start_poses[n][0][2])
-            tilt[n].append(np.degrees(np.arccos(np.clip(R[2, 2], -1.0, 1.0))))
-            slip[n].append(np.linalg.norm((pos - start_poses[n][0])[:2]))
+            tilt[n].append(tilt_deg(R))
+            slip[n].append(sole_slip(pos, start_poses[n][0]))
         q, v = sim.state()  # the state the controller just saw
         if ctrl.cycles is not None:  # the native controller left robot's terms stale
             robot.update(q, v)
@@ -304,8 +143,8 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False) -> dict
                                                         - parts["solve"])[keep]))}}
     lifted_ok = all(s["lift_m"] > 0.8 * params["lift"] and s["max_normal_force_while_up_N"] == 0.0
                     for s in steps)
-    success = bool(failures == 0 and lifted_ok and max_tilt < MAX_TILT_DEG and max_slip < MAX_SLIP
-                   and base_drop < 0.1 and final_com_xy_err < 0.02 and len(steps) > 0)
+    success = bool(failures == 0 and lifted_ok and feet_in_place(max_tilt, max_slip)
+                   and base_drop < MAX_BASE_DROP_M and final_com_xy_err < 0.02 and len(steps) > 0)
     return {"formulation": "reduced" if reduced else "full", "success": success,
             "failed_cycles": failures, "steps": steps, "max_sole_tilt_in_contact_deg": max_tilt,
             "max_sole_slip_in_contact_m": max_slip, "max_base_drop_m": base_drop,
@@ -346,24 +185,10 @@ def run(robot, controller: str, params: dict, out_dir: Path | None,
     ]
     result = ScenarioResult("stepping", robot.name, controller, success, metrics, params, notes)
     if out_dir is not None and runs:
-        any_run = next(iter(runs.values()))
-        shaded = [(ph.start, ph.end) for ph in any_run["_phases"] if ph.kind == "single"]
-        colors = {"reduced": "reduced (Sect. 2.3)", "full": "full EoM"}
-        panels = [("controller time per cycle (update + rows + solve + τ)", "ms",
-                   {colors.get(k, k): 1e3 * r["_cycles"] for k, r in runs.items()}),
-                  ("per-formulation maximum (after warm-up)", "ms",
-                   {f"max {colors.get(k, k)}": np.full(len(r["_cycles"]),
-                                                       r["timing"]["overall"].get("max_ms", np.nan))
-                    for k, r in runs.items()}),
-                  ("number of contacts c", "", {"c": any_run["_nc"]})]
-        n = min(len(r["_t"]) for r in runs.values())
-        for panel in panels:
-            for key in panel[2]:
-                panel[2][key] = panel[2][key][:n]
-        fig = time_series_figure(Path(out_dir) / "fig5_timing.png", any_run["_t"][:n], panels,
-                                 title=f"stepping (Table 1) on {robot.name}: reduced vs full "
-                                       f"formulation, single support shaded", shaded=shaded)
-        result.figures = [str(fig)]
+        result.figures = [str(stepping_timing_figure(
+            Path(out_dir) / "fig5_timing.png", runs,
+            title=f"stepping (Table 1) on {robot.name}: reduced vs full formulation, single "
+                  f"support shaded"))]
     return result
 
 

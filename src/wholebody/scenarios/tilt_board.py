@@ -36,14 +36,15 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..control.balance import MomentumBalance, SoleFrameReference
+from ..control.balance import MomentumBalance, SoleFrameReference, lqr_q
+from ..planning.blend import WaypointMotion
+from ..report.balance_figures import balance_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import ENGINE, Parameter, Scenario, ScenarioResult
+from .base import ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, check_biped, format_mm
 from .loop import run_closed_loop
-from .platform import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, TILT_LIMIT_DEG,
-                       BalanceMonitor, WaypointMotion, _mm, limit_notes, lqr_q, sole_midpoint,
-                       validate_biped)
+from .measures import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, MAX_TILT_DEG,
+                       BalanceMonitor, limit_notes, sole_midpoint)
 
 GRAVITY = 9.81
 
@@ -61,7 +62,7 @@ PARAMETERS = (
     Parameter("impact_window", 0.3, "drop mode: time after the impact in which the feet may tilt (s)"),
     Parameter("start", 0.5, "time of the first move (s)"),
     Parameter("settle", 2.0, "simulated time after the last move or the impact (s)"),
-    Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)"),
+    Q_ANGULAR,
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)"),
     ENGINE,
 )
@@ -112,7 +113,7 @@ class BoardMotion:
 
 
 def validate(robot, params: dict) -> None:
-    validate_biped(robot, params)
+    check_biped(robot, params)
     if params["plane"] not in ("sagittal", "lateral"):
         raise ValueError(f"--set plane: expected sagittal or lateral, got '{params['plane']}'")
     if params["mode"] not in ("tilt", "drop"):
@@ -156,7 +157,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         fz = a["fz_meas"][window]
         metrics["impact_min_normal_force_N"] = float(fz.min())
         metrics["impact_max_normal_force_N"] = float(fz.max())
-        tilted = np.flatnonzero(tilt >= TILT_LIMIT_DEG)
+        tilted = np.flatnonzero(tilt >= MAX_TILT_DEG)
         metrics["feet_flat_again_after_impact_s"] = (
             float(a["t"][tilted[-1]] - board.impact) if tilted.size else 0.0)
         late = a["t"] >= a["t"][-1] - 0.5
@@ -164,13 +165,13 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
             failures == 0 and metrics["final_cog_error_m"] < FINAL_COG_LIMIT_M
             and metrics["final_linear_momentum_Ns"] < FINAL_LIN_MOM
             and metrics["final_angular_momentum_Nms"] < FINAL_ANG_MOM
-            and tilt[late].max() < TILT_LIMIT_DEG)
+            and tilt[late].max() < MAX_TILT_DEG)
     success = monitor.success(metrics, failures, params["max_cog_error"])
     notes = [f"board pivot {board.lever:.3f} m from the soles' midpoint (from the paper's "
              f"[-2.8, 5.6] deg and 6.9 cm); CoG reference attached to the soles (yaw only); contacts "
              f"assumed stationary by the controller (eq. 2)"]
     if board.mode == "drop":
-        notes.append(f"drop: tilt < {TILT_LIMIT_DEG} deg not required within "
+        notes.append(f"drop: tilt < {MAX_TILT_DEG} deg not required within "
                      f"{params['impact_window']} s of the impact (paper: the feet bounced and "
                      f"tilted for a moment); impact_max_foot_tilt_deg reports it")
     if controller == "lqr" and params["q_angular"] == 0.1:
@@ -180,7 +181,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     measured = (f"max CoG error {100 * m['max_cog_error_m']:.2f} cm, foot tilt "
                 f"{m['max_foot_tilt_deg']:.2f} deg, slip {1000 * m['max_foot_slip_m']:.1f} mm, "
                 f"measured CoP up to {m['max_cop_edge_ratio'] or 0:.2f} of the half-sole, predicted-"
-                f"vs-measured CoP RMS {_mm(m['cop_rms_error_m'])} mm")
+                f"vs-measured CoP RMS {format_mm(m['cop_rms_error_m'])} mm")
     if board.mode == "tilt":
         notes.append("paper: feet flat, CoPs in a wider range than for pushes but inside the soles "
                      "with a margin, predicted and real forces differ; measured: " + measured)
@@ -199,8 +200,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         shaded = ([(board.impact, board.impact + params["impact_window"])] if board.mode == "drop"
                   else [])
         slope = np.degrees([board.theta(t) for t in a["t"]])
-        result.figures = [str(monitor.figure(
-            Path(out_dir) / "tilt_board.png",
+        result.figures = [str(balance_figure(
+            monitor, Path(out_dir) / "tilt_board.png",
             f"tilt board ({params['plane']}, {params['mode']}, [{params['min_angle']}, "
             f"{params['max_angle']}] deg) — {robot.name}, {controller} momentum gains",
             shaded=shaded, extra=[("board slope", "deg", {"slope": slope}),

@@ -35,10 +35,11 @@ import numpy as np
 
 from ..planning.planner import GaitPlanner
 from ..planning.swing import quintic_blend
-from ..planning.trunk import VelocityCommand
+from ..report.locomotion_figures import unstable_foothold_figure
 from ..sim.environment import Box, Environment, Platform
 from .base import Parameter, Scenario, ScenarioResult
-from .locomotion import make_schedule, run_gait
+from .gait_measures import outcome
+from .locomotion import DURATION, GAIT, check_gait, make_schedule, ramped_command, run_gait
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +55,8 @@ PARAMETERS = (
     Parameter("shift", 0.12, "outward slide of the stone (m)"),
     Parameter("tilt", 20.0, "roll of the stone about x while it goes (deg)"),
     Parameter("speed", 0.1, "crawl speed after a 2 s ramp-up (m/s)"),
-    Parameter("duration", 10.0, "simulated time (s)"),
-    Parameter("gait", "crawl", "crawl or trot"),
+    DURATION,
+    GAIT,
 )
 
 
@@ -63,8 +64,7 @@ def validate(robot, params: dict) -> None:
     if any(c.spec.type != "point" for c in robot.contacts) or LEG not in robot.contact_names:
         raise ValueError(f"robot '{robot.name}': the unstable-foothold scenario needs a quadruped "
                          f"with point feet and an '{LEG}' contact (hyq)")
-    if params["gait"] not in ("crawl", "trot"):
-        raise ValueError(f"--set gait: expected crawl or trot, got '{params['gait']}'")
+    check_gait(params)
     if not (0.0 < params["depth"] <= 0.15 and 0.08 <= params["size"] <= 0.4):
         raise ValueError("--set depth/size: expected 0 < depth <= 0.15 m, 0.08 <= size <= 0.4 m")
     if not params["duration"] > params["release_time"] > 3.0:
@@ -72,8 +72,8 @@ def validate(robot, params: dict) -> None:
 
 
 def _planner(robot, params):
-    command = VelocityCommand.speed_ramp(0.0, params["speed"], 1.0, 3.0)
-    return GaitPlanner.for_robot(robot, make_schedule(params["gait"], 1.0), command)
+    return GaitPlanner.for_robot(robot, make_schedule(params["gait"], 1.0),
+                                 ramped_command(params["speed"]))
 
 
 def stone_site(robot, params: dict) -> tuple[np.ndarray, float]:
@@ -167,11 +167,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         "rf_foot_drop_m": drop, "rf_foot_displacement_xy_m": slide,
         "rf_normal_force_before_N": float(fz[(ts >= t_r - 0.2) & (ts < t_r)].mean()),
         "rf_normal_force_min_during_roll_N": float(fz[sel_sim].min()),
-        "disturbed": {**dist, "fell": disturbed.fell, "failed_cycles": int(disturbed.failures),
-                      "distance_m": disturbed.distance,
+        "disturbed": {**dist, **outcome(disturbed),
                       "tracking_after_release": disturbed.tracking(t_r)},
-        "undisturbed": {**ref, "fell": reference.fell, "failed_cycles": int(reference.failures),
-                        "distance_m": reference.distance},
+        "undisturbed": {**ref, **outcome(reference)},
     }
     happened = drop >= 0.5 * params["depth"]
     kept_walking = (not disturbed.fell and disturbed.failures == 0
@@ -198,43 +196,11 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         notes.append("the RF foot did not drop: the stone was not under it at the release")
     figures = []
     if out_dir is not None:
-        figures.append(str(_figure(Path(out_dir) / "unstable_foothold.png", disturbed, reference,
-                                   sim, leg, params)))
+        figures.append(str(unstable_foothold_figure(
+            Path(out_dir) / "unstable_foothold.png", disturbed, reference, sim, leg,
+            params["gait"], params["depth"], t_r, WINDOW)))
     return ScenarioResult("unstable-foothold", robot.name, controller, success, metrics, params,
                           notes, figures=figures)
-
-
-def _figure(path: Path, disturbed, reference, sim: dict, leg: int, params: dict) -> Path:
-    """Fig. 6 style: CoM x, y, z (reference and simulator), the disturbance shaded; plus the RF
-    foot height and normal force."""
-    from ..report.plots import plt, save_figure  # the headless (Agg) pyplot
-    t = disturbed.log["t"]
-    com, ref = disturbed.log["com"], disturbed.log["com_ref"]
-    t_r = params["release_time"]
-    fig, axes = plt.subplots(5, 1, sharex=True, figsize=(8, 9))
-    for k, name in enumerate("xyz"):
-        ax = axes[k]
-        ax.plot(t, ref[:, k], "k--", linewidth=1.0, label="desired")
-        ax.plot(t, com[:, k], color="tab:blue", linewidth=1.0, label="actual (stone rolls)")
-        tr = reference.log["t"]
-        ax.plot(tr, reference.log["com"][:, k], color="tab:green", linewidth=0.8, alpha=0.6,
-                label="actual (stone still)")
-        ax.set_ylabel(f"CoM {name} (m)", fontsize=8)
-    ax = axes[3]
-    ax.plot(t, disturbed.log["feet"][:, leg, 2], color="tab:orange", label="RF foot height")
-    ax.set_ylabel("RF z (m)", fontsize=8)
-    ax = axes[4]
-    ax.plot(sim["t"], sim["contact_wrenches"][:, leg, 2], color="tab:red", linewidth=0.8,
-            label="RF normal force (simulator)")
-    ax.set_ylabel("RF f_z (N)", fontsize=8)
-    ax.set_xlabel("time (s)")
-    for ax in axes:
-        ax.axvspan(t_r, t_r + WINDOW, color="tab:red", alpha=0.12, zorder=0)
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"HyQ {params['gait']}: a {100 * params['depth']:.0f} cm stone rolls away under the "
-                 f"RF foot at {t_r} s (cf. Fig. 6; red: disturbance window)", fontsize=10)
-    return save_figure(fig, path)
 
 
 SCENARIO = Scenario(

@@ -37,29 +37,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ..planning.trunk import VelocityCommand
-from ..report.plots import time_series_figure
+from ..report.locomotion_figures import weak_joint_figure
 from .base import Parameter, Scenario, ScenarioResult
-from .locomotion import run_gait
+from .gait_measures import intervals, outcome
+from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_joint, check_positive, check_quadruped,
+                         parse_positive_floats, run_gait, steady_command)
 
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
     Parameter("joint", "lf_kfe_joint", "the weakened joint (its leg's HAA/HFE are compared)"),
     Parameter("limit", 26.0, "its torque limit in the WBC (Nm), symmetric"),
-    Parameter("speed", 0.11, "forward crawl speed (m/s), reached 1 s after the gait starts"),
-    Parameter("duration", 10.0, "simulated time per run (s); the crawl starts at 1 s"),
+    CRAWL_SPEED,
+    RUN_DURATION,
     Parameter("sweep", "40,60", "further limits (Nm) run for comparison, comma-separated"),
     Parameter("trunk_tolerance", 0.005, "allowed increase of the trunk RMS errors (m, rad)"),
 )
-
-
-def intervals(t: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:
-    """(start, end) times of the runs of True in ``flags`` (one flag per sample of ``t``)."""
-    col = np.concatenate([[False], np.asarray(flags, bool), [False]]).astype(int)
-    edges = np.flatnonzero(np.diff(col))
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    return [(float(t[a]), float(t[b - 1] + dt)) for a, b in zip(edges[::2], edges[1::2])]
 
 
 def leg_joints(robot, joint: str) -> tuple[str, list[str], str]:
@@ -74,15 +67,11 @@ def leg_joints(robot, joint: str) -> tuple[str, list[str], str]:
 
 
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': weak-joint needs a quadruped with point feet (hyq)")
-    if params["joint"] not in robot.joint_names:
-        raise ValueError(f"--set joint: unknown joint '{params['joint']}'; joints: "
-                         f"{', '.join(robot.joint_names)}")
+    check_quadruped(robot, "weak-joint")
+    check_joint(robot, params["joint"])
     leg_joints(robot, params["joint"])
-    for key in ("limit", "speed", "duration", "trunk_tolerance"):
-        if not params[key] > 0:
-            raise ValueError(f"--set {key}: must be positive, got {params[key]}")
+    parse_positive_floats(params["sweep"], "sweep", allow_empty=True)
+    check_positive(params, ("limit", "speed", "duration", "trunk_tolerance"))
 
 
 def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
@@ -91,7 +80,7 @@ def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
     name -> :class:`GaitRun`, each with ``post_solve_clips`` (cycles whose eq. 19 torque left the
     limits and was clipped after the solve) and ``sim_saturation_max`` (largest torque the simulator
     had to cut to the real actuator limits)."""
-    command = VelocityCommand((0.0, 0.0), (speed, 0.0), (1.0, 2.0))
+    command = steady_command(speed)
     setups = [("nominal", {})] + [(f"limit {lim:g} Nm", {"torque_limit_override": {joint: lim}})
                                   for lim in limits]
     runs = {}
@@ -129,21 +118,12 @@ def leg_load(run, robot, joints: list[str], contact: str, t_from: float = 1.0,
             "stance_time_s": float(stance.sum() * run.sim.dt)}
 
 
-def parse_limits(text: str) -> list[float]:
-    try:
-        values = [float(x) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise ValueError(f"--set sweep: expected comma-separated torques, got '{text}'") from None
-    if any(not (np.isfinite(v) and v > 0) for v in values):
-        raise ValueError(f"--set sweep: torques must be positive, got '{text}'")
-    return values
-
-
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     p = params
     joint, limit = p["joint"], p["limit"]
     prefix, joints, contact = leg_joints(robot, joint)
-    limits = [limit] + [x for x in parse_limits(p["sweep"]) if x != limit]
+    sweep = parse_positive_floats(p["sweep"], "sweep", allow_empty=True)
+    limits = [limit] + [x for x in sweep if x != limit]
     runs = weak_joint_runs(robot, joint, limits, p["speed"], p["duration"], progress)
     j = robot.joint_names.index(joint)
     metrics = {}
@@ -152,8 +132,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         failed = np.flatnonzero(~r.log["ok"].astype(bool))
         until = float(r.log["t"][failed[0]]) if len(failed) else float(np.inf)
         metrics[name] = {
-            "fell": r.fell, "failed_cycles": int(np.sum(~r.log["ok"].astype(bool))),
-            "distance_m": r.distance, **r.tracking(t_from=1.0),
+            **outcome(r), **r.tracking(t_from=1.0),
             f"{joint}_max_abs_sent_Nm": float(np.abs(sim["tau_command"][:, j]).max()),
             f"{joint}_max_abs_applied_Nm": float(np.abs(sim["tau_applied"][:, j]).max()),
             f"{joint}_time_at_or_above_{limit:g}Nm_s": float(
@@ -216,31 +195,16 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                  f", trunk unaffected {head['trunk unaffected']}")
     figures = []
     if out_dir is not None:
-        figures.append(str(_figure(Path(out_dir) / "weak_joint.png", runs, robot, joints, contact,
-                                   limits, p)))
+        nominal = runs["nominal"]
+        leg = list(nominal.controller.planner.legs).index(contact)
+        swing = intervals(nominal.log["t"], ~nominal.log["stance"][:, leg].astype(bool)
+                          & (nominal.log["t"] >= 1.0))
+        figures.append(str(weak_joint_figure(
+            Path(out_dir) / "weak_joint.png", runs,
+            {jn: robot.joint_names.index(jn) for jn in joints}, joints, limits[0], contact,
+            p["speed"], swing)))
     return ScenarioResult("weak-joint", robot.name, controller, success, metrics, params, notes,
                           figures=figures)
-
-
-def _figure(path, runs, robot, joints, contact, limits, p) -> Path:
-    """Fig. 3 style: the weak joint's torque with its limits, then HFE and HAA, every run; the
-    leg's swing phases shaded."""
-    sims = {k: r.sim.log.arrays() for k, r in runs.items()}
-    n = min(len(s["t"]) for s in sims.values())
-    t = sims["nominal"]["t"][:n]
-    idx = {jn: robot.joint_names.index(jn) for jn in joints}
-    r = runs["nominal"]
-    leg = list(r.controller.planner.legs).index(contact)
-    swing = intervals(r.log["t"], ~r.log["stance"][:, leg].astype(bool) & (r.log["t"] >= 1.0))
-    kfe = joints[2]
-    series = {k: s["tau_applied"][:n, idx[kfe]] for k, s in sims.items()}
-    series[f"+{limits[0]:g} Nm"] = np.full(n, limits[0])
-    panels = [(f"{kfe} torque applied in the twin", "tau (Nm)", series)]
-    for jn in (joints[1], joints[0]):
-        panels.append((f"{jn} torque", "tau (Nm)",
-                       {k: s["tau_applied"][:n, idx[jn]] for k, s in sims.items()}))
-    return time_series_figure(path, t, panels, f"HyQ crawl {p['speed']} m/s, {kfe} torque limited "
-                              f"in the WBC (Fig. 3; shaded: {contact} swing)", shaded=swing)
 
 
 SCENARIO = Scenario(

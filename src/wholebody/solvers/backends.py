@@ -22,16 +22,21 @@ memory on failure, so a failed x is never passed on).
   Its infeasibility certificates misfire on small feasible problems; see the adapter.
 
 Keyword options are passed to the solver (e.g. ``eps_abs`` for proxsuite, DAQP settings).
+
+Single QPs that DAQP solves on their own rows and senses, with simple bounds and a warm start
+(PassiveWBC's eq. 7 of Fahmi et al. 2019, the quasi-static baseline), go through
+:func:`solve_daqp_qp`, which returns a :class:`DaqpResult` (exit flag, iterations, multipliers).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["solve_qp", "BACKENDS"]
+__all__ = ["solve_qp", "BACKENDS", "solve_daqp_qp", "DaqpResult"]
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +61,13 @@ DAQP_EXIT = {  # DAQP's exit flags by name (daqp 0.11's constants.h)
 # DAQP's settings where the caller gives none (solve_daqp says why)
 DAQP_DEFAULTS = {"primal_tol": 1e-9, "sing_tol": 1e-14}
 DAQP_RAW_TOL = 1e-6  # largest violation of an unscaled row a DAQP solution may have
+DAQP_OK = (1, 2)  # DAQP's success flags: optimal, soft optimal
+DAQP_SENSE_EQ, DAQP_SENSE_INEQ = 5, 0  # DAQP's row senses: equality, (two-sided) inequality
+# DAQP's settings for solve_daqp_qp where the caller gives none: daqp.solve's own defaults (nothing
+# overridden). The single weighted QPs it serves (PassiveWBC, Fahmi et al. 2019 eq. 7, and the
+# quasi-static baseline) are solved on their own rows, not on the cascade's relaxed level QPs that
+# DAQP_DEFAULTS was measured on.
+DAQP_QP_DEFAULTS: dict = {}
 
 
 def _split_rows(lower: np.ndarray, upper: np.ndarray):
@@ -149,6 +161,50 @@ def solve_daqp_unit_rows(H, g, unit_A, bupper, blower, sense, **opts):
     if flag not in (1, 2):
         return None, f"daqp: {DAQP_EXIT.get(flag, 'exitflag')} ({flag})"
     return np.asarray(x), "optimal"
+
+
+class DaqpResult(NamedTuple):
+    """What :func:`solve_daqp_qp` found: ``x`` (None unless ``ok``), DAQP's exit ``flag``, its
+    ``iterations``, the multipliers ``dual`` (None unless ``ok``; the next cycle's warm start)
+    and a ``status`` naming the flag (``DAQP_EXIT``)."""
+
+    x: np.ndarray | None
+    flag: int
+    iterations: int
+    dual: np.ndarray | None
+    status: str
+
+    @property
+    def ok(self) -> bool:
+        return self.x is not None
+
+
+def solve_daqp_qp(H, g, A, upper, lower, sense, dual_start=None, **settings) -> DaqpResult:
+    """min ½xᵀHx + gᵀx s.t. lower ≤ A x ≤ upper by DAQP on the caller's rows (not scaled) with
+    the caller's senses (5: equality) → :class:`DaqpResult`.
+
+    General H (positive definite, not the cascade's unit Hessian). ``upper``/``lower`` longer than
+    A's rows bound the first variables directly (DAQP's simple bounds), as in ``daqp.solve``.
+    ``dual_start`` (multipliers of an earlier solve of the same layout) warm-starts DAQP; a warm
+    start that fails is retried cold. ``settings`` override ``DAQP_QP_DEFAULTS``. Success is exit
+    flag 1 or 2 (``DAQP_OK``) with a finite x; on failure x is None (DAQP returns uninitialised
+    memory then).
+    """
+    daqp, opts = _daqp(), {**DAQP_QP_DEFAULTS, **settings}
+    args = (H, g, A, upper, lower, sense)
+    if dual_start is not None:
+        x, _, flag, info = daqp.solve(*args, dual_start=dual_start, **opts)
+        if flag not in DAQP_OK:
+            x, _, flag, info = daqp.solve(*args, **opts)
+    else:
+        x, _, flag, info = daqp.solve(*args, **opts)
+    iterations = info.get("iterations", 0)
+    if flag not in DAQP_OK:
+        return DaqpResult(None, flag, iterations, None,
+                          f"daqp: {DAQP_EXIT.get(flag, 'exit flag')} ({flag})")
+    if not math.isfinite(np.add.reduce(x)):  # x.sum() without its Python-level wrapper
+        return DaqpResult(None, flag, iterations, None, f"daqp: non-finite solution (flag {flag})")
+    return DaqpResult(x, flag, iterations, info["lam"], "optimal")
 
 
 def daqp_verdict(x, status: str, over: float, raw_tol: float = DAQP_RAW_TOL):

@@ -1,5 +1,5 @@
-"""Terrain courses for the quadruped experiments: one description -> the simulator's boxes and the
-planner's terrain (Fahmi et al. 2019, seed 001, Sect. V-G, Figs. 7-8).
+"""Terrain courses for the quadruped experiments: one description -> the planner's terrain
+(Fahmi et al. 2019, seed 001, Sect. V-G, Figs. 7-8).
 
 A course is a sequence of segments along +x (the walking direction), starting at ``x_start`` on
 level ground at z = 0 and continuing level after the last segment:
@@ -11,17 +11,18 @@ level ground at z = 0 and continuing level after the last segment:
 * ``("gap", length)`` — a hole (nothing underneath; the ground after it continues at the current
   height, so a step after a gap is ``("gap", 0.22), ("step", 0.07)``).
 
-:func:`build_course` turns it into
+:func:`build_course` turns it into a :class:`Course` with
 
-* an :class:`~wholebody.sim.environment.Environment` without the floor plane, one box per surface
-  strip (so a gap is a real hole), for the simulator;
+* ``strips`` (one planar surface strip each) and ``gaps``, from which the simulator's boxes are
+  built (:func:`wholebody.scenarios.locomotion.course_environment`);
 * a :class:`~wholebody.planning.terrain.Terrain` with the exact height (gaps ``GAP_DEPTH`` below the
   lowest surface) and exact per-strip normals, for the footholds and friction cones (footnote 17:
   the real terrain normal under each foot);
 * a smoothed ``trunk_terrain`` for the trunk reference: the course profile with gaps bridged,
   averaged over a window of the robot's hip-to-hip length, so that the desired trunk pitch is the
   slope of the line between the terrain under the hind and the front hips (a kink of the course
-  does not become a jump of the desired pitch) and its height the mean terrain height under the body;
+  does not become a jump of the desired pitch) and its height the mean terrain height under the
+  body;
 * :meth:`Course.safe_x` moves a foothold out of a gap (used by :class:`CoursePlanner`).
 """
 
@@ -32,14 +33,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..planning.footholds import Foothold
-from ..planning.planner import GaitPlanner
-from ..planning.terrain import Terrain
-from ..sim.environment import Box, Environment
+from .footholds import Foothold
+from .planner import GaitPlanner
+from .terrain import Terrain
 
 GAP_DEPTH = 1.0  # planner's view of a hole: this far below the lowest surface (m)
-BOX_THICKNESS = 1.0  # thickness of the simulator's level ground boxes (m)
-SLOPE_THICKNESS = 0.1  # thickness of the simulator's ramp boxes (m)
 FAR = 50.0  # the level ground before/after the course extends this far (m)
 
 
@@ -63,7 +61,8 @@ class Strip:
 @dataclass
 class Course:
     """A built course (see the module docstring). ``strips`` are sorted along x; ``gaps`` are the
-    (x0, x1) intervals without ground."""
+    (x0, x1) intervals without ground; ``width`` (across y) and ``friction`` describe the surface
+    for the simulator."""
 
     strips: list[Strip]
     gaps: list[tuple[float, float]]
@@ -72,7 +71,6 @@ class Course:
     smoothing: float
     terrain: Terrain = field(init=False)
     trunk_terrain: Terrain = field(init=False)
-    environment: Environment = field(init=False)
 
     def __post_init__(self):
         self._x0 = np.array([s.x0 for s in self.strips])
@@ -81,11 +79,6 @@ class Course:
                                normal=lambda x, y: self._normal(self.slope(x)))
         self.trunk_terrain = Terrain(height=lambda x, y: self.smooth_height(x),
                                      normal=lambda x, y: self._normal(self.smooth_slope(x)))
-        # level strips: deep boxes; slopes: thin ones (a tilted box's end face leans over its
-        # neighbour; next to a gap it narrows the hole, but only below 5 cm under the surface)
-        boxes = [_strip_box(s, self.width, BOX_THICKNESS if s.z0 == s.z1 else SLOPE_THICKNESS)
-                 for s in self.strips]
-        self.environment = Environment(floor_friction=self.friction, floor=False, boxes=boxes)
 
     # ------------------------------------------------------------------ exact profile
     def strip_at(self, x: float) -> Strip | None:
@@ -186,16 +179,6 @@ class Course:
         return np.array(xs), np.array(zs)
 
 
-def _strip_box(s: Strip, width: float, thickness: float) -> Box:
-    """A box whose top face is the strip (tilted by its slope), ``thickness`` deep."""
-    angle = math.atan2(s.z1 - s.z0, s.x1 - s.x0)
-    length = math.hypot(s.x1 - s.x0, s.z1 - s.z0)
-    n = np.array([-math.sin(angle), 0.0, math.cos(angle)])
-    top_mid = np.array([0.5 * (s.x0 + s.x1), 0.0, 0.5 * (s.z0 + s.z1)])
-    centre = top_mid - 0.5 * thickness * n
-    return Box(tuple(centre), (0.5 * length, 0.5 * width, 0.5 * thickness), (0.0, -angle, 0.0))
-
-
 def build_course(segments, x_start: float = 0.5, width: float = 3.0, friction: float = 1.0,
                  smoothing: float = 0.75) -> Course:
     """Build a :class:`Course` from ``segments`` (see the module docstring) starting at
@@ -225,7 +208,6 @@ def build_course(segments, x_start: float = 0.5, width: float = 3.0, friction: f
         if seg[0] in ("flat", "slope", "gap") and not float(seg[1]) > 0.0:
             raise ValueError(f"course segment {seg}: length must be > 0")
     strips.append(Strip(x, x + FAR, z, z))
-    # merge consecutive strips at the same height and slope? keep them: boxes are cheap
     strips = [s for s in strips if s.x1 > s.x0]
     return Course(strips, gaps, width, friction, smoothing)
 

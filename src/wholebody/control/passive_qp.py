@@ -1,0 +1,216 @@
+"""The preallocated QP of passive whole-body control (Fahmi et al. 2019, eq. 7), in DAQP's form.
+
+Variables u = [q̈ (nv), F (3 per foot), ε (one per foot, "single" swing slacks only)]; simple bounds
+on every variable (the base accelerations free, joint accelerations by eqs. 16-18, swing-foot forces
+pinned to zero) come first in ``upper``/``lower``/``sense``, then the rows of ``A``:
+
+* dynamics, nv rows M q̈ − Jᵀ F: the 6 base rows equal to −h (eq. 9), the joint rows in
+  [τ_min − h_j, τ_max − h_j] (eq. 15 with τ from eq. 19);
+* feet, 3 per foot: J q̈ = target for stance feet (eq. 10/32), swing rows free or eq. 11/12;
+* friction, 5 per foot: the pyramid (eq. 13) and the normal-force bounds (eq. 14), free on swing
+  feet;
+* "single" slacks only, 3 per foot: the paired rows of the swing rows, J q̈ + ε ≥ b.
+
+The layout never changes with the stance split, so DAQP's multipliers warm-start the next cycle.
+:class:`PassiveQP` owns the arrays and writes each block from numbers the controller computes
+(:class:`~wholebody.control.passive.PassiveWBC`); the compiled cycle writes the same arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE
+from ..solvers.backends import DaqpResult, solve_daqp_qp
+from ..tasks.contact import friction_faces, tangent_basis
+
+_INF = np.inf
+
+
+@dataclass(frozen=True)
+class StancePattern:
+    """Masks and bounds that depend only on the stance/swing split of one cycle."""
+
+    s3: np.ndarray  # stance mask per force component
+    swing: np.ndarray  # indices (controller order) of the swing feet
+    all_stance: bool
+    swing_feet_rows: np.ndarray  # A rows of the swing feet's eq. 12
+    swing_single_rows: np.ndarray  # their paired rows (single-slack layout)
+    feet_sense: np.ndarray
+    force_upper: np.ndarray
+    force_lower: np.ndarray
+    force_sense: np.ndarray
+    fric_upper: np.ndarray
+    fric_lower: np.ndarray
+    tangential: np.ndarray  # tangential-force regulariser of the stance feet (unweighted)
+
+
+class PassiveQP:
+    """The arrays ``H, g, A, upper, lower, sense`` of eq. 7 for ``nv`` velocities and
+    ``n_feet`` point feet, their row blocks, and the DAQP solve with warm start."""
+
+    def __init__(self, nv: int, n_feet: int, single_slack: bool = False):
+        c = n_feet
+        self.nv, self.n_feet, self.single_slack = nv, c, single_slack
+        self.nf = 3 * c
+        self.n = nv + self.nf + (c if single_slack else 0)
+        self.r_feet = nv  # the dynamics rows come first (6 base rows, then na joint rows)
+        self.r_fric = self.r_feet + 3 * c
+        self.r_single = self.r_fric + 5 * c
+        self.m = self.r_single + (3 * c if single_slack else 0)
+        self.A = np.zeros((self.m, self.n))
+        self.H = np.zeros((self.n, self.n))
+        self.g = np.zeros(self.n)
+        self.upper = np.zeros(self.n + self.m)  # simple bounds on every variable, then rows
+        self.lower = np.zeros(self.n + self.m)
+        self.sense = np.zeros(self.n + self.m, dtype=np.int32)
+        self.cols_force = slice(nv, nv + self.nf)
+        self.cols_slack = slice(nv + self.nf, self.n)
+        self.dual: np.ndarray | None = None  # multipliers of the last successful solve
+        self._normals = np.full((c, 3), np.nan)  # friction rows are rebuilt when these change
+        self._friction_key = None
+        self._tangential = np.zeros((self.nf, self.nf))
+        self._patterns: dict[bytes, StancePattern] = {}
+        n = self.n  # constant senses: dynamics rows are equalities, everything else inequalities
+        self.sense[n:n + 6] = EQ
+        self.upper[:6], self.lower[:6] = _INF, -_INF  # the base accelerations are free
+        if single_slack:
+            for i in range(c):  # slack columns of the paired rows: row1 - eps <= b, row2 + eps >= b
+                self.A[self.r_feet + 3 * i:self.r_feet + 3 * i + 3, nv + self.nf + i] = -1.0
+                self.A[self.r_single + 3 * i:self.r_single + 3 * i + 3, nv + self.nf + i] = 1.0
+
+    # ------------------------------------------------------------------ per stance split
+    def pattern(self, stance: np.ndarray) -> StancePattern:
+        """Masks and bounds for the split ``stance`` (cached per split; the cache is emptied when
+        the friction rows change)."""
+        key = stance.tobytes()
+        pattern = self._patterns.get(key)
+        if pattern is None:
+            s3, s5 = np.repeat(stance, 3), np.repeat(stance, 5)
+            swing = np.flatnonzero(~stance)
+            feet_rows = self.r_feet + 3 * swing[:, None] + np.arange(3)
+            pattern = StancePattern(
+                s3=s3, swing=swing, all_stance=bool(stance.all()),
+                swing_feet_rows=feet_rows.ravel(),
+                swing_single_rows=(feet_rows + self.r_single - self.r_feet).ravel(),
+                feet_sense=np.where(s3, EQ, FREE).astype(np.int32),
+                force_upper=np.where(s3, _INF, 0.0), force_lower=np.where(s3, -_INF, 0.0),
+                force_sense=np.where(s3, FREE, EQ).astype(np.int32),
+                fric_upper=np.where(s5, self._fric_upper, _INF),
+                fric_lower=np.where(s5, self._fric_lower, -_INF),
+                tangential=self._tangential * s3[:, None])
+            self._patterns[key] = pattern
+        return pattern
+
+    def set_friction(self, normals: np.ndarray, mu: float, f_min: float, f_max: float) -> None:
+        """Rows of eqs. 13-14 about each foot's terrain normal; rebuilt only when a normal, μ or
+        the normal-force bounds changed."""
+        key = (mu, f_min, f_max)
+        if key == self._friction_key and np.array_equal(normals, self._normals):
+            return
+        nv = self.nv
+        self._tangential[:] = 0.0
+        for i, normal in enumerate(normals):
+            rr, fi = self.r_fric + 5 * i, nv + 3 * i
+            self.A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, mu)
+            t1, t2, nn = tangent_basis(normal)
+            self.A[rr + 4, fi:fi + 3] = nn
+            self._tangential[3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.outer(t1, t1) + np.outer(t2, t2)
+        c = self.n_feet
+        self._fric_upper = np.tile([0.0, 0.0, 0.0, 0.0, f_max], c)
+        self._fric_lower = np.tile([-_INF, -_INF, -_INF, -_INF, f_min], c)
+        self._normals[:] = normals
+        self._friction_key = key
+        self._patterns.clear()
+
+    # ------------------------------------------------------------------ row blocks
+    def set_dynamics(self, M, J, h, tau_lo, tau_hi) -> None:
+        """Eq. 9 and eq. 15 in one block: M q̈ − Jᵀ F = −h on the base rows, in
+        [τ_min − h_j, τ_max − h_j] on the joint rows."""
+        nv, n, up, lo = self.nv, self.n, self.upper, self.lower
+        self.A[:nv, :nv] = M
+        self.A[:nv, self.cols_force] = -J.T
+        np.negative(h, out=up[n:n + nv])
+        lo[n:n + nv] = up[n:n + nv]
+        up[n + 6:n + nv] += tau_hi
+        lo[n + 6:n + nv] += tau_lo
+
+    def set_joint_bounds(self, qdd_lo, qdd_hi) -> None:
+        """Eqs. 16-18: joint accelerations as simple bounds (the base stays free)."""
+        self.lower[6:self.nv], self.upper[6:self.nv] = qdd_lo, qdd_hi
+
+    def set_feet(self, J, target, pat: StancePattern) -> None:
+        """Stance feet, eq. 10 / 32: J q̈ = target, written for every foot; the swing feet's rows
+        are left free (see :meth:`set_swing`)."""
+        n, rf, rq, up, lo = self.n, self.r_feet, self.r_fric, self.upper, self.lower
+        self.A[rf:rq, :self.nv] = J
+        up[n + rf:n + rq] = lo[n + rf:n + rq] = target
+        self.sense[n + rf:n + rq] = pat.feet_sense
+        if not pat.all_stance:
+            up[n + pat.swing_feet_rows] = _INF
+            lo[n + pat.swing_feet_rows] = -_INF
+
+    def set_forces(self, pat: StancePattern) -> None:
+        """Eqs. 13-14: friction pyramid and normal-force bounds on stance feet; swing forces 0."""
+        n, rq, rs, F = self.n, self.r_fric, self.r_single, self.cols_force
+        self.upper[n + rq:n + rs], self.lower[n + rq:n + rs] = pat.fric_upper, pat.fric_lower
+        self.upper[F], self.lower[F], self.sense[F] = (pat.force_upper, pat.force_lower,
+                                                       pat.force_sense)
+
+    def set_cost(self, R_diagonal, H_force, g_force) -> None:
+        """Cost ‖u‖²_R plus the force block (trunk wrench task, eqs. 7a and 8, and the force
+        regulariser): H = diag(R) + [0, H_F, 0], g = [0, g_F, 0]."""
+        F, n = self.cols_force, self.n
+        self.H[:] = 0.0
+        self.H.flat[::n + 1] = R_diagonal  # (flat-iterator assignment writes in place)
+        self.g[:] = 0.0
+        self.g[F] = g_force
+        self.H[F, F] += H_force
+
+    def set_single_slacks(self, stance: np.ndarray, slack_weight: float) -> None:
+        """Single-slack layout: a stance foot's slack is pinned at 0 and its paired rows are free;
+        a swing foot's slack is in [0, inf) with cost α ε² (its rows are set in set_swing)."""
+        n, e, rs = self.n, self.cols_slack, self.r_single
+        self.upper[e] = np.where(stance, 0.0, _INF)
+        self.lower[e] = 0.0
+        self.sense[e] = np.where(stance, EQ, FREE)
+        cols = np.arange(e.start, e.stop)  # H[e, e] = v with a slice would fill the whole block
+        self.H[cols, cols] = np.where(stance, 1.0, slack_weight)  # 1: keeps H definite
+        self.upper[n + rs:n + self.m], self.lower[n + rs:n + self.m] = _INF, -_INF
+
+    def set_swing(self, J_rows, b, pat: StancePattern, slack: str, slack_weight: float) -> None:
+        """Swing feet's eq. 12 rows J q̈ = b: hard (``slack`` "none", eq. 11), a weighted
+        least-squares term α‖J q̈ − b‖² (``"per-direction"``, eq. 33 with one slack per row) or
+        J q̈ − ε ≤ b ≤ J q̈ + ε (``"single"``, one slack per foot)."""
+        nv, n = self.nv, self.n
+        rows = n + pat.swing_feet_rows
+        if slack == "per-direction":  # rows stay free: α‖J q̈ − b‖² in the cost
+            self.H[:nv, :nv] += slack_weight * (J_rows.T @ J_rows)
+            self.g[:nv] -= slack_weight * (J_rows.T @ b)
+            return
+        self.A[pat.swing_feet_rows, :nv] = J_rows
+        if slack == "none":
+            self.upper[rows] = self.lower[rows] = b
+            self.sense[rows] = EQ
+        else:
+            self.A[pat.swing_single_rows, :nv] = J_rows
+            self.upper[rows] = b
+            self.lower[n + pat.swing_single_rows] = b
+
+    # ------------------------------------------------------------------ solve
+    def solve(self) -> DaqpResult:
+        """DAQP on the full layout, warm-started from the last successful solve's multipliers."""
+        result = solve_daqp_qp(self.H, self.g, self.A, self.upper, self.lower, self.sense,
+                               dual_start=self.dual)
+        self.dual = result.dual
+        return result
+
+    def compact(self, k: int, rows: int) -> tuple:
+        """Views (H, g, A, upper, lower, sense) of the arrays holding a compact QP of ``k``
+        variables and ``rows`` rows written at their start (the compiled cycle leaves out the
+        swing feet's forces and the free rows, see passive_cycle.cpp)."""
+        return (self.H.reshape(-1)[:k * k].reshape(k, k), self.g[:k],
+                self.A.reshape(-1)[:rows * k].reshape(rows, k), self.upper[:k + rows],
+                self.lower[:k + rows], self.sense[:k + rows])

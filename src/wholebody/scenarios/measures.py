@@ -1,0 +1,233 @@
+"""Measures shared by the humanoid scenarios, each defined once: foot tilt and slip, CoG recovery
+after a push, falls, the CoP of a sole, the survival thresholds, and the per-cycle monitor of the
+balance scenarios (Herzog et al. 2016 Sects. 5.2-5.4).
+
+All are computed from the simulator (its state, sole poses and contact wrenches), not from the
+controller's model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: survival thresholds: the feet stay flat (tilt below MAX_TILT_DEG) and in place (slip below
+#: MAX_SLIP_M), and the CoG returns within COG_TOLERANCE_M of its reference within
+#: RECOVERY_WINDOW_S after a push
+MAX_TILT_DEG = 2.0
+MAX_SLIP_M = 0.01
+COG_TOLERANCE_M = 5e-3
+RECOVERY_WINDOW_S = 3.0
+
+#: a fall: the base tilts by more than FALL_BASE_TILT_DEG or sinks below FALL_HEIGHT_FRACTION of its
+#: standing height (stand), the base drops by MAX_BASE_DROP_M (stepping), or the CoG error exceeds
+#: FALL_COG_ERROR_M (balance scenarios)
+FALL_BASE_TILT_DEG = 30.0
+FALL_HEIGHT_FRACTION = 0.5
+MAX_BASE_DROP_M = 0.1
+FALL_COG_ERROR_M = 0.1
+
+COP_MIN_FORCE = 50.0  # N: a CoP (predicted or measured) is counted only while the sole carries this
+COP_ACTIVE_TOL = 5e-4  # m: a predicted CoP this close to its bound counts as an active constraint
+COP_SKIP = 0.2  # s: landing transient at the start, left out of the CoP statistics
+#: balance at the end of a run: CoG error and momentum deviations over the last window below these
+FINAL_COG_LIMIT_M, FINAL_LIN_MOM, FINAL_ANG_MOM = COG_TOLERANCE_M, 1.0, 1.0
+
+
+def tilt_deg(rotation: np.ndarray) -> float:
+    """Angle (deg) between the z axis of ``rotation`` and the world's (or the support's, for a
+    rotation relative to it)."""
+    return np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0)))
+
+
+def sole_slip(position: np.ndarray, start: np.ndarray) -> float:
+    """Horizontal displacement of a sole frame origin from its start (m)."""
+    return np.linalg.norm((position - start)[:2])
+
+
+def feet_in_place(max_tilt: float, max_slip: float) -> bool:
+    """The feet stayed flat and in place (the survival thresholds)."""
+    return bool(max_tilt < MAX_TILT_DEG and max_slip < MAX_SLIP_M)
+
+
+def cog_recovery(t: np.ndarray, err: np.ndarray, end: float, window: np.ndarray | None = None,
+                 tolerance: float = COG_TOLERANCE_M) -> tuple[float, float | None]:
+    """(recovery time after ``end``, time of the last sample with the CoG error ``err`` above
+    ``tolerance``, or None if there is none) over the samples from ``end`` on (and in ``window``)."""
+    after = t >= end
+    if window is not None:
+        after = after & window
+    outside = np.flatnonzero(after & (err > tolerance))
+    if outside.size == 0:
+        return 0.0, None
+    return float(t[outside[-1]] - end), t[outside[-1]]
+
+
+def cog_recovered(t: np.ndarray, err: np.ndarray, end: float,
+                  window: float = RECOVERY_WINDOW_S) -> tuple[bool, float]:
+    """(recovered, recovery time) of a push ending at ``end``: the CoG error was last above
+    COG_TOLERANCE_M before ``end + window`` and at least 0.2 s before the end of the record."""
+    recovery, last = cog_recovery(t, err, end)
+    return bool(last is None or last < min(end + window, t[-1] - 0.2)), recovery
+
+
+def fallen(base_tilt_deg: float, base_height: float, standing_height: float) -> bool:
+    """The base tilted by more than FALL_BASE_TILT_DEG or sank below FALL_HEIGHT_FRACTION of its
+    standing height."""
+    return bool(base_tilt_deg > FALL_BASE_TILT_DEG
+                or base_height < FALL_HEIGHT_FRACTION * standing_height)
+
+
+def cop_in_sole(wrench: np.ndarray, rotation: np.ndarray,
+                min_force: float = 1e-9) -> tuple[np.ndarray, float]:
+    """(CoP (x, y) in the sole's axes about its origin, normal force) of a world-axes wrench [f;
+    moment about the sole origin]; the CoP is nan while the normal force is at most ``min_force``."""
+    f = rotation.T @ wrench[:3]
+    tau = rotation.T @ wrench[3:]
+    if f[2] <= min_force:
+        return np.full(2, np.nan), float(f[2])
+    return np.array([-tau[1] / f[2], tau[0] / f[2]]), float(f[2])
+
+
+def sole_midpoint(robot) -> np.ndarray:
+    """Midpoint of the contact frames at the reference posture (resting on z = 0)."""
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    return np.mean([robot.frame_placement(robot.contact(n).spec.frame)[0]
+                    for n in robot.contact_names], axis=0)
+
+
+def limit_notes(metrics: dict) -> list[str]:
+    """A note when a joint reached its position limit (the twin's limits are hard stops)."""
+    if metrics["min_joint_limit_margin_rad"] < 0.01:
+        return [f"{metrics['closest_to_limit_joint']} reached its position limit (margin "
+                f"{metrics['min_joint_limit_margin_rad']:.3f} rad); the controller has no "
+                f"joint-position limit task"]
+    return []
+
+
+class BalanceMonitor:
+    """Per-cycle measurements of a balance run on a (possibly moving) support (definitions: the
+    docstring of :mod:`wholebody.scenarios.platform`).
+
+    Called as ``on_result(t, solution)`` by :func:`run_closed_loop`, i.e. before the step that
+    applies the solution; the simulator's contact wrenches are those of the step that just ended.
+    """
+
+    def __init__(self, robot, sim, ctrl, cop_margin: float = 0.0):
+        self.robot, self.sim, self.ctrl = robot, sim, ctrl
+        self.names = robot.contact_names
+        self.half = {n: np.asarray(robot.contact(n).spec.half_size, dtype=float)
+                     for n in self.names}
+        self.bound = {n: (1.0 - cop_margin) * self.half[n] for n in self.names}
+        p_s, R_s = sim.support_pose()
+        poses = sim.contact_frame_poses()
+        self.start = {n: R_s.T @ (poses[n][0] - p_s) for n in self.names}
+        self.rows: dict[str, list] = {k: [] for k in (
+            "t", "com", "com_ref", "cog_error", "dh", "tilt", "slip", "cop_pred", "cop_meas",
+            "fz_meas", "active", "support_p", "support_R", "joints", "qdd")}
+
+    def __call__(self, t: float, sol) -> None:
+        robot, sim, r = self.robot, self.sim, self.rows
+        p_s, R_s = sim.support_pose()
+        poses = sim.contact_frame_poses()
+        wrenches = sim.contact_wrenches()
+        tilt, slip, pred, meas, fz, active = [], [], [], [], [], False
+        for n in self.names:
+            p, R = poses[n]
+            tilt.append(tilt_deg(R_s.T @ R))
+            slip.append(sole_slip(R_s.T @ (p - p_s), self.start[n]))
+            cp, fp = cop_in_sole(np.asarray(sol.forces[n]), R) if n in sol.forces else (
+                np.full(2, np.nan), 0.0)
+            cm, f = cop_in_sole(wrenches[n], R)
+            pred.append(cp if fp > COP_MIN_FORCE else np.full(2, np.nan))
+            meas.append(cm if f > COP_MIN_FORCE else np.full(2, np.nan))
+            fz.append(f)
+            if np.all(np.isfinite(cp)) and np.any(np.abs(cp) >= self.bound[n] - COP_ACTIVE_TOL):
+                active = True
+        r["t"].append(t)
+        r["com"].append(robot.com.copy())
+        r["com_ref"].append(self.ctrl.com_ref.copy())
+        r["cog_error"].append(robot.com - self.ctrl.com_ref)
+        r["dh"].append(robot.h_G - self.ctrl.h_ref)
+        r["tilt"].append(tilt)
+        r["slip"].append(slip)
+        r["cop_pred"].append(pred)
+        r["cop_meas"].append(meas)
+        r["fz_meas"].append(fz)
+        r["active"].append(active)
+        r["support_p"].append(p_s)
+        r["support_R"].append(R_s)
+        r["joints"].append(robot.q[7:] - robot.q_ref[7:])
+        r["qdd"].append(np.asarray(sol.qdd)[6:])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.asarray(v) for k, v in self.rows.items()}
+
+    def joint_limit_margin(self, deviations: np.ndarray, name: bool = False):
+        """Smallest distance of any joint to its position limits over the run (rad), or with
+        ``name`` the joint where it occurs."""
+        model = self.robot.model
+        q = deviations + self.robot.q_ref[7:]
+        lo, hi = model.lowerPositionLimit[7:], model.upperPositionLimit[7:]
+        margin = np.minimum(q - lo, hi - q).min(axis=0)
+        return self.robot.joint_names[int(margin.argmin())] if name else float(margin.min())
+
+    def support_imu(self, point_offset=None) -> tuple[np.ndarray, np.ndarray]:
+        """(linear acceleration of a point fixed to the support, angular velocity), world axes, by
+        finite differences of the logged support pose; ``point_offset`` in the support's frame
+        (default: the soles' midpoint at the start)."""
+        a = self.arrays()
+        t, p, R = a["t"], a["support_p"], a["support_R"]
+        if point_offset is None:
+            point_offset = np.mean([self.start[n] for n in self.names], axis=0)
+        x = p + np.einsum("kij,j->ki", R, point_offset)
+        acc = np.gradient(np.gradient(x, t, axis=0), t, axis=0)
+        dR = np.gradient(R, t, axis=0)
+        W = np.einsum("kij,kjl->kil", dR, np.transpose(R, (0, 2, 1)))  # R' R^T = [w]x
+        omega = np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=1)
+        return acc, omega
+
+    def metrics(self, window: float = 0.5) -> dict[str, float]:
+        a = self.arrays()
+        t = a["t"]
+        late = t >= t[-1] - window
+        err = np.linalg.norm(a["cog_error"], axis=1)
+        lin = np.linalg.norm(a["dh"][:, :3], axis=1)
+        ang = np.linalg.norm(a["dh"][:, 3:], axis=1)
+        settled = t >= t[0] + COP_SKIP
+        diff = np.linalg.norm(a["cop_pred"] - a["cop_meas"], axis=2)[settled]  # nan: unloaded
+        diff = diff[np.isfinite(diff)]
+        ratio = (np.abs(a["cop_meas"]) / np.array([self.half[n] for n in self.names]))[settled]
+        acc, omega = self.support_imu()
+        return {
+            "max_cog_error_m": float(err.max()),
+            "rms_cog_error_m": float(np.sqrt(np.mean(err ** 2))),
+            "final_cog_error_m": float(err[late].max()),
+            "max_linear_momentum_Ns": float(lin.max()),
+            "max_angular_momentum_Nms": float(ang.max()),
+            "final_linear_momentum_Ns": float(lin[late].max()),
+            "final_angular_momentum_Nms": float(ang[late].max()),
+            "max_foot_tilt_deg": float(a["tilt"].max()),
+            "max_foot_slip_m": float(a["slip"].max()),
+            "cop_rms_error_m": float(np.sqrt(np.mean(diff ** 2))) if diff.size else None,
+            "cop_max_error_m": float(diff.max()) if diff.size else None,
+            "max_cop_edge_ratio": float(np.nanmax(ratio)) if np.isfinite(ratio).any() else None,
+            "cop_active_fraction": float(np.mean(a["active"][settled])),
+            "max_joint_deviation_rad": float(np.abs(a["joints"]).max()),
+            "max_deviation_joint": self.robot.joint_names[int(np.abs(a["joints"]).max(axis=0)
+                                                              .argmax())],
+            "min_joint_limit_margin_rad": self.joint_limit_margin(a["joints"]),
+            "closest_to_limit_joint": self.joint_limit_margin(a["joints"], name=True),
+            "max_commanded_joint_acceleration_radps2": float(np.abs(a["qdd"]).max()),
+            "max_commanded_acceleration_joint": self.robot.joint_names[
+                int(np.abs(a["qdd"]).max(axis=0).argmax())],
+            "peak_platform_acceleration_mps2": float(np.linalg.norm(acc, axis=1).max()),
+            "peak_platform_angular_velocity_radps": float(np.linalg.norm(omega, axis=1).max()),
+        }
+
+    def success(self, metrics: dict, failures: int, max_cog_error: float) -> bool:
+        return bool(failures == 0 and metrics["max_foot_tilt_deg"] < MAX_TILT_DEG
+                    and metrics["max_foot_slip_m"] < MAX_SLIP_M
+                    and metrics["max_cog_error_m"] < max_cog_error
+                    and metrics["final_cog_error_m"] < FINAL_COG_LIMIT_M
+                    and metrics["final_linear_momentum_Ns"] < FINAL_LIN_MOM
+                    and metrics["final_angular_momentum_Nms"] < FINAL_ANG_MOM)

@@ -1,0 +1,157 @@
+"""Pushes on the standing humanoid (Herzog et al. 2016 Sect. 5.2.2), shared by ``push``,
+``push-series``, ``robust-push`` and ``single-support``: the paper's push points, the push itself,
+the momentum-balance options and one push trial.
+
+The push is a half-sine force applied at one of the paper's 7 points (front, right, back, left on
+the torso above the hip; front, right, left at the hip) or along any ``angle`` and ``height``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..control.balance import MomentumBalance, lqr_q
+from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
+from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
+from ..sim.disturbance import Push
+from ..sim.simulator import Simulator
+from .base import ENGINE, Q_ANGULAR, Parameter, check_engine
+from .loop import run_closed_loop
+from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
+
+# location -> (frame, direction of the force, point of application in the frame)
+TORSO_OFFSET, SURFACE = 0.1, 0.12
+LOCATIONS = {
+    "front": ("torso_2_link", (-1.0, 0.0, 0.0), (SURFACE, 0.0, TORSO_OFFSET)),
+    "right": ("torso_2_link", (0.0, 1.0, 0.0), (0.0, -SURFACE, TORSO_OFFSET)),
+    "back": ("torso_2_link", (1.0, 0.0, 0.0), (-SURFACE, 0.0, TORSO_OFFSET)),
+    "left": ("torso_2_link", (0.0, -1.0, 0.0), (0.0, SURFACE, TORSO_OFFSET)),
+    "hip-front": ("base_link", (-1.0, 0.0, 0.0), (SURFACE, 0.0, 0.0)),
+    "hip-right": ("base_link", (0.0, 1.0, 0.0), (0.0, -SURFACE, 0.0)),
+    "hip-left": ("base_link", (0.0, -1.0, 0.0), (0.0, SURFACE, 0.0)),
+}
+
+#: momentum-balance options of the push scenarios (see :func:`controller_options`)
+ANGULAR_WEIGHT = Parameter(
+    "angular_weight", ANGULAR_MOMENTUM_WEIGHT,
+    "weight of the momentum task's angular rows in Table 2 (1e4: the paper's single momentum "
+    "weight, which lets the pelvis drift under model errors)")
+Q_INTEGRAL = Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error integral (LQI; our "
+                                          "extension, not the paper's); 0 = off, the paper's "
+                                          "controller")
+INTEGRAL_LIMIT = Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
+                           "LQR integral action: anti-windup clamp of each integral component "
+                           "(m s)")
+CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, ENGINE)
+
+#: the push parameters of one trial that push-series and robust-push do not vary
+FIXED_PUSH = {"angle": 0.0, "height": 0.1}
+
+
+def controller_options(controller: str, params: dict) -> dict:
+    """Keyword arguments of :class:`MomentumBalance` from the scenario parameters (``q_angular``,
+    ``angular_weight``, ``engine``, and for LQR the integral action ``q_integral``/``integral_limit``;
+    missing keys take the defaults of :data:`CONTROLLER_PARAMETERS`)."""
+    defaults = {p.name: p.default for p in CONTROLLER_PARAMETERS}
+    get = lambda key: params.get(key, defaults[key])  # noqa: E731
+    opts = {"angular_weight": get("angular_weight"), "engine": get("engine")}
+    if controller == "lqr":
+        opts["Q"] = lqr_q(get("q_angular"))
+        if get("q_integral") > 0:
+            opts["q_integral"] = get("q_integral")
+            opts["integral_limit"] = get("integral_limit")
+    return opts
+
+
+def make_push(params: dict) -> Push:
+    """The half-sine push of ``location`` (or ``angle``/``height``), ``peak_force``, ``start``,
+    ``push_duration``."""
+    location = params["location"]
+    if location == "angle":
+        a = np.radians(params["angle"])
+        direction = (-np.cos(a), -np.sin(a), 0.0)
+        offset = (SURFACE * np.cos(a), SURFACE * np.sin(a), params["height"])
+        frame = "base_link"
+    elif location in LOCATIONS:
+        frame, direction, offset = LOCATIONS[location]
+    else:
+        raise ValueError(f"--set location: '{location}' is not one of {', '.join(LOCATIONS)}, angle")
+    return Push(frame, direction, params["peak_force"], params["start"], params["push_duration"],
+                offset=offset)
+
+
+def location_of(push: Push) -> str:
+    """The name in :data:`LOCATIONS` of a push's point."""
+    return next(k for k, v in LOCATIONS.items() if v[0] == push.frame and
+                np.allclose(v[1], push.direction))
+
+
+def check_push(robot, params: dict) -> None:
+    """ValueError unless the engine is known, ``robot`` has the push's frame and rectangular soles."""
+    check_engine(params)
+    push = make_push(params)
+    if not robot.model.existFrame(push.frame):
+        raise ValueError(f"robot '{robot.name}' has no frame '{push.frame}' to push at; the push "
+                         f"scenario is for the Talos humanoids (talos14, talos)")
+    if any(c.spec.type != "rectangle" for c in robot.contacts):
+        raise ValueError(f"robot '{robot.name}': momentum balance needs rectangular soles")
+
+
+def check_locations(locations) -> None:
+    for location in locations:
+        if location not in LOCATIONS:
+            raise ValueError(f"--set locations: '{location}' is not one of {', '.join(LOCATIONS)}")
+
+
+@dataclass
+class PushTrial:
+    """One push on the exact twin: survived, metrics, and the records of every control cycle."""
+
+    success: bool
+    metrics: dict
+    push: Push
+    log: object  # the simulator's log
+    cog_error: np.ndarray  # (N, 3) robot.com - com_ref
+    momentum: np.ndarray  # (N, 6) h_G
+
+
+def push_trial(robot, controller: str, params: dict, progress: bool = False) -> PushTrial:
+    """One push (``make_push(params)``) on the standing robot under :class:`MomentumBalance` for
+    ``duration`` s. Survived: the feet stay flat and in place and the CoG returns within 5 mm of its
+    reference within 3 s after the push (:mod:`~wholebody.scenarios.measures`)."""
+    push = make_push(params)
+    ctrl = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
+    sim = Simulator(robot)
+    sim.add_push(push)
+    start_feet = sim.contact_frame_poses()
+    com, momentum, feet_tilt, feet_slip = [], [], [], []
+
+    def observe(t, result):
+        com.append(robot.com - ctrl.com_ref)
+        momentum.append(robot.h_G.copy())
+        poses = sim.contact_frame_poses()
+        feet_tilt.append(max(tilt_deg(R) for _, R in poses.values()))
+        feet_slip.append(max(sole_slip(poses[n][0], start_feet[n][0]) for n in poses))
+
+    failures = run_closed_loop(sim, ctrl, params["duration"], progress=progress, on_result=observe)
+    t = sim.log.arrays()["t"]
+    com, momentum = np.array(com), np.array(momentum)
+    err = np.linalg.norm(com, axis=1)
+    recovered, recovery = cog_recovered(t, err, push.start + push.duration)
+    metrics = {
+        "peak_force_N": push.peak_force,
+        "impulse_Ns": push.impulse,
+        "delta_v_mps": push.impulse / robot.mass,
+        "max_cog_error_m": float(err.max()),
+        "final_cog_error_m": float(err[-1]),
+        "max_linear_momentum_Ns": float(np.linalg.norm(momentum[:, :3], axis=1).max()),
+        "max_angular_momentum_Nms": float(np.linalg.norm(momentum[:, 3:], axis=1).max()),
+        "cog_recovery_time_s": recovery,
+        "max_foot_tilt_deg": float(max(feet_tilt)),
+        "max_foot_slip_m": float(max(feet_slip)),
+        "failed_cycles": failures,
+    }
+    success = recovered and feet_in_place(metrics["max_foot_tilt_deg"], metrics["max_foot_slip_m"])
+    return PushTrial(success, metrics, push, sim.log, com, momentum)
