@@ -71,7 +71,8 @@ public:
     torque_cap_ = get_vector(spec, "torque_cap", na_);
   }
 
-  // The arrays this object writes (allocated by Python, see PassiveWBC._bind_native).
+  // The arrays this object writes (allocated by Python, see PassiveQP.__init__ and
+  // PassiveWBC._build_native).
   void bind(const py::dict & b)
   {
     keep_.clear();
@@ -419,7 +420,7 @@ private:
     tangential_.setZero(nf_, nf_);
     stance_.assign(nc_, false);
     was_stance_.assign(nc_, false);
-    // the full layout of PassiveWBC._allocate, and its constant parts
+    // the full layout of PassiveQP.__init__ (control/passive_qp.py), and its constant parts
     H_full_.setZero(n_, n_);
     A_full_.setZero(m_, n_);
     g_full_.setZero(n_);
