@@ -12,27 +12,6 @@ import quadprog
 from wholebody.control.passive import PassiveWBC
 from wholebody.formulation import Formulation
 from wholebody.tasks.contact import friction_faces
-from wholebody.planning.trunk import TrunkState
-
-
-def make_plan(robot, rng, stance, normal=(0.0, 0.0, 1.0)):
-    """A plan for the robot's cached state: trunk reference near the current trunk, swing targets
-    a few cm from the current feet."""
-    legs = robot.contact_names
-    feet = np.array([robot.data.oMf[robot.contact(n).frame_id].translation for n in legs])
-    R = pin.Quaternion(robot.q[3:7]).normalized().toRotationMatrix()
-    trunk = TrunkState(position=robot.com + rng.normal(scale=0.01, size=3),
-                           velocity=rng.normal(scale=0.05, size=3),
-                           acceleration=rng.normal(scale=0.2, size=3),
-                           rotation=R @ pin.exp3(rng.normal(scale=0.02, size=3)),
-                           angular_velocity=rng.normal(scale=0.05, size=3))
-    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
-    return SimpleNamespace(legs=legs, contact=np.array(stance, dtype=bool),
-                           foot_position=feet + rng.normal(scale=0.02, size=feet.shape),
-                           foot_velocity=rng.normal(scale=0.1, size=feet.shape),
-                           foot_acceleration=rng.normal(scale=0.5, size=feet.shape),
-                           touchdown_position=feet.copy(), touchdown_normal=np.tile(n, (4, 1)),
-                           trunk=trunk)
 
 
 def standing_state(robot, rng, noise=0.02):
@@ -46,14 +25,14 @@ STANCE_SETS = [(True, True, True, True), (False, True, True, True), (True, False
 
 
 @pytest.mark.parametrize("stance", STANCE_SETS)
-def test_solution_satisfies_dynamics_and_constraints(robots, rng, stance):
+def test_solution_satisfies_dynamics_and_constraints(robots, rng, stance, plan_for):
     """Eq. 1 (all n+6 rows, via RNEA), eq. 10/32 on stance feet, friction pyramid + normal bounds
     (eqs. 13-14), torque limits (eq. 15) and joint-acceleration bounds (eq. 18)."""
     robot = robots["hyq"]
     wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), mu=0.6)
     for _ in range(3):
         robot.update(*standing_state(robot, rng))
-        sol = wbc.solve(make_plan(robot, rng, stance))
+        sol = wbc.solve(plan_for(robot, rng, stance))
         assert sol.ok, sol.status
         J = robot.stacked_contact_jacobian()
         generalized = np.concatenate([np.zeros(6), sol.tau]) + J.T @ sol.lam
@@ -81,13 +60,13 @@ def test_solution_satisfies_dynamics_and_constraints(robots, rng, stance):
 @pytest.mark.parametrize("options", [{}, {"regularization": "torque",
                                           "torque_weights": np.tile([1e-4, 1e-4, 1e-2], 4)},
                                      {"swing_slack": "none"}])
-def test_matches_two_level_stack(robots, rng, stance, options):
+def test_matches_two_level_stack(robots, rng, stance, options, plan_for):
     """The dedicated assembly and the generic Formulation (two levels, method="weighted", DAQP)
     solve the same problem: same torques."""
     robot = robots["hyq"]
     wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), **options)
     robot.update(*standing_state(robot, rng))
-    plan = make_plan(robot, rng, stance)
+    plan = plan_for(robot, rng, stance)
     if options.get("swing_slack") == "none":  # a hard swing task must be reachable: small targets
         plan.foot_position = np.array([robot.data.oMf[robot.contact(n).frame_id].translation
                                        for n in robot.contact_names])
@@ -128,12 +107,12 @@ def test_slack_per_direction_is_weighted_least_squares(rng):
         np.testing.assert_allclose(z[n:], np.abs(A @ x_ls - b), atol=1e-6)
 
 
-def test_single_slack_couples_directions(robots, rng):
+def test_single_slack_couples_directions(robots, rng, plan_for):
     """With one slack per swing foot the violation is bounded in the ∞-norm: the largest residual
     direction sets ε and every direction's residual is within it."""
     robot = robots["hyq"]
     robot.update(*standing_state(robot, rng))
-    plan = make_plan(robot, rng, (False, True, True, True))
+    plan = plan_for(robot, rng, (False, True, True, True))
     plan.foot_position[0, 0] += 0.5  # unreachable along x in one step: conflicts with limits
     wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
                      swing_slack="single")
@@ -147,14 +126,14 @@ def test_single_slack_couples_directions(robots, rng):
     assert np.all(np.abs(residual) <= slack + 1e-6)
 
 
-def test_failure_is_a_value(robots, rng):
+def test_failure_is_a_value(robots, rng, plan_for):
     """An infeasible QP (normal force floor above the robot's weight share, hard constraints) returns
     ok=False with a finite torque within limits and the reason."""
     robot = robots["hyq"]
     wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), f_min=1500.0,
                      f_max=2000.0, torque_limit_override={"lf_kfe_joint": 1.0})
     robot.update(*standing_state(robot, rng))
-    sol = wbc.solve(make_plan(robot, rng, (True, True, True, True)))
+    sol = wbc.solve(plan_for(robot, rng, (True, True, True, True)))
     assert not sol.ok and "daqp" in sol.status
     lo, hi = robot.torque_bounds()
     hi[robot.joint_names.index("lf_kfe_joint")] = 1.0

@@ -6,13 +6,11 @@ starts, and its failure values."""
 from types import SimpleNamespace
 
 import numpy as np
-import pinocchio as pin
 import pytest
 import quadprog
 
 from wholebody.control.passive import PassiveConfig, PassiveWBC
 from wholebody.control.passive_qp import PassiveQP
-from wholebody.planning.trunk import TrunkState
 from wholebody.solvers.backends import DAQP_EXIT, DAQP_SENSE_EQ, solve_daqp_qp
 
 
@@ -30,32 +28,13 @@ def quadprog_solve(H, g, A, upper, lower, sense):
     return x, 0.5 * x @ H @ x + g @ x
 
 
-def random_plan(robot, rng, stance):
-    """A plan at the robot's cached state: trunk reference near the trunk, swing targets a few cm
-    from the feet (the hard swing rows stay reachable), flat ground."""
-    legs = robot.contact_names
-    feet = np.array([robot.data.oMf[robot.contact(n).frame_id].translation for n in legs])
-    R = pin.Quaternion(robot.q[3:7]).normalized().toRotationMatrix()
-    trunk = TrunkState(position=robot.com + rng.normal(scale=0.01, size=3),
-                       velocity=rng.normal(scale=0.05, size=3),
-                       acceleration=rng.normal(scale=0.2, size=3),
-                       rotation=R @ pin.exp3(rng.normal(scale=0.02, size=3)),
-                       angular_velocity=rng.normal(scale=0.05, size=3))
-    return SimpleNamespace(legs=legs, contact=np.array(stance, dtype=bool),
-                           foot_position=feet + rng.normal(scale=0.005, size=feet.shape),
-                           foot_velocity=rng.normal(scale=0.05, size=feet.shape),
-                           foot_acceleration=rng.normal(scale=0.2, size=feet.shape),
-                           touchdown_position=feet.copy(),
-                           touchdown_normal=np.tile([0.0, 0.0, 1.0], (len(legs), 1)), trunk=trunk)
-
-
 STANCES = [(True, True, True, True), (False, True, True, True), (True, False, False, True),
            (True, True, False, True)]
 
 
 @pytest.mark.parametrize("options", [{}, {"swing_slack": "none"}, {"swing_slack": "single"},
                                      {"regularization": "torque", "mu": 0.5, "f_min": 5.0}])
-def test_adapter_optimum_matches_quadprog(robots, rng, options):
+def test_adapter_optimum_matches_quadprog(robots, rng, options, plan_for):
     """Cycle after cycle (so that DAQP is warm-started from the previous multipliers), the x the
     controller got through the adapter is quadprog's optimum of the same arrays."""
     robot = robots["hyq"]
@@ -64,7 +43,8 @@ def test_adapter_optimum_matches_quadprog(robots, rng, options):
         q = robot.q_ref.copy()
         q[7:] += rng.normal(scale=0.03, size=robot.na)
         robot.update(q, rng.normal(scale=0.05, size=robot.nv))
-        sol = wbc.solve(random_plan(robot, rng, STANCES[k % len(STANCES)]))
+        plan = plan_for(robot, rng, STANCES[k % len(STANCES)], swing_noise=(0.005, 0.05, 0.2))
+        sol = wbc.solve(plan)
         assert sol.ok, sol.status
         qp = wbc.qp
         x_ref, cost_ref = quadprog_solve(qp.H, qp.g, qp.A, qp.upper, qp.lower, qp.sense)
