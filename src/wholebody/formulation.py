@@ -220,8 +220,8 @@ class Formulation:
         ``primal_tol``; see :func:`~wholebody.solvers.hierarchy.solve_hierarchy`); if it fails,
         the cycle is solved again with ``fallback_backend`` (each backend has rare failure modes
         of its own on these ill-conditioned cascades — measured in
-        ``benchmarks/bench_wbc.py``). ``diagnostics`` computes the per-task report (a few tens
-        of µs). Never raises for numerical reasons: a
+        ``benchmarks/bench_wbc.py``). ``diagnostics`` computes the per-task report (extra
+        work every cycle). Never raises for numerical reasons: a
         failed solve returns ``ok=False`` with the reason and a torque computed from the best
         available solution, clipped to the torque limits. ``regularization`` is the eps of eq. 5
         on the scaled variables; the paper's 1e-4 visibly trades tasks off (see the tests), 1e-6

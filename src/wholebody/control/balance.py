@@ -63,10 +63,8 @@ class CoMSineReference:
 
     With ``move_base`` (default) the floating-base reference of the posture task is translated with
     the CoG reference, so that the posture task does not pull the base back to its standing
-    position. Measured on talos14 (Table 2, PD): it changes nothing visible — the momentum task
-    (weight 1e4) leaves the posture task (1e-1) two directions of q'' and the base translation is
-    not among them — and in both cases the torso pitch swings with a growing amplitude (-0.26 rad
-    at 2.5 s, +0.78 rad at 7 s) until it hits its joint limit (0.733 rad) after three 0.5 Hz periods.
+    position. With Table 2's weights this changes little: the momentum task (weight 1e4) leaves the
+    posture task (1e-1) two directions of q'' and the base translation is not among them.
     """
 
     def __init__(self, robot: Robot, amplitude, frequency, ramp: float = 1.0, x0=None,

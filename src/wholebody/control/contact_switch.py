@@ -6,8 +6,8 @@ Phases of :class:`ContactSwitch`:
 1. shift: the CoG reference moves (quintic, with its velocity and acceleration as the momentum
    feedforward) over the stance sole, Table 2 hierarchy;
 2. unload: a force regulariser drives the leaving sole's wrench from its value at the start of the
-   phase to zero (a ramp of the target, not of the weight: ramping the weight over six decades gave
-   torque jumps of 30 Nm per cycle). With LQR gains, the gains are blended over the same ramp from
+   phase to zero (a ramp of the target, not of the weight: ramping the weight over six decades gives
+   large torque jumps per cycle). With LQR gains, the gains are blended over the same ramp from
    the double-support configuration to the single-support one (the Remark of Sect. 3.2:
    :meth:`~wholebody.control.lqr.MomentumLQR.blend`); each configuration's gains are computed once,
    at its key pose (double: the reference posture; single: the pose at the start of unloading, CoG

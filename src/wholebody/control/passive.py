@@ -3,7 +3,7 @@
 One QP per control cycle over u = [q̈, F_grf] (eq. 7), written into the preallocated arrays of
 :class:`~wholebody.control.passive_qp.PassiveQP` (the generic
 :class:`~wholebody.formulation.Formulation` builds the same problem as a two-level stack, see
-:meth:`PassiveWBC.as_stack`, but costs ~10x more per cycle):
+:meth:`PassiveWBC.as_stack`, but costs much more per cycle):
 
 * cost ‖W_com − W_com,d‖²_Q + ‖u‖²_R (eqs. 7a, 8): the trunk wrench task of eq. 4
   (:class:`~wholebody.tasks.wrench.TrunkImpedance`) plus a regulariser — either forces near the cone
@@ -150,7 +150,7 @@ class PassiveWBC(PlannedController):
     limit tasks), which the Python engine reads every cycle; ``config`` keeps what it was built
     with.
 
-    ``engine="native"`` computes each cycle in compiled code (about 5x faster, see
+    ``engine="native"`` computes each cycle in compiled code (faster: docs/results.md,
     benchmarks/bench_passive.py) with the same results; it supports the "per-direction" and "none"
     swing slacks. It keeps its own rigid-body terms: ``compute``/``cycle`` do not refresh
     ``robot``'s Python cache (``robot.M``, ``robot.com``... stay those of the last

@@ -64,7 +64,7 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     base rows. An angular-momentum row costs about I_G (~15 kg m^2 on talos14) per rad/s^2, so at
     1e4 against the posture's 1e-1 the posture has no say in those 3 directions: a bias torque from
     model errors (1 cm link CoM offsets: ~ m g x 1 cm ~ 10 Nm) then drives the pelvis away at a
-    constant rate and the robot falls without any push (robust-push seeds 2 and 3). The posture
+    constant rate and the robot falls without any push (docs/results.md). The posture
     (base kp 50) holds the trunk only if the angular rows weigh less than the posture's by more
     than I_G, i.e. 1e-4 among the paper's {1e4, 1, 1e-1, 1e-4}; the angular momentum is then damped
     through the posture's base damping instead of eq. 22's D."""

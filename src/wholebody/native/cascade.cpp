@@ -389,8 +389,8 @@ namespace
 
 // DAQP's C interface, declared as daqp 0.11.0 defines it (csrc/include/types.h and api.h of its
 // source distribution) and reached through the symbols the installed daqp Python module exports:
-// the cascade's level QPs are then solved without a trip through Python (~20 µs a QP of argument
-// conversion, result packing and the verdict). hierarchy._daqp_in_cascade uses this only for
+// the cascade's level QPs are then solved without a trip through Python (no argument conversion,
+// result packing or verdict per QP there). hierarchy._daqp_in_cascade uses this only for
 // that daqp version and after checking the layout (daqp_default_settings read through these
 // declarations must equal daqp.solve's keyword defaults); otherwise the QPs go through Python.
 namespace daqp_c

@@ -166,7 +166,7 @@ class CrawlSway:
     Limitation: the targets come from the *nominal* footprint, not from where the feet actually
     are. In steady walking the two agree closely, but when a forward speed is commanded as a step
     from rest the feet that have not stepped yet lag behind the trunk during the first cycle and the
-    CoM reference leaves their triangle (by up to ~6 cm at 0.15 m/s for the default HyQ crawl).
+    CoM reference leaves their triangle.
     Ramp the speed up from rest (e.g. over two cycles) to avoid it.
     """
 

@@ -28,12 +28,11 @@ the nominal run of the same α; the trunk orientation error; falls. The controll
 residual |J q̈ + J̇ v − v̇_d| (the slack) shades the figure where it is active.
 
 Which task gives way is set by α against the trunk-wrench weight Q (eq. 7a): the base is a free
-variable of the QP, so a swing foot can keep its reference by moving the trunk. Measured (HyQ,
-LH-HFE lower limit -0.85 rad, 0.11 m/s): with α = 1e4 the foot error barely changes (+0.1 mm) and
-the trunk absorbs the conflict (orientation error up to ~0.17 rad), and the hard swing task is
-feasible for the same reason; with α = 10 the trunk is unaffected and the foot error grows in X
-and Z about twice as much as in Y, the single slack spreading the same error over X, Y and Z — the
-behaviour of Fig. 2 and Sect. IV-B.
+variable of the QP, so a swing foot can keep its reference by moving the trunk. With the large
+α = 1e4 the foot error barely changes and the trunk absorbs the conflict, and the hard swing task
+is feasible for the same reason; with a small α (10) the trunk is unaffected and the foot error
+grows instead, the single slack spreading it over X, Y and Z (Fig. 2 and Sect. IV-B; the numbers
+are in docs/results.md).
 
 Success: for both α the per-direction run solves every cycle without falling and the joint reaches
 the changed limit (within ``at_limit``) without going more than ``overshoot`` beyond it. The

@@ -3,7 +3,7 @@
 The push is a half-sine force applied at one of the paper's 7 points (front, right, back, left on
 the torso above the hip; front, right, left at the hip) or along any ``angle`` and ``height``
 (:mod:`~wholebody.scenarios.pushes`).
-"Survived" (issue criterion): the feet stay flat and in place (tilt < 2 deg, slip < 1 cm) and the CoG
+"Survived": the feet stay flat and in place (tilt < 2 deg, slip < 1 cm) and the CoG
 returns within 5 mm of its reference within 3 s after the push.
 """
 

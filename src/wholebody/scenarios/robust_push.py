@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 
 #: Largest peak force (N) survived on the exact twin (front/back/left/right above the hip, 0.1 s
 #: half-sine), measured with ``push`` in 10 N steps up to the first failure (LQR with
-#: q_angular=10, this scenario's default) with the current cascade.
+#: q_angular=10, this scenario's default).
 #: The LQR values are the plain LQR's also when ``q_integral`` (our integral action) is set.
 NOMINAL = {
     "pd": {"front": 190.0, "back": 180.0, "left": 250.0, "right": 260.0},
@@ -51,9 +51,9 @@ NOMINAL = {
 }
 #: The same with the paper's single momentum weight (``--set angular_weight=1e4``), with the same
 #: protocol as ``NOMINAL`` (``push``, 10 N steps up to the first failure, LQR with q_angular=10,
-#: engine native). PD's first failures are foot slip (13-49 mm) with the CoG recovered; LQR
-#: left/right survive 320-330 N with 1-2 failed solver cycles (``push`` does not count them:
-#: 310/320 N otherwise).
+#: engine native). PD's first failures are foot slips with the CoG recovered; the LQR left/right
+#: values include pushes survived with a few failed solver cycles, which ``push`` does not count
+#: as failures.
 NOMINAL_SINGLE_MOMENTUM_WEIGHT = {
     "pd": {"front": 150.0, "back": 130.0, "left": 210.0, "right": 200.0},
     "lqr": {"front": 100.0, "back": 220.0, "left": 330.0, "right": 330.0},

@@ -14,12 +14,11 @@ Variants:
   is sacrificed. How the paper made its constraints active is not said; its Sarcos feet have a
   flexible toe that makes "the effectively used part of the sole rather small" (Sect. 4.1), which a
   shrunk region imitates. The default 0.7 (+-3.15 cm x +-1.95 cm on talos14's 21 x 13 cm soles) is
-  chosen from two numbers measured in the ``tracking`` variant, not from the outcome: the CoG at
-  rest is 0.6 cm ahead of the sole centres, so the reference reaches 2.6 cm ahead (a bound below
-  that, e.g. 0.8 = +-2.1 cm, makes the reference statically infeasible), and the 0.5 Hz motion
-  needs the CoP between -3 and +4.5 cm, so a +-3.15 cm bound saturates it. Measured on talos14:
-  with 0.6, 0.7 and 0.8, PD and LQR gains alike, the robot falls within about a second of the
-  first activation (see the summary notes and the issue report).
+  chosen from the ``tracking`` variant, not from the outcome: the CoG at rest is 0.6 cm ahead of
+  the sole centres, so the reference reaches 2.6 cm ahead (a bound below that, e.g. 0.8 = +-2.1
+  cm, makes the reference statically infeasible), and the 0.5 Hz motion needs the CoP further
+  forward than +3.15 cm, so that bound saturates it. With PD and LQR gains alike the robot falls
+  soon after the first activation (docs/results.md, Fig. 10 row; see the summary notes).
 
 Metrics: those of :mod:`wholebody.scenarios.platform` (measured by
 :class:`~wholebody.scenarios.measures.BalanceMonitor`: CoG error, momentum deviation from h_ref,

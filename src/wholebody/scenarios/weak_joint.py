@@ -24,10 +24,10 @@ weak joint's sent and applied torques stay within the limit and nothing is clipp
 the leg's HFE and HAA carry more load than nominally; the trunk RMS errors grow by at most
 ``trunk_tolerance`` (m, rad). The same claims are reported for every ``sweep`` limit.
 
-Measured here (HyQ preset, 0.11 m/s): the nominal LF-KFE torque is 55 Nm standing and up to
-~125 Nm in stance, so 26 Nm is ~1/5 of the nominal peak; with it the front-left leg folds during the
-first three-leg phase and the robot falls, while the limit itself holds and HFE/HAA do take more
-load. The paper does not give its nominal knee torque; see the summary notes.
+On the HyQ preset the nominal LF-KFE torque of this crawl is well above 26 Nm, so at the paper's
+limit the limit itself holds and HFE/HAA do take more load, but the front-left leg folds and the
+robot falls (docs/results.md). The paper does not give its nominal knee torque; see the summary
+notes.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ WORLD_UP = np.array([0.0, 0.0, 1.0])
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of two 3-vectors (np.cross is ~10x slower on tiny arrays)."""
+    """Cross product of two 3-vectors (np.cross is much slower on tiny arrays)."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
@@ -94,11 +94,10 @@ class FrictionCone(_PerContact):
     moment of the inscribed disc under uniform pressure, inside the rectangle's exact bound
     (Caron et al. 2015, "Stability of surface contacts for humanoid robots": mu (X + Y) f.n when
     the tangential force and the tilting moments vanish). Off by default, as in the papers'
-    tables (4 rows per contact). Without it nothing in Tables 1/2/4 bounds the yaw moments:
-    in the cop-active squat the cascade put opposite yaw moments of 100 Nm (hip-yaw torque
-    limits) and up to 2500 Nm on the two soles as soon as the CoP rows became active (those rows,
-    written in the measured sole axes, couple to yaw moments through a fraction of a degree of
-    tilt); with the bound they stay at its ~16 Nm (that robot still falls, for another reason).
+    tables (4 rows per contact). Without it nothing in Tables 1/2/4 bounds the yaw moments, and
+    once the CoP rows are active (they are written in the measured sole axes, so a fraction of a
+    degree of tilt couples them to yaw moments) the cascade may put large opposite yaw moments on
+    the two soles; with the bound they stay within it.
     """
 
     kind = "ineq"
