@@ -82,3 +82,45 @@ def positive(value, name: str) -> float:
     if not np.isfinite(out) or out <= 0.0:
         raise ValueError(f"{name}: expected a positive number, got {value!r}")
     return out
+
+
+def number(value, name: str, *, low: float = -np.inf, high: float = np.inf,
+           low_open: bool = False, high_open: bool = False) -> float:
+    """``value`` as a finite float in [low, high] (``low_open``/``high_open``: the bound itself is
+    excluded); ValueError naming ``name`` and the value otherwise."""
+    def interval() -> str:
+        left = "(" if low_open else "["
+        right = ")" if high_open else "]"
+        return f"{left}{low:g}, {high:g}{right}"
+    try:
+        out = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected a number in {interval()}, got {value!r}") from exc
+    inside = (out > low if low_open else out >= low) and (out < high if high_open else out <= high)
+    if not np.isfinite(out) or not inside:
+        raise ValueError(f"{name}: expected a finite number in {interval()}, got {value!r}")
+    return out
+
+
+def nonnegative(value, name: str) -> float:
+    """``value`` as a finite float >= 0; ValueError naming ``name`` otherwise."""
+    return number(value, name, low=0.0)
+
+
+def finite_array(value, name: str, *, shape: tuple | None = None,
+                 nonnegative: bool = False) -> np.ndarray:
+    """``value`` as a finite float array (of ``shape`` if given; entries >= 0 if
+    ``nonnegative``); ValueError naming ``name``, and the first bad entry, otherwise."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected numbers, got {value!r}") from exc
+    if shape is not None and arr.shape != tuple(shape):
+        raise ValueError(f"{name}: expected shape {tuple(shape)}, got {arr.shape}")
+    bad = ~np.isfinite(arr) | ((arr < 0.0) if nonnegative else False)
+    if np.any(bad):
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        what = "finite numbers >= 0" if nonnegative else "finite numbers"
+        where = f" at index {index[0] if len(index) == 1 else index}" if arr.ndim else ""
+        raise ValueError(f"{name}: expected {what}, got {arr[index]!r}{where}")
+    return arr
