@@ -122,5 +122,5 @@ def finite_array(value, name: str, *, shape: tuple | None = None,
         index = tuple(int(i) for i in np.argwhere(bad)[0])
         what = "finite numbers >= 0" if nonnegative else "finite numbers"
         where = f" at index {index[0] if len(index) == 1 else index}" if arr.ndim else ""
-        raise ValueError(f"{name}: expected {what}, got {arr[index]!r}{where}")
+        raise ValueError(f"{name}: expected {what}, got {float(arr[index])!r}{where}")
     return arr
