@@ -22,13 +22,16 @@ from typing import Sequence
 import numpy as np
 import pinocchio as pin
 
-from .robots.description import ContactSpec, RobotDescription
+from .robots.description import ContactSpec, DescriptionError, RobotDescription
 from .robots.torque_limits import TorqueProfile
 
 log = logging.getLogger(__name__)
 
 FREE_FLYER_NQ = 7
 FREE_FLYER_NV = 6
+GRAVITY = 9.81
+# an effort limit above this many times the robot's weight times 1 m is likely a URDF placeholder
+PLACEHOLDER_TORQUE_FACTOR = 10.0
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,38 @@ def check_vector(value, size: int, field: str) -> np.ndarray:
     return arr
 
 
+def _model_joint_names(model: pin.Model) -> list[str]:
+    """Names of the model's joints other than the universe and the root free flyer."""
+    return list(model.names[2:])
+
+
+def check_inertias(model: pin.Model, where: str = "robot") -> None:
+    """Every body of ``model`` (``model.inertias``: links merged by fixed joints) has a finite
+    mass >= 0, a finite centre of mass, and, when it has mass, a positive-definite rotational
+    inertia; DescriptionError naming the body (its URDF link) and the joint moving it otherwise.
+    Massless bodies (e.g. frames merged by fixed joints) are accepted."""
+    for jid in range(1, model.njoints):
+        inertia = model.inertias[jid]
+        mass, lever = float(inertia.mass), np.asarray(inertia.lever)
+        rot = np.asarray(inertia.inertia)
+        links = [f.name for f in model.frames
+                 if f.parentJoint == jid and f.type == pin.FrameType.BODY]
+        body = (f"body '{links[0]}'" if links else "the body") + f" of joint '{model.names[jid]}'"
+        if not (math.isfinite(mass) and mass >= 0):
+            raise DescriptionError(f"{where}: {body} has mass {mass!r} kg; fix the <inertial> "
+                                   f"<mass> of the link in the URDF")
+        if not (np.all(np.isfinite(lever)) and np.all(np.isfinite(rot))):
+            raise DescriptionError(f"{where}: {body} has a non-finite centre of mass or inertia; "
+                                   f"fix the <inertial> of the link in the URDF")
+        if mass > 0:
+            eig = np.linalg.eigvalsh(0.5 * (rot + rot.T))
+            if eig[0] <= 1e-12 * mass:  # radius of gyration below 1 micrometre
+                raise DescriptionError(
+                    f"{where}: {body} has mass {mass:g} kg but its rotational inertia is not "
+                    f"positive definite (eigenvalues {[float(f'{e:.3g}') for e in eig]} kg m^2); "
+                    f"fix the <inertia> of the link in the URDF")
+
+
 class Robot:
     """A floating-base robot built from a :class:`RobotDescription`.
 
@@ -72,14 +107,16 @@ class Robot:
 
         self.description = description
         self.name = description.name
+        where = f"robot '{self.name}'"
         urdf = resolve_model_path(description.urdf, description.base_dir)
         full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
         q_posture = self._posture(full, description)
         if description.locked_joints:
-            missing = [j for j in description.locked_joints if not full.existJointName(j)]
+            joints = _model_joint_names(full)
+            missing = [j for j in description.locked_joints if j not in joints]
             if missing:
-                raise ValueError(f"robot '{self.name}': field 'locked_joints' names unknown joints "
-                                 f"{missing}")
+                raise DescriptionError(f"{where}: field 'locked_joints' names unknown joints "
+                                       f"{missing}; joints of the model: {joints}")
             lock_ids = [full.getJointId(j) for j in description.locked_joints]
             model = pin.buildReducedModel(full, lock_ids, q_posture)
         else:
@@ -89,13 +126,17 @@ class Robot:
         self.na = model.nv - FREE_FLYER_NV
         self.joint_names: tuple[str, ...] = tuple(model.names[2:])
         self._check_joint_types()
+        check_inertias(model, where)
         self._set_armature(description.armature)
         self.data: pin.Data = model.createData()
         self.mass = float(pin.computeTotalMass(model))
 
+        for i, spec in enumerate(description.contacts):
+            if not model.existFrame(spec.frame):
+                raise DescriptionError(f"{where}: contacts[{i}].frame = '{spec.frame}' (contact "
+                                       f"'{spec.name}') is not a frame of the model")
         self.contacts: tuple[Contact, ...] = tuple(
-            Contact(spec, self.frame_id(spec.frame, f"contacts '{spec.name}'.frame"))
-            for spec in description.contacts)
+            Contact(spec, self.frame_id(spec.frame)) for spec in description.contacts)
         self.contact_names = tuple(c.name for c in self.contacts)
         self._contacts_by_name = {c.name: c for c in self.contacts}
         self._contact_index = {c.name: i for i, c in enumerate(self.contacts)}
@@ -117,7 +158,8 @@ class Robot:
         self.q_max = model.upperPositionLimit[FREE_FLYER_NQ:].copy()
         self.v_max = model.velocityLimit[FREE_FLYER_NV:].copy()
         self.torque_limits = TorqueProfile(self.joint_names, model.effortLimit[FREE_FLYER_NV:],
-                                          description.torque_limits)
+                                          description.torque_limits, where)
+        self._warn_placeholder_limits(description.torque_limits)
         self.q_ref = self._rest_on_ground(self._reduce_posture(full, model, q_posture))
 
         selection = np.zeros((self.na, self.nv))
@@ -143,14 +185,25 @@ class Robot:
             srdf = resolve_model_path(d.srdf, d.base_dir)  # type: ignore[arg-type]
             pin.loadReferenceConfigurations(full, str(srdf), False)
             if d.posture not in full.referenceConfigurations:
-                raise ValueError(f"robot '{d.name}': field 'posture' = '{d.posture}' is not a group "
-                                 f"state of {srdf.name}; have {list(full.referenceConfigurations)}")
+                raise DescriptionError(f"robot '{d.name}': field 'posture' = '{d.posture}' is not "
+                                       f"a group state of {srdf.name}; have "
+                                       f"{list(full.referenceConfigurations)}")
             return np.array(full.referenceConfigurations[d.posture], dtype=float)
         q = pin.neutral(full)
+        joints = _model_joint_names(full)
         for joint, value in d.posture.items():
-            if not full.existJointName(joint):
-                raise ValueError(f"robot '{d.name}': field 'posture' names unknown joint '{joint}'")
-            q[full.joints[full.getJointId(joint)].idx_q] = value
+            if joint not in joints:
+                raise DescriptionError(f"robot '{d.name}': field 'posture' names unknown joint "
+                                       f"'{joint}'; joints of the model: {joints}")
+            j = full.joints[full.getJointId(joint)]
+            if j.nq != 1:
+                raise DescriptionError(f"robot '{d.name}': posture.{joint}: joint '{joint}' "
+                                       f"({j.shortname()}) has no single angle")
+            lo, hi = full.lowerPositionLimit[j.idx_q], full.upperPositionLimit[j.idx_q]
+            if not lo - 1e-9 <= value <= hi + 1e-9:
+                raise DescriptionError(f"robot '{d.name}': posture.{joint} = {value!r} is outside "
+                                       f"the joint's URDF limits [{float(lo):g}, {float(hi):g}]")
+            q[j.idx_q] = value
         return q
 
     @staticmethod
@@ -166,24 +219,46 @@ class Robot:
     def _check_joint_types(self) -> None:
         root = self.model.joints[1]
         if root.nq != FREE_FLYER_NQ or root.nv != FREE_FLYER_NV:
-            raise ValueError(f"robot '{self.name}': the root joint must be a free flyer")
+            raise DescriptionError(f"robot '{self.name}': the root joint must be a free flyer")
         for jid in range(2, self.model.njoints):
             j = self.model.joints[jid]
             if j.nq != 1 or j.nv != 1:
-                raise ValueError(f"robot '{self.name}': joint '{self.model.names[jid]}' "
-                                 f"({j.shortname()}) is not a 1-DoF revolute/prismatic joint")
+                raise DescriptionError(f"robot '{self.name}': joint '{self.model.names[jid]}' "
+                                       f"({j.shortname()}) is not a 1-DoF revolute/prismatic "
+                                       f"joint (lock it with 'locked_joints')")
 
     def _set_armature(self, armature) -> None:
         arm = np.zeros(self.nv)
         if isinstance(armature, dict):
             for joint, value in armature.items():
                 if joint not in self.joint_names:
-                    raise ValueError(f"robot '{self.name}': field 'armature' names unknown joint "
-                                     f"'{joint}'")
+                    locked = joint in self.description.locked_joints
+                    raise DescriptionError(
+                        f"robot '{self.name}': armature.{joint}: "
+                        + ("the joint is locked" if locked else "no such actuated joint")
+                        + f"; actuated joints: {list(self.joint_names)}")
                 arm[FREE_FLYER_NV + self.joint_names.index(joint)] = value
         else:
             arm[FREE_FLYER_NV:] = float(armature)
+        if not (np.all(np.isfinite(arm)) and np.all(arm >= 0)):  # RobotDescription checked it
+            raise DescriptionError(f"robot '{self.name}': armature: expected finite numbers >= 0, "
+                                   f"got {armature!r}")
         self.model.armature = arm
+
+    def _warn_placeholder_limits(self, config) -> None:
+        """Log a warning naming the joints whose URDF effort limit (times ``scale``, joints with
+        an override or a linkage excepted) exceeds 10x the robot's weight times 1 m: such limits
+        (e.g. Solo12's 1000 Nm on a 2.5 kg robot) are placeholders, not the actuators'."""
+        given = set(config.get("overrides", {})) | set(config.get("linkage", {}))
+        threshold = PLACEHOLDER_TORQUE_FACTOR * self.mass * GRAVITY * 1.0
+        tl = self.torque_limits
+        big = [f"{j} ({tl.scale * c:g} Nm)" for j, c in zip(self.joint_names, tl.constant)
+               if j not in given and tl.scale * c > threshold]
+        if big:
+            log.warning("robot '%s': effort limit of joint(s) %s exceeds %g x the robot's weight "
+                        "times 1 m (%.0f Nm); likely a URDF placeholder: give the actuators' "
+                        "limits with torque_limits.overrides", self.name, ", ".join(big),
+                        PLACEHOLDER_TORQUE_FACTOR, threshold)
 
     def frame_id(self, frame: str, field: str = "frame") -> int:
         """The model's id of ``frame``; ValueError naming ``field`` if the model has no such frame."""

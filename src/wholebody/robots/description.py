@@ -15,6 +15,12 @@ Fields (``*`` = required)::
     torque_limits  {scale = 1.0, overrides = {joint = Nm}, linkage = {joint = {...}}} (see
                    :mod:`wholebody.robots.torque_limits`)
     friction       nominal Coulomb friction coefficient of the feet used by controllers, default 0.8
+
+Every number is checked here, with a :class:`DescriptionError` naming its path (``posture.<joint>``,
+``armature.<joint>``, ``contacts[i].radius``, ``torque_limits.overrides.<joint>``...) and the value:
+all finite; radius and armature >= 0; half_size entries, friction, torque scale, overrides and
+linkage a, b, force > 0. Unknown keys are errors at every level. Joint and frame names, and the
+URDF's effort limits and link inertias, are checked against the model by :class:`wholebody.Robot`.
 """
 
 from __future__ import annotations
@@ -24,11 +30,109 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
+from .. import validation
+
 CONTACT_TYPES = ("point", "rectangle")
+CONTACT_KEYS = {"point": ("name", "frame", "type", "radius"),
+                "rectangle": ("name", "frame", "type", "half_size")}
+TORQUE_LIMIT_KEYS = ("scale", "overrides", "linkage")
+LINKAGE_KEYS = ("a", "b", "force", "q_peak")
 
 
 class DescriptionError(ValueError):
     """A robot description is missing a field or has a bad value (the message names the field)."""
+
+
+def _checked(check, value, path: str, where: str, **kwargs) -> float:
+    """``check`` (a :mod:`wholebody.validation` number check) of ``value``, named ``path``; a
+    DescriptionError prefixed by ``where`` otherwise. Strings and booleans are not numbers here
+    (TOML ``"0.5"`` or ``true`` is a typo, not a value)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, (str, bytes, bool)) or value is None:
+        raise DescriptionError(f"{where}: {path}: expected a number, got {value!r}")
+    try:
+        return check(value, path, **kwargs)
+    except ValueError as exc:
+        raise DescriptionError(f"{where}: {exc}") from None
+
+
+def _table(value: Any, path: str, where: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise DescriptionError(f"{where}: {path}: expected a table, got {value!r}")
+    return value
+
+
+def _no_unknown_keys(table: Mapping[str, Any], allowed, path: str, where: str,
+                     what: str = "") -> None:
+    unknown = sorted(str(k) for k in set(table) - set(allowed))
+    if unknown:
+        raise DescriptionError(f"{where}: {path}: unknown key(s) {unknown}; allowed{what}: "
+                               f"{sorted(allowed)}")
+
+
+def _list(value: Any, path: str, where: str, expected: str) -> list:
+    """``value`` as a list (a string or a table is not a list here)."""
+    items = None
+    if not isinstance(value, (str, bytes, Mapping)):
+        try:
+            items = list(value)
+        except TypeError:
+            pass
+    if items is None:
+        raise DescriptionError(f"{where}: {path}: expected {expected}, got {value!r}")
+    return items
+
+
+def _name(value: Any, path: str, where: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise DescriptionError(f"{where}: {path}: expected a non-empty string, got {value!r}")
+    return value
+
+
+def check_torque_limits(raw: Any, where: str = "robot description") -> dict[str, Any]:
+    """The ``torque_limits`` table with its numbers checked (joint names are checked against the
+    model by :class:`wholebody.robots.torque_limits.TorqueProfile`): ``scale`` finite > 0,
+    ``overrides`` finite > 0 Nm, each ``linkage`` entry exactly {a, b, force, q_peak} with lengths
+    a != b and force finite > 0, q_peak finite. Returns the table with floats (keys as given)."""
+    config = _table({} if raw is None else raw, "torque_limits", where)
+    _no_unknown_keys(config, TORQUE_LIMIT_KEYS, "torque_limits", where)
+    out: dict[str, Any] = {}
+    if "scale" in config:
+        out["scale"] = _checked(validation.positive, config["scale"], "torque_limits.scale", where)
+    if "overrides" in config:
+        overrides = _table(config["overrides"], "torque_limits.overrides", where)
+        out["overrides"] = {str(j): _checked(validation.positive, v, f"torque_limits.overrides.{j}",
+                                             where) for j, v in overrides.items()}
+    if "linkage" in config:
+        linkage = _table(config["linkage"], "torque_limits.linkage", where)
+        out["linkage"] = {str(j): _linkage(p, f"torque_limits.linkage.{j}", where)
+                          for j, p in linkage.items()}
+    both = sorted(set(out.get("overrides", {})) & set(out.get("linkage", {})))
+    if both:
+        raise DescriptionError(
+            f"{where}: torque_limits.overrides.{both[0]}: joint '{both[0]}' also has a "
+            f"torque_limits.linkage profile, which replaces its constant bound; keep one of the "
+            f"two")
+    return out
+
+
+def _linkage(raw: Any, path: str, where: str) -> dict[str, float]:
+    p = _table(raw, path, where)
+    for key in LINKAGE_KEYS:
+        if key not in p:
+            raise DescriptionError(f"{where}: field '{path}' misses key '{key}'")
+    _no_unknown_keys(p, LINKAGE_KEYS, path, where)
+    a = _checked(validation.positive, p["a"], f"{path}.a", where)
+    b = _checked(validation.positive, p["b"], f"{path}.b", where)
+    force = _checked(validation.positive, p["force"], f"{path}.force", where)
+    q_peak = _checked(validation.number, p["q_peak"], f"{path}.q_peak", where)
+    if a == b:  # the cylinder length sqrt(a^2 + b^2 - 2ab cos t) vanishes at t = 0: 0/0
+        raise DescriptionError(f"{where}: {path}: a and b must differ, got a = b = {a!r} (the "
+                               f"bound is 0/0 where the cylinder length vanishes)")
+    return {"a": a, "b": b, "force": force, "q_peak": q_peak}
 
 
 @dataclass(frozen=True)
@@ -64,44 +168,56 @@ class RobotDescription:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], base_dir: Path | None = None) -> "RobotDescription":
+        """Check every field (numbers finite and in range, tables with known keys only) and build
+        the description; DescriptionError naming the field path and the bad value otherwise.
+        Names of joints and frames are checked against the model by :class:`wholebody.Robot`."""
+        if not isinstance(data, Mapping):
+            raise DescriptionError(f"robot description: expected a table of fields, got {data!r}")
         where = f"robot description '{data.get('name', '?')}'"
 
         def need(key: str) -> Any:
-            if key not in data or data[key] in (None, "", []):
+            if key not in data or data[key] in (None, "", [], ()):
                 raise DescriptionError(f"{where}: missing required field '{key}'")
             return data[key]
 
         known = {"name", "urdf", "srdf", "posture", "locked_joints", "armature", "contacts",
                  "torque_limits", "friction", "description"}
-        unknown = sorted(set(data) - known)
+        unknown = sorted(str(k) for k in set(data) - known)
         if unknown:
             raise DescriptionError(f"{where}: unknown field(s) {unknown}; known: {sorted(known)}")
         name = str(need("name"))
-        urdf = str(need("urdf"))
+        urdf = _name(need("urdf"), "urdf", where)
         posture = need("posture")
         if isinstance(posture, Mapping):
-            posture = {str(k): float(v) for k, v in posture.items()}
+            posture = {str(k): _checked(validation.number, v, f"posture.{k}", where)
+                       for k, v in posture.items()}
         elif not isinstance(posture, str):
-            raise DescriptionError(f"{where}: field 'posture' must be a group-state name or a table")
+            raise DescriptionError(f"{where}: field 'posture' must be a group-state name or a "
+                                   f"table {{joint = angle}}, got {posture!r}")
         srdf = data.get("srdf")
+        if srdf is not None and srdf != "":
+            srdf = _name(srdf, "srdf", where)
         if isinstance(posture, str) and not srdf:
             raise DescriptionError(f"{where}: field 'srdf' is required when 'posture' is a name")
-        contacts = tuple(_parse_contact(c, i, where) for i, c in enumerate(need("contacts")))
+        raw_contacts = _list(need("contacts"), "contacts", where, "a list of contact tables")
+        contacts = tuple(_parse_contact(c, i, where) for i, c in enumerate(raw_contacts))
         names = [c.name for c in contacts]
         if len(set(names)) != len(names):
             raise DescriptionError(f"{where}: field 'contacts' has duplicate names {names}")
+        locked = _list(data.get("locked_joints", ()), "locked_joints", where,
+                       "a list of joint names")
+        locked = tuple(_name(j, f"locked_joints[{i}]", where) for i, j in enumerate(locked))
         armature = data.get("armature", 0.0)
         if isinstance(armature, Mapping):
-            armature = {str(k): float(v) for k, v in armature.items()}
+            armature = {str(k): _checked(validation.nonnegative, v, f"armature.{k}", where)
+                        for k, v in armature.items()}
         else:
-            armature = float(armature)
-        friction = float(data.get("friction", 0.8))
-        if not friction > 0:
-            raise DescriptionError(f"{where}: field 'friction' must be > 0, got {friction}")
+            armature = _checked(validation.nonnegative, armature, "armature", where)
+        friction = _checked(validation.positive, data.get("friction", 0.8), "friction", where)
         return cls(
-            name=name, urdf=urdf, srdf=str(srdf) if srdf else None, posture=posture,
-            contacts=contacts, locked_joints=tuple(str(j) for j in data.get("locked_joints", ())),
-            armature=armature, torque_limits=dict(data.get("torque_limits", {})),
+            name=name, urdf=urdf, srdf=srdf or None, posture=posture, contacts=contacts,
+            locked_joints=locked, armature=armature,
+            torque_limits=check_torque_limits(data.get("torque_limits"), where),
             friction=friction, base_dir=base_dir,
         )
 
@@ -117,27 +233,31 @@ class RobotDescription:
 
 
 def _parse_contact(raw: Any, index: int, where: str) -> ContactSpec:
-    field_name = f"contacts[{index}]"
+    path = f"contacts[{index}]"
     if not isinstance(raw, Mapping):
-        raise DescriptionError(f"{where}: field '{field_name}' must be a table")
+        raise DescriptionError(f"{where}: field '{path}' must be a table, got {raw!r}")
     for key in ("name", "frame", "type"):
         if key not in raw:
-            raise DescriptionError(f"{where}: missing required field '{field_name}.{key}'")
-    kind = str(raw["type"])
+            raise DescriptionError(f"{where}: missing required field '{path}.{key}'")
+    kind = raw["type"]
     if kind not in CONTACT_TYPES:
         raise DescriptionError(
-            f"{where}: field '{field_name}.type' is '{kind}', expected one of {CONTACT_TYPES}")
+            f"{where}: field '{path}.type' is {kind!r}, expected one of {CONTACT_TYPES}")
+    _no_unknown_keys(raw, CONTACT_KEYS[kind], path, where, f" for a {kind} contact")
+    name = _name(raw["name"], f"{path}.name", where)
+    frame = _name(raw["frame"], f"{path}.frame", where)
     if kind == "point":
         if "radius" not in raw:
-            raise DescriptionError(f"{where}: missing required field '{field_name}.radius'")
-        radius = float(raw["radius"])
-        if radius < 0:
-            raise DescriptionError(f"{where}: field '{field_name}.radius' must be >= 0")
-        return ContactSpec(str(raw["name"]), str(raw["frame"]), kind, radius=radius)
+            raise DescriptionError(f"{where}: missing required field '{path}.radius'")
+        radius = _checked(validation.nonnegative, raw["radius"], f"{path}.radius", where)
+        return ContactSpec(name, frame, kind, radius=radius)
     if "half_size" not in raw:
-        raise DescriptionError(f"{where}: missing required field '{field_name}.half_size'")
-    half = tuple(float(x) for x in raw["half_size"])
-    if len(half) != 2 or min(half) <= 0:
-        raise DescriptionError(
-            f"{where}: field '{field_name}.half_size' must be two positive lengths [hx, hy]")
-    return ContactSpec(str(raw["name"]), str(raw["frame"]), kind, half_size=half)  # type: ignore[arg-type]
+        raise DescriptionError(f"{where}: missing required field '{path}.half_size'")
+    expected = "two positive numbers [hx, hy] (half-lengths in m)"
+    half = _list(raw["half_size"], f"{path}.half_size", where, expected)
+    if len(half) != 2:
+        raise DescriptionError(f"{where}: {path}.half_size: expected {expected}, got "
+                               f"{raw['half_size']!r}")
+    hx, hy = (_checked(validation.positive, x, f"{path}.half_size[{k}]", where)
+              for k, x in enumerate(half))
+    return ContactSpec(name, frame, kind, half_size=(hx, hy))

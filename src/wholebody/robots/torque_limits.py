@@ -17,37 +17,48 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .description import DescriptionError
+from .description import DescriptionError, check_torque_limits
 
 
 class TorqueProfile:
     """Joint-dependent symmetric torque bounds for the actuated joints, in model joint order."""
 
     def __init__(self, joint_names: Sequence[str], urdf_max: np.ndarray,
-                 config: Mapping[str, Any] | None = None):
-        config = dict(config or {})
-        unknown = set(config) - {"scale", "overrides", "linkage"}
-        if unknown:
-            raise DescriptionError(f"field 'torque_limits' has unknown keys {sorted(unknown)}")
+                 config: Mapping[str, Any] | None = None, where: str = "robot description"):
+        """``config`` is the ``torque_limits`` table (checked by
+        :func:`~wholebody.robots.description.check_torque_limits`); every joint without a
+        ``linkage`` must end with a finite bound > 0, from ``urdf_max`` or ``overrides``
+        (DescriptionError naming the joint and the URDF value otherwise)."""
+        config = check_torque_limits(config, where)
         self.joint_names = tuple(joint_names)
         index = {n: i for i, n in enumerate(self.joint_names)}
         self.scale = float(config.get("scale", 1.0))
         constant = np.asarray(urdf_max, dtype=float).copy()
-        for joint, value in dict(config.get("overrides", {})).items():
-            if joint not in index:
-                raise DescriptionError(f"field 'torque_limits.overrides' names unknown joint '{joint}'")
-            constant[index[joint]] = float(value)
+        if constant.shape != (len(self.joint_names),):
+            raise ValueError(f"urdf_max: expected {len(self.joint_names)} effort limits, got "
+                             f"shape {constant.shape}")
+        for kind in ("overrides", "linkage"):
+            unknown = [j for j in config.get(kind, {}) if j not in index]
+            if unknown:
+                raise DescriptionError(f"{where}: field 'torque_limits.{kind}' names unknown "
+                                       f"joint(s) {unknown}; actuated joints: "
+                                       f"{list(self.joint_names)}")
+        for joint, value in config.get("overrides", {}).items():
+            constant[index[joint]] = value
+        linkage = config.get("linkage", {})
+        bad = [(j, float(constant[i])) for j, i in index.items()
+               if j not in linkage and not (np.isfinite(constant[i]) and constant[i] > 0)]
+        if bad:
+            listed = ", ".join(f"'{j}' ({v!r} Nm)" for j, v in bad)
+            example = ", ".join(f"{j} = <Nm>" for j, _ in bad[:2])
+            raise DescriptionError(
+                f"{where}: the URDF effort limit of joint(s) {listed} is not a finite torque > 0; "
+                f"give a bound with torque_limits.overrides = {{ {example} }} (or a "
+                f"torque_limits.linkage profile)")
         self.constant = constant
-        linkage = dict(config.get("linkage", {}))
         rows, params = [], []
         for joint, p in linkage.items():
-            if joint not in index:
-                raise DescriptionError(f"field 'torque_limits.linkage' names unknown joint '{joint}'")
-            try:
-                params.append([float(p["a"]), float(p["b"]), float(p["force"]), float(p["q_peak"])])
-            except KeyError as exc:
-                raise DescriptionError(
-                    f"field 'torque_limits.linkage.{joint}' misses key {exc.args[0]!r}") from None
+            params.append([p["a"], p["b"], p["force"], p["q_peak"]])
             rows.append(index[joint])
         self._linkage_rows = np.asarray(rows, dtype=int)
         self._linkage = np.asarray(params, dtype=float).reshape(-1, 4)
