@@ -554,13 +554,14 @@ class HierarchyCycle:
             program.raise_invalid()
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
         t_rows = time.perf_counter()
-        result, status = solve_levels(program.levels, self.analytic, self.method, self.backend,
-                                      self.regularization, self.fallback_backend,
-                                      program.bound(self), self.backend_options)
+        result, outcome, status = solve_levels(program.levels, self.analytic, self.method,
+                                               self.backend, self.regularization,
+                                               self.fallback_backend, program.bound(self),
+                                               self.backend_options)
         t_solve = time.perf_counter()
         self.engine.recover(program.id, result.x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),
-                                 (program.tau_lo, program.tau_hi), result.ok, status, result.costs,
+                                 (program.tau_lo, program.tau_hi), outcome, status, result.costs,
                                  variables)
         if diagnostics:
             solution.tasks = Formulation.task_reports(result.x, program.meta)

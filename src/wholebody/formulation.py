@@ -21,6 +21,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .guard import Outcome, guard_torque
 from .robot import FREE_FLYER_NV, Robot
 from .solvers import Level, solve_hierarchy
 from .solvers.hierarchy import BoundCascade, analytic_first_level
@@ -121,18 +122,25 @@ class TaskReport:
 
 @dataclass
 class Solution:
-    """Result of one whole-body solve (Herzog et al. 2016 eq. 14 for tau)."""
+    """Result of one control cycle (Herzog et al. 2016 eq. 14 for tau): ``tau`` is finite and
+    within the torque limits whatever happened (made by :func:`wholebody.guard.guard_torque`);
+    ``outcome`` says what happened (:class:`~wholebody.guard.Outcome`) and ``status`` why."""
 
     qdd: np.ndarray
     lam: np.ndarray
     tau: np.ndarray
     forces: dict[str, np.ndarray]
-    ok: bool
+    outcome: Outcome
     status: str
     level_costs: np.ndarray
     tasks: list[TaskReport] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     contacts: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        """The cycle solved its problem (outcome SOLVED or FALLBACK)."""
+        return self.outcome.ok
 
     def sacrificed(self, tol: float = 1e-6) -> list[TaskReport]:
         """Tasks not achieved (error above ``tol``), worst first."""
@@ -222,8 +230,8 @@ class Formulation:
         of its own on these ill-conditioned cascades — measured in
         ``benchmarks/bench_wbc.py``). ``diagnostics`` computes the per-task report (extra
         work every cycle). Never raises for numerical reasons: a
-        failed solve returns ``ok=False`` with the reason and a torque computed from the best
-        available solution, clipped to the torque limits. ``regularization`` is the eps of eq. 5
+        failed solve returns a :class:`Solution` with outcome ``HELD`` (``ok`` False), the reason,
+        and a torque computed from the best available solution, clipped to the torque limits. ``regularization`` is the eps of eq. 5
         on the scaled variables; the paper's 1e-4 visibly trades tasks off (see the tests), 1e-6
         does not, and much smaller values make quadprog cycle.
         """
@@ -239,11 +247,12 @@ class Formulation:
             if use_analytic and not self.analytic_first_level(stack):
                 raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque "
                                  "limits")
-        result, status = solve_levels(levels, use_analytic, method, backend, regularization,
-                                      fallback_backend, backend_options=backend_options)
+        result, outcome, status = solve_levels(levels, use_analytic, method, backend,
+                                               regularization, fallback_backend,
+                                               backend_options=backend_options)
         t_solve = time.perf_counter()
         x = result.x * self.scales(variables)
-        solution = self._recover(x, variables, result.ok, status, result.costs)
+        solution = self._recover(x, variables, outcome, status, result.costs)
         if diagnostics:
             solution.tasks = self.task_reports(result.x, meta)
         solution.timings = {"rows": t_rows - t0, "solve": t_solve - t_rows,
@@ -252,7 +261,8 @@ class Formulation:
                             "qps": result.timings.get("qps", 0)}
         return solution
 
-    def _recover(self, x, variables: Variables, ok: bool, status: str, costs) -> Solution:
+    def _recover(self, x, variables: Variables, outcome: Outcome, status: str,
+                 costs) -> Solution:
         robot, nv, nl = self.robot, variables.nv, variables.n_lambda
         qdd, lam = x[:nv].copy(), x[nv:nv + nl].copy()
         if self.reduced:
@@ -260,7 +270,8 @@ class Formulation:
             tau = robot.M[FREE_FLYER_NV:] @ qdd + robot.h[FREE_FLYER_NV:] - J_u.T @ lam  # eq. 14
         else:
             tau = x[nv + nl:].copy()
-        return make_solution(qdd, lam, tau, robot.torque_bounds(), ok, status, costs, variables)
+        return make_solution(qdd, lam, tau, robot.torque_bounds(), outcome, status, costs,
+                             variables)
 
     @staticmethod
     def task_reports(x, meta, active_tol: float = 1e-7) -> list[TaskReport]:
@@ -283,10 +294,10 @@ class Formulation:
 def solve_levels(levels: list[Level], analytic_first_level: bool, method: str, backend: str,
                  regularization: float, fallback_backend: str | None,
                  bound: BoundCascade | None = None, backend_options: dict | None = None):
-    """The levels solved as :meth:`Formulation.solve` does → (HierarchySolution, status): the
-    analytic first level (eq. 17) when asked, a failed cascade level QP retried with
-    ``fallback_backend`` (one QP, not the whole cascade again), other methods re-solved as a
-    cascade with it. ``bound``: a :class:`BoundCascade` made with these same arguments on these
+    """The levels solved as :meth:`Formulation.solve` does → (HierarchySolution, Outcome,
+    status): the analytic first level (eq. 17) when asked, a failed cascade level QP retried with
+    ``fallback_backend`` (one QP, not the whole cascade again; outcome FALLBACK), other methods
+    re-solved as a cascade with it. ``bound``: a :class:`BoundCascade` made with these same arguments on these
     levels' arrays, used for the first attempt (a control loop's fast path).
     ``backend_options`` are ``backend``'s (not passed to the fallback backend)."""
     fls = "analytic" if analytic_first_level and method == "cascade" else None
@@ -295,9 +306,10 @@ def solve_levels(levels: list[Level], analytic_first_level: bool, method: str, b
         first_level_solution=fls,
         fallback_backend=fallback_backend if method == "cascade" else None,
         backend_options=backend_options)
-    status = result.status
+    status, outcome = result.status, Outcome.SOLVED if result.ok else Outcome.HELD
     retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
     if result.ok and retried:
+        outcome = Outcome.FALLBACK
         status = f"optimal ({fallback_backend} after {backend}: {'; '.join(retried)})"
     if not result.ok and fallback_backend and fallback_backend != backend:
         retry = solve_hierarchy(levels, method="cascade", backend=fallback_backend,
@@ -305,25 +317,19 @@ def solve_levels(levels: list[Level], analytic_first_level: bool, method: str, b
         if retry.ok:
             log.debug("%s failed (%s); solved with %s", backend, result.status, fallback_backend)
             status = f"optimal ({fallback_backend} after {backend}: {result.status})"
-            result = retry
-    return result, status
+            result, outcome = retry, Outcome.FALLBACK
+    return result, outcome, status
 
 
 def make_solution(qdd: np.ndarray, lam: np.ndarray, tau: np.ndarray,
-                  bounds: tuple[np.ndarray, np.ndarray], ok: bool, status: str, costs,
+                  bounds: tuple[np.ndarray, np.ndarray], outcome: Outcome, status: str, costs,
                   variables: Variables) -> Solution:
-    """A :class:`Solution` whose torque is finite and within ``bounds`` = (tau_min, tau_max): a
-    failed solve's or an out-of-limits torque is clipped (and flagged), a non-finite one zeroed."""
-    lo, hi = bounds
-    if not np.isfinite(tau).all():
-        ok, status, tau = False, f"{status}; non-finite torque replaced by zero", np.zeros(tau.shape[0])
-    outside = bool(((tau < lo - 1e-6) | (tau > hi + 1e-6)).any())
-    if not ok or outside:
-        if outside and ok:
-            ok, status = False, "torque outside limits after solve; clipped"
-        tau = np.clip(tau, lo, hi)
+    """A :class:`Solution` whose torque went through :func:`~wholebody.guard.guard_torque` with
+    ``bounds`` = (tau_min, tau_max)."""
+    tau, outcome, status = guard_torque(tau, bounds[0], bounds[1], outcome, status)
     forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
-    return Solution(qdd, lam, tau, forces, ok, status, np.asarray(costs), contacts=variables.contacts)
+    return Solution(qdd, lam, tau, forces, outcome, status, np.asarray(costs),
+                    contacts=variables.contacts)
 
 
 def _signature(r: TaskRows) -> tuple:

@@ -9,8 +9,9 @@ import pinocchio as pin
 import pytest
 import quadprog
 
-from wholebody.control.passive import PassiveWBC
+from wholebody.control.passive import PassiveWBC, SwingGains
 from wholebody.formulation import Formulation
+from wholebody.guard import Outcome
 from wholebody.tasks.contact import friction_faces
 
 
@@ -140,13 +141,66 @@ def test_failure_is_a_value(robots, rng, plan_for):
     assert np.all(np.isfinite(sol.tau)) and np.all(sol.tau <= hi) and np.all(sol.tau >= lo)
 
 
-@pytest.mark.parametrize("field,kwargs", [("swing_slack", {"swing_slack": "two"}),
-                                          ("regularization", {"regularization": "l1"}),
-                                          ("f_min", {"f_min": 10.0, "f_max": 5.0})])
+NAN = float("nan")
+
+
+@pytest.mark.parametrize("field,kwargs", [
+    ("swing_slack", {"swing_slack": "two"}),
+    ("regularization", {"regularization": "l1"}),
+    ("f_max", {"f_min": 10.0, "f_max": 5.0}),
+    ("f_min", {"f_min": -1.0}),
+    ("mu", {"mu": NAN}), ("mu", {"mu": -0.5}), ("mu", {"mu": 0.0}),
+    ("control_period", {"control_period": 0.0}), ("control_period", {"control_period": NAN}),
+    ("control_period", {"control_period": -0.004}),
+    ("K_st", {"K_st": NAN}), ("D_st", {"D_st": -1.0}),
+    ("R_qdd", {"R_qdd": -1.0}), ("R_force", {"R_force": 0.0}),
+    ("slack_weight", {"slack_weight": float("inf")}), ("tangential_weight", {"tangential_weight": -1.0}),
+    ("Q", {"Q": (1.0, 1.0, NAN, 1.0, 1.0, 1.0)}), ("Q", {"Q": -1.0}),
+    ("torque_weights", {"torque_weights": -1e-4}),
+    ("torque_limit_override.lf_kfe_joint", {"torque_limit_override": {"lf_kfe_joint": NAN}}),
+    ("torque_limit_override.lf_kfe_joint", {"torque_limit_override": {"lf_kfe_joint": -5.0}}),
+    ("unknown joint", {"torque_limit_override": {"knee": 5.0}}),
+])
 def test_bad_options_name_the_field(robots, field, kwargs):
+    """Every number of PassiveConfig is checked when the controller is built: NaN friction used to
+    drop the friction cone, a zero control period the joint-limit braking, a NaN override the torque
+    limit itself; the error names the field."""
     with pytest.raises(ValueError, match=field):
         PassiveWBC(robots["hyq"], planner=SimpleNamespace(legs=robots["hyq"].contact_names),
                    **kwargs)
+
+
+def test_swing_gains_checked():
+    with pytest.raises(ValueError, match="swing.K"):
+        SwingGains(K=NAN)
+    with pytest.raises(ValueError, match="swing.D"):
+        SwingGains(D=-1.0)
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_torques_within_limits_under_an_impossible_wrench(robots, rng, plan_for, engine):
+    """A 3000 N downward external wrench estimate on a weak knee: whatever the QP does, the torque
+    that leaves the controller is finite and within the limits it enforces (the robot's, lowered on
+    the weak joint), and a solution reported solved satisfies eq. 19 (RNEA) with that torque."""
+    robot = robots["hyq"]
+    knee = robot.joint_names.index("lf_kfe_joint")
+    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), engine=engine,
+                     torque_limit_override={"lf_kfe_joint": 20.0})
+    wbc.impedance.external_wrench = np.array([0.0, 0.0, -3000.0, 0.0, 0.0, 0.0])
+    for k in range(6):
+        q, v = standing_state(robot, rng)
+        robot.update(q, v)
+        lo, hi = robot.torque_bounds()  # eq. 15: they depend on q
+        hi[knee], lo[knee] = min(hi[knee], 20.0), max(lo[knee], -20.0)
+        sol = wbc.cycle(q, v, plan_for(robot, rng, STANCE_SETS[k % len(STANCE_SETS)]))
+        assert np.all(np.isfinite(sol.tau)) and np.all(sol.tau <= hi + 1e-9), sol.status
+        assert np.all(sol.tau >= lo - 1e-9), sol.status
+        if sol.ok:
+            J = robot.stacked_contact_jacobian()
+            rnea = pin.rnea(robot.model, robot.model.createData(), q, v, sol.qdd)
+            np.testing.assert_allclose(rnea[6:] - J[:, 6:].T @ sol.lam, sol.tau, atol=1e-6)
+        else:
+            assert sol.outcome is Outcome.HELD and sol.status
 
 
 def test_point_feet_required(robots):

@@ -40,10 +40,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..formulation import Solution, TaskReport
+from ..guard import Outcome, guard_torque
 from ..robot import Robot
 from ..solvers.backends import DaqpResult, solve_daqp_qp
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import TrunkImpedance, contact_wrench_map
+from ..validation import finite_array, nonnegative, number, positive
 from .base import PlannedController
 from .passive_qp import PassiveQP, StancePattern
 from .passive_stack import passive_stack
@@ -98,17 +100,26 @@ class PassiveConfig:
         if self.engine == "native" and self.swing_slack == "single":
             raise ValueError("engine: 'native' supports swing_slack 'per-direction' and 'none', "
                              "not 'single'")
-        if not self.f_max > self.f_min >= 0.0:
-            raise ValueError(f"f_min, f_max: need 0 <= f_min < f_max, got {self.f_min}, "
-                             f"{self.f_max}")
+        if self.mu is not None:
+            number(self.mu, "mu", low=0.0, low_open=True)
+        number(self.f_min, "f_min", low=0.0)
+        if not (self.f_max == math.inf or number(self.f_max, "f_max") > self.f_min):
+            raise ValueError(f"f_max: must exceed f_min = {self.f_min}, got {self.f_max!r}")
+        for name in ("slack_weight", "R_qdd", "R_force", "control_period"):
+            positive(getattr(self, name), name)
+        for name in ("K_st", "D_st", "tangential_weight"):
+            nonnegative(getattr(self, name), name)
         # arrays as tuples of floats (exact), so that configurations compare by value
-        Q = tuple(np.broadcast_to(np.asarray(self.Q, dtype=float), 6).tolist())
-        object.__setattr__(self, "Q", Q)
+        Q = np.broadcast_to(finite_array(self.Q, "Q", nonnegative=True), 6)
+        object.__setattr__(self, "Q", tuple(Q.tolist()))
         if self.torque_weights is not None:
-            weights = tuple(np.ravel(np.asarray(self.torque_weights, dtype=float)).tolist())
-            object.__setattr__(self, "torque_weights", weights)
+            weights = np.ravel(finite_array(self.torque_weights, "torque_weights",
+                                            nonnegative=True))
+            object.__setattr__(self, "torque_weights", tuple(weights.tolist()))
         if self.torque_limit_override is not None:
-            object.__setattr__(self, "torque_limit_override", dict(self.torque_limit_override))
+            override = {joint: positive(value, f"torque_limit_override.{joint}")
+                        for joint, value in dict(self.torque_limit_override).items()}
+            object.__setattr__(self, "torque_limit_override", override)
 
 
 _CONFIG_FIELDS = frozenset(f.name for f in dataclasses.fields(PassiveConfig))
@@ -122,6 +133,9 @@ class SwingGains:
     K: float = 2000.0
     D: float = 20.0
     feedforward: bool = True
+
+    def __post_init__(self):
+        self.K, self.D = nonnegative(self.K, "swing.K"), nonnegative(self.D, "swing.D")
 
 
 def default_planner(robot: Robot):
@@ -168,6 +182,10 @@ class PassiveWBC(PlannedController):
         config = dataclasses.replace(config or PassiveConfig(), **overrides)
         if any(c.dim != 3 for c in robot.contacts):
             raise ValueError(f"robot '{robot.name}': PassiveWBC needs point contacts (3D forces)")
+        unknown = sorted(set(config.torque_limit_override or ()) - set(robot.joint_names))
+        if unknown:
+            raise ValueError(f"torque_limit_override: unknown joint(s) {unknown} of robot "
+                             f"'{robot.name}'")
         self.config = config
         self.robot = robot
         self.contacts = robot.contact_names
@@ -316,16 +334,12 @@ class PassiveWBC(PlannedController):
 
     def _solution(self, result: DaqpResult, J, W_d, G, pat, timings) -> Solution:
         robot, nv, nf = self.robot, self.robot.nv, self.nf
-        tau_lo, tau_hi = self._tau_bounds
         ok, x = result.ok, result.x
         swing_errors = None
         if ok:
             qdd, F = x[:nv], x[nv:nv + nf]
             tau = robot.M[6:] @ qdd + robot.h[6:] - J[:, 6:].T @ F  # eq. 19
-            excess = max((tau - tau_hi).max(), (tau_lo - tau).max())
-            status = self._excess_status(excess)
-            if excess > 0.0:  # within DAQP's primal tolerance unless something is wrong
-                tau = np.clip(tau, tau_lo, tau_hi)
+            status = "solved"
             if not pat.all_stance:
                 swing_errors = np.zeros(len(self.contacts))
                 residuals = (robot.contact_frame_jacobians[self._contact_order[pat.swing], :3] @ qdd
@@ -337,20 +351,10 @@ class PassiveWBC(PlannedController):
         return self._report(ok, qdd, F, tau, status, G @ F, W_d, pat.s3[::3], swing_errors,
                             timings)
 
-    @staticmethod
-    def _excess_status(excess: float) -> str:
-        if excess > 1e-6:  # torques beyond DAQP's primal tolerance: reported, then clipped
-            status = f"torque {excess:.2e} Nm outside limits after solve; clipped"
-            log.debug(status)
-            return status
-        return "solved"
-
     def _failed(self, reason: str, gravity_torque):
         """A failed solve (``reason``: the solver's status): hold the previous torque (or the
-        nonlinear effects), clipped."""
-        tau_lo, tau_hi = self._tau_bounds
-        previous = self.last_tau if self.last_tau is not None else gravity_torque
-        tau = np.clip(np.nan_to_num(previous), tau_lo, tau_hi)
+        nonlinear effects); :meth:`_report` clips it."""
+        tau = self.last_tau if self.last_tau is not None else gravity_torque
         status = f"{reason}: previous torque held (clipped to limits)"
         if self._failing == 0:  # one warning per streak of failed cycles, not one per cycle
             log.warning("PassiveWBC cycle %d: %s", self.robot.cycle, status)
@@ -358,8 +362,11 @@ class PassiveWBC(PlannedController):
 
     def _report(self, ok, qdd, F, tau, status, commanded, W_d, stance, swing_errors,
                 timings) -> Solution:
-        """The Solution of one cycle (both engines): failure streaks, the observer's input, task
-        reports (trunk wrench; swing feet when the solve succeeded)."""
+        """The Solution of one cycle (both engines; ``ok``: the QP was solved): the torque
+        through the guard, failure streaks, the observer's input, task reports (trunk wrench; swing
+        feet when the solve succeeded)."""
+        tau, outcome, status = guard_torque(tau, *self._tau_bounds,
+                                            Outcome.SOLVED if ok else Outcome.HELD, status)
         if ok and self._failing:
             log.warning("PassiveWBC cycle %d: solved again after %d failed cycles",
                         self.robot.cycle, self._failing)
@@ -377,7 +384,7 @@ class PassiveWBC(PlannedController):
                         for i, st in enumerate(in_stance) if not st]
         per_foot = F.reshape(-1, 3)
         forces = {name: per_foot[i] for i, name in enumerate(self.contacts) if in_stance[i]}
-        return Solution(qdd=qdd, lam=F, tau=tau, forces=forces, ok=ok, status=status,
+        return Solution(qdd=qdd, lam=F, tau=tau, forces=forces, outcome=outcome, status=status,
                         level_costs=np.array([wrench_error @ (self.Q * wrench_error)]),
                         tasks=reports, timings=timings, contacts=tuple(forces))
 
@@ -484,7 +491,7 @@ class PassiveWBC(PlannedController):
         ok = excess == excess  # NaN: failed
         if ok:
             qdd, F, tau = nb["qdd"].copy(), nb["forces"].copy(), nb["tau"].copy()
-            status = self._excess_status(excess)
+            status = "solved"
             commanded = nb["commanded"].copy()
         else:
             reason = result.status if not result.ok else "daqp: non-finite solution"

@@ -17,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..formulation import Solution, TaskReport
+from ..guard import Outcome, guard_torque
 from ..robot import Robot
 from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE, solve_daqp_qp
 from ..tasks.contact import friction_faces, tangent_basis
@@ -116,12 +117,13 @@ class QuasiStaticController(PlannedController):
         status = "solved" if ok else f"{result.status}: zero forces"
         if not ok:
             log.warning("quasi-static cycle %d: %s", robot.cycle, status)
-        tau = np.clip(tau, lo_tau, hi_tau)
+        tau, outcome, status = guard_torque(tau, lo_tau, hi_tau,
+                                            Outcome.SOLVED if ok else Outcome.HELD, status)
         self.last_tau = tau
         forces = {name: F[3 * i:3 * i + 3] for i, name in enumerate(self.contacts) if stance[i]}
         wrench_error = G @ F - W_d
         reports = [TaskReport("trunk wrench", 1, "eq", 6, float(np.linalg.norm(wrench_error))),
                    *swing_errors]
-        return Solution(qdd=np.zeros(robot.nv), lam=F, tau=tau, forces=forces, ok=ok,
+        return Solution(qdd=np.zeros(robot.nv), lam=F, tau=tau, forces=forces, outcome=outcome,
                         status=status, level_costs=np.array([float(wrench_error @ wrench_error)]),
                         tasks=reports, timings={"assemble": t1 - t0}, contacts=tuple(forces))

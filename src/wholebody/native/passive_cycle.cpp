@@ -290,8 +290,9 @@ public:
     return py::make_tuple(kept_vars_.size(), kept_rows_.size());
   }
 
-  // Eq. 19 for a QP solution x = [q̈, F]: torques (clipped to the bounds, returns by how much
-  // they exceeded them), the commanded contact wrench and the swing residuals.
+  // Eq. 19 for a QP solution x = [q̈, F]: torques (not clipped: wholebody.guard.guard_torque
+  // checks and clips them on the Python side, for both engines; returns by how much they exceed
+  // the bounds), the commanded contact wrench and the swing residuals.
   // x is the solution of the compact QP; NaN is returned (nothing written) if it is not finite.
   double finish(const DoubleArray & x_in)
   {
@@ -312,8 +313,6 @@ public:
     tau.noalias() -= J_.rightCols(na_).transpose() * F;
     const Map<VectorXd> lo(tau_lo_, na_), hi(tau_hi_, na_);
     const double excess = std::max((tau - hi).maxCoeff(), (lo - tau).maxCoeff());
-    if (excess > 0.0)
-      tau = tau.cwiseMax(lo).cwiseMin(hi);
     Map<VectorXd>(qdd_, nv_) = qdd;
     Map<VectorXd>(forces_, nf_) = F;
     Map<Eigen::Matrix<double, 6, 1>>(commanded_).noalias() = G_ * F;

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..guard import Outcome
 from ..report.locomotion_figures import weak_joint_figure
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
@@ -89,7 +90,7 @@ def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
         runs[name] = run_gait(robot, "passive", "crawl", command, duration,
                               controller_options=options, progress=progress,
                               on_cycle=lambda t, res, ctrl, sim, c=seen: c.append(
-                                  (res.status.startswith("torque outside limits"),
+                                  (res.outcome is Outcome.CLIPPED,
                                    float(np.abs(sim.last_clipped).max()))))
         runs[name].post_solve_clips = int(sum(c for c, _ in seen))
         runs[name].sim_saturation_max = float(max((s for _, s in seen), default=0.0))
