@@ -538,3 +538,10 @@ def test_planner_output_does_not_depend_on_the_call_rate(hyq):
     snapshot = a.copy()
     dense.update(9.5)
     assert snapshot.t != dense.state.t and snapshot.foot_position is not dense.state.foot_position
+
+
+@pytest.mark.parametrize("t", [math.nan, math.inf])
+def test_planner_rejects_a_time_that_is_not_finite(hyq, t):
+    planner = GaitPlanner.for_robot(hyq, trot(start=0.2), VelocityCommand.constant(0.3))
+    with pytest.raises(ValueError, match="t: expected a finite time"):
+        planner.update(t)

@@ -158,3 +158,12 @@ def test_state_setters_reject_bad_input(robots):
         sim.reset(np.full(19, np.nan))
     with pytest.raises(ValueError, match="push.frame"):
         sim.add_push(Push("nowhere", (1, 0, 0), 10.0, 0.0, 0.1))
+
+
+@pytest.mark.parametrize("quaternion", [(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 2.0)])
+def test_reset_rejects_a_base_orientation_that_is_no_rotation(robots, quaternion):
+    sim = Simulator(robots["hyq"])
+    q = robots["hyq"].q_ref.copy()
+    q[3:7] = quaternion
+    with pytest.raises(ValueError, match=r"q\[3:7\].*unit quaternion"):
+        sim.reset(q)

@@ -216,6 +216,8 @@ class GaitPlanner:
         """The plan at time ``t``. ``feet``: measured foot-frame positions (n, 3), used as the swing
         start at lift-off and as the stance anchor at touchdown (default: the planned ones);
         ``com_velocity``: measured CoM velocity for the Raibert feedback term."""
+        if not math.isfinite(t):
+            raise ValueError(f"t: expected a finite time, got {t!r}")
         if t < self._t_last:
             raise ValueError(f"t: planner times must not decrease ({t} < {self._t_last}); "
                              "call reset() to start over")

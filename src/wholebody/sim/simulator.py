@@ -82,6 +82,10 @@ class Simulator:
             q = robot.q_ref.copy()
             q[2] += self.environment.support_height()
         q = check_vector(q, robot.nq, "q")
+        norm = float(np.linalg.norm(q[3:7]))
+        if not abs(norm - 1.0) <= 1e-3:
+            raise ValueError(f"q[3:7]: the base orientation must be a unit quaternion (x, y, z, w), "
+                             f"got norm {norm:.6g}")
         v = np.zeros(robot.nv) if v is None else check_vector(v, robot.nv, "v")
         mujoco.mj_resetData(self.model, self.data)
         self._set_platform(0.0)
