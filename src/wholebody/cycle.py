@@ -29,7 +29,7 @@ import numpy as np
 from .formulation import Formulation, Solution, Stack, make_solution, solve_levels
 from .robot import FREE_FLYER_NQ, Robot
 from .solvers import Level
-from .solvers.hierarchy import BoundCascade
+from .solvers.compiled_cascade import BoundCascade
 from .tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
                     FrictionCone, FullDynamics, JointAccelerationLimits, JointTrajectoryTask,
                     MomentumForce, MomentumPD, NewtonEuler, PostureTask, TorqueLimits)

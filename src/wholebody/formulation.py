@@ -24,7 +24,8 @@ import numpy as np
 from .guard import Outcome, guard_torque
 from .robot import FREE_FLYER_NV, Robot
 from .solvers import Level, solve_hierarchy
-from .solvers.hierarchy import BoundCascade, analytic_first_level
+from .solvers.compiled_cascade import BoundCascade
+from .solvers.hierarchy import analytic_first_level
 from .tasks.base import Task, TaskRows
 from .tasks.dynamics import FullDynamics, NewtonEuler
 from .tasks.limits import TorqueLimits

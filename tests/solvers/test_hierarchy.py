@@ -603,16 +603,17 @@ def test_bad_solver_arguments():
 # ---------------------------------------------------------------------------- compiled cascade
 def _python_only(monkeypatch):
     """Run solve_hierarchy's cascade in Python only (the reference), whatever ``compiled`` says."""
-    import wholebody.solvers.hierarchy as h
-    monkeypatch.setattr(h, "_CompiledCascade", None)
+    import wholebody.solvers.compiled_cascade as cc
+    monkeypatch.setattr(cc, "_CompiledCascade", None)
 
 
 def _count_requests(monkeypatch):
     """Count the level QPs the compiled cascade solves (from Python, or DAQP's in the run itself:
     ``timings["qps"]``) and the NNLS solves of its implicit-equality searches."""
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.cascade as cascade
+    import wholebody.solvers.compiled_cascade as cc
     seen = {"qp": 0, "implicit": 0}
-    run_compiled, nnls = h._run_compiled, h.nnls
+    run_compiled, nnls = cc._run_compiled, cascade.nnls
 
     def counting_run(*args, **kwargs):
         sol = run_compiled(*args, **kwargs)
@@ -623,15 +624,15 @@ def _count_requests(monkeypatch):
         seen["implicit"] += 1
         return nnls(*args)
 
-    monkeypatch.setattr(h, "_run_compiled", counting_run)
-    monkeypatch.setattr(h, "nnls", counting_nnls)
+    monkeypatch.setattr(cc, "_run_compiled", counting_run)
+    monkeypatch.setattr(cascade, "nnls", counting_nnls)
     return seen
 
 
 def _daqp_from_python(monkeypatch):
     """The compiled cascade's DAQP QPs solved from Python (``_daqp_on_run``), not in the run."""
-    import wholebody.solvers.hierarchy as h
-    monkeypatch.setattr(h, "_daqp_in_cascade", lambda backend, opts: None)
+    import wholebody.solvers.compiled_cascade as cc
+    monkeypatch.setattr(cc, "_daqp_in_cascade", lambda backend, opts: None)
 
 
 def _daqp_in_run_or_skip():
@@ -639,12 +640,12 @@ def _daqp_in_run_or_skip():
     installed daqp is the declared version and the layout check still refuses it."""
     import importlib.metadata
     from conftest import native_cycle_or_skip
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.compiled_cascade as cc
     native_cycle_or_skip("_cascade")
     version = importlib.metadata.version("daqp")
-    if version != h._DAQP_C_VERSION:
-        pytest.skip(f"daqp {version} installed, cascade.cpp declares {h._DAQP_C_VERSION}'s C API")
-    assert h._daqp_c_module() is not None, "layout check failed for the declared daqp version"
+    if version != cc._DAQP_C_VERSION:
+        pytest.skip(f"daqp {version} installed, cascade.cpp declares {cc._DAQP_C_VERSION}'s C API")
+    assert cc._daqp_c_module() is not None, "layout check failed for the declared daqp version"
 
 
 def test_daqp_on_the_compiled_run_solves_its_qp_as_the_adapter(monkeypatch):
@@ -653,10 +654,10 @@ def test_daqp_on_the_compiled_run_solves_its_qp_as_the_adapter(monkeypatch):
     on the run's unscaled QP: the same verdict and status, y to 1e-8 (the scaled rows differ by
     rounding: the norms are summed in another order)."""
     from conftest import native_cycle_or_skip
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.compiled_cascade as cc
     native_cycle_or_skip("_cascade")
     _daqp_from_python(monkeypatch)
-    on_run, compared = h._daqp_on_run, []
+    on_run, compared = cc._daqp_on_run, []
 
     def compare(run, opts):
         fast = on_run(run, opts)
@@ -669,7 +670,7 @@ def test_daqp_on_the_compiled_run_solves_its_qp_as_the_adapter(monkeypatch):
             compared.append(fast[2])
         return fast
 
-    monkeypatch.setattr(h, "_daqp_on_run", compare)
+    monkeypatch.setattr(cc, "_daqp_on_run", compare)
     rng = np.random.default_rng(5)
     for _ in range(150):
         solve_hierarchy(random_hierarchy(rng), backend="daqp")
@@ -685,7 +686,7 @@ def test_daqp_in_the_run_gives_what_python_gives(monkeypatch, case):
     when the verdict on the unscaled rows refuses its solution (raw_tol 1e-15), and with ε =
     1e-10, where DAQP's "infeasible" misfires and is retried with proximal iterations."""
     import daqp
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.compiled_cascade as cc
     _daqp_in_run_or_skip()
     options = {"daqp-fails": {"iter_limit": 2}, "verdict-refuses": {"raw_tol": 1e-15},
                "tiny-eps": {"sing_tol": 3.7e-11, "primal_tol": 1e-7}}.get(case, {})
@@ -693,13 +694,13 @@ def test_daqp_in_the_run_gives_what_python_gives(monkeypatch, case):
     problems = [random_hierarchy(rng) for _ in range(200)]
     kwargs = dict(backend="daqp", fallback_backend="quadprog", backend_options=options,
                   regularization=1e-10 if case == "tiny-eps" else 1e-4)
-    solvers, make_solver = [], h._daqp_in_cascade
+    solvers, make_solver = [], cc._daqp_in_cascade
 
     def recording(backend, opts):
         solvers.append(make_solver(backend, opts))
         return solvers[-1]
 
-    monkeypatch.setattr(h, "_daqp_in_cascade", recording)
+    monkeypatch.setattr(cc, "_daqp_in_cascade", recording)
     in_run = [solve_hierarchy(levels, **kwargs) for levels in problems]
     assert all(s is not None for s in solvers)
     calls_in_run = sum(s.calls for s in solvers)
@@ -729,18 +730,18 @@ def test_daqp_in_the_run_is_used_only_where_it_is_the_adapter():
     backend, an option that is no DAQP setting, or a non-number setting go through Python; the
     solver refuses an unknown setting by name and a library that is not loaded."""
     import daqp
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.compiled_cascade as cc
     _daqp_in_run_or_skip()
-    assert h._daqp_in_cascade("daqp", {"primal_tol": 1e-8, "raw_tol": 1e-7}) is not None
-    assert h._daqp_in_cascade("quadprog", {}) is None
-    assert h._daqp_in_cascade("daqp", {"primal_start": np.zeros(3)}) is None
-    assert h._daqp_in_cascade("daqp", {"no_such_setting": 1.0}) is None
+    assert cc._daqp_in_cascade("daqp", {"primal_tol": 1e-8, "raw_tol": 1e-7}) is not None
+    assert cc._daqp_in_cascade("quadprog", {}) is None
+    assert cc._daqp_in_cascade("daqp", {"primal_start": np.zeros(3)}) is None
+    assert cc._daqp_in_cascade("daqp", {"no_such_setting": 1.0}) is None
     with pytest.raises(ValueError, match="no_such_setting"):
-        h._DaqpSolver(daqp.__file__, {"no_such_setting": 1.0}, {}, 1e-6)
+        cc._DaqpSolver(daqp.__file__, {"no_such_setting": 1.0}, {}, 1e-6)
     with pytest.raises(ValueError, match="not a loaded library"):
-        h._DaqpSolver("/nonexistent/daqp.so", {}, {}, 1e-6)
+        cc._DaqpSolver("/nonexistent/daqp.so", {}, {}, 1e-6)
     # the settings read through cascade.cpp's declaration are daqp.solve's, given ones applied
-    solver = h._DaqpSolver(daqp.__file__, {"iter_limit": 7, "eps_prox": 1e-3}, {}, 1e-6)
+    solver = cc._DaqpSolver(daqp.__file__, {"iter_limit": 7, "eps_prox": 1e-3}, {}, 1e-6)
     assert solver.settings()["iter_limit"] == 7 and solver.settings()["eps_prox"] == 1e-3
 
 
@@ -798,17 +799,17 @@ def test_daqp_c_interface_is_refused_for_another_version_or_layout(monkeypatch, 
     import importlib.metadata
     import inspect
     import daqp
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.compiled_cascade as cc
     _daqp_in_run_or_skip()
-    request.addfinalizer(h._daqp_c_module.cache_clear)  # nothing stale left for other tests
+    request.addfinalizer(cc._daqp_c_module.cache_clear)  # nothing stale left for other tests
     levels = random_hierarchy(np.random.default_rng(3))
     reference = solve_hierarchy(levels, backend="daqp")
     version = importlib.metadata.version
     monkeypatch.setattr(importlib.metadata, "version",
                         lambda name: "0.10.3" if name == "daqp" else version(name))
-    h._daqp_c_module.cache_clear()
-    with caplog.at_level("INFO", logger=h.log.name):
-        assert h._daqp_c_module() is None and h._daqp_in_cascade("daqp", {}) is None
+    cc._daqp_c_module.cache_clear()
+    with caplog.at_level("INFO", logger=cc.log.name):
+        assert cc._daqp_c_module() is None and cc._daqp_in_cascade("daqp", {}) is None
     assert "declared for 0.11.0" in caplog.text
     np.testing.assert_array_equal(solve_hierarchy(levels, backend="daqp").x, reference.x)
     monkeypatch.setattr(importlib.metadata, "version", version)
@@ -822,12 +823,12 @@ def test_daqp_c_interface_is_refused_for_another_version_or_layout(monkeypatch, 
         p.replace(default=7) if p.name == "iter_limit" else p
         for p in signature.parameters.values()])
     monkeypatch.setattr(daqp, "solve", moved)
-    h._daqp_c_module.cache_clear()
-    assert h._daqp_c_module() is None
+    cc._daqp_c_module.cache_clear()
+    assert cc._daqp_c_module() is None
     assert "differ from daqp.solve's defaults" in caplog.text
     monkeypatch.setattr(daqp, "solve", solve)
-    h._daqp_c_module.cache_clear()
-    assert h._daqp_c_module() is not None
+    cc._daqp_c_module.cache_clear()
+    assert cc._daqp_c_module() is not None
 
 
 def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots):
@@ -878,7 +879,7 @@ def test_compiled_cascade_matches_python_on_robots(robots, monkeypatch, name):
     from pathlib import Path
     from conftest import native_cycle_or_skip
     native_cycle_or_skip("_cascade")
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.compiled_cascade as cc
     from wholebody.control.stacks import table1_stack, table2_stack
     from wholebody.formulation import Formulation
     from wholebody.variables import Variables
@@ -896,15 +897,15 @@ def test_compiled_cascade_matches_python_on_robots(robots, monkeypatch, name):
         variables = Variables(robot, ["left_sole"])
     formulation = Formulation(robot)
     seen = _count_requests(monkeypatch)
-    compiled = h._CompiledCascade
+    compiled = cc._CompiledCascade
     for k, (q, v) in enumerate(moving_states(robot, 1200)):
         if k % 20:
             continue
         robot.update(q, v)
         a = formulation.solve(stack, variables, diagnostics=False)
-        monkeypatch.setattr(h, "_CompiledCascade", None)
+        monkeypatch.setattr(cc, "_CompiledCascade", None)
         b = formulation.solve(stack, variables, diagnostics=False)
-        monkeypatch.setattr(h, "_CompiledCascade", compiled)
+        monkeypatch.setattr(cc, "_CompiledCascade", compiled)
         assert a.ok and b.ok
         np.testing.assert_allclose(a.tau, b.tau, atol=0.05 if name == "talos14-single" else 1e-6,
                                    err_msg=f"state {k}")
@@ -1029,7 +1030,7 @@ def test_implicit_equalities_match_a_linear_programming_oracle(monkeypatch):
     G d ≥ 0, |d| ≤ 1 is 0 (scipy's HiGHS, not NNLS) — and the rows in the span cost no NNLS
     solve of their own (one per dependency, the span taken at once)."""
     from scipy.optimize import linprog
-    import wholebody.solvers.hierarchy as h
+    import wholebody.solvers.cascade as cascade
     seen = _count_requests(monkeypatch)
     rng = np.random.default_rng(11)
     for trial in range(40):
@@ -1048,7 +1049,7 @@ def test_implicit_equalities_match_a_linear_programming_oracle(monkeypatch):
         hlo = np.where(upper, -np.inf, hx)
         hup = np.where(upper, hx, np.inf)
         before = seen["implicit"]
-        mask = h._implicit_equalities(HZ, hx, hlo, hup)
+        mask = cascade._implicit_equalities(HZ, hx, hlo, hup)
         oracle = np.array([
             -linprog(-g, A_ub=-G, b_ub=np.zeros(len(G)), bounds=[(-1, 1)] * z,
                      method="highs").fun <= 1e-9 for g in G])

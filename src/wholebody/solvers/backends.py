@@ -66,7 +66,7 @@ DAQP_SENSE_EQ, DAQP_SENSE_INEQ = 5, 0  # DAQP's row senses: equality, (two-sided
 # DAQP's settings for solve_daqp_qp where the caller gives none: daqp.solve's own defaults (nothing
 # overridden). The single weighted QPs it serves (PassiveWBC, Fahmi et al. 2019 eq. 7, and the
 # quasi-static baseline) are solved on their own rows, not on the cascade's relaxed level QPs that
-# DAQP_DEFAULTS was measured on.
+# DAQP_DEFAULTS is chosen for.
 DAQP_QP_DEFAULTS: dict = {}
 
 
@@ -110,7 +110,7 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
     """DAQP via ``daqp.solve(H, f, A, bupper, blower, sense)``; equalities have sense 5; rows
     scaled to unit norm, the solution refused if a row is violated by more than ``raw_tol``.
 
-    Two settings differ from DAQP's defaults (``DAQP_DEFAULTS``, measured on the cascade's level
+    Two settings differ from DAQP's defaults (``DAQP_DEFAULTS``, chosen for the cascade's level
     QPs, which keep higher-priority rows active at their relaxed bounds):
 
     * ``sing_tol`` (the smallest pivot DAQP accepts in the LDLᵀ of its active rows): 1e-14
@@ -136,11 +136,10 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
         lower, upper = np.full(1, -np.inf), np.full(1, np.inf)
     # DAQP is given rows of unit norm (same feasible set): the cascade's level QPs in w = R u have
     # row norms from ~0.1 to ~1e6 (directions without objective are scaled by 1/sqrt(eps)), and
-    # on the raw rows DAQP declared feasible QPs infeasible/cycling at degenerate vertices (94
-    # of 300 Table 1 cycles, talos double support; 15 with unit rows). Its tolerance then holds
-    # on the unit rows, i.e. ‖row‖ times looser on the raw ones (up to 0.06 measured): the
-    # solution is checked on the caller's rows and refused beyond `raw_tol` (a fallback backend
-    # then solves the QP).
+    # on the raw rows DAQP declared feasible QPs infeasible/cycling at degenerate vertices far
+    # more often than on unit rows. Its tolerance then holds on the unit rows, i.e. ‖row‖ times
+    # looser on the raw ones: the solution is checked on the caller's rows and refused beyond
+    # `raw_tol` (a fallback backend then solves the QP).
     unit_A, bu, bl, sense = _daqp_rows(A, lower, upper)
     x, status = solve_daqp_unit_rows(H, g, unit_A, bu, bl, sense, **opts)
     return daqp_verdict(x, status, _row_violation(A, x, lower, upper) if x is not None else 0.0,

@@ -1,0 +1,215 @@
+"""The cascade compiled: the bridge to ``wholebody._cascade`` (src/wholebody/native/cascade.cpp).
+
+``wholebody._cascade.CascadeRun`` is the algorithm of :mod:`.cascade` line for line in C++
+(Eigen: Householder QR, QR with column pivoting, the same tolerances); it hands each level QP
+back to Python, where :func:`~.common._backend_solve` calls the backend (and the fallback)
+exactly as the Python cascade does — except DAQP's, which it solves itself through DAQP's C
+interface with the adapter's rows, settings and verdict (:func:`_daqp_in_cascade`; bitwise the
+same results) — and calls scipy's NNLS for the implicit-equality search. It is the default when
+built (``compiled=True``); the Python cascade is the reference the tests compare it with (x to
+1e-7 on the random hierarchies, torques to 1e-6 Nm on Tables 1/2). Results differ only by
+rounding: Eigen's and LAPACK's factorisations pivot alike but round differently.
+
+:class:`BoundCascade` keeps a compiled run bound to a control loop's level arrays.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import inspect
+import time
+
+import numpy as np
+
+from . import cascade
+from .backends import (BACKENDS, DAQP_DEFAULTS, DAQP_EXIT, DAQP_RAW_TOL, QP_ERRORS,
+                       daqp_verdict, solve_daqp, solve_daqp_unit_rows)
+from .common import HierarchySolution, _backend_solve, _checked_arguments, log
+
+try:  # the cascade, compiled (src/wholebody/native/cascade.cpp); optional
+    from .._cascade import CascadeRun as _CompiledCascade
+    from .._cascade import DAQP_C_VERSION as _DAQP_C_VERSION
+    from .._cascade import DaqpSolver as _DaqpSolver
+except ImportError:  # not built (no C++ compiler at install): the Python cascade does everything
+    _CompiledCascade = _DaqpSolver = _DAQP_C_VERSION = None
+
+__all__ = ["BoundCascade"]
+
+
+def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
+    """The cascade compiled (``wholebody._cascade.CascadeRun``, a line-for-line mirror of
+    :func:`.cascade._solve_cascade`, including :func:`.cascade._implicit_equalities` with its
+    NNLS, ``cascade.nnls``, passed in): it runs the levels and hands back each level QP, solved
+    here by ``backend``, then ``fallback``, exactly as the Python cascade does (DAQP's QPs are
+    solved in C++ when :func:`_daqp_in_cascade` allows it, with the same rows, settings and
+    verdict)."""
+    return _run_compiled(_new_run(levels, n, eps, fls, tols), levels, backend, opts, fallback, t0,
+                         _daqp_in_cascade(backend, opts))
+
+
+def _new_run(levels, n, eps, fls, tols):
+    """A compiled cascade run on the arrays of ``levels`` (held, not copied)."""
+    analytic = isinstance(fls, str)
+    x1, Z1 = fls if fls is not None and not analytic else (None, None)
+    return _CompiledCascade([L.B for L in levels], [L.b for L in levels], [L.w for L in levels],
+                            [L.C for L in levels], [L.lower for L in levels],
+                            [L.upper for L in levels], [L.v for L in levels],
+                            [L.name for L in levels], n, eps, x1, Z1, analytic, *tols, cascade.nnls)
+
+
+def _run_compiled(run, levels, backend, opts, fallback, t0, daqp=None):
+    """Drives a compiled run from its first level: its level QPs solved by ``backend``, then
+    ``fallback`` → HierarchySolution. ``daqp`` (a :func:`_daqp_in_cascade` solver) lets the run
+    solve them with DAQP itself; the QPs it leaves (DAQP failed, or no rows) come back here."""
+    warns = []
+    qp_times = None  # of the QPs solved here (not by the run), per level
+    n_qps = 0
+    direct_daqp = BACKENDS.get(backend) is solve_daqp
+    daqp = daqp if direct_daqp else None  # a test may have replaced the adapter since
+    advance = run.advance if daqp is None else functools.partial(run.advance_daqp, daqp)
+    while (kind := advance()) == "qp":
+        tq = time.perf_counter()
+        r = run.level
+        if daqp is not None and run.daqp_status:  # DAQP failed on it in the run (counted there)
+            first = (None, run.daqp_status, False)
+        else:
+            n_qps += 1
+            first = _daqp_on_run(run, opts) if direct_daqp else None
+        y, ok, status = _backend_solve(_identity_qp(run), backend, opts, fallback, r, levels,
+                                       warns, first)
+        if qp_times is None:
+            qp_times = np.zeros(len(levels))
+        qp_times[r] += time.perf_counter() - tq  # (give_qp's end of the level is cascade work)
+        run.give_qp(y if ok else None, status)
+    x, costs, res, vio, level_times, qp_time, run_qps, dims, run_warns, level, status = run.result()
+    if qp_times is not None:
+        level_times += qp_times
+        qp_time += float(qp_times.sum())
+    ok = kind == "done"
+    return HierarchySolution(
+        x=x, costs=costs, eq_residuals=res, ineq_violations=vio,
+        status="optimal" if ok else status, ok=ok,
+        timings={"total": time.perf_counter() - t0, "levels": level_times, "qp": qp_time,
+                 "qps": n_qps + run_qps},
+        method="cascade", levels_solved=level, nullspace_dims=dims,
+        warnings=run_warns + tuple(warns) if warns else run_warns,
+    )
+
+
+class BoundCascade:
+    """The compiled cascade bound to the arrays of ``levels``: solve, change the arrays'
+    contents in place, solve again — a control loop's level buffers (see
+    :class:`wholebody.cycle.HierarchyCycle`) — without :func:`solve_hierarchy`'s per-call
+    argument checks and array hand-over.
+
+    Arguments as :func:`solve_hierarchy` with ``method="cascade"``; :meth:`solve` returns what
+    ``solve_hierarchy(levels, ...)`` would for the arrays' current contents. The arrays must keep
+    their shapes and stay finite (checked by the caller: nothing is copied or re-checked here).
+    Needs the compiled cascade (:data:`available`).
+    """
+
+    available = _CompiledCascade is not None
+
+    def __init__(self, levels, backend: str = "quadprog", regularization: float = 1e-4, *,
+                 first_level_solution=None, fallback_backend: str | None = None,
+                 rank_tol: float = 1e-9, drop_tol: float = 1e-9, relax_tol: float = 1e-9,
+                 feas_tol: float = 1e-6, backend_options: dict | None = None):
+        if _CompiledCascade is None:
+            raise RuntimeError("BoundCascade needs the compiled cascade (wholebody._cascade), "
+                               "which is not built")
+        levels, n, fls, fallback = _checked_arguments(
+            levels, "cascade", backend, regularization, first_level_solution, fallback_backend)
+        for L in levels:  # held, not copied: a converted copy would never see the new contents
+            for field_name in ("B", "b", "w", "C", "lower", "upper", "v"):
+                a = getattr(L, field_name)
+                if a.dtype != np.float64 or not a.flags.c_contiguous:
+                    raise ValueError(f"BoundCascade: level {L.name!r} {field_name}: needs a "
+                                     f"C-contiguous float64 array (it is held, not copied)")
+        self.levels, self.backend, self.fallback_backend = levels, backend, fallback
+        self._opts = dict(backend_options or {})
+        self._run = _new_run(levels, n, regularization, fls,
+                             (rank_tol, drop_tol, relax_tol, feas_tol))
+        self._daqp = _daqp_in_cascade(backend, self._opts)
+
+    def solve(self) -> HierarchySolution:
+        """The cascade on the arrays' current contents."""
+        t0 = time.perf_counter()
+        self._run.reset()
+        return _run_compiled(self._run, self.levels, self.backend, self._opts,
+                             self.fallback_backend, t0, self._daqp)
+
+
+def _daqp_on_run(run, opts):
+    """DAQP on the compiled cascade's pending level QP, (y, status, ok) as ``solve_daqp`` gives
+    them: the run scales the rows (``run.daqp_qp``) and checks the unscaled ones
+    (``run.qp_violation``), which saves the generic adapter's array round trips.
+    None when the QP has no rows (the adapter's special case)."""
+    g, unit_A, bu, bl, sense = run.daqp_qp()
+    if unit_A.shape[0] == 0:
+        return None
+    opts = dict(opts)
+    raw_tol = opts.pop("raw_tol", DAQP_RAW_TOL)
+    try:
+        x, status = solve_daqp_unit_rows(np.eye(g.shape[0]), g, unit_A, bu, bl, sense, **opts)
+    except QP_ERRORS as exc:  # as solve_qp: never raises for numerical reasons
+        return None, f"daqp: {type(exc).__name__}: {exc}", False
+    return daqp_verdict(x, status, run.qp_violation(x) if x is not None else 0.0, raw_tol)
+
+
+def _daqp_in_cascade(backend, opts):
+    """A ``wholebody._cascade.DaqpSolver`` with which a compiled run solves its level QPs itself
+    (``CascadeRun.advance_daqp``: the stock DAQP adapter's rows, settings, retry and verdict in
+    C++, without :func:`_daqp_on_run`'s calls into Python), or None: ``backend`` is not the stock DAQP
+    adapter, an option is not a DAQP setting, or DAQP's C interface is not usable
+    (:func:`_daqp_c_module`). Then the QPs are solved from Python, with the same results."""
+    if BACKENDS.get(backend) is not solve_daqp or (path := _daqp_c_module()) is None:
+        return None
+    settings = {**DAQP_DEFAULTS, **opts}
+    raw_tol = settings.pop("raw_tol", DAQP_RAW_TOL)
+    try:
+        return _DaqpSolver(path, settings, DAQP_EXIT, raw_tol)
+    except (ValueError, TypeError):  # e.g. an option daqp.solve takes that is no setting
+        return None
+
+
+@functools.cache
+def _daqp_c_module() -> str | None:
+    """The file of the daqp module whose C solver the compiled cascade may call, or None.
+
+    ``cascade.cpp`` declares DAQP's C structures as one daqp version defines them
+    (``DAQP_C_VERSION``); they are used only with that version installed, and only if the
+    defaults read through them (``daqp_default_settings``) equal ``daqp.solve``'s keyword
+    defaults, field by field: a layout that differs would show there first."""
+    if _DaqpSolver is None:
+        return None
+    try:
+        import daqp
+
+        version = importlib.metadata.version("daqp")
+    except (ImportError, importlib.metadata.PackageNotFoundError):
+        return None
+    if version != _DAQP_C_VERSION:
+        log.info("daqp %s: level QPs go through Python (DAQP's C interface is declared for %s)",
+                 version, _DAQP_C_VERSION)
+        return None
+    try:
+        read = _DaqpSolver(daqp.__file__, {}, {}, DAQP_RAW_TOL).settings()
+        defaults = inspect.signature(daqp.solve).parameters
+        expected = {name: float(defaults[name].default) for name in read}
+    except (ValueError, TypeError, KeyError) as exc:
+        log.warning("DAQP's C interface not usable (%s): level QPs go through Python", exc)
+        return None
+    if read != expected:
+        log.warning("DAQP's C settings differ from daqp.solve's defaults (%s vs %s): level QPs go "
+                    "through Python", read, expected)
+        return None
+    return daqp.__file__
+
+
+def _identity_qp(run):
+    """The pending QP of a compiled run as (H, g, A, lower, upper), H = I, built when called."""
+    def qp():
+        g, A, lower, upper = run.qp()
+        return np.eye(g.shape[0]), g, A, lower, upper
+    return qp
