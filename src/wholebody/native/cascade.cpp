@@ -1,5 +1,5 @@
 // The cascade of QPs (Herzog et al. 2016, eqs. 8-11), compiled: a line-for-line mirror of
-// wholebody.solvers.hierarchy._solve_cascade (the reference, run with compiled=False). Each level
+// wholebody.solvers.cascade._solve_cascade (the reference, run with compiled=False). Each level
 // QP (eqs. 10-11, posed in w = R u, see _level_qp) is either handed back to Python, solved there
 // by the chosen backend (and the fallback backend) as everywhere else, or — DAQP — solved here
 // through DAQP's C interface with the adapter's rows, settings and verdict (DaqpSolver; a QP it
@@ -9,7 +9,7 @@
 // projecting each level onto the remaining null space, its regularised least-squares minimiser
 // (Householder QR of [√ε I; M], structured), the implicit-equality search, the QP's rows, locking
 // directions (QR with column pivoting) and the per-level costs — runs here. Usage (see
-// hierarchy._solve_compiled):
+// compiled_cascade._solve_compiled):
 //   run = CascadeRun(B, b, w, C, lower, upper, V, names, n, eps, x1, Z1, tolerances..., nnls)
 //   while run.advance() == "qp": run.give_qp(y, status)
 //   x, costs, ... = run.result()
@@ -50,7 +50,7 @@ namespace
   using ConstVecMap = Eigen::Map<const VectorXd>;
   using Clock = std::chrono::steady_clock;
 
-  constexpr double kTightTol = 1e-8; // hierarchy._TIGHT_TOL
+  constexpr double kTightTol = 1e-8; // cascade._TIGHT_TOL
   constexpr double kInf = std::numeric_limits<double>::infinity();
 
   VectorXd sq_norms(const MatrixXd & A) { return A.rowwise().squaredNorm(); }
@@ -390,7 +390,7 @@ namespace
 // DAQP's C interface, declared as daqp 0.11.0 defines it (csrc/include/types.h and api.h of its
 // source distribution) and reached through the symbols the installed daqp Python module exports:
 // the cascade's level QPs are then solved without a trip through Python (no argument conversion,
-// result packing or verdict per QP there). hierarchy._daqp_in_cascade uses this only for
+// result packing or verdict per QP there). compiled_cascade._daqp_in_cascade uses this only for
 // that daqp version and after checking the layout (daqp_default_settings read through these
 // declarations must equal daqp.solve's keyword defaults); otherwise the QPs go through Python.
 namespace daqp_c
@@ -676,7 +676,7 @@ public:
     return kind;
   }
 
-  // The QP of the pending level (hierarchy._level_qp): Hessian I (not returned), gradient g,
+  // The QP of the pending level (cascade._level_qp): Hessian I (not returned), gradient g,
   // rows lower ≤ A [w; s] ≤ upper.
   py::tuple qp() const
   {
@@ -766,7 +766,7 @@ private:
     return std::chrono::duration<double>(Clock::now() - t0).count();
   }
 
-  // a matrix without n columns is an empty level (hierarchy._rows)
+  // a matrix without n columns is an empty level (common._rows)
   Index rows_of_level(const std::vector<DoubleArray> & list, std::size_t r) const
   {
     const DoubleArray & a = list[r];

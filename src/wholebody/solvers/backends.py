@@ -115,19 +115,13 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
 
     * ``sing_tol`` (the smallest pivot DAQP accepts in the LDLᵀ of its active rows): 1e-14
       instead of 3.7e-11 (1e-14 is the floor DAQP itself uses in branch and bound). On unit rows
-      a pivot is about σ_min² of the active rows; nearly dependent active rows (σ_min ~ 3e-6,
-      pivots ~ 1e-11) were taken for dependent, and the QP declared "infeasible". talos Table
-      1, double support, 2000 moving states: 37 of 3947 level QPs "infeasible" → 0 (they then
-      agree with quadprog to 2e-9; the other solutions moved by ≤ 2.7e-12).
+      a pivot is about σ_min² of the active rows, so nearly dependent active rows (σ_min ~ 1e-6)
+      were taken for dependent with the default and feasible level QPs declared "infeasible".
     * ``primal_tol``: 1e-9 instead of 1e-6. DAQP's tolerance holds on the unit rows, i.e. ‖row‖
-      times looser on the caller's (norms up to ~1e6): at 1e-7, 16 of 9366 Table 1 level QPs
-      (double and single support) were refused by the check on the raw rows (violations 3e-3 to
-      36), at 1e-9 none (they agree with quadprog to 4e-11), for ~6 % more time per QP. (With
-      the default ``sing_tol``, 1e-9 had made DAQP fail more often, 17 % instead of 10 % of the
-      Table 1 cycles: the same false "infeasible".)
+      times looser on the caller's rows (norms up to ~1e6), which the check on the raw rows then
+      refuses; the tighter tolerance keeps DAQP's solutions within it, at a small cost per QP.
 
-    Random hierarchies (tests/test_hierarchy.py's generator, 300, DAQP then quadprog): level QPs
-    left to quadprog at ε = 1e-10: 161 with DAQP's defaults, 10 with these; at ε = 1e-8: 17 → 1.
+    tests/solvers/test_hierarchy.py checks both choices on random hierarchies against quadprog.
     """
     if A.shape[0] == 0:
         # DAQP needs at least one row: add a free one (not a zero row: DAQP normalises rows)
