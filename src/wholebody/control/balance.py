@@ -24,11 +24,14 @@ from typing import Callable, Sequence
 import numpy as np
 import pinocchio as pin
 
-from ..cycle import HierarchyCycle
+from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation, Solution
 from ..robot import Robot
 from ..variables import Variables
 from ..planning.blend import quintic_blend
+from ..tasks.base import contact_list
+from ..tasks.momentum import momentum_gain
+from ..validation import finite_array, nonnegative, number, positive
 from .lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_DIAG, MomentumLQR
 from .stacks import ANGULAR_MOMENTUM_WEIGHT, table2_stack
 
@@ -59,7 +62,8 @@ class CoMSineReference:
 
     ``amplitude`` and ``frequency`` are 3-vectors (world x, y, z); the envelope ``e`` rises from 0 to 1
     over ``ramp`` seconds (quintic) so that the reference starts at rest. ``x0`` defaults to the CoM
-    of the reference posture.
+    of the reference posture. Checked at construction: ``amplitude`` and ``frequency`` (>= 0, Hz)
+    finite 3-vectors, ``ramp`` finite >= 0 (0: no ramp), ``start`` finite, ``x0`` a finite 3-vector.
 
     With ``move_base`` (default) the floating-base reference of the posture task is translated with
     the CoG reference, so that the posture task does not pull the base back to its standing
@@ -69,13 +73,13 @@ class CoMSineReference:
 
     def __init__(self, robot: Robot, amplitude, frequency, ramp: float = 1.0, x0=None,
                  start: float = 0.0, move_base: bool = True):
-        self.amplitude = np.asarray(amplitude, dtype=float).reshape(3)
-        self.frequency = np.asarray(frequency, dtype=float).reshape(3)
-        self.ramp, self.start = float(ramp), float(start)
+        self.amplitude = finite_array(amplitude, "amplitude", shape=(3,))
+        self.frequency = finite_array(frequency, "frequency", shape=(3,), nonnegative=True)
+        self.ramp, self.start = nonnegative(ramp, "ramp"), number(start, "start")
         if x0 is None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             x0 = robot.com.copy()
-        self.x0 = np.asarray(x0, dtype=float).reshape(3)
+        self.x0 = finite_array(x0, "x0", shape=(3,))
         self.mass = robot.mass
         self.base0 = robot.q_ref[:7].copy() if move_base else None
 
@@ -118,11 +122,17 @@ class SoleFrameReference:
     support under the soles (an IMU on the platform, as in Sect. 4.5), used as the feed-forward
     hdot_ref = [m a; 0]. The paper's controller has no such term (hdot_ref = 0, contacts assumed
     stationary); it is an option to measure what the missing feed-forward costs.
+
+    ``contacts``: the soles defining the frame (None: all the robot's contacts; an empty list is
+    an error — there is no frame without a sole).
     """
 
     def __init__(self, robot: Robot, contacts: Sequence[str] | None = None,
                  support_acceleration: Callable[[float], np.ndarray] | None = None):
-        self.contacts = tuple(contacts or robot.contact_names)
+        self.contacts = _balance_contacts(robot, contacts, "SoleFrameReference")
+        if support_acceleration is not None and not callable(support_acceleration):
+            raise ValueError(f"support_acceleration: expected None or a callable t -> (3,), got "
+                             f"{support_acceleration!r}")
         self.frames = [robot.contact(n).spec.frame for n in self.contacts]
         robot.update(robot.q_ref, np.zeros(robot.nv))
         p0, yaw0 = self._frame(robot)
@@ -156,6 +166,19 @@ class SoleFrameReference:
         return BalanceReference(p + r, h, hdot, base)
 
 
+def _balance_contacts(robot: Robot, contacts, who: str) -> tuple[str, ...]:
+    """None: all the robot's contacts; otherwise a non-empty list of its contact names."""
+    if contacts is None:
+        return tuple(robot.contact_names)
+    names = contact_list(contacts, "contacts")
+    if not names:
+        raise ValueError(f"contacts: {who} needs at least one contact, got an empty list "
+                         f"(None means all the robot's contacts)")
+    for name in names:
+        robot.contact(name)  # ValueError naming an unknown contact
+    return names
+
+
 class MomentumBalance:
     """Balance controller: ``compute(q, v, t) -> Solution`` (tau, contact forces, diagnostics).
 
@@ -176,6 +199,15 @@ class MomentumBalance:
     stack solved by a :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and
     rows, the same solution); ``robot.update`` still runs every cycle for the references and
     the LQR.
+
+    ``contacts``: None (default) = all the robot's contacts; an empty list is a ValueError
+    (balance needs a support; the LQR model has no input without contacts). Checked at
+    construction, each error naming the argument: ``com_ref`` a finite 3-vector; ``P``/``D``
+    (PD only) 6x6 or their diagonals, finite with a positive semi-definite symmetric part;
+    ``Q``/``R`` (LQR only, checked by :class:`~wholebody.control.lqr.MomentumLQR`); ``cop_margin``
+    in [0, 1); ``angular_weight`` finite >= 0; ``integral_limit`` finite > 0; ``reference`` None
+    or callable; ``engine`` one of :data:`~wholebody.cycle.ENGINES`. Gains given for the other law
+    (``P``/``D`` with "lqr", ``Q``/``R``/``q_integral`` with "pd") are errors, not ignored.
     """
 
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
@@ -188,18 +220,34 @@ class MomentumBalance:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
         if gains != "lqr" and q_integral is not None and np.any(np.asarray(q_integral) != 0):
             raise ValueError("q_integral: integral action is only available with gains='lqr'")
+        for arg, value, law in (("P", P, "pd"), ("D", D, "pd"), ("Q", Q, "lqr"), ("R", R, "lqr")):
+            if value is not None and gains != law:
+                raise ValueError(f"{arg}: only used with gains='{law}', got gains='{gains}'")
+        P = None if P is None else momentum_gain(P, "P")
+        D = None if D is None else momentum_gain(D, "D")
+        if engine not in ENGINES:
+            raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
+        if reference is not None and not callable(reference):
+            raise ValueError(f"reference: expected None or a callable (t, robot) -> "
+                             f"BalanceReference, got {reference!r}")
+        cop_margin = number(cop_margin, "cop_margin", low=0.0, high=1.0, high_open=True)
+        angular_weight = nonnegative(angular_weight, "angular_weight")
+        integral_limit = positive(integral_limit, "integral_limit")
         self.robot = robot
         self.gains = gains
-        self.contacts = tuple(contacts or robot.contact_names)
+        self.contacts = _balance_contacts(robot, contacts, "MomentumBalance")
         self.variables = Variables(robot, self.contacts)
         self.stack = table2_stack(robot, self.contacts, lqr=(gains == "lqr"),
                                   angular_weight=angular_weight)
         self.momentum = self.stack.find("momentum")
-        if gains == "pd":
-            if P is not None:
-                self.momentum.P = np.asarray(P, dtype=float)
-            if D is not None:
-                self.momentum.D = np.asarray(D, dtype=float)
+        if P is not None:
+            self.momentum.P = P
+        if D is not None:
+            self.momentum.D = D
+        if cop_margin and not any(robot.contact(c).spec.type == "rectangle"
+                                  for c in self.contacts):
+            raise ValueError(f"cop_margin: {cop_margin!r} given, but none of the contacts "
+                             f"{list(self.contacts)} is a sole (rectangle)")
         self.formulation = Formulation(robot)
         self.backend = backend
         self.cycle = (None if engine == "python" else
@@ -207,13 +255,13 @@ class MomentumBalance:
         if com_ref is None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             com_ref = robot.com.copy()
-        self.com_ref = np.asarray(com_ref, dtype=float)
+        self.com_ref = finite_array(com_ref, "com_ref", shape=(3,))
         self.h_ref = np.zeros(6)
         self.hdot_ref = np.zeros(6)
         self.reference = reference
         self.posture = self.stack.find("posture")
         if cop_margin:
-            self.stack.find("center of pressure").margin = float(cop_margin)
+            self.stack.find("center of pressure").margin = cop_margin
         self.lqr = (MomentumLQR(robot, self.contacts, Q=Q, R=R, q_integral=q_integral,
                                 integral_limit=integral_limit) if gains == "lqr" else None)
         self.cog_integral = np.zeros(3)

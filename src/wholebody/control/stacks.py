@@ -16,6 +16,8 @@ from ..robot import Robot
 from ..tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
                      FrictionCone, FullDynamics, JointAccelerationLimits, MomentumForce, MomentumPD,
                      NewtonEuler, PostureTask, TorqueLimits)
+from ..tasks.base import contact_list
+from ..validation import nonnegative, number
 
 
 def _dynamics(full: bool):
@@ -23,12 +25,30 @@ def _dynamics(full: bool):
             TorqueLimits(name="torque limits")]
 
 
+def _contacts(robot: Robot, contacts, name: str, default_all: bool) -> tuple[str, ...]:
+    """The builders' contact list: a list of the robot's contact names (None: all of them if
+    ``default_all``); an empty list means no contact."""
+    if contacts is None and default_all:
+        return tuple(robot.contact_names)
+    if contacts is None:
+        raise ValueError(f"{name}: expected a list of contact names, got None")
+    names = contact_list(contacts, name)
+    for c in names:
+        robot.contact(c)  # ValueError naming an unknown contact
+    return names
+
+
+def _mu(robot: Robot, mu: float | None) -> float:
+    """The friction coefficient: ``mu`` (finite, > 0) or, if None, the robot's."""
+    return robot.friction if mu is None else number(mu, "mu", low=0.0, low_open=True)
+
+
 def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None):
     """CoP (weight 1e4, as the paper favours CoPs), friction pyramid, joint acceleration limits."""
     rows = []
     if any(robot.contact(c).spec.type == "rectangle" for c in contacts):
         rows.append(CenterOfPressure(name="center of pressure", weight=1e4, contacts=contacts))
-    rows.append(FrictionCone(mu or robot.friction, name="friction", contacts=contacts))
+    rows.append(FrictionCone(_mu(robot, mu), name="friction", contacts=contacts))
     rows.append(JointAccelerationLimits(name="joint acceleration limits"))
     return rows
 
@@ -41,8 +61,8 @@ ANGULAR_MOMENTUM_WEIGHT = 1e-4
 def momentum_task(lqr: bool, angular_weight: float = 1e4):
     """The momentum task of level 3: LQR force law (eq. 24) or diagonal PD (eq. 22). Its six rows
     are [linear; angular] (momentum rates, or forces and moments for eq. 24); the linear rows weigh
-    1e4, the angular rows ``angular_weight``."""
-    weight = np.array([1e4] * 3 + [float(angular_weight)] * 3)
+    1e4, the angular rows ``angular_weight`` (finite, >= 0)."""
+    weight = np.array([1e4] * 3 + [nonnegative(angular_weight, "angular_weight")] * 3)
     if lqr:
         return MomentumForce(name="momentum", weight=weight)
     return MomentumPD(name="momentum", weight=weight)
@@ -67,8 +87,14 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     constant rate and the robot falls without any push (docs/results.md). The posture
     (base kp 50) holds the trunk only if the angular rows weigh less than the posture's by more
     than I_G, i.e. 1e-4 among the paper's {1e4, 1, 1e-1, 1e-4}; the angular momentum is then damped
-    through the posture's base damping instead of eq. 22's D."""
-    contacts = tuple(contacts or robot.contact_names)
+    through the posture's base damping instead of eq. 22's D.
+
+    ``contacts``: None = all the robot's contacts; an empty list means no contact: the contact
+    tasks (contact constraints, friction, GRF regulariser) then have no rows and there is no CoP
+    task — a stack for a robot with no support, to be solved with ``Variables(robot, [])``
+    (:class:`~wholebody.control.balance.MomentumBalance` refuses it: balancing needs a contact).
+    ``mu``: None = the robot's friction coefficient, else finite and > 0 (0 used to mean None)."""
+    contacts = _contacts(robot, contacts, "contacts", default_all=True)
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=contacts)] + _contact_conditions(robot, contacts, mu),
@@ -82,8 +108,9 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
                  lqr: bool = False, full: bool = False, mu: float | None = None) -> Stack:
     """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
     acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
-    regulariser."""
-    stance = tuple(stance)
+    regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks have no
+    rows)."""
+    stance = _contacts(robot, stance, "stance", default_all=False)
     swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
     return Stack([
         _dynamics(full),
@@ -98,8 +125,9 @@ def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
                  full: bool = False, mu: float | None = None) -> Stack:
     """Table 1, the stepping benchmark: (1) dynamics + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) CoG PD + swing-foot PD; (4) posture (joints + base);
-    (5) GRF regulariser."""
-    stance = tuple(stance)
+    (5) GRF regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks
+    have no rows)."""
+    stance = _contacts(robot, stance, "stance", default_all=False)
     swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
     return Stack([
         _dynamics(full),

@@ -12,18 +12,32 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot import FREE_FLYER_NV, Robot
+from ..validation import finite_array
 from .base import ControlResult
 
 
+def _joint_gain(value, name: str, na: int) -> np.ndarray:
+    """A joint PD gain: a number or one per actuated joint, finite and >= 0."""
+    arr = finite_array(value, name, nonnegative=True)
+    if arr.shape not in ((), (na,)):
+        raise ValueError(f"{name}: expected a number or {na} numbers (one per joint), got shape "
+                         f"{arr.shape}")
+    return np.broadcast_to(arr, (na,)).copy()
+
+
 class StandingController:
-    """tau = h_u - J_{c,u}^T lambda + Kp (q_ref - q) - Kd qdot, saturated to the torque limits."""
+    """tau = h_u - J_{c,u}^T lambda + Kp (q_ref - q) - Kd qdot, saturated to the torque limits.
+
+    ``kp``, ``kd``: a number or one per joint, finite and >= 0; ``q_ref``: a finite nq vector
+    (default the robot's reference posture). Checked at construction (ValueError naming the
+    argument and the bad value)."""
 
     def __init__(self, robot: Robot, kp: float | np.ndarray = 1000.0,
                  kd: float | np.ndarray = 30.0, q_ref: np.ndarray | None = None):
         self.robot = robot
-        self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (robot.na,)).copy()
-        self.kd = np.broadcast_to(np.asarray(kd, dtype=float), (robot.na,)).copy()
-        q_ref = robot.q_ref if q_ref is None else np.asarray(q_ref, dtype=float)
+        self.kp = _joint_gain(kp, "kp", robot.na)
+        self.kd = _joint_gain(kd, "kd", robot.na)
+        q_ref = robot.q_ref if q_ref is None else finite_array(q_ref, "q_ref", shape=(robot.nq,))
         self.q_joint_ref = q_ref[7:].copy()
 
     def compute(self, q, v, t: float = 0.0) -> ControlResult:

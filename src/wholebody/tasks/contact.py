@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Task, TaskRows, contact_subset
+from .base import (Task, TaskRows, checked_attribute, contact_list, contact_subset, flag,
+                   gain_rule, normal_map, scalar_rule)
 
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 
@@ -32,12 +33,18 @@ def friction_faces(normal: np.ndarray, mu: float) -> np.ndarray:
 
 
 class _PerContact(Task):
-    """A task with one block of rows per selected contact, placed in the lambda columns."""
+    """A task with one block of rows per selected contact, placed in the lambda columns.
+
+    ``contacts``: None = all active contacts; an empty list = none (the task has no rows).
+    ``normals``: contact name -> surface normal (finite, non-zero; default world up)."""
+
+    contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
+    normals = checked_attribute(normal_map, "contact name -> non-zero surface normal.")
 
     def __init__(self, name=None, weight=1.0, contacts=None, normals=None):
         super().__init__(name, weight)
-        self.contacts = None if contacts is None else tuple(contacts)
-        self.normals = dict(normals or {})  # contact name -> surface normal (default world up)
+        self.contacts = contacts
+        self.normals = normals
 
     def normal(self, contact: str) -> np.ndarray:
         return np.asarray(self.normals.get(contact, WORLD_UP), dtype=float)
@@ -59,8 +66,12 @@ class ContactConstraint(_PerContact):
 
     With ``kp``/``kd`` > 0 it becomes Fahmi et al. 2019's stance task (eq. 32): the contact
     acceleration tracks kp (x_anchor - x) - kd v, holding each foot at its touchdown position
-    ``anchors[name]`` (set on first use) so that slipping feet are pulled back.
+    ``anchors[name]`` (set on first use) so that slipping feet are pulled back. ``kp``, ``kd``:
+    finite numbers >= 0 (one gain for all contacts), checked on assignment.
     """
+
+    kp = checked_attribute(gain_rule(scalar_only=True), "Anchor stiffness (1/s^2), >= 0.")
+    kd = checked_attribute(gain_rule(scalar_only=True), "Contact-velocity damping (1/s), >= 0.")
 
     def __init__(self, name=None, weight=1.0, contacts=None, kp: float = 0.0, kd: float = 0.0):
         super().__init__(name, weight, contacts)
@@ -98,15 +109,18 @@ class FrictionCone(_PerContact):
     once the CoP rows are active (they are written in the measured sole axes, so a fraction of a
     degree of tilt couples them to yaw moments) the cascade may put large opposite yaw moments on
     the two soles; with the bound they stay within it.
+
+    ``mu`` (finite, > 0) and ``torsion`` (a bool) are checked on every assignment: a negative mu
+    would turn the pyramid inside out (only zero forces satisfy it).
     """
 
     kind = "ineq"
+    mu = checked_attribute(scalar_rule(low=0.0, low_open=True), "Friction coefficient, > 0.")
+    torsion = checked_attribute(flag, "Add the torsional friction rows (6D contacts).")
 
     def __init__(self, mu: float, name=None, weight=1.0, contacts=None, normals=None,
                  torsion: bool = False):
         super().__init__(name, weight, contacts, normals)
-        if not mu > 0:
-            raise ValueError(f"mu: must be > 0, got {mu}")
         self.mu = mu
         self.torsion = torsion
         self._cache_key = None
@@ -137,17 +151,38 @@ class FrictionCone(_PerContact):
         return self._cache
 
 
+def _f_min_rule(value, field, obj):
+    f_min = scalar_rule(low=0.0)(value, field)
+    f_max = getattr(obj, "f_max", None)
+    if f_max is not None and not f_min < f_max:
+        raise ValueError(f"{field}: must be < f_max = {f_max!r} (when raising both bounds, set "
+                         f"f_max first), got {value!r}")
+    return f_min
+
+
+def _f_max_rule(value, field, obj):
+    f_max = scalar_rule(low=0.0, low_open=True, allow_inf=True)(value, field)
+    f_min = getattr(obj, "f_min", None)
+    if f_min is not None and not f_max > f_min:
+        raise ValueError(f"{field}: must be > f_min = {f_min!r} (when lowering both bounds, set "
+                         f"f_min first), got {value!r}")
+    return f_max
+
+
 class NormalForceBounds(_PerContact):
-    """f_min <= f.n <= f_max per contact (unilaterality and loading limits; Fahmi et al. 2019 eq. 14)."""
+    """f_min <= f.n <= f_max per contact (unilaterality and loading limits; Fahmi et al. 2019 eq. 14).
+
+    0 <= f_min < f_max (f_max may be inf), checked on every assignment against the other bound."""
 
     kind = "ineq"
+    f_min = checked_attribute(_f_min_rule, "Least normal force (N), finite, 0 <= f_min < f_max.")
+    f_max = checked_attribute(_f_max_rule, "Largest normal force (N), > f_min, may be inf.")
 
     def __init__(self, f_min: float = 0.0, f_max: float = np.inf, name=None, weight=1.0,
                  contacts=None, normals=None):
         super().__init__(name, weight, contacts, normals)
-        if f_min > f_max:
-            raise ValueError(f"f_min ({f_min}) > f_max ({f_max})")
-        self.f_min, self.f_max = f_min, f_max
+        self.f_max = f_max
+        self.f_min = f_min
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
@@ -165,9 +200,12 @@ class CenterOfPressure(_PerContact):
     """The centre of pressure of each rectangular contact stays in its sole (Herzog et al. 2016
     Sect. 2.1): with the wrench [f; tau] about the sole frame expressed in sole axes,
     |tau_y| <= hx f_z and |tau_x| <= hy f_z — 4 linear rows per sole. ``margin`` shrinks the sole
-    (0.1 = 10 % smaller half-lengths)."""
+    (0.1 = 10 % smaller half-lengths), 0 <= margin < 1, checked on every assignment (a negative
+    margin would admit CoPs outside the sole, one >= 1 none or the mirrored sole)."""
 
     kind = "ineq"
+    margin = checked_attribute(scalar_rule(low=0.0, high=1.0, high_open=True),
+                               "Relative shrinking of the sole, in [0, 1).")
 
     def __init__(self, name=None, weight=1.0, contacts=None, margin: float = 0.0):
         super().__init__(name, weight, contacts)

@@ -5,7 +5,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
-from .base import Task, TaskRows
+from .base import Task, TaskRows, checked_attribute, choice_rule, scalar_rule
+
+
+def _overrides(value, field) -> dict[str, float]:
+    """joint name -> a torque cap >= 0 (inf allowed)."""
+    rule = scalar_rule(low=0.0, allow_inf=True)
+    out = {}
+    for joint, cap in dict(value or {}).items():
+        if not isinstance(joint, str):
+            raise ValueError(f"{field}: expected joint names as keys, got {joint!r}")
+        out[joint] = rule(cap, f"{field}[{joint!r}]")
+    return out
 
 
 class TorqueLimits(Task):
@@ -13,15 +24,21 @@ class TorqueLimits(Task):
 
     Bounds default to the robot's (joint-dependent) limits, recomputed every cycle; ``scale``
     shrinks them (a margin), ``upper_override`` replaces named joints' bound (e.g. a weak knee).
+    Checked on every assignment: ``scale`` in (0, 1] (above 1 it would exceed the robot's limits),
+    ``upper_override`` values >= 0 (inf allowed: no cap; a NaN cap would be ignored by the min).
     """
 
     kind = "ineq"
+    scale = checked_attribute(scalar_rule(low=0.0, high=1.0, low_open=True),
+                              "Factor on the robot's torque bounds, in (0, 1].")
+    upper_override = checked_attribute(
+        lambda value, field, obj: _overrides(value, field), "joint name -> torque cap (Nm) >= 0.")
 
     def __init__(self, name=None, weight=1.0, scale: float = 1.0,
                  upper_override: dict[str, float] | None = None):
         super().__init__(name, weight)
         self.scale = scale
-        self.upper_override = dict(upper_override or {})
+        self.upper_override = upper_override
 
     def bounds(self, robot) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = robot.torque_bounds()
@@ -52,16 +69,22 @@ class JointAccelerationLimits(Task):
     ``mode="tanh"`` (Herzog et al. 2016, Sect. 2.1, "qdd bounds proportional to tanh of the distance
     to the limit"): qdd_max = a_max tanh(k (q_max - q)), qdd_min = a_max tanh(k (q_min - q)), i.e.
     +-a_max far from the limits, zero at the limit, pushing back beyond it.
+
+    ``horizon`` (s), ``a_max`` (rad/s^2) and ``steepness`` (1/rad) must be finite and > 0, checked
+    at construction and on every assignment: horizon = 0 would make the bounds +-inf (braking
+    silently off), a negative one would flip their sign.
     """
 
     kind = "ineq"
     MODES = ("braking", "tanh")
+    mode = checked_attribute(choice_rule(MODES), "'braking' or 'tanh'.")
+    horizon = checked_attribute(scalar_rule(low=0.0, low_open=True), "Braking horizon (s), > 0.")
+    a_max = checked_attribute(scalar_rule(low=0.0, low_open=True), "tanh amplitude (rad/s^2), > 0.")
+    steepness = checked_attribute(scalar_rule(low=0.0, low_open=True), "tanh slope (1/rad), > 0.")
 
     def __init__(self, name=None, weight=1.0, mode: str = "braking", horizon: float = 0.01,
                  a_max: float = 200.0, steepness: float = 10.0):
         super().__init__(name, weight)
-        if mode not in self.MODES:
-            raise ValueError(f"mode: expected one of {self.MODES}, got '{mode}'")
         self.mode, self.horizon, self.a_max, self.steepness = mode, horizon, a_max, steepness
 
     def bounds(self, robot) -> tuple[np.ndarray, np.ndarray]:

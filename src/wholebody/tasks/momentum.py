@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Task, TaskRows, contact_subset
+from .base import Task, TaskRows, check_gain, checked_attribute, contact_list, contact_subset
 
 
 def skew(x: np.ndarray) -> np.ndarray:
@@ -35,13 +35,29 @@ def momentum_map(robot, contacts) -> np.ndarray:
     return centroidal_map(positions, robot.com, [robot.contact(n).dim for n in contacts])
 
 
+def momentum_gain(value, field, obj=None) -> np.ndarray:
+    """A 6x6 gain of eq. 22 (or its diagonal, 6 numbers >= 0): finite, with a positive
+    semi-definite symmetric part (a scalar would be ambiguous: use a diagonal)."""
+    if np.ndim(value) == 0:
+        raise ValueError(f"{field}: expected a 6x6 matrix or its diagonal (6 numbers >= 0), got "
+                         f"{value!r}")
+    out = check_gain(value, field, size=6)
+    return np.diag(out) if out.ndim == 1 else out
+
+
 class MomentumPD(Task):
-    """Eq. 22: A_G qdd + Adot_G v = P [m (x_ref - x_cog); 0] + D (h_ref - h) + hdot_ref."""
+    """Eq. 22: A_G qdd + Adot_G v = P [m (x_ref - x_cog); 0] + D (h_ref - h) + hdot_ref.
+
+    ``P``, ``D``: 6x6 gains (a 6-vector is taken as the diagonal), finite with a positive
+    semi-definite symmetric part, checked on every assignment."""
+
+    P = checked_attribute(momentum_gain, "6x6 gain on [m (x_ref - x_cog); 0].")
+    D = checked_attribute(momentum_gain, "6x6 gain on h_ref - h.")
 
     def __init__(self, P=None, D=None, name=None, weight=1.0):
         super().__init__(name, weight)
-        self.P = np.diag([50.0] * 3 + [0.0] * 3) if P is None else np.asarray(P, dtype=float)
-        self.D = np.diag([15.0] * 3 + [5.0] * 3) if D is None else np.asarray(D, dtype=float)
+        self.P = np.diag([50.0] * 3 + [0.0] * 3) if P is None else P
+        self.D = np.diag([15.0] * 3 + [5.0] * 3) if D is None else D
         self.com_ref: np.ndarray | None = None  # None: hold the CoM first seen
         self.h_ref = np.zeros(6)
         self.hdot_ref = np.zeros(6)
@@ -60,13 +76,17 @@ class MomentumPD(Task):
 class MomentumForce(Task):
     """Eq. 24: G (lambda + K [x_cog; h] - k) = 0 — the LQR force law of eq. 23 projected into
     momentum space, leaving the internal forces free. ``K`` (n_lambda x 9) and ``k`` (n_lambda)
-    come from :mod:`wholebody.control.lqr`; they must match the active contacts' order."""
+    come from :mod:`wholebody.control.lqr`; they must match the active contacts' order (checked
+    in :meth:`rows`; a NaN ends at the formulation's boundary check). ``contacts``: None = all
+    active contacts, an empty list = none."""
+
+    contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
 
     def __init__(self, K=None, k=None, name=None, weight=1.0, contacts=None):
         super().__init__(name, weight)
         self.K = None if K is None else np.asarray(K, dtype=float)
         self.k = None if k is None else np.asarray(k, dtype=float)
-        self.contacts = None if contacts is None else tuple(contacts)
+        self.contacts = contacts
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)

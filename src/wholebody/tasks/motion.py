@@ -7,17 +7,31 @@ import numpy as np
 import pinocchio as pin
 
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
-from .base import Task, TaskRows, pd_acceleration
+from .base import (Task, TaskRows, check_gain, checked_attribute, choice_rule, gain_rule,
+                   pd_acceleration)
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
 
+_GAINS_DOC = ("PD gain: finite >= 0, a number, one per row, or a matrix (positive semi-definite "
+              "symmetric part).")
+
+
 class CoMTask(Task):
-    """CoM PD: J_com qdd + Jdot_com v = a_d + Kp (x_d - x) + Kd (v_d - v). ``axes`` selects rows."""
+    """CoM PD: J_com qdd + Jdot_com v = a_d + Kp (x_d - x) + Kd (v_d - v). ``axes`` selects rows
+    (a non-empty selection of "x", "y", "z"). ``kp``, ``kd``: a number, 3 numbers or a 3x3 matrix,
+    finite and >= 0, checked on every assignment."""
+
+    kp = checked_attribute(gain_rule(size=3), _GAINS_DOC)
+    kd = checked_attribute(gain_rule(size=3), _GAINS_DOC)
 
     def __init__(self, kp=100.0, kd=20.0, name=None, weight=1.0, axes: str = "xyz"):
         super().__init__(name, weight)
         self.kp, self.kd = kp, kd
+        if (not isinstance(axes, str) or not axes or any(a not in AXES for a in axes)
+                or len(set(axes)) != len(axes)):
+            raise ValueError(f"axes: expected a selection of 'x', 'y', 'z' (e.g. 'xyz'), got "
+                             f"{axes!r}")
         self.rows_idx = [AXES[a] for a in axes]
         self.position: np.ndarray | None = None  # None: hold the CoM where it was first seen
         self.velocity = np.zeros(3)
@@ -36,14 +50,17 @@ class FrameTask(Task):
     """PD on a frame's position and/or orientation (world axes), e.g. a swing foot.
 
     Orientation error: log3(R_d R^T) (world axes). ``mask`` is "6d", "position" or "orientation".
+    ``kp``, ``kd``: a number, 6 numbers ([linear; angular]) or a 6x6 matrix, finite and >= 0;
+    they and ``mask`` are checked on every assignment.
     """
 
     MASKS = {"6d": slice(0, 6), "position": slice(0, 3), "orientation": slice(3, 6)}
+    kp = checked_attribute(gain_rule(size=6), _GAINS_DOC)
+    kd = checked_attribute(gain_rule(size=6), _GAINS_DOC)
+    mask = checked_attribute(choice_rule(tuple(MASKS)), "'6d', 'position' or 'orientation'.")
 
     def __init__(self, frame: str, kp=100.0, kd=20.0, name=None, weight=1.0, mask: str = "6d"):
         super().__init__(name or f"frame {frame}", weight)
-        if mask not in self.MASKS:
-            raise ValueError(f"mask: expected one of {list(self.MASKS)}, got '{mask}'")
         self.frame, self.kp, self.kd, self.mask = frame, kp, kd, mask
         self.position: np.ndarray | None = None  # None: hold the pose first seen
         self.rotation: np.ndarray | None = None
@@ -66,7 +83,16 @@ class FrameTask(Task):
 
 class PostureTask(Task):
     """Joint-space PD toward a reference posture; with ``base_kp`` > 0 also the floating base
-    (position and orientation, LOCAL base frame as Pinocchio's v) — Table 2's "14 + 6 eq"."""
+    (position and orientation, LOCAL base frame as Pinocchio's v) — Table 2's "14 + 6 eq".
+
+    ``kp``, ``kd``: a number, one per joint or an na x na matrix, finite and >= 0 (the robot,
+    hence na, is not known on assignment: a wrong size fails in :meth:`rows`); ``base_kp``,
+    ``base_kd``: numbers >= 0. All are checked on every assignment."""
+
+    kp = checked_attribute(gain_rule(), _GAINS_DOC)
+    kd = checked_attribute(gain_rule(), _GAINS_DOC)
+    base_kp = checked_attribute(gain_rule(scalar_only=True), "Base stiffness (1/s^2), >= 0.")
+    base_kd = checked_attribute(gain_rule(scalar_only=True), "Base damping (1/s), >= 0.")
 
     def __init__(self, kp=50.0, kd=10.0, name=None, weight=1.0, q_ref=None,
                  base_kp: float = 0.0, base_kd: float = 0.0):
@@ -92,10 +118,22 @@ class PostureTask(Task):
                         target=np.concatenate([base_acc, joint_acc]))
 
 
+def _joint_gain(value, field, obj):
+    return check_gain(value, field, size=len(obj.joints))
+
+
 class JointTrajectoryTask(Task):
-    """Named joints track q_d(t), qdot_d(t), qddot_d(t) with a PD (Herzog et al. 2016 Sect. 5.4)."""
+    """Named joints track q_d(t), qdot_d(t), qddot_d(t) with a PD (Herzog et al. 2016 Sect. 5.4).
+
+    ``kp``, ``kd``: a number, one per joint or a k x k matrix, finite and >= 0, checked on every
+    assignment."""
+
+    kp = checked_attribute(_joint_gain, _GAINS_DOC)
+    kd = checked_attribute(_joint_gain, _GAINS_DOC)
 
     def __init__(self, joints, kp=100.0, kd=20.0, name=None, weight=1.0):
+        if isinstance(joints, str) or not all(isinstance(j, str) for j in joints) or not joints:
+            raise ValueError(f"joints: expected a non-empty list of joint names, got {joints!r}")
         super().__init__(name or f"joints {','.join(joints)}", weight)
         self.joints, self.kp, self.kd = tuple(joints), kp, kd
         self.position: np.ndarray | None = None

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot import FREE_FLYER_NV
-from .base import Task, TaskRows, contact_subset
+from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, normal_map
 from .contact import WORLD_UP, tangent_basis
 
 
@@ -19,12 +19,16 @@ class AccelerationRegularizer(Task):
 
 class TangentialForceRegularizer(Task):
     """Tangential components of point-contact forces ≈ 0: forces near the cone normals (Sect. V-D,
-    "robustness to uncertainties in the friction parameters"). 2 rows per contact."""
+    "robustness to uncertainties in the friction parameters"). 2 rows per contact. ``contacts``:
+    None = all active contacts, an empty list = none (no rows); ``normals`` finite, non-zero."""
+
+    contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
+    normals = checked_attribute(normal_map, "contact name -> non-zero surface normal.")
 
     def __init__(self, name=None, weight=1.0, contacts=None, normals=None):
         super().__init__(name, weight)
-        self.contacts = None if contacts is None else tuple(contacts)
-        self.normals = dict(normals or {})
+        self.contacts = contacts
+        self.normals = normals
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
@@ -38,11 +42,14 @@ class TangentialForceRegularizer(Task):
 
 class ContactTorqueRegularizer(Task):
     """Joint torques of the contact forces ≈ 0, per-joint weights (Sect. V-D, footnote 16:
-    R_F = J_st,j R_τ J_st,jᵀ): rows −J_st,jᵀ λ; ``weight`` is √R_τ per joint."""
+    R_F = J_st,j R_τ J_st,jᵀ): rows −J_st,jᵀ λ; ``weight`` is √R_τ per joint. ``contacts``:
+    None = all active contacts, an empty list = none (the rows are then zero)."""
+
+    contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
 
     def __init__(self, name=None, weight=1.0, contacts=None):
         super().__init__(name, weight)
-        self.contacts = None if contacts is None else tuple(contacts)
+        self.contacts = contacts
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)

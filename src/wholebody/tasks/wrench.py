@@ -12,21 +12,37 @@ import numpy as np
 import pinocchio as pin
 
 from ..planning.trunk import TrunkState
-from .base import Task, TaskRows, contact_subset
+from ..validation import finite_array
+from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, flag
 
 GRAVITY = 9.81
+
+
+def _diagonal_gain(value, field, obj=None) -> np.ndarray:
+    """A diagonal impedance gain: a number or 3 numbers (x, y, z), finite and >= 0, as a new
+    3-vector."""
+    arr = finite_array(value, field, nonnegative=True)
+    if arr.shape not in ((), (1,), (3,)):
+        raise ValueError(f"{field}: expected a number or 3 numbers, got shape {arr.shape}")
+    return np.broadcast_to(arr, 3).astype(float)
 
 
 class TrunkImpedance:
     """Eq. 4 of Fahmi et al. 2019 with diagonal gains (defaults: Sect. V, K_x = 2000, D_x = 400,
     K_θ = 1000, D_θ = 200). The orientation error is log3(R_d Rᵀ) in world axes; ``feedforward``
-    switches W_ff off (Assumption 2 of the passivity analysis); ``external_wrench`` is W_ext."""
+    switches W_ff off (Assumption 2 of the passivity analysis); ``external_wrench`` is W_ext.
+    The gains (a number or 3, finite and >= 0) and ``feedforward`` (a bool) are checked on every
+    assignment (:class:`~wholebody.tasks.base.checked_attribute`)."""
+
+    K_x = checked_attribute(_diagonal_gain, "CoM stiffness (N/m), 3 values >= 0.")
+    D_x = checked_attribute(_diagonal_gain, "CoM damping (N s/m), 3 values >= 0.")
+    K_theta = checked_attribute(_diagonal_gain, "Trunk orientation stiffness (Nm/rad), >= 0.")
+    D_theta = checked_attribute(_diagonal_gain, "Trunk angular damping (Nm s/rad), >= 0.")
+    feedforward = checked_attribute(flag, "Add W_ff = M_com v̇_com,d.")
 
     def __init__(self, K_x=2000.0, D_x=400.0, K_theta=1000.0, D_theta=200.0,
                  feedforward: bool = True):
-        self.K_x, self.D_x = np.broadcast_to(K_x, 3).astype(float), np.broadcast_to(D_x, 3).astype(float)
-        self.K_theta = np.broadcast_to(K_theta, 3).astype(float)
-        self.D_theta = np.broadcast_to(D_theta, 3).astype(float)
+        self.K_x, self.D_x, self.K_theta, self.D_theta = K_x, D_x, K_theta, D_theta
         self.feedforward = feedforward
         self.external_wrench = np.zeros(6)
         self.last_errors = np.zeros(12)  # [Δx, Δθ, Δv, Δω] of the last call, world axes
@@ -77,14 +93,17 @@ class TrunkWrenchTask(Task):
     """Σ_i [f_i; (p_i − c) × f_i] ≈ W_com,d (Fahmi et al. 2019, eqs. 2, 4, 7a-8) as equality rows over
     the contact forces (point contacts). ``reference`` is a trunk sample (:class:`~wholebody.planning.trunk.TrunkState`: CoM position/velocity/
     acceleration, rotation, angular velocity/acceleration, world axes);
-    ``impedance`` a :class:`TrunkImpedance`; weights are per row (√ of the diagonal of Q)."""
+    ``impedance`` a :class:`TrunkImpedance`; weights are per row (√ of the diagonal of Q).
+    ``contacts``: None = all active contacts, an empty list = none."""
+
+    contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
 
     def __init__(self, impedance: TrunkImpedance | None = None, name="trunk wrench", weight=1.0,
                  contacts=None):
         super().__init__(name, weight)
         self.impedance = impedance or TrunkImpedance()
         self.reference = TrunkState()
-        self.contacts = None if contacts is None else tuple(contacts)
+        self.contacts = contacts
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
