@@ -46,3 +46,20 @@ def test_non_finite_limits_give_zero_torque():
 def test_outcome_values_are_stable_names():
     assert [o.value for o in Outcome] == ["solved", "solved-with-fallback", "clipped", "held"]
     assert [o.ok for o in Outcome] == [True, True, False, False]
+
+
+def test_standing_controller_saturation_is_clipped_outcome(robots):
+    """StandingController's torque leaves through the guard: a posture error far beyond what the
+    limits allow saturates, the outcome says CLIPPED, the torque is at the limits."""
+    from wholebody.control.standing import StandingController
+
+    robot = robots["talos14"]
+    q = robot.q_ref.copy()
+    q[7:] += 0.5
+    result = StandingController(robot).compute(q, np.zeros(robot.nv))
+    lo, hi = robot.torque_bounds()
+    assert result.outcome is Outcome.CLIPPED and not result.ok
+    assert np.all(result.tau >= lo) and np.all(result.tau <= hi)
+    assert np.any(np.isclose(result.tau, hi) | np.isclose(result.tau, lo))
+    calm = StandingController(robot, kp=0.0, kd=0.0).compute(robot.q_ref, np.zeros(robot.nv))
+    assert calm.outcome is Outcome.SOLVED and calm.ok

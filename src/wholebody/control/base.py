@@ -6,19 +6,26 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..guard import Outcome
+
 
 @dataclass
 class ControlResult:
-    """Joint torques plus what the controller assumed (contact forces) and whether it succeeded.
+    """Joint torques plus what the controller assumed (contact forces) and what happened.
 
-    ``ok`` False means the controller could not do what was asked; ``tau`` is still finite and within
-    the torque limits, and ``status`` says why.
+    ``tau`` is finite and within the torque limits whatever happened (made by
+    :func:`wholebody.guard.guard_torque`); ``outcome`` (:class:`~wholebody.guard.Outcome`) says
+    what happened and ``status`` why; ``ok`` is True for a solved outcome.
     """
 
     tau: np.ndarray
     contact_forces: dict[str, np.ndarray] = field(default_factory=dict)
-    ok: bool = True
-    status: str = "ok"
+    outcome: Outcome = Outcome.SOLVED
+    status: str = "solved"
+
+    @property
+    def ok(self) -> bool:
+        return self.outcome.ok
 
 
 class PlannedController:

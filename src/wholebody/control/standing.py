@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..guard import Outcome, guard_torque
 from ..robot import FREE_FLYER_NV, Robot
 from ..validation import finite_array
 from .base import ControlResult
@@ -26,7 +27,8 @@ def _joint_gain(value, name: str, na: int) -> np.ndarray:
 
 
 class StandingController:
-    """tau = h_u - J_{c,u}^T lambda + Kp (q_ref - q) - Kd qdot, saturated to the torque limits.
+    """tau = h_u - J_{c,u}^T lambda + Kp (q_ref - q) - Kd qdot, saturated to the torque limits
+    (outcome ``CLIPPED`` when saturated).
 
     ``kp``, ``kd``: a number or one per joint, finite and >= 0; ``q_ref``: a finite nq vector
     (default the robot's reference posture). Checked at construction (ValueError naming the
@@ -50,12 +52,9 @@ class StandingController:
         lam, *_ = np.linalg.lstsq(J[:, :n].T, h[:n], rcond=None)
         tau = h[n:] - J[:, n:].T @ lam
         tau += self.kp * (self.q_joint_ref - robot.q[7:]) - self.kd * robot.v[n:]
-        lo, hi = robot.torque_bounds()
-        saturated = bool(np.any(tau < lo) | np.any(tau > hi))
-        tau = np.clip(tau, lo, hi)
+        tau, outcome, status = guard_torque(tau, *robot.torque_bounds(), Outcome.SOLVED, "solved")
         forces, start = {}, 0
         for c in robot.contacts:
             forces[c.name] = lam[start:start + c.dim]
             start += c.dim
-        return ControlResult(tau, forces, ok=not saturated,
-                             status="torque saturated" if saturated else "ok")
+        return ControlResult(tau, forces, outcome, status)
