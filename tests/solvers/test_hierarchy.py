@@ -1108,3 +1108,23 @@ def test_bound_cascade_refuses_arrays_it_would_have_to_copy():
                           name="L1")
     with pytest.raises(ValueError, match="level 'L1' B: needs a C-contiguous float64"):
         BoundCascade([level])
+
+
+@pytest.mark.parametrize("method", ["cascade", "daqp", "weighted"])
+def test_overflowing_entries_are_not_reported_solved(method):
+    """Entries of 1e200: the level's cost overflows to inf at any x; no method may call that
+    solved (they used to report ok=True with cost inf)."""
+    big = Level(eq=(np.array([[1e200, 1.0]]), np.array([1e200])), name="big")
+    rest = Level(eq=(np.eye(2), np.ones(2)), name="rest")
+    with np.errstate(over="ignore", invalid="ignore"):
+        for compiled in (True, False):
+            extra = {"compiled": compiled} if method == "cascade" else {}
+            sol = solve_hierarchy([big, rest], method=method, **extra)
+            assert not sol.ok and sol.status, (compiled, sol.status)
+            assert np.all(np.isfinite(sol.x))
+
+
+@pytest.mark.parametrize("method", ["cascade", "daqp", "weighted"])
+def test_no_variables_is_an_empty_solution(method):
+    sol = solve_hierarchy([Level(eq=(np.zeros((1, 0)), np.zeros(1)), name="empty")], method=method)
+    assert sol.ok and sol.x.shape == (0,)

@@ -164,6 +164,10 @@ def evaluate_levels(levels, x):
 
 def _finish(levels, x, status, ok, t_start, level_times, method, solved, zdims, warns):
     costs, res, vio = evaluate_levels(levels, x)
+    if ok and not np.isfinite(costs.sum()):  # entries so large that the products overflow
+        ok = False
+        status = (f"level costs not finite at the solution (level "
+                  f"{int(np.argmin(np.isfinite(costs)))}: entries too large, the products overflow)")
     return HierarchySolution(
         x=x, costs=costs, eq_residuals=res, ineq_violations=vio, status=status, ok=ok,
         timings={"total": time.perf_counter() - t_start, "levels": level_times},

@@ -119,6 +119,8 @@ def solve_hierarchy(
     opts = dict(backend_options or {})
     tols = (rank_tol, drop_tol, relax_tol, feas_tol)
 
+    if n == 0 and method != "cascade":  # no variable: nothing to optimise, the cascade evaluates
+        method = "cascade"
     if method == "daqp":
         return _solve_daqp(levels, n, opts, t0, uniform_soft_weights=not daqp_native_weights)
     if method == "weighted":
