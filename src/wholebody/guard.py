@@ -43,17 +43,18 @@ def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome:
     A torque of a successful cycle that leaves the limits by more than ``LIMIT_TOLERANCE`` is
     clipped to them (``CLIPPED``); the torque of a failed cycle (``HELD``) is clipped as well. A
     torque with a non-finite entry is no torque at all: replaced by zero (clipped), ``HELD``.
-    Limits that are themselves not finite (a bug upstream: robot files and constructors validate
-    them) give zero torque, ``HELD``."""
-    if not (np.isfinite(np.add.reduce(lower)) and np.isfinite(np.add.reduce(upper))):
+    Limits with a NaN (a bug upstream: robot files and constructors validate them) give zero
+    torque, ``HELD``."""
+    if outcome.ok:  # the common case first: one pass, NaN anywhere makes ``excess`` NaN
+        excess = max(np.subtract(tau, upper).max(), np.subtract(lower, tau).max())
+        if excess <= LIMIT_TOLERANCE:
+            return tau, outcome, reason
+    if np.isnan(np.add.reduce(lower) + np.add.reduce(upper)):
         return np.zeros(np.shape(tau)), Outcome.HELD, f"{reason}; torque limits not finite: zero torque"
     if not np.isfinite(np.add.reduce(tau)):
         tau = np.zeros(np.shape(tau))
         outcome, reason = Outcome.HELD, f"{reason}; non-finite torque replaced by zero"
     elif outcome.ok:
-        excess = max((tau - upper).max(initial=0.0), (lower - tau).max(initial=0.0))
-        if excess <= LIMIT_TOLERANCE:
-            return tau, outcome, reason
         reason = f"torque {excess:.3g} Nm outside limits after solve; clipped"
         log.debug(reason)
         outcome = Outcome.CLIPPED
