@@ -40,15 +40,17 @@ def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome:
                  reason: str) -> tuple[np.ndarray, Outcome, str]:
     """(τ, outcome, reason) with τ finite and inside [lower, upper].
 
-    A torque of a successful cycle that leaves the limits by more than ``LIMIT_TOLERANCE`` is
-    clipped to them (``CLIPPED``); the torque of a failed cycle (``HELD``) is clipped as well. A
+    A torque of a successful cycle is clipped to the limits; if it left them by more than
+    ``LIMIT_TOLERANCE`` (more than a solver's tolerance) the outcome becomes ``CLIPPED``; the torque of a failed cycle (``HELD``) is clipped as well. A
     torque with a non-finite entry is no torque at all: replaced by zero (clipped), ``HELD``.
     Limits with a NaN (a bug upstream: robot files and constructors validate them) give zero
     torque, ``HELD``."""
     if outcome.ok:  # the common case first: one pass, NaN anywhere makes ``excess`` NaN
         excess = max(np.subtract(tau, upper).max(), np.subtract(lower, tau).max())
-        if excess <= LIMIT_TOLERANCE:
+        if excess <= 0.0:
             return tau, outcome, reason
+        if excess <= LIMIT_TOLERANCE:  # the solver's tolerance: clipped, still the optimum
+            return np.clip(tau, lower, upper), outcome, reason
     if np.isnan(np.add.reduce(lower) + np.add.reduce(upper)):
         return np.zeros(np.shape(tau)), Outcome.HELD, f"{reason}; torque limits not finite: zero torque"
     if not np.isfinite(np.add.reduce(tau)):

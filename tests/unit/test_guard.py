@@ -11,9 +11,16 @@ LO, HI = np.array([-10.0, -5.0, -1.0]), np.array([10.0, 5.0, 1.0])
 
 @pytest.mark.parametrize("outcome", [Outcome.SOLVED, Outcome.FALLBACK])
 def test_solved_torque_inside_passes_unchanged(outcome):
-    tau = np.array([9.0, -5.0 - 0.5 * LIMIT_TOLERANCE, 0.0])
+    tau = np.array([9.0, -5.0, 0.0])
     out, got, reason = guard_torque(tau, LO, HI, outcome, "optimal")
     assert out is tau and got is outcome and reason == "optimal" and got.ok
+
+
+def test_solved_torque_within_the_solver_tolerance_is_clipped_silently():
+    tau = np.array([9.0, -5.0 - 0.5 * LIMIT_TOLERANCE, 0.0])
+    out, got, reason = guard_torque(tau, LO, HI, Outcome.SOLVED, "optimal")
+    np.testing.assert_array_equal(out, [9.0, -5.0, 0.0])
+    assert got is Outcome.SOLVED and reason == "optimal"
 
 
 def test_solved_torque_outside_is_clipped_and_flagged():
