@@ -1,7 +1,9 @@
 """Command line: ``wholebody robots | scenarios | run SCENARIO``.
 
 Exit codes: 0 success; 1 the scenario ran but did not meet its success criterion; 2 bad usage
-(unknown robot, scenario, controller or parameter; malformed robot file).
+(unknown robot, scenario, controller or parameter; a parameter value outside its declared range;
+malformed robot file; an output directory that cannot be written), always found before anything
+is simulated; 130 interrupted (Ctrl-C), with a summary.json marked ``"interrupted": true``.
 """
 
 from __future__ import annotations
@@ -10,11 +12,13 @@ import argparse
 import json
 import logging
 import sys
+import tempfile
+import time
 from pathlib import Path
 
 from . import __version__
 
-EXIT_OK, EXIT_SCENARIO_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_SCENARIO_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
 def _parse_sets(pairs: list[str]) -> dict[str, str]:
@@ -48,21 +52,40 @@ def _cmd_robots(args) -> int:
 
 def _cmd_scenarios(args) -> int:
     from .scenarios import SCENARIOS
+    from .scenarios.base import BASE_HEIGHT_LEGEND
 
     if args.json:
         print(json.dumps({s.name: {"summary": s.summary, "controllers": list(s.controllers),
                                    "default_robot": s.default_robot,
-                                   "parameters": {p.name: {"default": p.default, "help": p.help}
+                                   "parameters": {p.name: _parameter_json(p)
                                                   for p in s.parameters}}
                           for s in SCENARIOS.values()}, indent=2))
         return EXIT_OK
+    relative = False
     for s in SCENARIOS.values():
         print(f"{s.name}  (robot {s.default_robot}; controllers: {', '.join(s.controllers)})")
         print(f"    {s.summary}")
         for p in s.parameters:
             setting = f"--set {p.name}={p.default!r}"
-            print(f"    {setting:<32} {p.help}")
+            accepted = p.describe()
+            print(f"    {setting:<32} {p.help}" + (f"; {accepted}" if accepted else ""))
+            relative |= p.robot_relative
+    if relative:
+        print(BASE_HEIGHT_LEGEND)
     return EXIT_OK
+
+
+def _parameter_json(p) -> dict:
+    """One parameter for ``scenarios --json``: default, help, and what it accepts."""
+    out = {"default": p.default, "help": p.help, "type": p.kind.__name__}
+    if p.items is not None:
+        out["list"] = True  # comma-separated items of that type
+    if p.numeric:  # "(0, 600]", "[0, 0.5 h]" (h: the robot's standing base height), and as data
+        out["range"] = p.range_text()
+        out["bounds"] = p.bounds()
+    if p.choices:
+        out["choices"] = list(p.choices)
+    return out
 
 
 def _print_metrics(metrics: dict, indent: int) -> None:
@@ -81,9 +104,22 @@ def _print_metrics(metrics: dict, indent: int) -> None:
         print(f"{pad}{key}: {value}")
 
 
+def _prepare_output(out_dir: Path) -> Path:
+    """Make ``out_dir``, check that a file can be written in it and remove a summary.json left by
+    an earlier run (so that a run cut short leaves none of its predecessor's); OSError otherwise."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile(dir=out_dir, prefix=".wholebody-write-test-"):
+        pass
+    summary = out_dir / "summary.json"
+    if summary.exists() or summary.is_symlink():
+        summary.unlink()
+    return summary
+
+
 def _cmd_run(args) -> int:
     from .robots import load_robot
     from .scenarios import get_scenario
+    from .scenarios.base import ScenarioResult
 
     try:  # every usage error surfaces here, before anything runs
         scenario = get_scenario(args.scenario)
@@ -92,13 +128,41 @@ def _cmd_run(args) -> int:
         if args.controller and args.controller not in scenario.controllers:
             raise ValueError(f"scenario '{scenario.name}' has no controller '{args.controller}'; "
                              f"controllers: {', '.join(scenario.controllers)}")
-        robot = load_robot(args.robot or scenario.default_robot)
-        scenario.validate(robot, overrides)
-    except (ValueError, FileNotFoundError) as exc:
+        robot_name = args.robot or scenario.default_robot
+        try:
+            robot = load_robot(robot_name)
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"robot file {robot_name}: not UTF-8 text ({exc.reason})") from None
+        except OSError as exc:
+            raise ValueError(f"robot {robot_name}: {exc.strerror or exc}"
+                             f"{f' ({exc.filename})' if exc.filename else ''}") from None
+        params = scenario.validate(robot, overrides)
+    except (ValueError, OSError) as exc:
         return _usage_error(exc)
     out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"
-    result = scenario.run(robot, args.controller, overrides, out_dir,
-                          progress=not args.no_progress and sys.stderr.isatty())
+    try:
+        if out_dir.exists() and not out_dir.is_dir():
+            raise NotADirectoryError(0, "not a directory")
+        _prepare_output(out_dir)
+    except OSError as exc:
+        return _usage_error(f"--out {out_dir}: cannot write there ({exc.strerror or exc})")
+    controller = args.controller or scenario.controllers[0]
+    start = time.perf_counter()
+    try:
+        result = scenario.run(robot, controller, overrides, out_dir,
+                              progress=not args.no_progress and sys.stderr.isatty())
+    except KeyboardInterrupt:
+        elapsed = time.perf_counter() - start
+        cut = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
+                             [f"interrupted (Ctrl-C) after {elapsed:.1f} s of wall time; no "
+                              f"metrics or figures"], wall_time_s=elapsed, interrupted=True)
+        try:
+            written = f"wrote {cut.write(out_dir)} (interrupted: true)"
+        except OSError as exc:
+            written = f"could not write {out_dir / 'summary.json'}: {exc.strerror or exc}"
+        print(f"{scenario.name} on {robot.name} ({controller}): INTERRUPTED after {elapsed:.1f} s; "
+              f"{written}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     status = "SUCCESS" if result.success else "FAILED"
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")
@@ -132,7 +196,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--controller", help="controller variant (default: the scenario's first)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario parameter (repeatable)")
-    p.add_argument("--out", help="output directory (default: results/SCENARIO-ROBOT)")
+    p.add_argument("--out", help="output directory, created and checked to be writable before "
+                                 "the run (default: results/SCENARIO-ROBOT)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
     return parser
@@ -143,7 +208,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
-    return args.func(args)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:  # outside a run (a run writes its interrupted summary itself)
+        print("wholebody: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -94,3 +94,237 @@ def test_console_script_entry_point():
     proc = subprocess.run([sys.executable, "-m", "wholebody", "run", "nothing"],
                           capture_output=True, text=True)
     assert proc.returncode == 2 and "unknown scenario" in proc.stderr
+
+
+# ---------------------------------------------------------------- checked before simulating
+@pytest.fixture
+def no_simulation(monkeypatch):
+    """Scenario.run fails the test: the checks under test must come before any simulation."""
+    from wholebody.scenarios.base import Scenario
+
+    def run(self, *args, **kwargs):
+        pytest.fail(f"scenario '{self.name}' was run: the bad input was not caught before it")
+    monkeypatch.setattr(Scenario, "run", run)
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["run", "stand", "--set", "duration=0"],
+     "--set duration: expected a finite number in (0, 600], got '0'"),
+    (["run", "stand", "--set", "duration=nan"], "--set duration: expected a finite number in "
+                                                "(0, 600], got 'nan'"),
+    (["run", "stand", "--set", "duration=inf"], "got 'inf'"),
+    (["run", "stand", "--set", "duration=-inf"], "got '-inf'"),
+    (["run", "stand", "--set", "duration=1e9"], "--set duration: expected a finite number in "
+                                                "(0, 600], got '1e9'"),
+    (["run", "crawl", "--set", "ramp_time=0"], "--set ramp_time: expected a finite number in "
+                                               "(0, 600], got '0'"),
+    (["run", "stand", "--set", "friction=-1"],
+     "--set friction: expected a finite number in (0, 10], got '-1'"),
+    (["run", "push", "--set", "start=-1"], "--set start: expected a finite number in [0, 600], "
+                                           "got '-1'"),
+    (["run", "push", "--set", "peak_force=-150"], "--set peak_force: expected a finite number in "
+                                                  "[0, inf), got '-150'"),
+    (["run", "push", "--set", "location=nose"], "--set location: expected one of front, right"),
+    (["run", "stand", "--set", "duration=abc"], "--set duration: expected a number, got 'abc'"),
+    (["run", "stepping", "--set", "steps=1.5"], "--set steps: expected a whole number, got '1.5'"),
+    (["run", "stepping", "--set", "steps=0"], "--set steps: expected a whole number in [1, 100], "
+                                              "got '0'"),
+    (["run", "push-series", "--set", "forces=60,nan"], "--set forces: expected a finite number in "
+                                                       "(0, inf), got item 'nan'"),
+    (["run", "push-series", "--set", "locations=front,nose"], "--set locations: expected one of "),
+    (["run", "robust-push", "--set", "torque_delay=1,-2"], "--set torque_delay: expected a whole "
+                                                           "number in [0, 1000], got item '-2'"),
+    (["run", "squat", "--set", "variant=deep"], "--set variant: expected one of tracking, "
+                                                "cop-active, got 'deep'"),
+    (["run", "ramp", "--set", "speed=0.001"], "--set speed: expected 0 or a finite number in "
+                                              "[0.01, 5], got '0.001'"),  # 0: the course's speed
+    # robot-relative: a size against the robot's standing base height h
+    (["run", "stepping", "--set", "lift=0.6"],
+     "--set lift: expected a finite number in (0, 0.5 h] = (0, 0.51] for robot 'talos' "
+     "(h = 1.02 m), got 0.6"),
+    (["run", "ramp", "--set", "step=0.3"],
+     "--set step: expected a finite number in (-0.25 h, 0.25 h) = (-0.15, 0.15) for robot 'hyq'"),
+])
+def test_out_of_range_exit_2_before_simulating(argv, needle, capsys, no_simulation, tmp_path):
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wholebody: error: ") and needle in err, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "out").exists()  # nothing made before the checks passed
+
+
+def test_bad_input_via_the_console_script(tmp_path):
+    """The installed entry point: exit 2, one line on stderr, no traceback (no simulation: the
+    values are refused while parsing)."""
+    for sets in (["duration=0"], ["duration=nan"], ["kp=x"], ["speed=1"]):
+        proc = subprocess.run([sys.executable, "-m", "wholebody", "run", "stand",
+                               *[a for s in sets for a in ("--set", s)], "--out",
+                               str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2, (sets, proc.stderr)
+        assert proc.stderr.startswith("wholebody: error: ") and "Traceback" not in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("contents,needle", [
+    (b"\xff\xfe", "not UTF-8 text"),
+    (b"name = = \n", "invalid TOML"),
+    (b'name = "x"\n', "missing required field"),
+])
+def test_bad_robot_file_exit_2(tmp_path, capsys, contents, needle, no_simulation):
+    robot_file = tmp_path / "bad.toml"
+    robot_file.write_bytes(contents)
+    assert main(["run", "stand", "--robot", str(robot_file), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wholebody: error: ") and needle in err and len(err.splitlines()) == 1
+
+
+def test_declared_ranges_cover_every_parameter():
+    """Every numeric parameter of every scenario has a declared range, every fixed-set string its
+    choices, and every default lies in its range (robot-relative bounds on the default robot)."""
+    import math
+
+    from wholebody.robots import load_robot
+    from wholebody.scenarios import SCENARIOS
+
+    free_text = {("joint-limit", "joint"), ("weak-joint", "joint"), ("single-support", "stance"),
+                 ("single-support", "sine_joints")}  # robot-dependent names, checked by validate
+    robots = {}
+    for s in SCENARIOS.values():
+        for p in s.parameters:
+            if p.numeric:
+                assert p.low != -math.inf or p.high != math.inf, (s.name, p.name)
+            elif p.kind is str:
+                assert p.choices or (s.name, p.name) in free_text, (s.name, p.name)
+            p.parse(str(p.default).lower() if isinstance(p.default, bool) else str(p.default))
+        robot = robots.setdefault(s.default_robot, load_robot(s.default_robot))
+        for p in s.parameters:
+            p.check(p.default, robot)
+        # durations and times are bounded: nothing asks for more than MAX_TIME of simulated time
+        for p in s.parameters:
+            if p.name == "duration" or p.help.rstrip(")").endswith("(s"):
+                assert p.high == p.MAX_TIME, (s.name, p.name)
+
+
+def test_parameter_ranges_unit():
+    from types import SimpleNamespace
+
+    from wholebody.scenarios.base import Parameter
+
+    robot = SimpleNamespace(name="toy", q_ref=[0.0, 0.0, 0.8])
+    lift = Parameter("lift", 0.1, "lift (m)", low=0.0, low_open=True, high=0.5 * Parameter.H)
+    assert lift.range_text() == "(0, 0.5 h]" and lift.describe() == "in (0, 0.5 h]"
+    assert lift.parse("0.7") == 0.7  # robot-relative bounds wait for the robot ...
+    with pytest.raises(ValueError, match=r"--set lift: .*\(0, 0\.4\] for robot 'toy'.*got 0\.7"):
+        lift.check(0.7, robot)  # ... and are checked with it
+    assert lift.check(0.4, robot) == 0.4
+    for bad in ("0", "-0.1", "nan", "inf"):
+        with pytest.raises(ValueError, match="--set lift: expected a finite number"):
+            lift.parse(bad)
+    count = Parameter("n", 2, "count", low=1, high=5)
+    assert count.parse("5") == 5 and count.range_text() == "[1, 5]"
+    with pytest.raises(ValueError, match=r"--set n: expected a whole number in \[1, 5\], got '6'"):
+        count.parse("6")
+    mode = Parameter("mode", "a", "mode", choices=("a", "b"))
+    assert mode.parse("b") == "b" and mode.describe() == "one of: a, b"
+    with pytest.raises(ValueError, match="--set mode: expected one of a, b, got 'c'"):
+        mode.parse("c")
+    forces = Parameter("forces", "1,2", "forces", low=0.0, low_open=True, items=float)
+    assert forces.parse(" 3, 4 ") == "3, 4" and forces.describe() == "items in (0, inf)"
+    with pytest.raises(ValueError, match="got item '-4'"):
+        forces.parse("3,-4")
+    unbounded = Parameter("x", 1.0, "x", low=0.0, finite=False)
+    assert unbounded.parse("inf") == float("inf") and unbounded.range_text() == "[0, inf]"
+    with pytest.raises(ValueError, match="got 'nan'"):
+        unbounded.parse("nan")
+    auto = Parameter("speed", 0.0, "speed (0: automatic)", low=0.01, high=5.0, special=(0.0,))
+    assert auto.parse("0") == 0.0 and auto.parse("0.5") == 0.5
+    assert auto.describe() == "0 or in [0.01, 5]"
+    with pytest.raises(ValueError, match=r"expected 0 or a finite number in \[0\.01, 5\]"):
+        auto.parse("0.001")
+    flag = Parameter("flag", False, "flag")
+    assert flag.parse("yes") is True and flag.parse(True) is True and flag.range_text() is None
+
+
+def test_scenarios_lists_ranges(capsys):
+    from wholebody.scenarios import SCENARIOS
+
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    names = [line.split()[0] for line in out.splitlines() if line and not line.startswith(" ")
+             and not line.startswith("h:")]
+    assert names == list(SCENARIOS)
+    assert "simulated time (s); in (0, 600]" in out
+    assert "one of: auto, native, python" in out and "in (0, 0.5 h]" in out
+    assert out.rstrip().splitlines()[-1].startswith("h: the robot's standing base height")
+    assert main(["scenarios", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert set(data) == set(SCENARIOS)
+    duration = data["stand"]["parameters"]["duration"]
+    assert duration["range"] == "(0, 600]" and duration["bounds"] == {
+        "low": 0.0, "high": 600.0, "low_open": True, "high_open": False, "finite": True}
+    assert data["push"]["parameters"]["engine"]["choices"] == ["auto", "native", "python"]
+    assert data["stepping"]["parameters"]["lift"]["bounds"]["high"] == {"base_height": 0.5}
+    assert data["push-series"]["parameters"]["forces"]["list"] is True
+
+
+# ---------------------------------------------------------------- output directory, Ctrl-C
+@pytest.mark.parametrize("make_out", [
+    lambda tmp: tmp / "a_file",  # an existing file
+    lambda tmp: tmp / "a_file" / "sub",  # under a file
+])
+def test_unwritable_out_exit_2_before_simulating(tmp_path, capsys, no_simulation, make_out):
+    (tmp_path / "a_file").write_text("not a directory\n")
+    out = make_out(tmp_path)
+    assert main(["run", "stand", "--set", "duration=0.2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"wholebody: error: --out {out}: cannot write there")
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_unwritable_out_read_only_directory(tmp_path, capsys, no_simulation):
+    import os
+
+    out = tmp_path / "ro"
+    out.mkdir()
+    out.chmod(0o500)
+    try:
+        if os.access(out, os.W_OK):
+            pytest.skip("running as a user that may write into read-only directories (root)")
+        assert main(["run", "stand", "--set", "duration=0.2", "--out", str(out)]) == 2
+        assert f"--out {out}: cannot write there" in capsys.readouterr().err
+    finally:
+        out.chmod(0o700)
+
+
+def test_interrupted_run_writes_marked_summary(tmp_path, capsys, monkeypatch):
+    """Ctrl-C during the run: the stale summary.json of an earlier run is gone before the run
+    starts, and an interrupted one (scenario, robot, parameters, "interrupted": true) replaces it;
+    exit 130."""
+    from wholebody.scenarios.base import Scenario
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "summary.json").write_text(json.dumps({"scenario": "stand", "success": True}))
+    seen = {}
+
+    def run(self, robot, controller=None, overrides=None, out_dir=None, progress=False):
+        seen["stale summary"] = (out / "summary.json").exists()
+        raise KeyboardInterrupt
+    monkeypatch.setattr(Scenario, "run", run)
+    assert main(["run", "stand", "--robot", "hyq", "--set", "duration=0.7", "--out", str(out)]) \
+        == 130
+    assert seen == {"stale summary": False}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and summary["success"] is False
+    assert summary["scenario"] == "stand" and summary["robot"] == "hyq"
+    assert summary["controller"] == "standing" and summary["parameters"]["duration"] == 0.7
+    assert summary["metrics"] == {} and summary["figures"] == []
+    err = capsys.readouterr().err
+    assert "stand on hyq (standing): INTERRUPTED" in err and str(out / "summary.json") in err
+
+
+def test_summary_says_not_interrupted():
+    from wholebody.scenarios.base import ScenarioResult
+
+    summary = ScenarioResult("stand", "hyq", "standing", True, {}, {}).summary()
+    assert summary["interrupted"] is False

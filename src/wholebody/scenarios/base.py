@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 
@@ -17,31 +18,237 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
+class BaseHeight:
+    """A robot-relative bound of a size parameter: ``factor`` x the robot's standing base height
+    ``h`` (its base above the ground in the reference posture, ``robot.q_ref[2]``). Declared as
+    ``0.5 * Parameter.H``, shown as ``0.5 h``, checked when the robot is known
+    (:meth:`Scenario.validate`)."""
+
+    factor: float = 1.0
+
+    def __rmul__(self, factor: float) -> BaseHeight:
+        return BaseHeight(float(factor) * self.factor)
+
+    __mul__ = __rmul__
+
+    def __neg__(self) -> BaseHeight:
+        return BaseHeight(-self.factor)
+
+    def value(self, robot) -> float:
+        return self.factor * float(robot.q_ref[2])
+
+    def __str__(self) -> str:
+        return {1.0: "h", -1.0: "-h"}.get(self.factor, f"{self.factor:g} h")
+
+
+#: what ``h`` stands for in the ranges listed by ``wholebody scenarios``
+BASE_HEIGHT_LEGEND = ("h: the robot's standing base height (its base above the ground in the "
+                      "reference posture); checked once the robot is known")
+
+_NOUNS = {bool: ("a boolean (true/false)", "booleans"), int: ("a whole number", "whole numbers"),
+          float: ("a number", "numbers"), str: ("a text", "texts")}
+
+
+@dataclass(frozen=True)
 class Parameter:
-    """A scenario parameter settable with ``--set name=value`` (parsed to the default's type)."""
+    """A scenario parameter settable with ``--set name=value`` (parsed to the default's type).
+
+    Its declared range is checked by :meth:`parse` (the ``--set`` text) and :meth:`check` (a
+    value, with the robot for robot-relative bounds); each error names the parameter, the value
+    and the range:
+
+    - numbers (float, int): ``low <= value <= high``, ``low_open``/``high_open`` exclude the
+      bound itself; a bound is a number or robot-relative (``0.5 * Parameter.H``, see
+      :class:`BaseHeight`). NaN is refused, and +-inf unless ``finite`` is False;
+    - strings: ``choices``, if given, are the accepted values;
+    - ``special``: numbers accepted outside the range, with a meaning given in the help (the 0 of
+      "0: automatic" where the range starts above 0);
+    - ``items`` (float, int or str): the value is a comma-separated list of such items, kept as
+      the text; each item is checked against the range or ``choices`` (whether the list may be
+      empty is the scenario's own check).
+    """
 
     name: str
     default: Any
     help: str
+    low: float | BaseHeight = -math.inf
+    high: float | BaseHeight = math.inf
+    low_open: bool = False
+    high_open: bool = False
+    choices: tuple[str, ...] | None = None
+    items: type | None = None
+    finite: bool = True
+    special: tuple[float, ...] = ()
 
-    def parse(self, text: str) -> Any:
-        kind = type(self.default)
+    #: the largest simulated time a time parameter may ask for (s)
+    MAX_TIME: ClassVar[float] = 600.0
+    #: the robot's standing base height, for robot-relative bounds: ``high=0.5 * Parameter.H``
+    H: ClassVar[BaseHeight] = BaseHeight()
+
+    def __post_init__(self):
+        if self.choices is not None:
+            object.__setattr__(self, "choices", tuple(self.choices))
+
+    @property
+    def kind(self) -> type:
+        """The type of one value: ``items`` for list parameters, else the default's type."""
+        return self.items or type(self.default)
+
+    @property
+    def numeric(self) -> bool:
+        return self.kind in (int, float)
+
+    @property
+    def robot_relative(self) -> bool:
+        return isinstance(self.low, BaseHeight) or isinstance(self.high, BaseHeight)
+
+    # ------------------------------------------------------------------ description
+    def range_text(self) -> str | None:
+        """The declared range, e.g. ``(0, 600]``, ``[0, 0.5 h]``, ``one of: a, b``; None for
+        booleans and free text."""
+        if self.kind is str:
+            return f"one of: {', '.join(self.choices)}" if self.choices else None
+        if not self.numeric:
+            return None
+
+        def text(bound) -> str:
+            if isinstance(bound, BaseHeight):
+                return str(bound)
+            if math.isinf(bound):
+                return "inf" if bound > 0 else "-inf"
+            return str(int(bound)) if self.kind is int else f"{bound:g}"
+        return self._special() + self._interval(text(self.low), text(self.high))
+
+    def _interval(self, low: str, high: str) -> str:
+        """``[low, high]`` with the brackets of the declared range (open at an infinite bound)."""
+        closed_low = not self.low_open and (not self.finite or not self._infinite(self.low))
+        closed_high = not self.high_open and (not self.finite or not self._infinite(self.high))
+        return f"{'[' if closed_low else '('}{low}, {high}{']' if closed_high else ')'}"
+
+    def _special(self) -> str:
+        """The ``special`` values as the start of the range text: ``"0 or "``."""
+        return "".join(f"{v:g} or " for v in self.special)
+
+    @staticmethod
+    def _infinite(bound) -> bool:
+        return not isinstance(bound, BaseHeight) and math.isinf(bound)
+
+    def describe(self) -> str:
+        """The range for the listing: ``in (0, 600]``, ``one of: a, b``, ``items in [0, inf)``,
+        ``0 or in [0.01, 5]``."""
+        text = self.range_text()
+        if text is None:
+            return ""
+        if self.kind is str:
+            return f"items {text}" if self.items is not None else text
+        extra = self._special()
+        return f"{'items ' if self.items is not None else ''}{extra}in {text[len(extra):]}"
+
+    def bounds(self) -> dict[str, Any] | None:
+        """The numeric range as data (``wholebody scenarios --json``): ``low``/``high`` a number,
+        None (unbounded) or ``{"base_height": factor}``, ``low_open``/``high_open``, ``finite``;
+        None for strings and booleans."""
+        if not self.numeric:
+            return None
+
+        def data(bound):
+            if isinstance(bound, BaseHeight):
+                return {"base_height": bound.factor}
+            return None if math.isinf(bound) else bound
+        out = {"low": data(self.low), "high": data(self.high), "low_open": self.low_open,
+               "high_open": self.high_open, "finite": self.finite}
+        if self.special:
+            out["special"] = list(self.special)
+        return out
+
+    # ------------------------------------------------------------------ checks
+    def parse(self, text: Any) -> Any:
+        """The ``--set`` text as a value of the parameter's type, checked against the range
+        (robot-relative bounds wait for :meth:`check` with the robot); ValueError naming the
+        parameter, the text and what was expected otherwise."""
+        text = _as_text(text).strip()
+        if self.items is not None:
+            for item in (x.strip() for x in text.split(",")):
+                if item:
+                    self._check(self._convert(item, listed=True), item, None)
+            return text
+        value = self._convert(text)
+        self._check(value, text, None)
+        return value
+
+    def check(self, value: Any, robot=None) -> Any:
+        """``value`` (of the parameter's type, e.g. from :meth:`parse` or the default) checked
+        against the whole range, robot-relative bounds against ``robot`` (skipped if None)."""
+        if self.items is not None:
+            for item in (x.strip() for x in str(value).split(",")):
+                if item:
+                    self._check(self._convert(item, listed=True), item, robot)
+            return value
+        self._check(value, value, robot)
+        return value
+
+    def _convert(self, text: str, listed: bool = False) -> Any:
+        kind = self.kind
         try:
             if kind is bool:
-                lowered = text.strip().lower()
+                lowered = text.lower()
                 if lowered not in ("true", "false", "1", "0", "yes", "no"):
                     raise ValueError(text)
                 return lowered in ("true", "1", "yes")
             return kind(text)
         except ValueError:
-            raise ValueError(f"--set {self.name}: expected a {kind.__name__}, got '{text}'") from None
+            one, many = _NOUNS.get(kind, (f"a {kind.__name__}", f"{kind.__name__}s"))
+            expected = f"comma-separated {many}" if listed else one
+            raise ValueError(f"--set {self.name}: expected {expected}, got '{text}'") from None
 
+    def _check(self, value: Any, shown: Any, robot) -> None:
+        shown = f"'{shown}'" if isinstance(shown, str) else repr(shown)
+        item = "item " if self.items is not None else ""
+        if self.kind is str:
+            if self.choices and value not in self.choices:
+                raise ValueError(f"--set {self.name}: expected one of {', '.join(self.choices)}, "
+                                 f"got {item}{shown}")
+            return
+        if not self.numeric:
+            return
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"--set {self.name}: expected a number in {self.range_text()}, got "
+                             f"{shown}") from None
+        low, high, note = self.low, self.high, ""
+        if self.robot_relative and robot is not None:
+            low = low.value(robot) if isinstance(low, BaseHeight) else low
+            high = high.value(robot) if isinstance(high, BaseHeight) else high
+            numbers = self._interval(f"{low:.3g}", f"{high:.3g}")
+            note = f" = {numbers} for robot '{robot.name}' (h = {robot.q_ref[2]:.3g} m)"
+        else:  # robot-relative bounds wait for the robot
+            low = -math.inf if isinstance(low, BaseHeight) else low
+            high = math.inf if isinstance(high, BaseHeight) else high
+        inside = ((x > low if self.low_open else x >= low) and
+                  (x < high if self.high_open else x <= high)) or x in self.special
+        if math.isnan(x) or (self.finite and math.isinf(x)) or not inside:
+            what = "whole number" if self.kind is int else \
+                "finite number" if self.finite else "number"
+            extra = self._special()
+            raise ValueError(f"--set {self.name}: expected {extra}a {what} in "
+                             f"{self.range_text()[len(extra):]}{note}, got {item}{shown}")
+
+
+def _as_text(value: Any) -> str:
+    """A programmatic override (a number, a bool, a list) as the text ``--set`` would give."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return ",".join(str(v) for v in value)
+    return str(value)
 
 
 #: the controller's engine, for the scenarios that take one (momentum balance, stepping)
 ENGINE = Parameter("engine", "python", "controller engine: 'python' (Robot.update + Formulation) "
                                        "or 'native' (wholebody.cycle.HierarchyCycle: rigid-body "
-                                       "terms and task rows compiled, same torques)")
+                                       "terms and task rows compiled, same torques)",
+                   choices=ENGINES)
 
 
 def check_engine(params: dict) -> None:
@@ -52,12 +259,17 @@ def check_engine(params: dict) -> None:
 
 
 #: eq. 26's angular-momentum weight of the LQR cost, for the momentum-balance scenarios
-Q_ANGULAR = Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)")
+Q_ANGULAR = Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)",
+                      low=0.0, low_open=True)
 
 
-def duration_parameter(default: float, help: str = "simulated time (s)") -> Parameter:
-    """The ``duration`` parameter (simulated time) with a scenario's default."""
-    return Parameter("duration", default, help)
+def duration_parameter(default: float, help: str = "simulated time (s)",
+                       low_open: bool = True) -> Parameter:
+    """The ``duration`` parameter (simulated time) with a scenario's default: in
+    (0, ``Parameter.MAX_TIME``], or [0, ...] with ``low_open=False`` (where 0 means "until the end
+    of the scenario's phases")."""
+    return Parameter("duration", default, help, low=0.0, high=Parameter.MAX_TIME,
+                     low_open=low_open)
 
 
 def check_biped(robot, params: dict) -> None:
@@ -86,6 +298,8 @@ class ScenarioResult:
     log: Any = None
     figures: list[str] = field(default_factory=list)
     wall_time_s: float = 0.0
+    #: the run was cut short (Ctrl-C): ``metrics`` and ``figures`` are what was known by then
+    interrupted: bool = False
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -93,6 +307,7 @@ class ScenarioResult:
             "robot": self.robot,
             "controller": self.controller,
             "success": bool(self.success),
+            "interrupted": bool(self.interrupted),
             "metrics": _jsonable(self.metrics),
             "parameters": _jsonable(self.parameters),
             "notes": self.notes,
@@ -150,14 +365,19 @@ class Scenario:
     validate_function: Callable[[Any, dict], None] | None = None
 
     def validate(self, robot, overrides: dict[str, str] | None = None) -> dict[str, Any]:
-        """Parameters resolved and checked against ``robot`` (ValueError naming the problem)."""
+        """Parameters resolved and checked against ``robot``: every declared range (the
+        robot-relative ones with this robot), then the scenario's own checks (ValueError naming
+        the problem)."""
         params = self.resolve(overrides or {})
+        for p in self.parameters:
+            p.check(params[p.name], robot)
         if self.validate_function is not None:
             self.validate_function(robot, params)
         return params
 
     def resolve(self, overrides: dict[str, str]) -> dict[str, Any]:
-        """Defaults updated with ``--set`` strings; unknown names are an error listing the known."""
+        """Defaults updated with ``--set`` strings, each parsed and checked against its declared
+        range (:meth:`Parameter.parse`); unknown names are an error listing the known."""
         known = {p.name: p for p in self.parameters}
         values = {p.name: p.default for p in self.parameters}
         for key, text in overrides.items():

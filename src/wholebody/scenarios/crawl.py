@@ -25,12 +25,16 @@ from .gait_measures import outcome
 from .locomotion import GAIT, check_gait, check_quadruped, run_gait
 
 PARAMETERS = (
-    Parameter("speed_start", 0.04, "forward speed at the start of the ramp (m/s)"),
-    Parameter("speed_end", 0.15, "forward speed at the end of the ramp (m/s)"),
-    Parameter("ramp_time", 10.0, "duration of the speed ramp (s), after 1 s of standing"),
-    Parameter("duration", 12.0, "simulated time (s)"),
+    Parameter("speed_start", 0.04, "forward speed at the start of the ramp (m/s)",
+              low=0.0, high=5.0),
+    Parameter("speed_end", 0.15, "forward speed at the end of the ramp (m/s)", low=0.0, high=5.0),
+    Parameter("ramp_time", 10.0, "duration of the speed ramp (s), after 1 s of standing",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("duration", 12.0, "simulated time (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
     GAIT,
-    Parameter("engine", "python", "passive WBC engine: python, or native (the compiled cycle)"),
+    Parameter("engine", "python", "passive WBC engine: python, or native (the compiled cycle)",
+              choices=ENGINES),
 )
 
 CONTROLLER_CHOICES = ("passive+quasi-static", "passive", "quasi-static")

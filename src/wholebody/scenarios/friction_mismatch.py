@@ -49,16 +49,23 @@ from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_positive, check_quadru
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
-    Parameter("floor_mu", 0.4, "friction coefficient of the simulated floor"),
-    Parameter("controller_mu", 1.0, "friction coefficient in the WBC's cones (the wrong estimate)"),
+    Parameter("floor_mu", 0.4, "friction coefficient of the simulated floor",
+              low=0.0, low_open=True, high=10.0),
+    Parameter("controller_mu", 1.0, "friction coefficient in the WBC's cones (the wrong estimate)",
+              low=0.0, low_open=True, high=10.0),
     CRAWL_SPEED,
-    Parameter("fast_speed", 0.16, "speed of the corrected-mu run at higher speed (m/s)"),
+    Parameter("fast_speed", 0.16, "speed of the corrected-mu run at higher speed (m/s)",
+              low=0.0, low_open=True, high=5.0),
     RUN_DURATION,
-    Parameter("K_st", 200.0, "stance-task stiffness of eq. 32 (1/s^2) in the stance-task runs"),
-    Parameter("D_st", 30.0, "stance-task damping of eq. 32 (1/s)"),
-    Parameter("slip_speed", 0.02, "slip-event threshold on the contact-point speed (m/s)"),
-    Parameter("slip_time", 0.02, "slip-event minimum duration (s)"),
-    Parameter("slip_bound", 0.25, "largest per-stance slip (m) accepted as 'bounded'"),
+    Parameter("K_st", 200.0, "stance-task stiffness of eq. 32 (1/s^2) in the stance-task runs",
+              low=0.0, low_open=True),
+    Parameter("D_st", 30.0, "stance-task damping of eq. 32 (1/s)", low=0.0),
+    Parameter("slip_speed", 0.02, "slip-event threshold on the contact-point speed (m/s)",
+              low=0.0, low_open=True, high=5.0),
+    Parameter("slip_time", 0.02, "slip-event minimum duration (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("slip_bound", 0.25, "largest per-stance slip (m) accepted as 'bounded'",
+              low=0.0, low_open=True, high=Parameter.H),
 )
 
 

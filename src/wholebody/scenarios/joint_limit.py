@@ -58,16 +58,23 @@ log = logging.getLogger(__name__)
 
 PARAMETERS = (
     Parameter("joint", "lh_hfe_joint", "the joint whose limit is changed in the controller"),
-    Parameter("side", "lower", "which of its limits is changed: lower or upper"),
-    Parameter("limit", -0.85, "the changed limit in the controller (rad), inside the real range"),
+    Parameter("side", "lower", "which of its limits is changed: lower or upper",
+              choices=("lower", "upper")),
+    Parameter("limit", -0.85, "the changed limit in the controller (rad), inside the real range",
+              low=-np.pi, high=np.pi),
     CRAWL_SPEED,
-    Parameter("duration", 8.5, "simulated time per run (s); the crawl starts at 1 s"),
-    Parameter("slack_weight", 1e4, "slack weight alpha of eq. 33 (the PassiveWBC default)"),
-    Parameter("low_slack_weight", 10.0, "a lower alpha, run for comparison"),
-    Parameter("at_limit", 0.01, "joint within this of the raised limit counts as 'at the limit' (rad)"),
-    Parameter("overshoot", 0.02, "allowed excursion beyond the raised limit (rad)"),
+    Parameter("duration", 8.5, "simulated time per run (s); the crawl starts at 1 s",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("slack_weight", 1e4, "slack weight alpha of eq. 33 (the PassiveWBC default)",
+              low=0.0, low_open=True),
+    Parameter("low_slack_weight", 10.0, "a lower alpha, run for comparison",
+              low=0.0, low_open=True),
+    Parameter("at_limit", 0.01, "joint within this of the raised limit counts as 'at the limit' (rad)",
+              low=0.0, low_open=True, high=np.pi),
+    Parameter("overshoot", 0.02, "allowed excursion beyond the raised limit (rad)",
+              low=0.0, low_open=True, high=np.pi),
     Parameter("slack_active", 0.5, "swing residual (m/s^2) above which the slack is 'active' "
-                                   "(figure shading, time counts)"),
+                                   "(figure shading, time counts)", low=0.0, low_open=True),
 )
 
 

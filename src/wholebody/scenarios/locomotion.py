@@ -40,11 +40,14 @@ COURSE_BOX_THICKNESS = 1.0  # thickness of the simulator's level ground boxes of
 COURSE_SLOPE_THICKNESS = 0.1  # thickness of the simulator's ramp boxes of a course (m)
 
 #: parameters declared alike by several quadruped scenarios
-GAIT = Parameter("gait", "crawl", "crawl or trot")
+GAIT = Parameter("gait", "crawl", "crawl or trot", choices=("crawl", "trot"))
 CRAWL_SPEED = Parameter("speed", 0.11,
-                        "forward crawl speed (m/s), reached 1 s after the gait starts")
-DURATION = Parameter("duration", 10.0, "simulated time (s)")
-RUN_DURATION = Parameter("duration", 10.0, "simulated time per run (s); the crawl starts at 1 s")
+                        "forward crawl speed (m/s), reached 1 s after the gait starts",
+                        low=0.0, low_open=True, high=5.0)
+DURATION = Parameter("duration", 10.0, "simulated time (s)",
+                     low=0.0, low_open=True, high=Parameter.MAX_TIME)
+RUN_DURATION = Parameter("duration", 10.0, "simulated time per run (s); the crawl starts at 1 s",
+                         low=0.0, low_open=True, high=Parameter.MAX_TIME)
 
 
 def check_quadruped(robot, scenario: str) -> None:

@@ -62,7 +62,7 @@ NEAR_SWITCH = 0.05  # s: "right after a lift-off or touchdown"
 
 PARAMETERS = (
     GAIT,
-    Parameter("speed", 0.1, "forward speed after the ramp-up (m/s)"),
+    Parameter("speed", 0.1, "forward speed after the ramp-up (m/s)", low=0.0, high=5.0),
     DURATION,
     Parameter("feedforward", False, "keep the feed-forward terms on (Assumption 2 needs them off)"),
 )

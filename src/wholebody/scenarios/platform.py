@@ -66,21 +66,25 @@ from .measures import BalanceMonitor, limit_notes, sole_midpoint
 
 PARAMETERS = (
     Parameter("direction", "sagittal", "translation axis of the board: sagittal (robot's x, the "
-                                       "paper's Fig. 8 'facing the disturbance') or lateral"),
-    Parameter("distance", 0.15, "translation of each move (m)"),
-    Parameter("yaw", 15.0, "rotation of the rotating moves (deg)"),
+                                       "paper's Fig. 8 'facing the disturbance') or lateral",
+              choices=("sagittal", "lateral")),
+    Parameter("distance", 0.15, "translation of each move (m)", low=0.0, high=Parameter.H),
+    Parameter("yaw", 15.0, "rotation of the rotating moves (deg)", low=-90.0, high=90.0),
     Parameter("move_time", 1.0, "duration of each minimum-jerk move (s); peak acceleration "
-                                "5.77 distance / move_time^2"),
+                                "5.77 distance / move_time^2",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
     Parameter("moves", 5, "number of moves of the sequence 0, +d, (0, +yaw), -d, (0, -yaw), 0 "
-                          "(1-5)"),
-    Parameter("start", 0.5, "time of the first move (s)"),
-    Parameter("settle", 2.0, "simulated time after the last move (s)"),
+                          "(1-5)", low=1, high=5),
+    Parameter("start", 0.5, "time of the first move (s)", low=0.0, high=Parameter.MAX_TIME),
+    Parameter("settle", 2.0, "simulated time after the last move (s)",
+              low=0.0, high=Parameter.MAX_TIME),
     Parameter("feedforward", False, "feed the board's acceleration (an IMU on it) forward as "
                                     "hdot_ref = m a (not in the paper)"),
     Q_ANGULAR,
     Parameter("cop_margin", 0.0, "shrink the admissible CoP rectangle by this fraction (0: the "
-                                 "whole sole)"),
-    Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)"),
+                                 "whole sole)", low=0.0, high=1.0, high_open=True),
+    Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)",
+              low=0.0, low_open=True, high=Parameter.H),
     ENGINE,
 )
 

@@ -17,13 +17,16 @@ from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, chec
                      push_trial)
 
 PARAMETERS = (
-    Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')"),
+    Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')",
+              choices=(*LOCATIONS, "angle")),
     Parameter("angle", 0.0, "with location=angle: force direction in the horizontal plane (deg, "
-                            "0 = pushing backwards from the front)"),
-    Parameter("height", 0.1, "with location=angle: height of the point above the base (m)"),
-    Parameter("peak_force", 100.0, "peak of the half-sine force (N)"),
-    Parameter("push_duration", 0.1, "duration of the push (s), 0.05-0.15 in the paper"),
-    Parameter("start", 0.5, "time of the push (s)"),
+                            "0 = pushing backwards from the front)", low=-180.0, high=180.0),
+    Parameter("height", 0.1, "with location=angle: height of the point above the base (m)",
+              low=-Parameter.H, high=Parameter.H),
+    Parameter("peak_force", 100.0, "peak of the half-sine force (N)", low=0.0),
+    Parameter("push_duration", 0.1, "duration of the push (s), 0.05-0.15 in the paper",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("start", 0.5, "time of the push (s)", low=0.0, high=Parameter.MAX_TIME),
     duration_parameter(4.0),
     Q_ANGULAR,
     ANGULAR_WEIGHT,

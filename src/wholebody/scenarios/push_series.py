@@ -21,16 +21,20 @@ from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_IN
                      check_locations, check_push, push_trial)
 
 PARAMETERS = (
-    Parameter("locations", ",".join(LOCATIONS), "comma-separated push points"),
-    Parameter("forces", "60,100,140,180", "comma-separated peak forces (N), increasing"),
-    Parameter("push_duration", 0.1, "duration of each push (s)"),
+    Parameter("locations", ",".join(LOCATIONS), "comma-separated push points",
+              choices=tuple(LOCATIONS), items=str),
+    Parameter("forces", "60,100,140,180", "comma-separated peak forces (N), increasing",
+              low=0.0, low_open=True, items=float),
+    Parameter("push_duration", 0.1, "duration of each push (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
     duration_parameter(3.5, "simulated time per push (s)"),
     Q_ANGULAR,
     ANGULAR_WEIGHT,
     Q_INTEGRAL,
     INTEGRAL_LIMIT,
     Parameter("bisection", False, "also find the largest survivable peak force per point"),
-    Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)"),
+    Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)",
+              low=1, high=30),
     ENGINE,
 )
 CONTROLLERS = ("pd", "lqr")

@@ -37,13 +37,13 @@ LOCATIONS = {
 ANGULAR_WEIGHT = Parameter(
     "angular_weight", ANGULAR_MOMENTUM_WEIGHT,
     "weight of the momentum task's angular rows in Table 2 (1e4: the paper's single momentum "
-    "weight, which lets the pelvis drift under model errors)")
+    "weight, which lets the pelvis drift under model errors)", low=0.0)
 Q_INTEGRAL = Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error integral (LQI; our "
                                           "extension, not the paper's); 0 = off, the paper's "
-                                          "controller")
+                                          "controller", low=0.0)
 INTEGRAL_LIMIT = Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
                            "LQR integral action: anti-windup clamp of each integral component "
-                           "(m s)")
+                           "(m s)", low=0.0, low_open=True)
 CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, ENGINE)
 
 #: the push parameters of one trial that push-series and robust-push do not vary

@@ -43,13 +43,18 @@ DEFAULTS = {"ramp": {"gait": "trot", "speed": 0.15}, "gap": {"gait": "crawl", "s
 
 PARAMETERS = (
     Parameter("course", "ramp", "ramp (trot up and down a ramp, Fig. 8) or gap (crawl across a "
-                                "gap with a step, Fig. 7)"),
-    Parameter("angle", 15.0, "ramp slope (deg)"),
-    Parameter("gap", 0.22, "gap width (m), course=gap"),
-    Parameter("step", 0.07, "step height after the gap (m), course=gap"),
-    Parameter("gait", "auto", "crawl or trot (auto: trot on the ramp, crawl across the gap)"),
-    Parameter("speed", 0.0, "forward speed (m/s) after a 2 s ramp-up (0: 0.15 ramp, 0.1 gap)"),
-    Parameter("duration", 0.0, "simulated time (s) (0: long enough to cross the course)"),
+                                "gap with a step, Fig. 7)", choices=COURSES),
+    Parameter("angle", 15.0, "ramp slope (deg)", low=0.0, high=35.0, low_open=True, high_open=True),
+    Parameter("gap", 0.22, "gap width (m), course=gap",
+              low=0.0, high=0.65 * Parameter.H, low_open=True, high_open=True),
+    Parameter("step", 0.07, "step height after the gap (m), course=gap",
+              low=-0.25 * Parameter.H, high=0.25 * Parameter.H, low_open=True, high_open=True),
+    Parameter("gait", "auto", "crawl or trot (auto: trot on the ramp, crawl across the gap)",
+              choices=("auto", "crawl", "trot")),
+    Parameter("speed", 0.0, "forward speed (m/s) after a 2 s ramp-up (0: 0.15 ramp, 0.1 gap)",
+              low=0.01, high=5.0, special=(0.0,)),
+    Parameter("duration", 0.0, "simulated time (s) (0: long enough to cross the course)",
+              low=0.0, high=Parameter.MAX_TIME),
 )
 
 

@@ -38,12 +38,16 @@ from .locomotion import check_gait, check_quadruped, parse_positive_floats, run_
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
-    Parameter("kfe_weights", "1e-4,1e-3,1e-2,3e-2,1e-1,1", "comma-separated KFE weights of R_tau"),
-    Parameter("other_weight", 1e-4, "R_tau weight of the HAA and HFE joints"),
-    Parameter("gait", "stand", "stand or crawl"),
-    Parameter("speed", 0.11, "crawl speed (m/s) when gait=crawl"),
-    Parameter("duration", 2.0, "simulated time per run (s)"),
-    Parameter("window", 0.5, "averaging window at the end of each run (s)"),
+    Parameter("kfe_weights", "1e-4,1e-3,1e-2,3e-2,1e-1,1", "comma-separated KFE weights of R_tau",
+              low=0.0, low_open=True, items=float),
+    Parameter("other_weight", 1e-4, "R_tau weight of the HAA and HFE joints",
+              low=0.0, low_open=True),
+    Parameter("gait", "stand", "stand or crawl", choices=("stand", "crawl")),
+    Parameter("speed", 0.11, "crawl speed (m/s) when gait=crawl", low=0.0, high=5.0),
+    Parameter("duration", 2.0, "simulated time per run (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("window", 0.5, "averaging window at the end of each run (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
 )
 
 

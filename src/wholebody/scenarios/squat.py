@@ -49,17 +49,21 @@ VARIANTS = ("tracking", "cop-active")
 
 PARAMETERS = (
     Parameter("variant", "tracking", "tracking (whole sole admissible) or cop-active (Fig. 10: "
-                                     "shrunk CoP region, constraints become active)"),
-    Parameter("frequency", 0.5, "sine frequency (Hz), 0.3 or 0.5 in the paper"),
-    Parameter("amplitude_x", 0.02, "forward amplitude (m)"),
-    Parameter("amplitude_z", 0.03, "vertical amplitude (m)"),
-    Parameter("periods", 3.0, "number of sine periods after the ramp"),
-    Parameter("ramp", 1.0, "amplitude ramp-in time (s)"),
+                                     "shrunk CoP region, constraints become active)",
+              choices=VARIANTS),
+    Parameter("frequency", 0.5, "sine frequency (Hz), 0.3 or 0.5 in the paper", low=0.1, high=5.0),
+    Parameter("amplitude_x", 0.02, "forward amplitude (m)",
+              low=-0.3 * Parameter.H, high=0.3 * Parameter.H),
+    Parameter("amplitude_z", 0.03, "vertical amplitude (m)",
+              low=-0.3 * Parameter.H, high=0.3 * Parameter.H),
+    Parameter("periods", 3.0, "number of sine periods after the ramp",
+              low=0.0, low_open=True, high=60.0),
+    Parameter("ramp", 1.0, "amplitude ramp-in time (s)", low=0.0, high=Parameter.MAX_TIME),
     Parameter("active_margin", 0.7, "cop-active: fraction by which the admissible CoP half-sizes "
-                                    "shrink"),
+                                    "shrink", low=0.0, high=1.0, high_open=True),
     Q_ANGULAR,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
-                                    "cop-active"),
+                                    "cop-active", low=0.0, high=Parameter.H),
     ENGINE,
 )
 

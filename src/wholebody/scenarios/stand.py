@@ -17,10 +17,11 @@ from .measures import fallen, sole_slip, tilt_deg
 
 PARAMETERS = (
     duration_parameter(5.0),
-    Parameter("kp", 1000.0, "joint stiffness of the PD (Nm/rad)"),
-    Parameter("kd", 30.0, "joint damping of the PD (Nm s/rad)"),
-    Parameter("friction", 1.0, "floor friction coefficient"),
-    Parameter("drift_tolerance", 0.01, "largest base drift counted as success (m)"),
+    Parameter("kp", 1000.0, "joint stiffness of the PD (Nm/rad)", low=0.0),
+    Parameter("kd", 30.0, "joint damping of the PD (Nm s/rad)", low=0.0),
+    Parameter("friction", 1.0, "floor friction coefficient", low=0.0, low_open=True, high=10.0),
+    Parameter("drift_tolerance", 0.01, "largest base drift counted as success (m)",
+              low=0.0, low_open=True, high=Parameter.H),
 )
 
 

@@ -33,23 +33,31 @@ from .measures import MAX_BASE_DROP_M, feet_in_place, sole_slip, tilt_deg
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
-    Parameter("steps", 2, "number of steps (alternating, the right sole lifted first)"),
-    Parameter("shift_time", 1.0, "duration of each CoG shift (s)"),
-    Parameter("unload_time", 0.3, "duration of the unloading (s)"),
-    Parameter("lift_time", 0.5, "duration of the lift and, again, of the lowering (s)"),
-    Parameter("reload_time", 0.3, "double support after touch-down before the next shift (s)"),
+    Parameter("steps", 2, "number of steps (alternating, the right sole lifted first)",
+              low=1, high=100),
+    Parameter("shift_time", 1.0, "duration of each CoG shift (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("unload_time", 0.3, "duration of the unloading (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("lift_time", 0.5, "duration of the lift and, again, of the lowering (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("reload_time", 0.3, "double support after touch-down before the next shift (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
     Parameter("preload", 0.1, "normal force ramped onto the touched-down sole during the reload, "
-                              "as a fraction of the weight"),
-    Parameter("lift", 0.03, "swing-foot lift height (m)"),
+                              "as a fraction of the weight", low=0.0, high=1.0),
+    Parameter("lift", 0.03, "swing-foot lift height (m)",
+              low=0.0, low_open=True, high=0.5 * Parameter.H),
     Parameter("touchdown_depth", 0.003, "the lowered swing-foot target ends this far below its "
-                                        "lift-off height (m)"),
-    Parameter("settle", 0.5, "simulated time after the final shift back to the middle (s)"),
+                                        "lift-off height (m)", low=0.0, high=0.1 * Parameter.H),
+    Parameter("settle", 0.5, "simulated time after the final shift back to the middle (s)",
+              low=0.0, high=Parameter.MAX_TIME),
     Parameter("contact_kd", 20.0, "damping of the contact velocities in the contact constraint "
-                                  "(1/s; 0: eq. 2 as is)"),
-    Parameter("formulations", "reduced,full", "formulations to run, in this order"),
+                                  "(1/s; 0: eq. 2 as is)", low=0.0),
+    Parameter("formulations", "reduced,full", "formulations to run, in this order",
+              choices=("reduced", "full"), items=str),
     ENGINE,
     Parameter("timing_warmup", 50, "first cycles left out of the timing statistics (plans, "
-                                   "caches)"),
+                                   "caches)", low=0),
 )
 
 

@@ -48,13 +48,18 @@ WINDOW = 2.0  # s after the release over which the tracking is judged
 HORIZONTAL_LIMIT = 0.02  # m
 
 PARAMETERS = (
-    Parameter("release_time", 6.5, "when the stone starts to roll (s; Fig. 6: 6.5 s)"),
-    Parameter("roll_time", 0.25, "how long the stone takes to roll away (s)"),
-    Parameter("depth", 0.06, "stone height = depth of the pit the foot drops into (m)"),
-    Parameter("size", 0.2, "stone (and pit) side length (m)"),
-    Parameter("shift", 0.12, "outward slide of the stone (m)"),
-    Parameter("tilt", 20.0, "roll of the stone about x while it goes (deg)"),
-    Parameter("speed", 0.1, "crawl speed after a 2 s ramp-up (m/s)"),
+    Parameter("release_time", 6.5, "when the stone starts to roll (s; Fig. 6: 6.5 s)",
+              low=3.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("roll_time", 0.25, "how long the stone takes to roll away (s)",
+              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+    Parameter("depth", 0.06, "stone height = depth of the pit the foot drops into (m)",
+              low=0.0, low_open=True, high=0.25 * Parameter.H),
+    Parameter("size", 0.2, "stone (and pit) side length (m)",
+              low=0.13 * Parameter.H, high=0.67 * Parameter.H),
+    Parameter("shift", 0.12, "outward slide of the stone (m)",
+              low=-0.5 * Parameter.H, high=0.5 * Parameter.H),
+    Parameter("tilt", 20.0, "roll of the stone about x while it goes (deg)", low=-90.0, high=90.0),
+    Parameter("speed", 0.1, "crawl speed after a 2 s ramp-up (m/s)", low=0.0, high=5.0),
     DURATION,
     GAIT,
 )

@@ -48,11 +48,13 @@ log = logging.getLogger(__name__)
 
 PARAMETERS = (
     Parameter("joint", "lf_kfe_joint", "the weakened joint (its leg's HAA/HFE are compared)"),
-    Parameter("limit", 26.0, "its torque limit in the WBC (Nm), symmetric"),
+    Parameter("limit", 26.0, "its torque limit in the WBC (Nm), symmetric", low=0.0, low_open=True),
     CRAWL_SPEED,
     RUN_DURATION,
-    Parameter("sweep", "40,60", "further limits (Nm) run for comparison, comma-separated"),
-    Parameter("trunk_tolerance", 0.005, "allowed increase of the trunk RMS errors (m, rad)"),
+    Parameter("sweep", "40,60", "further limits (Nm) run for comparison, comma-separated",
+              low=0.0, low_open=True, items=float),
+    Parameter("trunk_tolerance", 0.005, "allowed increase of the trunk RMS errors (m, rad)",
+              low=0.0, low_open=True, high=1.0),
 )
 
 
