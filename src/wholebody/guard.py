@@ -16,6 +16,8 @@ log = logging.getLogger(__name__)
 #: far below it, so only a wrong problem or a wrong solution gets there
 LIMIT_TOLERANCE = 1e-6
 
+_larger, _max = np.maximum, np.maximum.reduce  # both propagate NaN (np.fmax would drop it)
+
 
 class Outcome(enum.Enum):
     """What one control cycle achieved (``Solution.outcome``; ``Solution.status`` says why).
@@ -46,7 +48,7 @@ def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome:
     Limits with a NaN (a bug upstream: robot files and constructors validate them) give zero
     torque, ``HELD``."""
     if outcome.ok:  # the common case first: one pass, NaN anywhere makes ``excess`` NaN
-        excess = max(np.subtract(tau, upper).max(), np.subtract(lower, tau).max())
+        excess = _max(_larger(np.subtract(tau, upper), np.subtract(lower, tau)))
         if excess <= 0.0:
             return tau, outcome, reason
         if excess <= LIMIT_TOLERANCE:  # the solver's tolerance: clipped, still the optimum
