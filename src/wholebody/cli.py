@@ -3,7 +3,9 @@
 Exit codes: 0 success; 1 the scenario ran but did not meet its success criterion; 2 bad usage
 (unknown robot, scenario, controller or parameter; a parameter value outside its declared range;
 malformed robot file; an output directory that cannot be written), always found before anything
-is simulated; 130 interrupted (Ctrl-C), with a summary.json marked ``"interrupted": true``.
+is simulated; 130 interrupted (Ctrl-C), with a summary.json marked ``"interrupted": true``. A
+simulation that diverges ends the run with exit 1 and a summary naming the time
+(``metrics.diverged_at_s``).
 """
 
 from __future__ import annotations
@@ -120,6 +122,7 @@ def _cmd_run(args) -> int:
     from .robots import load_robot
     from .scenarios import get_scenario
     from .scenarios.base import ScenarioResult
+    from .sim.simulator import SimulationDiverged
 
     try:  # every usage error surfaces here, before anything runs
         scenario = get_scenario(args.scenario)
@@ -163,6 +166,17 @@ def _cmd_run(args) -> int:
         print(f"{scenario.name} on {robot.name} ({controller}): INTERRUPTED after {elapsed:.1f} s; "
               f"{written}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except SimulationDiverged as exc:
+        elapsed = time.perf_counter() - start
+        failed = ScenarioResult(scenario.name, robot.name, controller, False,
+                                {"diverged_at_s": exc.t}, params, [str(exc)], wall_time_s=elapsed)
+        try:
+            written = f"wrote {failed.write(out_dir)}"
+        except OSError as err:
+            written = f"could not write {out_dir / 'summary.json'}: {err.strerror or err}"
+        print(f"{scenario.name} on {robot.name} ({controller}): FAILED: {exc}; {written}",
+              file=sys.stderr)
+        return EXIT_SCENARIO_FAILED
     status = "SUCCESS" if result.success else "FAILED"
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")

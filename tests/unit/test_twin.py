@@ -167,3 +167,19 @@ def test_reset_rejects_a_base_orientation_that_is_no_rotation(robots, quaternion
     q[3:7] = quaternion
     with pytest.raises(ValueError, match=r"q\[3:7\].*unit quaternion"):
         sim.reset(q)
+
+
+def test_a_diverging_step_says_when(robots):
+    """A state MuJoCo cannot integrate (velocities of 1e30): it resets its data; the step raises
+    SimulationDiverged with the time the step started at instead of going on from t = 0."""
+    from wholebody.sim.simulator import SimulationDiverged
+
+    robot = robots["hyq"]
+    sim = Simulator(robot)
+    for _ in range(5):
+        sim.step(np.zeros(robot.na))
+    t = sim.t
+    sim.data.qvel[:] = 1e30
+    with pytest.raises(SimulationDiverged, match=r"diverged at t = 0.005 s") as info:
+        sim.step(np.zeros(robot.na))
+    assert info.value.t == pytest.approx(t)

@@ -23,6 +23,20 @@ from .twin import SimOptions, Twin, build_twin
 
 log = logging.getLogger(__name__)
 
+#: MuJoCo's warnings for a state it cannot integrate; on any of them it resets the simulation
+_DIVERGENCE_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                        mujoco.mjtWarning.mjWARN_BADQACC)
+
+
+class SimulationDiverged(RuntimeError):
+    """MuJoCo found NaN, inf or huge values in the state or its accelerations during a step (and
+    reset its data); ``t`` is the simulated time at which that step started."""
+
+    def __init__(self, t: float, what: str):
+        self.t = t
+        super().__init__(f"the simulation diverged at t = {t:.3f} s ({what}): the torques or the "
+                         f"robot model drove the state to NaN/inf")
+
 
 @dataclass
 class SimLog:
@@ -144,7 +158,8 @@ class Simulator:
 
     # ------------------------------------------------------------------ stepping
     def step(self, tau) -> None:
-        """Advance one time step with the commanded actuated-joint torques ``tau``."""
+        """Advance one time step with the commanded actuated-joint torques ``tau``.
+        :class:`SimulationDiverged` (with the time) if MuJoCo cannot integrate the state."""
         robot = self.robot
         tau = check_vector(tau, robot.na, "tau")
         q, v = self.state()
@@ -169,7 +184,16 @@ class Simulator:
             self.log.tau_applied.append(clipped)
             self.log.contact_wrenches.append(self.contact_wrenches_array())
             self.log.push_force.append(push_force)
+        t_start = self.data.time
         mujoco.mj_step(self.model, self.data)
+        if self.data.time < t_start + 0.5 * self.dt:  # MuJoCo reset its data: it diverged
+            raise SimulationDiverged(t_start, self._divergence_reason())
+
+    def _divergence_reason(self) -> str:
+        names = {mujoco.mjtWarning.mjWARN_BADQPOS: "positions", mujoco.mjtWarning.mjWARN_BADQVEL:
+                 "velocities", mujoco.mjtWarning.mjWARN_BADQACC: "accelerations"}
+        bad = [names[w] for w in _DIVERGENCE_WARNINGS if self.data.warning[w].number]
+        return "MuJoCo: NaN, inf or huge " + (" and ".join(bad) or "values")
 
     # ------------------------------------------------------------------ contact forces
     def contact_wrenches_array(self) -> np.ndarray:
