@@ -263,6 +263,10 @@ Q_ANGULAR = Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 
                       low=0.0, low_open=True)
 
 
+#: the range of a phase duration or a time span: ``Parameter(name, 1.0, help, **TIME_SPAN)``
+TIME_SPAN = {"low": 0.0, "low_open": True, "high": Parameter.MAX_TIME}
+
+
 def duration_parameter(default: float, help: str = "simulated time (s)",
                        low_open: bool = True) -> Parameter:
     """The ``duration`` parameter (simulated time) with a scenario's default: in

@@ -20,7 +20,7 @@ import numpy as np
 from ..control.passive import ENGINES
 from ..planning.trunk import VelocityCommand
 from ..report.locomotion_figures import crawl_tracking_figure
-from .base import Parameter, Scenario, ScenarioResult
+from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
 from .locomotion import GAIT, check_gait, check_quadruped, run_gait
 
@@ -29,9 +29,9 @@ PARAMETERS = (
               low=0.0, high=5.0),
     Parameter("speed_end", 0.15, "forward speed at the end of the ramp (m/s)", low=0.0, high=5.0),
     Parameter("ramp_time", 10.0, "duration of the speed ramp (s), after 1 s of standing",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("duration", 12.0, "simulated time (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     GAIT,
     Parameter("engine", "python", "passive WBC engine: python, or native (the compiled cycle)",
               choices=ENGINES),

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..report.locomotion_figures import friction_mismatch_figure
 from ..sim.environment import Environment
-from .base import Parameter, Scenario, ScenarioResult
+from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import IMPACT_SKIP, outcome, settled_stance, slip_events
 from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_positive, check_quadruped, run_gait,
                          steady_command)
@@ -63,7 +63,7 @@ PARAMETERS = (
     Parameter("slip_speed", 0.02, "slip-event threshold on the contact-point speed (m/s)",
               low=0.0, low_open=True, high=5.0),
     Parameter("slip_time", 0.02, "slip-event minimum duration (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("slip_bound", 0.25, "largest per-stance slip (m) accepted as 'bounded'",
               low=0.0, low_open=True, high=Parameter.H),
 )

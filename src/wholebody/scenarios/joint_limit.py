@@ -49,7 +49,7 @@ import numpy as np
 
 from ..report.locomotion_figures import joint_limit_figure
 from ..robot import FREE_FLYER_NQ
-from .base import Parameter, Scenario, ScenarioResult
+from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
 from .locomotion import (CRAWL_SPEED, check_joint, check_positive, check_quadruped, run_gait,
                          steady_command)
@@ -64,7 +64,7 @@ PARAMETERS = (
               low=-np.pi, high=np.pi),
     CRAWL_SPEED,
     Parameter("duration", 8.5, "simulated time per run (s); the crawl starts at 1 s",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("slack_weight", 1e4, "slack weight alpha of eq. 33 (the PassiveWBC default)",
               low=0.0, low_open=True),
     Parameter("low_slack_weight", 10.0, "a lower alpha, run for comparison",

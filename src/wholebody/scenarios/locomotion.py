@@ -29,7 +29,7 @@ from ..planning.terrain import Terrain
 from ..planning.trunk import VelocityCommand
 from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
-from .base import Parameter
+from .base import TIME_SPAN, Parameter
 from .loop import run_closed_loop
 
 CONTROLLERS = ("passive", "quasi-static")
@@ -45,9 +45,9 @@ CRAWL_SPEED = Parameter("speed", 0.11,
                         "forward crawl speed (m/s), reached 1 s after the gait starts",
                         low=0.0, low_open=True, high=5.0)
 DURATION = Parameter("duration", 10.0, "simulated time (s)",
-                     low=0.0, low_open=True, high=Parameter.MAX_TIME)
+                     **TIME_SPAN)
 RUN_DURATION = Parameter("duration", 10.0, "simulated time per run (s); the crawl starts at 1 s",
-                         low=0.0, low_open=True, high=Parameter.MAX_TIME)
+                         **TIME_SPAN)
 
 
 def check_quadruped(robot, scenario: str) -> None:

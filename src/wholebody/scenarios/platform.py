@@ -60,7 +60,8 @@ from ..planning.blend import WaypointMotion
 from ..report.balance_figures import balance_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, check_biped, format_mm
+from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_biped,
+                   format_mm)
 from .loop import run_closed_loop
 from .measures import BalanceMonitor, limit_notes, sole_midpoint
 
@@ -72,7 +73,7 @@ PARAMETERS = (
     Parameter("yaw", 15.0, "rotation of the rotating moves (deg)", low=-90.0, high=90.0),
     Parameter("move_time", 1.0, "duration of each minimum-jerk move (s); peak acceleration "
                                 "5.77 distance / move_time^2",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("moves", 5, "number of moves of the sequence 0, +d, (0, +yaw), -d, (0, -yaw), 0 "
                           "(1-5)", low=1, high=5),
     Parameter("start", 0.5, "time of the first move (s)", low=0.0, high=Parameter.MAX_TIME),

@@ -12,7 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..report.balance_figures import push_figure
-from .base import ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, duration_parameter
+from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
+                   duration_parameter)
 from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, check_push,
                      push_trial)
 
@@ -25,7 +26,7 @@ PARAMETERS = (
               low=-Parameter.H, high=Parameter.H),
     Parameter("peak_force", 100.0, "peak of the half-sine force (N)", low=0.0),
     Parameter("push_duration", 0.1, "duration of the push (s), 0.05-0.15 in the paper",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("start", 0.5, "time of the push (s)", low=0.0, high=Parameter.MAX_TIME),
     duration_parameter(4.0),
     Q_ANGULAR,

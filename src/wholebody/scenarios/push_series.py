@@ -15,8 +15,8 @@ import numpy as np
 from tqdm import tqdm
 
 from ..report.balance_figures import push_series_figure
-from .base import (ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, duration_parameter,
-                   parse_list)
+from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
+                   duration_parameter, parse_list)
 from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
                      check_locations, check_push, push_trial)
 
@@ -26,7 +26,7 @@ PARAMETERS = (
     Parameter("forces", "60,100,140,180", "comma-separated peak forces (N), increasing",
               low=0.0, low_open=True, items=float),
     Parameter("push_duration", 0.1, "duration of each push (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     duration_parameter(3.5, "simulated time per push (s)"),
     Q_ANGULAR,
     ANGULAR_WEIGHT,

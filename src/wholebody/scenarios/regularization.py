@@ -32,7 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..report.locomotion_figures import regularization_figure
-from .base import Parameter, Scenario, ScenarioResult
+from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .locomotion import check_gait, check_quadruped, parse_positive_floats, run_gait, steady_command
 
 log = logging.getLogger(__name__)
@@ -45,9 +45,9 @@ PARAMETERS = (
     Parameter("gait", "stand", "stand or crawl", choices=("stand", "crawl")),
     Parameter("speed", 0.11, "crawl speed (m/s) when gait=crawl", low=0.0, high=5.0),
     Parameter("duration", 2.0, "simulated time per run (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("window", 0.5, "averaging window at the end of each run (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
 )
 
 

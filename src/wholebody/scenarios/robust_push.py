@@ -33,7 +33,8 @@ from ..report.balance_figures import robust_push_location_figure, robust_push_su
 from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
-from .base import ENGINE, Parameter, Scenario, ScenarioResult, duration_parameter, parse_list
+from .base import (ENGINE, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter,
+                   parse_list)
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
 from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
@@ -69,7 +70,7 @@ PARAMETERS = (
     Parameter("fraction", 0.7, "the push is this fraction of the nominal force",
               low=0.0, low_open=True, high=10.0),
     Parameter("push_duration", 0.1, "push duration (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("seeds", 5, "number of mismatch draws per location", low=1, high=1000),
     Parameter("first_seed", 0, "seed of the first draw", low=0, high=2 ** 32 - 1),
     Parameter("mass_noise", 0.1, "link mass/inertia factor drawn in [1 - x, 1 + x]",

@@ -26,7 +26,7 @@ from ..control.contact_switch import ContactSwitch, ContactSwitchConfig, Timelin
 from ..report.balance_figures import fig11, single_support_figure
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..sim.simulator import Simulator
-from .base import Q_ANGULAR, Parameter, Scenario, ScenarioResult, duration_parameter
+from .base import Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter
 from .loop import run_closed_loop
 from .measures import (COG_TOLERANCE_M, RECOVERY_WINDOW_S, cog_recovery, cop_in_sole,
                        feet_in_place, sole_slip, tilt_deg)
@@ -37,11 +37,11 @@ log = logging.getLogger(__name__)
 PARAMETERS = (
     Parameter("stance", "left_sole", "contact kept (the other sole is lifted)"),
     Parameter("shift_time", 2.0, "duration of the CoG shift (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("unload_time", 0.5, "duration of the unloading (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("lift_time", 1.0, "duration of the swing-foot lift (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("lift", 0.10, "swing-foot lift height (m)",
               low=0.0, low_open=True, high=0.5 * Parameter.H),
     Parameter("push_forces", "150", "comma-separated peak forces (N) of the pushes in single "
@@ -51,11 +51,11 @@ PARAMETERS = (
               choices=tuple(LOCATIONS)),
     Parameter("push_duration", 0.06, "their duration (s); 150 N x 0.06 s half-sine = 5.7 Ns "
                                      "(the paper: 4.5-5.8 Ns)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("push_start", 1.0, "first push, seconds after the lift ends",
               low=0.0, high=Parameter.MAX_TIME),
     Parameter("push_interval", 3.0, "time between pushes (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("sine_time", 8.0, "duration of the joint-space leg swinging (s); 0: none",
               low=0.0, high=Parameter.MAX_TIME),
     Parameter("sine_frequency", 0.25, "frequency of the hip and knee sines (Hz)",
@@ -74,7 +74,7 @@ PARAMETERS = (
               low=0.0),
     Parameter("sine_push_location", "hip-front", "its push point", choices=tuple(LOCATIONS)),
     Parameter("sine_push_duration", 0.06, "its duration (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("sine_push_at", 3.0, "its time, seconds after the swinging starts",
               low=0.0, high=Parameter.MAX_TIME),
     Parameter("settle", 1.0, "simulated time after the last phase (s)",
@@ -83,7 +83,7 @@ PARAMETERS = (
                        low_open=False),
     Parameter("recovery_time", RECOVERY_WINDOW_S, "a push is recovered if the CoG is back within 5 mm of its "
                                     "reference this long after it (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Q_ANGULAR,
     Parameter("lqr_blend", True, "LQR: blend the gains during the unloading (Sect. 3.2 remark); "
                                  "false: switch them at the contact switch"),

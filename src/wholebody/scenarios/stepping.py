@@ -26,7 +26,7 @@ import numpy as np
 from ..control.stepping import Stepping, SteppingConfig
 from ..report.balance_figures import stepping_timing_figure
 from ..sim.simulator import Simulator
-from .base import ENGINE, Parameter, Scenario, ScenarioResult, check_engine
+from .base import ENGINE, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_engine
 from .loop import run_closed_loop
 from .measures import MAX_BASE_DROP_M, feet_in_place, sole_slip, tilt_deg
 
@@ -36,13 +36,13 @@ PARAMETERS = (
     Parameter("steps", 2, "number of steps (alternating, the right sole lifted first)",
               low=1, high=100),
     Parameter("shift_time", 1.0, "duration of each CoG shift (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("unload_time", 0.3, "duration of the unloading (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("lift_time", 0.5, "duration of the lift and, again, of the lowering (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("reload_time", 0.3, "double support after touch-down before the next shift (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("preload", 0.1, "normal force ramped onto the touched-down sole during the reload, "
                               "as a fraction of the weight", low=0.0, high=1.0),
     Parameter("lift", 0.03, "swing-foot lift height (m)",

@@ -41,7 +41,8 @@ from ..planning.blend import WaypointMotion
 from ..report.balance_figures import balance_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, check_biped, format_mm
+from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_biped,
+                   format_mm)
 from .loop import run_closed_loop
 from .measures import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, MAX_TILT_DEG,
                        BalanceMonitor, limit_notes, sole_midpoint)
@@ -60,7 +61,7 @@ PARAMETERS = (
     Parameter("elevation", 0.069, "rise of the robot from the lowest to the highest slope (m)",
               low=0.0, low_open=True, high=0.5 * Parameter.H),
     Parameter("move_time", 0.8, "duration of each minimum-jerk slope change (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("swings", 5, "tilt mode: number of moves of 0, max, min, max, min, 0 (1-5)",
               low=1, high=5),
     Parameter("hold", 0.5, "drop mode: time held at the top before the release (s)",

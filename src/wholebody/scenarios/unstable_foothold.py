@@ -37,7 +37,7 @@ from ..planning.planner import GaitPlanner
 from ..planning.swing import quintic_blend
 from ..report.locomotion_figures import unstable_foothold_figure
 from ..sim.environment import Box, Environment, Platform
-from .base import Parameter, Scenario, ScenarioResult
+from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
 from .locomotion import DURATION, GAIT, check_gait, make_schedule, ramped_command, run_gait
 
@@ -51,7 +51,7 @@ PARAMETERS = (
     Parameter("release_time", 6.5, "when the stone starts to roll (s; Fig. 6: 6.5 s)",
               low=3.0, low_open=True, high=Parameter.MAX_TIME),
     Parameter("roll_time", 0.25, "how long the stone takes to roll away (s)",
-              low=0.0, low_open=True, high=Parameter.MAX_TIME),
+              **TIME_SPAN),
     Parameter("depth", 0.06, "stone height = depth of the pit the foot drops into (m)",
               low=0.0, low_open=True, high=0.25 * Parameter.H),
     Parameter("size", 0.2, "stone (and pit) side length (m)",
