@@ -330,7 +330,7 @@ def test_summary_says_not_interrupted():
     assert summary["interrupted"] is False
 
 
-def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys):
+def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys, monkeypatch):
     """Solo12 (example-robot-data) standing on the default joint gains, which are far too stiff for
     a 2.5 kg robot: MuJoCo diverges within the first hundredth of a second. The run ends with exit 1
     and a summary that says when, not with an error from downstream."""
@@ -341,6 +341,7 @@ def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys):
                          f'  {{ name = "{leg.lower()}", frame = "{leg}_FOOT", type = "point", radius = 0.0 }},\n'
                          for leg in ("FL", "FR", "HL", "HR")) + "]\n")
     out = tmp_path / "run"
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes MUJOCO_LOG.TXT into the working directory
     assert main(["run", "stand", "--robot", str(robot), "--out", str(out), "--no-progress"]) == 1
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success"] is False and 0.0 < summary["metrics"]["diverged_at_s"] < 0.1
