@@ -169,11 +169,12 @@ def test_reset_rejects_a_base_orientation_that_is_no_rotation(robots, quaternion
         sim.reset(q)
 
 
-def test_a_diverging_step_says_when(robots):
+def test_a_diverging_step_says_when(robots, tmp_path, monkeypatch):
     """A state MuJoCo cannot integrate (velocities of 1e30): it resets its data; the step raises
     SimulationDiverged with the time the step started at instead of going on from t = 0."""
     from wholebody.sim.simulator import SimulationDiverged
 
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes MUJOCO_LOG.TXT into the working directory
     robot = robots["hyq"]
     sim = Simulator(robot)
     for _ in range(5):
