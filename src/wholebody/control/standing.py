@@ -13,17 +13,9 @@ import numpy as np
 
 from ..guard import Outcome, guard_torque
 from ..robot import FREE_FLYER_NV, Robot
+from ..tasks.base import check_gain
 from ..validation import finite_array
 from .base import ControlResult
-
-
-def _joint_gain(value, name: str, na: int) -> np.ndarray:
-    """A joint PD gain: a number or one per actuated joint, finite and >= 0."""
-    arr = finite_array(value, name, nonnegative=True)
-    if arr.shape not in ((), (na,)):
-        raise ValueError(f"{name}: expected a number or {na} numbers (one per joint), got shape "
-                         f"{arr.shape}")
-    return np.broadcast_to(arr, (na,)).copy()
 
 
 class StandingController:
@@ -37,8 +29,8 @@ class StandingController:
     def __init__(self, robot: Robot, kp: float | np.ndarray = 1000.0,
                  kd: float | np.ndarray = 30.0, q_ref: np.ndarray | None = None):
         self.robot = robot
-        self.kp = _joint_gain(kp, "kp", robot.na)
-        self.kd = _joint_gain(kd, "kd", robot.na)
+        self.kp = np.broadcast_to(check_gain(kp, "kp", robot.na, matrix=False), robot.na).copy()
+        self.kd = np.broadcast_to(check_gain(kd, "kd", robot.na, matrix=False), robot.na).copy()
         q_ref = robot.q_ref if q_ref is None else finite_array(q_ref, "q_ref", shape=(robot.nq,))
         self.q_joint_ref = q_ref[7:].copy()
 
