@@ -104,18 +104,8 @@ def scalar_rule(*, low: float = -np.inf, high: float = np.inf, low_open: bool = 
                 high_open: bool = False, allow_inf: bool = False) -> Rule:
     """A finite float in the interval (``allow_inf``: +inf is also accepted, e.g. f_max)."""
     def rule(value, field, obj=None):
-        x = _plain_float(value)
-        if x is None:
-            try:
-                x = float(np.asarray(value, dtype=float)) if np.ndim(value) == 0 else None
-            except (TypeError, ValueError):
-                x = None
-        if x is not None:
-            if allow_inf and x == math.inf:
-                return math.inf
-            if (math.isfinite(x) and (x > low if low_open else x >= low)
-                    and (x < high if high_open else x <= high)):
-                return x
+        if allow_inf and isinstance(value, float) and value == math.inf:
+            return math.inf
         return number(value, field, low=low, high=high, low_open=low_open, high_open=high_open)
     return rule
 
