@@ -118,6 +118,17 @@ def _prepare_output(out_dir: Path) -> Path:
     return summary
 
 
+def _report_cut_short(result, out_dir: Path, what: str, mark: str = "") -> None:
+    """Write the summary of a run that ended early and say so on stderr (also if it cannot be
+    written)."""
+    try:
+        written = f"wrote {result.write(out_dir)}{mark}"
+    except OSError as exc:
+        written = f"could not write {out_dir / 'summary.json'}: {exc.strerror or exc}"
+    print(f"{result.scenario} on {result.robot} ({result.controller}): {what}; {written}",
+          file=sys.stderr)
+
+
 def _cmd_run(args) -> int:
     from .robots import load_robot
     from .scenarios import get_scenario
@@ -159,23 +170,14 @@ def _cmd_run(args) -> int:
         cut = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
                              [f"interrupted (Ctrl-C) after {elapsed:.1f} s of wall time; no "
                               f"metrics or figures"], wall_time_s=elapsed, interrupted=True)
-        try:
-            written = f"wrote {cut.write(out_dir)} (interrupted: true)"
-        except OSError as exc:
-            written = f"could not write {out_dir / 'summary.json'}: {exc.strerror or exc}"
-        print(f"{scenario.name} on {robot.name} ({controller}): INTERRUPTED after {elapsed:.1f} s; "
-              f"{written}", file=sys.stderr)
+        _report_cut_short(cut, out_dir, f"INTERRUPTED after {elapsed:.1f} s",
+                          " (interrupted: true)")
         return EXIT_INTERRUPTED
     except SimulationDiverged as exc:
-        elapsed = time.perf_counter() - start
         failed = ScenarioResult(scenario.name, robot.name, controller, False,
-                                {"diverged_at_s": exc.t}, params, [str(exc)], wall_time_s=elapsed)
-        try:
-            written = f"wrote {failed.write(out_dir)}"
-        except OSError as err:
-            written = f"could not write {out_dir / 'summary.json'}: {err.strerror or err}"
-        print(f"{scenario.name} on {robot.name} ({controller}): FAILED: {exc}; {written}",
-              file=sys.stderr)
+                                {"diverged_at_s": exc.t}, params, [str(exc)],
+                                wall_time_s=time.perf_counter() - start)
+        _report_cut_short(failed, out_dir, f"FAILED: {exc}")
         return EXIT_SCENARIO_FAILED
     status = "SUCCESS" if result.success else "FAILED"
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
