@@ -22,7 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from .guard import Outcome, guard_torque
-from .robot import FREE_FLYER_NV, Robot
+from .robot import FREE_FLYER_NV, GRAVITY, Robot
 from .solvers import Level, solve_hierarchy
 from .solvers.compiled_cascade import BoundCascade
 from .solvers.hierarchy import analytic_first_level
@@ -175,7 +175,7 @@ class Formulation:
         """s with x = s * x_scaled (see class docstring)."""
         key = (variables.nv, variables.n_lambda)
         if self._scales_key != key:
-            parts = [np.ones(variables.nv), np.full(variables.n_lambda, self.robot.mass * 9.81)]
+            parts = [np.ones(variables.nv), np.full(variables.n_lambda, self.robot.mass * GRAVITY)]
             if not self.reduced:
                 parts.append(self._tau_scale)
             self._scales, self._scales_key = np.concatenate(parts), key

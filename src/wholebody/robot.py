@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 
 FREE_FLYER_NQ = 7
 FREE_FLYER_NV = 6
-GRAVITY = 9.81
+GRAVITY = 9.81  # m/s^2, the magnitude of the twin's and the models' gravity
 # an effort limit above this many times the robot's weight times 1 m is likely a URDF placeholder
 PLACEHOLDER_TORQUE_FACTOR = 10.0
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-GRAVITY = 9.81
+from ..robot import GRAVITY
 
 
 class MomentumObserver:

@@ -39,6 +39,7 @@ import pinocchio as pin
 from ..control.balance import MomentumBalance, SoleFrameReference, lqr_q
 from ..planning.blend import WaypointMotion
 from ..report.balance_figures import balance_figure
+from ..robot import GRAVITY
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_biped,
@@ -47,7 +48,6 @@ from .loop import run_closed_loop
 from .measures import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, MAX_TILT_DEG,
                        BalanceMonitor, limit_notes, sole_midpoint)
 
-GRAVITY = 9.81
 
 PARAMETERS = (
     Parameter("plane", "sagittal", "plane of the board motion: sagittal or lateral",

@@ -12,10 +12,10 @@ import numpy as np
 import pinocchio as pin
 
 from ..planning.trunk import TrunkState
+from ..robot import GRAVITY
 from ..validation import finite_array
 from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, flag
 
-GRAVITY = 9.81
 
 
 def _diagonal_gain(value, field, obj=None) -> np.ndarray:
