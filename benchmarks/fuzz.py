@@ -14,9 +14,17 @@ For every (robot, controller, engine, state family) it counts
   controllers do not compute q̈ (their qdd is zero or absent): finiteness and limits only;
 * ``exceptions``: a controller raised on a finite state (the first message is kept);
 * the outcomes (SOLVED/FALLBACK/CLIPPED/HELD; a result without ``outcome`` counts ok/not-ok);
+* for the cascade controllers (MomentumBalance), the level QPs handed to a backend and the share
+  DAQP solved (the rest went to the fallback backend, quadprog, or failed);
 * for controllers with two engines, the disagreement on the same state and plan: max
   |τ_python − τ_native|, the fraction of states above 1e-6 Nm and above 1 Nm, and the fraction
-  where ``ok`` differs (known open defect: reported, not a failure).
+  where ``ok`` differs. Every state above 1e-6 Nm (or whose ``ok`` differs) is solved again by
+  both engines with (q, v) changed by 1e-12 relative (:func:`perturbed`): if an engine's torque
+  then moves by more than 1e-7 Nm the state is *ill-posed* — its solution is not determined to
+  1e-6 Nm by double-precision data (nearly dependent active rows in a level QP, or a backend
+  that fails on one side of rounding) and no two engines that round differently can agree on
+  it. The "well-posed" columns count the disagreements on the other states: the engines are
+  meant to agree there to 1e-6 Nm (reported, not a failure of the exit code).
 
 Robots and controllers: talos14 — ``pd`` and ``lqr`` (MomentumBalance, built as the push scenario
 builds it: ``scenarios.pushes.controller_options``, all contacts active); hyq — ``passive``
@@ -86,6 +94,11 @@ CONTROLLER_NAMES = ("pd", "lqr", "passive", "quasi-static", "standing")
 #: tolerance (DAQP's primal tolerance in the formulation's scaled units, forces in m g).
 DYNAMICS_TOLERANCE = 1e-6
 DISAGREE_SMALL, DISAGREE_LARGE = 1e-6, 1.0  # Nm
+#: relative size of the perturbation of (q, v) that tells a well-posed state from an ill-posed one
+PERTURBATION = 1e-12
+#: a state is ill-posed when that perturbation moves an engine's torque by more than this (Nm):
+#: a tenth of DISAGREE_SMALL, since the two engines' rounding differs by less than PERTURBATION
+ILL_POSED = 0.1 * DISAGREE_SMALL
 
 #: state families: roll/pitch bound (deg), joint sampling, base position noise (m), velocity factor
 FAMILY_SPECS = {
@@ -292,6 +305,8 @@ class Stats:
     max_limit_excess: float = 0.0  # Nm
     max_residual_ok: float = 0.0  # N/Nm, over ok solutions
     seconds: float = 0.0  # in the controller's call
+    qps: int = 0  # level QPs handed to a backend (cascade controllers: ``timings["qps"]``)
+    daqp_failed: int = 0  # of them, those DAQP did not solve (a fallback then solved, or none)
     first: dict = field(default_factory=dict)  # category -> {"index", "message"}
 
     def note(self, category: str, index: int, message: str) -> None:
@@ -299,7 +314,8 @@ class Stats:
             self.first[category] = {"index": int(index), "message": message}
 
     def merge(self, other: "Stats") -> None:
-        for name in ("states", "nan", "limit", "unflagged", "exceptions", "seconds"):
+        for name in ("states", "nan", "limit", "unflagged", "exceptions", "seconds", "qps",
+                     "daqp_failed"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         for key, n in other.outcomes.items():
             self.outcomes[key] = self.outcomes.get(key, 0) + n
@@ -322,17 +338,65 @@ class Disagreement:
     above_large: int = 0  # > DISAGREE_LARGE
     ok_differs: int = 0
     above_small_solved: int = 0  # > DISAGREE_SMALL with both engines SOLVED (no fallback, clip)
+    # of the states above DISAGREE_SMALL or whose ok differs: those whose solution moves by more
+    # than ILL_POSED under a PERTURBATION of (q, v) (:func:`sensitivity`), and the rest
+    ill_posed: int = 0
+    above_small_well_posed: int = 0
+    ok_differs_well_posed: int = 0
+    max_diff_well_posed: float = 0.0  # Nm, over every state not found ill-posed
     worst_index: int = -1
     first_ok_differs: int = -1
+    first_well_posed: int = -1  # first state above DISAGREE_SMALL that is not ill-posed
 
     def merge(self, other: "Disagreement") -> None:
-        for name in ("states", "above_small", "above_large", "ok_differs", "above_small_solved"):
+        for name in ("states", "above_small", "above_large", "ok_differs", "above_small_solved",
+                     "ill_posed", "above_small_well_posed", "ok_differs_well_posed"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.max_diff_well_posed = max(self.max_diff_well_posed, other.max_diff_well_posed)
         if other.max_diff > self.max_diff or self.worst_index < 0:
             self.max_diff, self.worst_index = max(self.max_diff, other.max_diff), other.worst_index
+        if other.first_well_posed >= 0 and (self.first_well_posed < 0
+                                            or other.first_well_posed < self.first_well_posed):
+            self.first_well_posed = other.first_well_posed
         if other.first_ok_differs >= 0 and (self.first_ok_differs < 0
                                             or other.first_ok_differs < self.first_ok_differs):
             self.first_ok_differs = other.first_ok_differs
+
+
+def perturbed(q, v, index: int, size: float = PERTURBATION):
+    """(q, v) with the joint angles and all velocities scaled by 1 + size ξ (ξ standard normal,
+    drawn from ``index``): a change of the problem's data near rounding level."""
+    rng = np.random.default_rng([int(index), 12])
+    q2, v2 = q.copy(), v * (1.0 + size * rng.standard_normal(v.size))
+    q2[7:] *= 1.0 + size * rng.standard_normal(q2.size - 7)
+    return q2, v2
+
+
+def sensitivity(runners, q, v, plan, index: int, taus) -> float:
+    """How far the torque of each of ``runners`` moves when (q, v) are :func:`perturbed` (max over
+    the engines, Nm; inf if one raises). Above ``ILL_POSED`` the state has no solution that is
+    unique at double precision: its torque depends on the rounding of the data (a level QP whose
+    active rows are nearly dependent, or a backend that fails on one side of rounding and not
+    on the other), and two engines that round differently cannot agree on it."""
+    q2, v2 = perturbed(q, v, index)
+    worst = 0.0
+    for runner in runners:
+        try:
+            tau = np.asarray(runner.run(q2, v2, plan).tau, dtype=float)
+        except Exception:  # noqa: BLE001 - counted by the main pass already
+            return math.inf
+        diff = float(np.abs(tau - taus[runner.controller, runner.engine][0]).max())
+        worst = max(worst, math.inf if diff != diff else diff)
+    return worst
+
+
+def daqp_failures(result) -> int:
+    """The level QPs of a cascade result that DAQP did not solve: its status names DAQP's
+    failure once per such level ("level 2 ('level 3'): daqp: infeasible (-1); solved with
+    quadprog")."""
+    if "qps" not in getattr(result, "timings", {}):
+        return 0
+    return str(result.status).count("'): daqp: ")  # after the level's name
 
 
 def outcome_key(result) -> str:
@@ -347,6 +411,8 @@ def check(stats: Stats, runner: Runner, dyn: DynamicsCheck, index: int, q, v, re
     robot = runner.robot
     key = outcome_key(result)
     stats.outcomes[key] = stats.outcomes.get(key, 0) + 1
+    stats.qps += int(getattr(result, "timings", {}).get("qps", 0))
+    stats.daqp_failed += daqp_failures(result)
     tau = np.asarray(result.tau, dtype=float)
     if tau.shape != (robot.na,) or not np.isfinite(tau).all():
         stats.nan += 1
@@ -424,6 +490,18 @@ def fuzz_chunk(robot_name: str, family: str, seed: int, start: int, stop: int,
                 d.ok_differs += 1
                 if d.first_ok_differs < 0:
                     d.first_ok_differs = index
+            ill = False
+            if diff > DISAGREE_SMALL or a[1] != b[1]:
+                pair = [r for r in runners if r.controller == name]
+                ill = sensitivity(pair, q, v, plan, index, taus) > ILL_POSED
+                d.ill_posed += ill
+                if not ill:
+                    d.above_small_well_posed += diff > DISAGREE_SMALL
+                    d.ok_differs_well_posed += a[1] != b[1]
+                    if diff > DISAGREE_SMALL and d.first_well_posed < 0:
+                        d.first_well_posed = index
+            if not ill:
+                d.max_diff_well_posed = max(d.max_diff_well_posed, diff)
     return {"stats": [asdict(s) for s in stats.values()],
             "disagreement": [asdict(d) for d in disagreement.values()]}
 
@@ -433,15 +511,16 @@ def _chunk(args):
 
 
 def fuzz(states: int, seed: int = 0, robots=ROBOTS, controllers=CONTROLLER_NAMES,
-         families=FAMILIES, engines=("python", "native"), jobs: int = 1) -> dict:
-    """``states`` states per (robot, family): merged {"stats", "disagreement", "wall_time_s"}."""
+         families=FAMILIES, engines=("python", "native"), jobs: int = 1, start: int = 0) -> dict:
+    """``states`` states per (robot, family), indices ``start`` .. ``start + states - 1``: merged
+    {"stats", "disagreement", "wall_time_s"}."""
     t0 = time.perf_counter()
     tasks = []
     for robot_name in robots:
         if not any(c in CONTROLLERS[robot_name] for c in controllers):
             continue
         for family in families:
-            edges = np.linspace(0, states, max(1, min(jobs, states)) + 1).astype(int)
+            edges = start + np.linspace(0, states, max(1, min(jobs, states)) + 1).astype(int)
             tasks += [(robot_name, family, seed, int(a), int(b), tuple(controllers),
                        tuple(engines)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
     if jobs > 1 and len(tasks) > 1:
@@ -450,6 +529,13 @@ def fuzz(states: int, seed: int = 0, robots=ROBOTS, controllers=CONTROLLER_NAMES
             parts = pool.map(_chunk, tasks)
     else:
         parts = [_chunk(t) for t in tasks]
+    return {"seed": seed, "states_per_family": states, "start": start, **merge(parts),
+            "wall_time_s": time.perf_counter() - t0}
+
+
+def merge(parts) -> dict:
+    """{"stats", "disagreement"} of several chunks or reports (of the same seed) summed per
+    (robot, controller, engine, family)."""
     stats: dict[tuple, Stats] = {}
     disagreement: dict[tuple, Disagreement] = {}
     for part in parts:
@@ -461,10 +547,8 @@ def fuzz(states: int, seed: int = 0, robots=ROBOTS, controllers=CONTROLLER_NAMES
             d = Disagreement(**entry)
             key = (d.robot, d.controller, d.family)
             disagreement.setdefault(key, Disagreement(*key)).merge(d)
-    return {"seed": seed, "states_per_family": states,
-            "stats": [asdict(s) for s in stats.values()],
-            "disagreement": [asdict(d) for d in disagreement.values()],
-            "wall_time_s": time.perf_counter() - t0}
+    return {"stats": [asdict(s) for s in stats.values()],
+            "disagreement": [asdict(d) for d in disagreement.values()]}
 
 
 # ------------------------------------------------------------------------------------ report
@@ -478,27 +562,34 @@ def _outcomes(outcomes: dict) -> str:
 def table(report: dict) -> str:
     """The report as text tables."""
     lines = [f"{'robot':<8} {'controller':<12} {'engine':<7} {'family':<12} {'states':>6} "
-             f"{'NaN':>4} {'limit':>5} {'unflag':>6} {'exc':>4} {'ms/state':>8}  "
-             f"outcomes (S solved, F fallback, C clipped, H held)"]
+             f"{'NaN':>4} {'limit':>5} {'unflag':>6} {'exc':>4} {'ms/state':>8} "
+             f"{'level QPs':>9} {'by DAQP':>8}  outcomes (S solved, F fallback, C clipped, H held)"]
     for s in report["stats"]:
         ms = 1e3 * s["seconds"] / max(s["states"], 1)
+        qps = s.get("qps", 0)
+        by_daqp = f"{1 - s.get('daqp_failed', 0) / qps:.1%}" if qps else "-"
         lines.append(f"{s['robot']:<8} {s['controller']:<12} {s['engine']:<7} {s['family']:<12} "
                      f"{s['states']:>6} {s['nan']:>4} {s['limit']:>5} "
                      f"{s['unflagged'] if s['checks_dynamics'] else '-':>6} "
-                     f"{s['exceptions']:>4} {ms:>8.2f}  {_outcomes(s['outcomes'])}")
+                     f"{s['exceptions']:>4} {ms:>8.2f} {qps if qps else '-':>9} {by_daqp:>8}  "
+                     f"{_outcomes(s['outcomes'])}")
     if report["disagreement"]:
-        lines += ["", "engine disagreement |tau_python - tau_native| "
-                      "(known open defect; reported, not asserted)",
+        lines += ["", "engine disagreement |tau_python - tau_native|; 'ill-posed': the state's "
+                      f"torque moves by > {ILL_POSED:g} Nm when (q, v) change by "
+                      f"{PERTURBATION:g} relative; 'well-posed' columns: the other states",
                   f"{'robot':<8} {'controller':<12} {'family':<12} {'states':>6} "
                   f"{'max Nm':>10} {'>1e-6':>7} {'>1 Nm':>7} {'ok differs':>10} "
-                  f"{'>1e-6 both S':>12}  worst state, first ok-differs state"]
+                  f"{'>1e-6 both S':>12} {'ill-posed':>9} {'well-posed: max Nm':>18} "
+                  f"{'>1e-6':>5} {'ok differs':>10}  worst, first ok-differs, first well-posed >1e-6"]
         for d in report["disagreement"]:
             n = max(d["states"], 1)
             lines.append(f"{d['robot']:<8} {d['controller']:<12} {d['family']:<12} "
                          f"{d['states']:>6} {d['max_diff']:>10.3g} "
                          f"{d['above_small'] / n:>7.1%} {d['above_large'] / n:>7.1%} "
-                         f"{d['ok_differs'] / n:>10.1%} {d['above_small_solved'] / n:>12.1%}  "
-                         f"{d['worst_index']}, {d['first_ok_differs']}")
+                         f"{d['ok_differs'] / n:>10.1%} {d['above_small_solved'] / n:>12.1%} "
+                         f"{d['ill_posed'] / n:>9.1%} {d['max_diff_well_posed']:>18.3g} "
+                         f"{d['above_small_well_posed']:>5} {d['ok_differs_well_posed']:>10}  "
+                         f"{d['worst_index']}, {d['first_ok_differs']}, {d['first_well_posed']}")
     firsts = [(s, c, e) for s in report["stats"] for c, e in sorted(s["first"].items())]
     if firsts:
         lines += ["", f"first state of each kind (reproduce: --robots R --families F --index I "
@@ -513,6 +604,12 @@ def totals(report: dict) -> dict:
     """Sums over every row: states, nan, limit, unflagged, exceptions."""
     keys = ("states", "nan", "limit", "unflagged", "exceptions")
     return {k: sum(s[k] for s in report["stats"]) for k in keys}
+
+
+def exit_code(report: dict) -> int:
+    """1 when any NaN, limit violation, unflagged failure or exception was counted, else 0."""
+    total = totals(report)
+    return int(bool(total["nan"] or total["limit"] or total["unflagged"] or total["exceptions"]))
 
 
 def show_state(robot_name: str, family: str, seed: int, index: int, controllers) -> None:
@@ -547,6 +644,8 @@ def show_state(robot_name: str, family: str, seed: int, index: int, controllers)
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--states", type=int, default=200, help="states per robot and family")
+    parser.add_argument("--start", type=int, default=0,
+                        help="index of the first state (a run in parts: --start 0, N, 2N ...)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--robots", nargs="+", choices=ROBOTS, default=list(ROBOTS))
     parser.add_argument("--controllers", nargs="+", choices=CONTROLLER_NAMES,
@@ -557,23 +656,31 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=1, help="worker processes")
     parser.add_argument("--json", metavar="OUT", help="write the numbers to this file")
     parser.add_argument("--index", type=int, help="show this one state (a reproducer) and stop")
+    parser.add_argument("--merge", nargs="+", metavar="JSON",
+                        help="print the table of these --json reports (parts of one run) summed")
     args = parser.parse_args(argv)
+    if args.merge:
+        reports = [json.load(open(path)) for path in args.merge]
+        if len({r["seed"] for r in reports}) != 1:
+            parser.error("--merge: the reports have different seeds")
+        report = {"seed": reports[0]["seed"], **merge(reports),
+                  "wall_time_s": sum(r["wall_time_s"] for r in reports)}
+        print(table(report))
+        return exit_code(report)
     if args.index is not None:
         for robot_name in args.robots:
             for family in args.families:
                 show_state(robot_name, family, args.seed, args.index, args.controllers)
         return 0
-    if args.states < 1 or args.jobs < 1:
-        parser.error("--states and --jobs must be >= 1")
+    if args.states < 1 or args.jobs < 1 or args.start < 0:
+        parser.error("--states and --jobs must be >= 1, --start >= 0")
     report = fuzz(args.states, args.seed, args.robots, args.controllers, args.families,
-                  args.engines, args.jobs)
+                  args.engines, args.jobs, args.start)
     print(table(report))
     if args.json:
         with open(args.json, "w") as f:
             json.dump(report, f, indent=1)
-    total = totals(report)
-    return 0 if not (total["nan"] or total["limit"] or total["unflagged"]
-                     or total["exceptions"]) else 1
+    return exit_code(report)
 
 
 if __name__ == "__main__":

@@ -683,12 +683,12 @@ def test_daqp_in_the_run_gives_what_python_gives(monkeypatch, case):
     DAQP called from Python (``daqp.solve`` via ``_daqp_on_run``) on 200 random hierarchies:
     bitwise the same x, the same status, warnings and QP count, and as many DAQP calls — also
     when DAQP fails (iteration limit 2: the fallback quadprog solves, with the same warning),
-    when the verdict on the unscaled rows refuses its solution (raw_tol 1e-15), and with ε =
-    1e-10, where DAQP's "infeasible" misfires and is retried with proximal iterations."""
+    when the verdict on the unscaled rows refuses its solution (raw_tol -1: every solution), and
+    with ε = 1e-10, where DAQP's "infeasible" misfires and is retried with proximal iterations."""
     import daqp
     import wholebody.solvers.compiled_cascade as cc
     _daqp_in_run_or_skip()
-    options = {"daqp-fails": {"iter_limit": 2}, "verdict-refuses": {"raw_tol": 1e-15},
+    options = {"daqp-fails": {"iter_limit": 2}, "verdict-refuses": {"raw_tol": -1.0},
                "tiny-eps": {"sing_tol": 3.7e-11, "primal_tol": 1e-7}}.get(case, {})
     rng = np.random.default_rng(8)
     problems = [random_hierarchy(rng) for _ in range(200)]

@@ -373,16 +373,22 @@ namespace
     }
   }
 
-  // max(0, lower - A x, A x - upper) over the rows; inf if x is not finite (backends.solve_daqp).
+  // The largest violation of lower <= A x <= upper beyond rounding: max(0, lower_i - a_i x,
+  // a_i x - upper_i) less n eps |a_i| |x| per row; inf if x is not finite (backends._row_violation).
   template <typename Matrix, typename Vector>
   double violation(const Matrix & A, const Vector & x, const double * lo, const double * up)
   {
     if (!x.allFinite())
       return kInf;
     const VectorXd ax = A * x;
+    const double unit = double(A.cols()) * std::numeric_limits<double>::epsilon() * x.norm();
     double over = 0.0;
     for (Index i = 0; i < A.rows(); ++i)
-      over = std::max({over, lo[i] - ax[i], ax[i] - up[i]});
+    {
+      const double off = std::max(lo[i] - ax[i], ax[i] - up[i]);
+      if (off > over) // the row norm only for a violated row
+        over = std::max(over, off - unit * A.row(i).norm());
+    }
     return over;
   }
 } // namespace

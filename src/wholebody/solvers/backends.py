@@ -60,7 +60,7 @@ DAQP_EXIT = {  # DAQP's exit flags by name (daqp 0.11's constants.h)
 }
 # DAQP's settings where the caller gives none (solve_daqp says why)
 DAQP_DEFAULTS = {"primal_tol": 1e-9, "sing_tol": 1e-14}
-DAQP_RAW_TOL = 1e-6  # largest violation of an unscaled row a DAQP solution may have
+DAQP_RAW_TOL = 1e-6  # a DAQP solution's largest violation of an unscaled row beyond rounding
 DAQP_OK = (1, 2)  # DAQP's success flags: optimal, soft optimal
 DAQP_SENSE_EQ, DAQP_SENSE_INEQ = 5, 0  # DAQP's row senses: equality, (two-sided) inequality
 # DAQP's settings for solve_daqp_qp where the caller gives none: daqp.solve's own defaults (nothing
@@ -108,7 +108,8 @@ def solve_quadprog(H, g, A, lower, upper, **_):
 
 def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
     """DAQP via ``daqp.solve(H, f, A, bupper, blower, sense)``; equalities have sense 5; rows
-    scaled to unit norm, the solution refused if a row is violated by more than ``raw_tol``.
+    scaled to unit norm, the solution refused if a row is violated by more than ``raw_tol``
+    beyond the rounding of its product (:func:`_row_violation_numpy`).
 
     Two settings differ from DAQP's defaults (``DAQP_DEFAULTS``, chosen for the cascade's level
     QPs, which keep higher-priority rows active at their relaxed bounds):
@@ -133,7 +134,9 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
     # on the raw rows DAQP declared feasible QPs infeasible/cycling at degenerate vertices far
     # more often than on unit rows. Its tolerance then holds on the unit rows, i.e. ‖row‖ times
     # looser on the raw ones: the solution is checked on the caller's rows and refused beyond
-    # `raw_tol` (a fallback backend then solves the QP).
+    # `raw_tol` plus what rounding the product a_i x allows (a fallback backend then solves the
+    # QP). Without that allowance rows of norm ~1e10 (value ~1e6) refused solutions that were
+    # exact to rounding on the unit rows and agreed with quadprog's to 1e-8.
     unit_A, bu, bl, sense = _daqp_rows(A, lower, upper)
     x, status = solve_daqp_unit_rows(H, g, unit_A, bu, bl, sense, **opts)
     return daqp_verdict(x, status, _row_violation(A, x, lower, upper) if x is not None else 0.0,
@@ -202,7 +205,8 @@ def solve_daqp_qp(H, g, A, upper, lower, sense, dual_start=None, **settings) -> 
 
 def daqp_verdict(x, status: str, over: float, raw_tol: float = DAQP_RAW_TOL):
     """(x, status, ok) for a DAQP solution ``x`` (None: failed with ``status``) whose unscaled rows
-    are violated by ``over`` at most: refused beyond ``raw_tol`` or if not finite."""
+    are violated by ``over`` at most beyond rounding (:func:`_row_violation_numpy`): refused
+    beyond ``raw_tol`` or if not finite."""
     if x is None:
         return None, status, False
     if not math.isfinite(over):
@@ -229,12 +233,19 @@ def _daqp_rows_numpy(A, lower, upper):
 
 
 def _row_violation_numpy(A, x, lower, upper) -> float:
-    """Largest violation of lower ≤ A x ≤ upper, inf if x is not finite (compiled:
-    ``_cascade.row_violation``)."""
+    """Largest violation of lower ≤ A x ≤ upper beyond rounding, inf if x is not finite (compiled:
+    ``_cascade.row_violation``): max(0, lower_i − a_i x, a_i x − upper_i) less the rounding
+    bound n ε ‖a_i‖ ‖x‖ of the product a_i x (n = len(x); Higham, "Accuracy and Stability of
+    Numerical Algorithms", §3.1). A level QP's rows in w = R u reach norms ~1e10 with values ~1e6,
+    where a_i x carries an error of ~1e-6 whichever backend computed x."""
     if not np.isfinite(x).all():
         return math.inf
     ax = A @ x
-    return float(np.max(np.maximum(lower - ax, ax - upper), initial=0.0))
+    off = np.maximum(lower - ax, ax - upper)
+    if not (off > 0.0).any():
+        return 0.0
+    unit = x.size * np.finfo(float).eps * float(np.linalg.norm(x))
+    return float(max(np.max(off - unit * np.sqrt(np.einsum("ij,ij->i", A, A))), 0.0))
 
 
 try:  # the same two helpers compiled (a few µs instead of ~40 µs of small numpy calls per QP)
