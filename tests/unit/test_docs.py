@@ -1,4 +1,5 @@
-"""Every ```python block of README.md and docs/*.md runs as it is.
+"""Every plain ```python block of README.md and docs/*.md runs as it is (the guide's worked
+examples, fenced ```python example:NAME, run in test_guide_examples.py).
 
 Each block runs in a fresh namespace from a temporary working directory, so a block may not rely
 on another block or write into the repository. Blocks that are not meant to run are fenced as
