@@ -497,9 +497,14 @@ class Robot:
         ``add_joints``), which rebuild the same Pinocchio model from these arrays (copied)."""
         model = self.model
         joints = range(1, model.njoints)
+        kinds = [model.joints[j].shortname() for j in joints]
         return {
             "parents": [int(model.parents[j]) for j in joints],
-            "kinds": [model.joints[j].shortname() for j in joints],
+            "kinds": kinds,
+            # the axis of an unaligned revolute/prismatic joint (a URDF axis such as "-1 0 0"),
+            # zero for the others
+            "axes": np.array([model.joints[j].extract().axis if "Unaligned" in kind
+                              else np.zeros(3) for j, kind in zip(joints, kinds)]),
             "placements": np.array([model.jointPlacements[j].homogeneous for j in joints]),
             "masses": np.array([model.inertias[j].mass for j in joints]),
             "levers": np.array([model.inertias[j].lever for j in joints]),

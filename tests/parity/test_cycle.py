@@ -762,3 +762,62 @@ def test_solver_settings_changed_after_the_first_cycle_take_effect(robots):
     assert limited.ok and "iteration limit" in limited.status
     cycle.backend_options = {}
     assert "iteration limit" not in cycle.solve(q, v, variables).status
+
+
+# ---------------------------------------------------------------------------- 7. unaligned joints
+def unaligned_quadruped():
+    """ANYmal C from example-robot-data: six of its twelve joints turn about -x (URDF axis
+    "-1 0 0"), which Pinocchio models as JointModelRevoluteUnaligned. Point feet at the FOOT frames
+    (the geometry's offset does not matter for the comparison)."""
+    import wholebody as wb
+    feet = ("LF", "RF", "LH", "RH")
+    return wb.load_robot({
+        "name": "anymal_c",
+        "urdf": "erd:anymal_c_simple_description/urdf/anymal.urdf",
+        "srdf": "erd:anymal_c_simple_description/srdf/anymal.srdf",
+        "posture": "standing",
+        "contacts": [{"name": f"{leg.lower()}_foot", "frame": f"{leg}_FOOT", "type": "point",
+                      "radius": 0.03} for leg in feet],
+    })
+
+
+@native
+def test_unaligned_joints_equal_python():
+    """A model with joints about a negative axis: the compiled update's rigid-body terms equal
+    Robot.update's, and a three-level stack gives the Python engine's torques, which satisfy the
+    equations of motion computed here with Pinocchio's RNEA."""
+    robot = unaligned_quadruped()
+    kinds = {robot.model.joints[j].shortname() for j in range(1, robot.model.njoints)}
+    assert "JointModelRevoluteUnaligned" in kinds
+
+    def stack():
+        return Stack([[NewtonEuler(), TorqueLimits()],
+                      [ContactConstraint(), FrictionCone(0.8)],
+                      [CoMTask(kp=50.0, kd=14.0), PostureTask(kp=30.0, kd=8.0, weight=0.1)]])
+
+    native_cycle, python_cycle = (HierarchyCycle(robot, stack(), engine=e) for e in ("native", "python"))
+    rng = np.random.default_rng(21)
+    for _ in range(5):
+        q, v = robot.random_state(rng)
+        a, b = python_cycle.solve(q, v), native_cycle.solve(q, v)
+        terms = native_cycle.engine.terms()
+        robot.update(q, v)
+        for key in ("M", "h", "com", "A_G"):
+            value = getattr(robot, key)
+            np.testing.assert_allclose(terms[key], value, rtol=0,
+                                       atol=1e-9 * max(1.0, np.abs(value).max()), err_msg=key)
+        assert a.ok == b.ok
+        np.testing.assert_allclose(b.tau, a.tau, rtol=0, atol=1e-6)
+        if not b.ok:
+            continue
+        model, data = robot.model, robot.model.createData()
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        rows = []
+        for c in robot.contacts:  # the sphere's bottom: J_o - [d]x J_w with d = (0, 0, -r)
+            J6 = pin.getFrameJacobian(model, data, c.frame_id, pin.LOCAL_WORLD_ALIGNED)
+            rows.append(J6[:3] - pin.skew(np.array([0.0, 0.0, -c.spec.radius])) @ J6[3:])
+        J = np.vstack(rows)
+        eom = pin.rnea(model, data, q, v, b.qdd) - J.T @ b.lam
+        np.testing.assert_allclose(eom[:6], 0.0, atol=1e-6 * robot.mass)
+        np.testing.assert_allclose(eom[6:], b.tau, atol=1e-6 * robot.mass)

@@ -123,7 +123,7 @@ namespace wholebody_native
     t2 = n.cross(t1);
   }
 
-  // Adds the joints and bodies of spec (keys parents, kinds, placements, masses, levers,
+  // Adds the joints and bodies of spec (keys parents, kinds, axes, placements, masses, levers,
   // inertias: the Python model's joints 1..njoints-1) to an empty model, and its armature.
   inline void add_joints(const py::dict & spec, wholebody::LeggedModel & model)
   {
@@ -136,10 +136,12 @@ namespace wholebody_native
     DoubleArray masses = get<DoubleArray>(spec, "masses");
     DoubleArray levers = get<DoubleArray>(spec, "levers");
     DoubleArray inertias = get<DoubleArray>(spec, "inertias");
+    DoubleArray axes = get<DoubleArray>(spec, "axes");
     const double * pl = input(placements, 16 * nj, "placements");
     const double * ms = input(masses, nj, "masses");
     const double * lv = input(levers, 3 * nj, "levers");
     const double * in = input(inertias, 9 * nj, "inertias");
+    const double * ax = input(axes, 3 * nj, "axes");
     for (py::ssize_t k = 0; k < nj; ++k)
     {
       const pinocchio::SE3 placement = placement_from(pl + 16 * k);
@@ -161,10 +163,19 @@ namespace wholebody_native
         id = model.addJoint(parent, pinocchio::JointModelPY(), placement, name);
       else if (kind == "JointModelPZ")
         id = model.addJoint(parent, pinocchio::JointModelPZ(), placement, name);
+      else if (kind == "JointModelRevoluteUnaligned")
+        id = model.addJoint(
+          parent, pinocchio::JointModelRevoluteUnaligned(Map<const Vector3d>(ax + 3 * k)), placement,
+          name);
+      else if (kind == "JointModelPrismaticUnaligned")
+        id = model.addJoint(
+          parent, pinocchio::JointModelPrismaticUnaligned(Map<const Vector3d>(ax + 3 * k)), placement,
+          name);
       else
         throw std::invalid_argument(
           "spec: joint " + std::to_string(k + 1) + " is a " + kind
-          + "; the native cycle supports the free flyer and revolute/prismatic joints about x, y, z");
+          + "; the native cycle supports the free flyer and 1-DoF revolute/prismatic joints (about "
+            "any fixed axis)");
       const Matrix3d I = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(in + 9 * k);
       model.appendBodyToJoint(
         id, pinocchio::Inertia(ms[k], Map<const Vector3d>(lv + 3 * k), I), pinocchio::SE3::Identity());
