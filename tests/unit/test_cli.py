@@ -13,11 +13,12 @@ from wholebody.cli import main
 def test_robots_lists_presets(capsys):
     assert main(["robots"]) == 0
     out = capsys.readouterr().out
-    for name, dof in (("talos14", "14"), ("talos", "32"), ("hyq", "12")):
+    for name, dof in (("talos14", "14"), ("talos", "32"), ("hyq", "12"), ("go1", "12"),
+                      ("go2", "12"), ("a1", "12"), ("solo12", "12")):
         assert any(line.split()[:2] == [name, dof] for line in out.splitlines()), out
     assert main(["robots", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert {r["name"] for r in rows} == {"talos14", "talos", "hyq"}
+    assert {r["name"] for r in rows} == {"talos14", "talos", "hyq", "go1", "go2", "a1", "solo12"}
 
 
 def test_scenarios_lists_parameters(capsys):
@@ -66,7 +67,8 @@ def test_run_with_robot_file(tmp_path):
 
 @pytest.mark.parametrize("argv,needle", [
     (["run", "fly"], "unknown scenario 'fly'; scenarios: "),
-    (["run", "stand", "--robot", "atlas"], "unknown robot 'atlas'; presets: hyq, talos, talos14"),
+    (["run", "stand", "--robot", "atlas"],
+     "unknown robot 'atlas'; presets: a1, go1, go2, hyq, solo12, talos, talos14"),
     (["run", "stand", "--set", "speed=3"], "no parameter 'speed'"),
     (["run", "stand", "--set", "duration"], "--set expects key=value"),
     (["run", "stand", "--controller", "mpc"], "no controller 'mpc'"),
@@ -331,9 +333,11 @@ def test_summary_says_not_interrupted():
 
 
 def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys, monkeypatch):
-    """Solo12 (example-robot-data) standing on the default joint gains, which are far too stiff for
-    a 2.5 kg robot: MuJoCo diverges within the first hundredth of a second. The run ends with exit 1
-    and a summary that says when, not with an error from downstream."""
+    """Solo12 (example-robot-data, its URDF's 1000 Nm limits) standing on absolute joint gains
+    made for a 90 kg Talos (kp = 1000, kd = 30; the defaults before they were derived from the
+    robot), far too stiff for a 2.5 kg robot: MuJoCo diverges within the first hundredth of a
+    second. The run ends with exit 1 and a summary that says when, not with an error from
+    downstream."""
     robot = tmp_path / "solo12.toml"
     robot.write_text('name = "solo12"\nurdf = "erd:solo_description/robots/solo12.urdf"\n'
                      'srdf = "erd:solo_description/srdf/solo.srdf"\nposture = "standing"\n'
@@ -342,7 +346,8 @@ def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys, monkey
                          for leg in ("FL", "FR", "HL", "HR")) + "]\n")
     out = tmp_path / "run"
     monkeypatch.chdir(tmp_path)  # MuJoCo writes MUJOCO_LOG.TXT into the working directory
-    assert main(["run", "stand", "--robot", str(robot), "--out", str(out), "--no-progress"]) == 1
+    assert main(["run", "stand", "--robot", str(robot), "--set", "kp=1000", "--set", "kd=30",
+                 "--out", str(out), "--no-progress"]) == 1
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success"] is False and 0.0 < summary["metrics"]["diverged_at_s"] < 0.1
     assert "the simulation diverged at t = " in capsys.readouterr().err

@@ -217,5 +217,5 @@ def test_bad_description_is_named(patch, needle):
 
 
 def test_unknown_preset_lists_presets():
-    with pytest.raises(ValueError, match="hyq, talos, talos14"):
+    with pytest.raises(ValueError, match="a1, go1, go2, hyq, solo12, talos, talos14"):
         wb.load_robot("atlas")

@@ -293,7 +293,7 @@ def test_massless_body_is_accepted(hyq_model):
     check_inertias(model, "robot 'x'")
 
 
-@pytest.mark.parametrize("name", ["talos14", "talos", "hyq"])
+@pytest.mark.parametrize("name", ["talos14", "talos", "hyq", "go1", "go2", "a1", "solo12"])
 def test_presets_pass_every_check_without_warning(name, caplog):
     with caplog.at_level(logging.WARNING, logger="wholebody.robot"):
         robot = wb.load_robot(name)

@@ -44,7 +44,7 @@ from ..guard import Outcome, guard_torque
 from ..robot import Robot
 from ..solvers.backends import DaqpResult, solve_daqp_qp
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
-from ..tasks.wrench import TrunkImpedance, contact_wrench_map
+from ..tasks.wrench import F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound
 from ..validation import finite_array, nonnegative, number, positive
 from .base import PlannedController
 from .passive_qp import PassiveQP, StancePattern
@@ -62,7 +62,9 @@ class PassiveConfig:
     """Weights, gains and limits of :class:`PassiveWBC` (Fahmi et al. 2019; defaults of Sect. V).
 
     ``mu`` friction coefficient of eq. 13 (None: the robot's); ``f_min``/``f_max`` normal-force
-    bounds of eq. 14 (N); ``swing_slack`` one of ``SLACKS`` (eq. 11 / 33) with weight
+    bounds of eq. 14 (N; ``f_max`` None: ``f_max_weights`` times the robot's weight m g, whose
+    default is the paper's 2000 N on HyQ, :func:`~wholebody.tasks.wrench.force_bound`);
+    ``swing_slack`` one of ``SLACKS`` (eq. 11 / 33) with weight
     ``slack_weight`` α; ``K_st``/``D_st`` stance task of eq. 32 (both 0: eq. 10); ``Q`` (6, trunk
     wrench, N² / (Nm)²), ``R_qdd`` and ``R_force`` the ‖u‖²_R term of eq. 7a;
     ``regularization`` one of ``REGULARIZATIONS`` with ``tangential_weight`` (force-normal) or
@@ -74,7 +76,8 @@ class PassiveConfig:
 
     mu: float | None = None
     f_min: float = 0.0
-    f_max: float = 2000.0
+    f_max: float | None = None
+    f_max_weights: float = F_MAX_WEIGHTS
     swing_slack: str = "per-direction"
     slack_weight: float = 1e4
     K_st: float = 200.0
@@ -103,9 +106,10 @@ class PassiveConfig:
         if self.mu is not None:
             number(self.mu, "mu", low=0.0, low_open=True)
         number(self.f_min, "f_min", low=0.0)
-        if not (self.f_max == math.inf or number(self.f_max, "f_max") > self.f_min):
+        if self.f_max is not None and not (self.f_max == math.inf
+                                           or number(self.f_max, "f_max") > self.f_min):
             raise ValueError(f"f_max: must exceed f_min = {self.f_min}, got {self.f_max!r}")
-        for name in ("slack_weight", "R_qdd", "R_force", "control_period"):
+        for name in ("slack_weight", "R_qdd", "R_force", "control_period", "f_max_weights"):
             positive(getattr(self, name), name)
         for name in ("K_st", "D_st", "tangential_weight"):
             nonnegative(getattr(self, name), name)
@@ -155,7 +159,10 @@ class PassiveWBC(PlannedController):
     the stance/swing split, swing references, stance anchors, terrain normals and the trunk
     reference. ``solve(plan)`` runs one cycle on a given plan at the robot's cached state.
 
-    ``impedance`` (the trunk wrench task of eq. 4, default :class:`TrunkImpedance`), ``swing``
+    ``impedance`` (the trunk wrench task of eq. 4, default
+    :meth:`TrunkImpedance.for_robot <wholebody.tasks.wrench.TrunkImpedance.for_robot>`: the
+    paper's gains on HyQ, the same CoM and trunk frequencies and damping ratios on any other
+    robot), ``swing``
     (:class:`SwingGains`) and ``observer`` (a :class:`~wholebody.control.observer.MomentumObserver`,
     default none: it estimates W_ext of eq. 4 every cycle from the centroidal momentum and the
     contact wrench commanded the cycle before, and writes it into ``impedance.external_wrench``)
@@ -192,8 +199,13 @@ class PassiveWBC(PlannedController):
         self.planner = planner if planner is not None else default_planner(robot)
         self._leg = np.array([tuple(self.planner.legs).index(n) for n in self.contacts])
         self.mu = robot.friction if config.mu is None else float(config.mu)
-        self.f_min, self.f_max = config.f_min, config.f_max
-        self.impedance = impedance or TrunkImpedance()
+        self.f_min = config.f_min
+        self.f_max = (force_bound(robot, config.f_max_weights) if config.f_max is None
+                      else config.f_max)
+        if not self.f_max > self.f_min:
+            raise ValueError(f"f_max_weights: {config.f_max_weights!r} x the robot's weight is "
+                             f"{self.f_max!r} N, which must exceed f_min = {self.f_min}")
+        self.impedance = impedance or TrunkImpedance.for_robot(robot)
         self.swing = swing or SwingGains()
         self.swing_slack = config.swing_slack
         self.slack_weight = float(config.slack_weight)

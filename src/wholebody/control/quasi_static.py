@@ -22,7 +22,7 @@ from ..robot import Robot
 from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE, solve_daqp_qp
 from ..tasks.contact import friction_faces, tangent_basis
 from ..tasks.limits import TorqueLimits
-from ..tasks.wrench import TrunkImpedance, contact_wrench_map
+from ..tasks.wrench import TrunkImpedance, contact_wrench_map, force_bound
 from .base import PlannedController
 from .passive import default_planner
 
@@ -32,11 +32,13 @@ log = logging.getLogger(__name__)
 class QuasiStaticController(PlannedController):
     """Centroidal force distribution + static torque map: ``compute(q, v, t) -> Solution``.
 
-    ``swing_K``/``swing_D``: Cartesian swing-leg stiffness (N/m) and damping (N s/m).
+    ``swing_K``/``swing_D``: Cartesian swing-leg stiffness (N/m) and damping (N s/m);
+    ``f_max`` None and ``impedance`` None: the robot-relative defaults of
+    :class:`~wholebody.control.passive.PassiveWBC` (the paper's 2000 N and trunk gains on HyQ).
     """
 
     def __init__(self, robot: Robot, planner=None, mu: float | None = None, f_min: float = 0.0,
-                 f_max: float = 2000.0, impedance: TrunkImpedance | None = None,
+                 f_max: float | None = None, impedance: TrunkImpedance | None = None,
                  Q=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), R_force: float = 1e-4,
                  tangential_weight: float = 1e-3, swing_K: float = 2000.0, swing_D: float = 50.0,
                  torque_limit_override: dict[str, float] | None = None):
@@ -47,8 +49,8 @@ class QuasiStaticController(PlannedController):
         self.planner = planner if planner is not None else default_planner(robot)
         self._leg = [tuple(self.planner.legs).index(n) for n in self.contacts]
         self.mu = robot.friction if mu is None else float(mu)
-        self.f_min, self.f_max = f_min, f_max
-        self.impedance = impedance or TrunkImpedance()
+        self.f_min, self.f_max = f_min, force_bound(robot) if f_max is None else f_max
+        self.impedance = impedance or TrunkImpedance.for_robot(robot)
         self.Q = np.broadcast_to(np.asarray(Q, dtype=float), 6).copy()
         self.R_force, self.tangential_weight = R_force, tangential_weight
         self.swing_K, self.swing_D = swing_K, swing_D

@@ -166,7 +166,7 @@ def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10
     planner = GaitPlanner.for_robot(robot, make_schedule(gait, 1.0), ramped_command(speed))
     if not feedforward:
         planner = SwingFeedForwardOff(planner)
-    impedance = TrunkImpedance(feedforward=feedforward)
+    impedance = TrunkImpedance.for_robot(robot, feedforward=feedforward)
     swing = SwingGains()
     meter = StorageMeter(robot, impedance, swing.K, swing.D)
     run = run_gait(robot, "passive", duration=duration, planner=planner, progress=progress,

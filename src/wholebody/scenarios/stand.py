@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..control.standing import StandingController
+from ..control.standing import DEFAULT_DAMPING_RATIO, DEFAULT_FREQUENCY_HZ, StandingController
 from ..report.balance_figures import stand_figure
 from ..sim.environment import Environment
 from ..sim.simulator import Simulator
@@ -17,8 +17,15 @@ from .measures import fallen, sole_slip, tilt_deg
 
 PARAMETERS = (
     duration_parameter(5.0),
-    Parameter("kp", 1000.0, "joint stiffness of the PD (Nm/rad)", low=0.0),
-    Parameter("kd", 30.0, "joint damping of the PD (Nm s/rad)", low=0.0),
+    Parameter("frequency_hz", DEFAULT_FREQUENCY_HZ, "natural frequency of each joint's PD (Hz): "
+              "kp = (2 pi f)^2 M_ii, M_ii the joint's inertia at the reference posture",
+              low=0.0, low_open=True, high=30.0),
+    Parameter("damping_ratio", DEFAULT_DAMPING_RATIO, "damping ratio of each joint's PD: "
+              "kd = 2 zeta (2 pi f) M_ii", low=0.0, high=10.0),
+    Parameter("kp", -1.0, "joint stiffness of the PD, every joint (Nm/rad) (-1: from "
+              "frequency_hz)", low=0.0, special=(-1.0,)),
+    Parameter("kd", -1.0, "joint damping of the PD, every joint (Nm s/rad) (-1: from "
+              "frequency_hz and damping_ratio)", low=0.0, special=(-1.0,)),
     Parameter("friction", 1.0, "floor friction coefficient", low=0.0, low_open=True, high=10.0),
     Parameter("drift_tolerance", 0.01, "largest base drift counted as success (m)",
               low=0.0, low_open=True, high=Parameter.H),
@@ -46,7 +53,10 @@ def standing_metrics(arrays: dict, robot) -> dict:
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     sim = Simulator(robot, Environment(floor_friction=params["friction"]))
-    ctrl = StandingController(robot, kp=params["kp"], kd=params["kd"])
+    ctrl = StandingController(robot, kp=None if params["kp"] == -1.0 else params["kp"],
+                              kd=None if params["kd"] == -1.0 else params["kd"],
+                              frequency_hz=params["frequency_hz"],
+                              damping_ratio=params["damping_ratio"])
     start_sites = {n: p for n, (p, _) in sim.contact_frame_poses().items()}
     slip = {n: 0.0 for n in robot.contact_names}
     force_error = []

@@ -8,13 +8,84 @@ for point feet ``W_com = Σ_i [f_i; (p_i − c) × f_i]``, the contact wrench ab
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
 from ..planning.trunk import TrunkState
 from ..robot import GRAVITY
-from ..validation import finite_array
+from ..validation import finite_array, nonnegative, positive
 from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, flag
+
+# The reference the robot-relative defaults are taken from: the trunk gains and normal-force bound
+# of Fahmi et al. 2019, Sect. V (K_x = 2000 N/m, D_x = 400 N s/m, K_θ = 1000 Nm/rad,
+# D_θ = 200 Nm s/rad, f_max = 2000 N), tuned on HyQ, whose mass and trunk inertia
+# (:func:`trunk_inertia`; the hyq preset, hyq_no_sensors.urdf at the SRDF's "standing" posture)
+# are these two numbers.
+REFERENCE_MASS = 86.77400500000003  # kg
+REFERENCE_INERTIA = 9.3599731892699  # kg m², trace(I_G) / 3
+REFERENCE_K_X, REFERENCE_D_X = 2000.0, 400.0
+REFERENCE_K_THETA, REFERENCE_D_THETA = 1000.0, 200.0
+REFERENCE_F_MAX = 2000.0  # N
+
+#: default natural frequencies (Hz) and damping ratios of the trunk impedance: those the paper's
+#: gains have on HyQ, ω = sqrt(K / m), ζ = D / (2 sqrt(K m)) (0.764 Hz, 0.480; 1.645 Hz, 1.034)
+FREQUENCY_X_HZ = math.sqrt(REFERENCE_K_X / REFERENCE_MASS) / (2.0 * math.pi)
+DAMPING_RATIO_X = REFERENCE_D_X / (2.0 * math.sqrt(REFERENCE_K_X * REFERENCE_MASS))
+FREQUENCY_THETA_HZ = math.sqrt(REFERENCE_K_THETA / REFERENCE_INERTIA) / (2.0 * math.pi)
+DAMPING_RATIO_THETA = REFERENCE_D_THETA / (2.0 * math.sqrt(REFERENCE_K_THETA * REFERENCE_INERTIA))
+#: default normal-force bound f_max as a multiple of the robot's weight: the paper's 2000 N on HyQ
+#: (2.350 m g)
+F_MAX_WEIGHTS = REFERENCE_F_MAX / (REFERENCE_MASS * GRAVITY)
+
+
+def trunk_inertia(robot, q=None) -> float:
+    """The scalar rotational inertia the trunk impedance acts on (kg m²): trace(I_G) / 3, the mean
+    principal moment of the locked (composite rigid body) centroidal inertia I_G at ``q`` (default
+    the reference posture; Pinocchio's ``ccrba``, on its own ``Data``). The trunk wrench of eq. 4
+    is realised as the rate of the centroidal momentum (eq. 2, ḣ_G = W_com), whose angular part
+    is I_G ω̇ with the legs held, so I_G, not the base link's inertia, is what K_θ works against;
+    the paper's K_θ is isotropic, hence one number, the mean over the axes."""
+    q = robot.q_ref if q is None else finite_array(q, "q", shape=(robot.nq,))
+    data = robot.model.createData()
+    pin.ccrba(robot.model, data, np.asarray(q, float), np.zeros(robot.nv))
+    return float(np.trace(data.Ig.inertia)) / 3.0
+
+
+def trunk_gains(robot, frequency_x_hz: float = FREQUENCY_X_HZ,
+                damping_ratio_x: float = DAMPING_RATIO_X,
+                frequency_theta_hz: float = FREQUENCY_THETA_HZ,
+                damping_ratio_theta: float = DAMPING_RATIO_THETA) -> dict[str, float]:
+    """Trunk impedance gains (eq. 4) from the robot: K_x = m ω_x², D_x = 2 ζ_x m ω_x,
+    K_θ = I ω_θ², D_θ = 2 ζ_θ I ω_θ (ω = 2π × frequency, m the robot's mass, I
+    :func:`trunk_inertia`) → {"K_x", "D_x", "K_theta", "D_theta"}.
+
+    The defaults are the frequencies and damping ratios the paper's gains have on HyQ, so HyQ gets
+    exactly those gains and any other robot the same dynamics of its CoM and trunk. The formulas
+    are evaluated as the reference gains times m / m_ref and (ω / ω_ref)² (the same numbers), so
+    that the reference robot's gains come out exactly, not to rounding."""
+    for name, value in (("frequency_x_hz", frequency_x_hz),
+                        ("frequency_theta_hz", frequency_theta_hz)):
+        positive(value, name)
+    for name, value in (("damping_ratio_x", damping_ratio_x),
+                        ("damping_ratio_theta", damping_ratio_theta)):
+        nonnegative(value, name)
+    mass = robot.mass / REFERENCE_MASS
+    inertia = trunk_inertia(robot) / REFERENCE_INERTIA
+    wx, wt = frequency_x_hz / FREQUENCY_X_HZ, frequency_theta_hz / FREQUENCY_THETA_HZ
+    return {"K_x": REFERENCE_K_X * mass * wx ** 2,
+            "D_x": REFERENCE_D_X * mass * wx * (damping_ratio_x / DAMPING_RATIO_X),
+            "K_theta": REFERENCE_K_THETA * inertia * wt ** 2,
+            "D_theta": (REFERENCE_D_THETA * inertia * wt
+                        * (damping_ratio_theta / DAMPING_RATIO_THETA))}
+
+
+def force_bound(robot, weights: float = F_MAX_WEIGHTS) -> float:
+    """A normal-force bound (N) of ``weights`` (> 0) times the robot's weight m g (default: the
+    paper's 2000 N on HyQ, evaluated as 2000 N x m / m_ref so that HyQ's is exact)."""
+    positive(weights, "f_max_weights")
+    return REFERENCE_F_MAX * (robot.mass / REFERENCE_MASS) * (weights / F_MAX_WEIGHTS)
 
 
 
@@ -29,7 +100,8 @@ def _diagonal_gain(value, field, obj=None) -> np.ndarray:
 
 class TrunkImpedance:
     """Eq. 4 of Fahmi et al. 2019 with diagonal gains (defaults: Sect. V, K_x = 2000, D_x = 400,
-    K_θ = 1000, D_θ = 200). The orientation error is log3(R_d Rᵀ) in world axes; ``feedforward``
+    K_θ = 1000, D_θ = 200, absolute values tuned on HyQ; :meth:`for_robot` scales them to any
+    robot). The orientation error is log3(R_d Rᵀ) in world axes; ``feedforward``
     switches W_ff off (Assumption 2 of the passivity analysis); ``external_wrench`` is W_ext.
     The gains (a number or 3, finite and >= 0) and ``feedforward`` (a bool) are checked on every
     assignment (:class:`~wholebody.tasks.base.checked_attribute`)."""
@@ -46,6 +118,18 @@ class TrunkImpedance:
         self.feedforward = feedforward
         self.external_wrench = np.zeros(6)
         self.last_errors = np.zeros(12)  # [Δx, Δθ, Δv, Δω] of the last call, world axes
+
+    @classmethod
+    def for_robot(cls, robot, frequency_x_hz: float = FREQUENCY_X_HZ,
+                  damping_ratio_x: float = DAMPING_RATIO_X,
+                  frequency_theta_hz: float = FREQUENCY_THETA_HZ,
+                  damping_ratio_theta: float = DAMPING_RATIO_THETA,
+                  feedforward: bool = True) -> "TrunkImpedance":
+        """The impedance with the robot-relative gains of :func:`trunk_gains` (default: the
+        paper's frequencies and damping ratios, i.e. exactly the paper's gains on HyQ)."""
+        gains = trunk_gains(robot, frequency_x_hz, damping_ratio_x, frequency_theta_hz,
+                            damping_ratio_theta)
+        return cls(**gains, feedforward=feedforward)
 
     @staticmethod
     def trunk_state(robot) -> tuple[np.ndarray, np.ndarray]:

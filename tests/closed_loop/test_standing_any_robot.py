@@ -1,0 +1,39 @@
+"""The stand scenario on robots of very different size with the default, robot-derived joint gains:
+a 13 kg Go1 and a 2.5 kg Solo12 stand like the 90 kg Talos and HyQ do; the absolute gains made
+for Talos (kp = 1000, kd = 30) saturate the Solo12's 2.7 Nm joints on nearly every cycle."""
+
+import numpy as np
+import pytest
+
+import wholebody as wb
+from wholebody.scenarios import get_scenario
+
+pytestmark = pytest.mark.slow
+
+DURATION = 1.5  # s; the twin steps at 1 ms: 1500 cycles
+
+
+def stand(robot, **overrides):
+    return get_scenario("stand").run(robot, overrides={"duration": str(DURATION), **overrides})
+
+
+@pytest.mark.parametrize("name", ["go1", "solo12"])
+def test_small_quadruped_stands_on_default_gains(name):
+    robot = wb.load_robot(name)
+    result = stand(robot)
+    m = result.metrics
+    cycles = round(DURATION / 1e-3)
+    assert result.success and not m["fell"], m
+    assert m["torque_saturated_cycles"] <= 0.03 * cycles, m
+    assert m["base_drift_max_m"] < 0.01 and m["foot_slip_max_m"] < 0.005, m
+    # after settling, the floor carries the weight, every foot loaded (the simulator's forces)
+    wrenches = result.log.arrays()["contact_wrenches"][500:]
+    np.testing.assert_allclose(wrenches[:, :, 2].sum(axis=1), robot.mass * 9.81, rtol=0.02)
+    assert np.all(wrenches[:, :, 2] > 0)
+
+
+def test_absolute_talos_gains_saturate_solo12():
+    """The contrast: the same run with the old absolute gains."""
+    robot = wb.load_robot("solo12")
+    m = stand(robot, kp="1000", kd="30").metrics
+    assert m["torque_saturated_cycles"] > 0.5 * round(DURATION / 1e-3), m

@@ -1,0 +1,255 @@
+"""Gains derived from the robot: the standing PD (kp = ω² M_ii, kd = 2 ζ ω M_ii) and the passive
+WBC's trunk impedance and force bound (K = m ω², D = 2 ζ m ω, K_θ = I ω_θ², f_max = n m g).
+
+The evidence is independent of the code under test: the joint inertia is measured by Newton-Euler
+(RNEA, a unit joint acceleration), the centroidal inertia is summed body by body with the parallel
+axis theorem, the mass scaling comes from a URDF whose masses and inertias are multiplied by k, and
+HyQ's gains are compared with the numbers printed in Fahmi et al. 2019 (Sect. V)."""
+
+import math
+import re
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import wholebody as wb
+from wholebody.control import StandingController
+from wholebody.control.passive import PassiveConfig, PassiveWBC
+from wholebody.control.quasi_static import QuasiStaticController
+from wholebody.robots.locate import resolve_model_path
+from wholebody.scenarios import get_scenario
+from wholebody.tasks.wrench import TrunkImpedance, force_bound, trunk_gains, trunk_inertia
+
+G = 9.81
+# Fahmi et al. 2019, Sect. V (HyQ): K_x, D_x, K_theta, D_theta, f_max
+PAPER = {"K_x": 2000.0, "D_x": 400.0, "K_theta": 1000.0, "D_theta": 200.0, "f_max": 2000.0}
+SMALL = ("go1", "go2", "a1", "solo12")
+
+
+@pytest.fixture(scope="module")
+def quadrupeds():
+    return {name: wb.load_robot(name) for name in ("hyq",) + SMALL}
+
+
+def planner(robot):
+    from types import SimpleNamespace
+    return SimpleNamespace(legs=robot.contact_names)
+
+
+def rnea_joint_inertia(robot):
+    """M_ii by Newton-Euler: the torque of joint i for a unit acceleration of joint i alone, at
+    rest (gravity removed by subtracting the zero-acceleration torque)."""
+    model, data, q = robot.model, robot.model.createData(), robot.q_ref
+    zero = np.zeros(robot.nv)
+    bias = pin.rnea(model, data, q, zero, zero)
+    out = np.empty(robot.na)
+    for i in range(robot.na):
+        a = zero.copy()
+        a[6 + i] = 1.0
+        out[i] = (pin.rnea(model, data, q, zero, a) - bias)[6 + i]
+    return out
+
+
+def centroidal_inertia_by_bodies(robot):
+    """I_G at the reference posture from the bodies' inertias: Σ R I_b Rᵀ + m (|r|² 1 − r rᵀ)
+    about the robot's CoM."""
+    model, data = robot.model, robot.model.createData()
+    pin.forwardKinematics(model, data, robot.q_ref)
+    masses, centres, rotated = [], [], []
+    for j in range(1, model.njoints):
+        body, placement = model.inertias[j], data.oMi[j]
+        masses.append(body.mass)
+        centres.append(placement.act(body.lever))
+        rotated.append(placement.rotation @ body.inertia @ placement.rotation.T)
+    masses, centres = np.array(masses), np.array(centres)
+    com = masses @ centres / masses.sum()
+    inertia = np.zeros((3, 3))
+    for m, c, rot in zip(masses, centres, rotated):
+        r = c - com
+        inertia += rot + m * (r @ r * np.eye(3) - np.outer(r, r))
+    return inertia
+
+
+# ---------------------------------------------------------------------- standing PD
+@pytest.mark.parametrize("name", ["talos14", "hyq", "go1", "solo12"])
+def test_standing_gains_are_frequency_and_damping_on_the_joint_inertia(name, robots, quadrupeds):
+    robot = robots[name] if name in robots else quadrupeds[name]
+    inertia = rnea_joint_inertia(robot)  # includes the armature (talos14: 0.1 kg m²)
+    ctrl = StandingController(robot, frequency_hz=4.0, damping_ratio=0.7)
+    omega = 2 * math.pi * 4.0
+    np.testing.assert_allclose(ctrl.kp, omega ** 2 * inertia, rtol=1e-9)
+    np.testing.assert_allclose(ctrl.kd, 2 * 0.7 * omega * inertia, rtol=1e-9)
+    # every joint's loop has the same frequency and damping ratio
+    np.testing.assert_allclose(np.sqrt(ctrl.kp / inertia), omega, rtol=1e-9)
+    np.testing.assert_allclose(ctrl.kd / (2 * np.sqrt(ctrl.kp * inertia)), 0.7, rtol=1e-9)
+
+
+def test_armature_enters_the_joint_inertia(robots):
+    """talos14's 0.1 kg m² reflected rotor inertia is part of the inertia the gains scale."""
+    robot = robots["talos14"]
+    model = pin.Model(robot.model)
+    model.armature[:] = 0.0
+    bare = np.diag(pin.crba(model, model.createData(), robot.q_ref))[6:]
+    ctrl = StandingController(robot, frequency_hz=1.0 / (2 * math.pi))  # ω = 1: kp = M_ii
+    np.testing.assert_allclose(ctrl.kp - bare, 0.1, rtol=1e-9)
+
+
+def _scaled_robot(tmp_path, name: str, k: float):
+    """The preset ``name`` with every link mass and inertia of its URDF multiplied by ``k``."""
+    base = wb.load_robot(name).description
+    text = resolve_model_path(base.urdf, base.base_dir).read_text()
+
+    def scale(match):
+        return f'{match.group(1)}="{float(match.group(2)) * k!r}"'
+    text = re.sub(r'<mass\s+value="([^"]+)"',
+                  lambda m: f'<mass value="{float(m.group(1)) * k!r}"', text)
+    text = re.sub(r'\b(i[xyz]{2})="([^"]+)"', scale, text)
+    urdf = tmp_path / f"{name}_x{k:g}.urdf"
+    urdf.write_text(text)
+    return wb.load_robot({
+        "name": f"{name}_x{k:g}", "urdf": str(urdf), "srdf": base.srdf, "posture": base.posture,
+        "contacts": [{"name": c.name, "frame": c.frame, "type": c.type, "radius": c.radius}
+                     for c in base.contacts],
+        "torque_limits": base.torque_limits, "friction": base.friction})
+
+
+@pytest.mark.parametrize("name", ["go1", "solo12"])
+def test_gains_scale_with_the_robots_masses(tmp_path, quadrupeds, name):
+    """Masses and inertias x k (same geometry): every derived gain and the force bound x k."""
+    k = 3.0
+    robot, heavy = quadrupeds[name], _scaled_robot(tmp_path, name, k)
+    assert heavy.mass == pytest.approx(k * robot.mass, rel=1e-12)
+    np.testing.assert_allclose(heavy.q_ref, robot.q_ref, atol=1e-12)
+    light_pd, heavy_pd = StandingController(robot), StandingController(heavy)
+    np.testing.assert_allclose(heavy_pd.kp, k * light_pd.kp, rtol=1e-9)
+    np.testing.assert_allclose(heavy_pd.kd, k * light_pd.kd, rtol=1e-9)
+    light, heavy_wbc = PassiveWBC(robot, planner(robot)), PassiveWBC(heavy, planner(heavy))
+    for gain in ("K_x", "D_x", "K_theta", "D_theta"):
+        np.testing.assert_allclose(getattr(heavy_wbc.impedance, gain),
+                                   k * getattr(light.impedance, gain), rtol=1e-9, err_msg=gain)
+    assert heavy_wbc.f_max == pytest.approx(k * light.f_max, rel=1e-9)
+
+
+# ---------------------------------------------------------------------- trunk impedance
+def test_hyq_gets_the_papers_gains(quadrupeds):
+    """HyQ's defaults are Fahmi et al.'s numbers, not a rounding of them (its crawl and passivity
+    results must not change)."""
+    robot = quadrupeds["hyq"]
+    for wbc in (PassiveWBC(robot, planner(robot)), QuasiStaticController(robot, planner(robot))):
+        imp = wbc.impedance
+        np.testing.assert_array_equal(imp.K_x, PAPER["K_x"])
+        np.testing.assert_array_equal(imp.D_x, PAPER["D_x"])
+        assert wbc.f_max == PAPER["f_max"]
+        # the rotational gains go through Pinocchio's centroidal inertia: exact on this build,
+        # allowed the last bit elsewhere
+        np.testing.assert_allclose(imp.K_theta, PAPER["K_theta"], rtol=1e-13, atol=0)
+        np.testing.assert_allclose(imp.D_theta, PAPER["D_theta"], rtol=1e-13, atol=0)
+    # explicit absolute values still win
+    wbc = PassiveWBC(robot, planner(robot), f_max=1500.0, impedance=TrunkImpedance(K_x=123.0))
+    assert wbc.f_max == 1500.0 and np.all(wbc.impedance.K_x == 123.0)
+
+
+def test_trunk_inertia_is_the_mean_centroidal_moment(quadrupeds):
+    for robot in quadrupeds.values():
+        expected = np.trace(centroidal_inertia_by_bodies(robot)) / 3
+        assert trunk_inertia(robot) == pytest.approx(expected, rel=1e-9), robot.name
+
+
+def test_small_quadrupeds_get_hyqs_frequencies_and_damping_ratios(quadrupeds):
+    """Not HyQ's absolute gains (a 2000 N/m spring on a 2.5 kg Solo12) but its dynamics: the same
+    ω = sqrt(K/m) and ζ = D / (2 sqrt(K m)) for the CoM, and for the trunk rotation on I_G."""
+    hyq = quadrupeds["hyq"]
+    m0, i0 = hyq.mass, np.trace(centroidal_inertia_by_bodies(hyq)) / 3
+    w_x, z_x = math.sqrt(PAPER["K_x"] / m0), PAPER["D_x"] / (2 * math.sqrt(PAPER["K_x"] * m0))
+    w_t = math.sqrt(PAPER["K_theta"] / i0)
+    z_t = PAPER["D_theta"] / (2 * math.sqrt(PAPER["K_theta"] * i0))
+    for name in SMALL:
+        robot = quadrupeds[name]
+        m, inertia = robot.mass, np.trace(centroidal_inertia_by_bodies(robot)) / 3
+        imp = PassiveWBC(robot, planner(robot)).impedance
+        K_x, D_x, K_t, D_t = (float(getattr(imp, g)[0])
+                              for g in ("K_x", "D_x", "K_theta", "D_theta"))
+        assert K_x < 0.2 * PAPER["K_x"]  # a fraction of HyQ's: these robots weigh 2.5-16 kg
+        assert math.sqrt(K_x / m) == pytest.approx(w_x, rel=1e-9), name
+        assert D_x / (2 * math.sqrt(K_x * m)) == pytest.approx(z_x, rel=1e-9), name
+        assert math.sqrt(K_t / inertia) == pytest.approx(w_t, rel=1e-9), name
+        assert D_t / (2 * math.sqrt(K_t * inertia)) == pytest.approx(z_t, rel=1e-9), name
+        f_max = PassiveWBC(robot, planner(robot)).f_max
+        assert f_max / (m * G) == pytest.approx(PAPER["f_max"] / (m0 * G), rel=1e-9), name
+
+
+def test_explicit_trunk_frequencies(quadrupeds):
+    robot = quadrupeds["go1"]
+    gains = trunk_gains(robot, frequency_x_hz=2.0, damping_ratio_x=0.7, frequency_theta_hz=3.0,
+                        damping_ratio_theta=1.0)
+    m, inertia = robot.mass, np.trace(centroidal_inertia_by_bodies(robot)) / 3
+    w_x, w_t = 2 * math.pi * 2.0, 2 * math.pi * 3.0
+    assert gains["K_x"] == pytest.approx(m * w_x ** 2, rel=1e-9)
+    assert gains["D_x"] == pytest.approx(2 * 0.7 * m * w_x, rel=1e-9)
+    assert gains["K_theta"] == pytest.approx(inertia * w_t ** 2, rel=1e-9)
+    assert gains["D_theta"] == pytest.approx(2 * 1.0 * inertia * w_t, rel=1e-9)
+    assert force_bound(robot, 3.0) == pytest.approx(3.0 * m * G, rel=1e-9)
+    wbc = PassiveWBC(robot, planner(robot), f_max_weights=3.0)
+    assert wbc.f_max == pytest.approx(3.0 * m * G, rel=1e-9)
+
+
+# ---------------------------------------------------------------------- checks
+@pytest.mark.parametrize("kwargs,needle", [
+    ({"frequency_hz": 0.0}, "frequency_hz: expected a positive number, got 0.0"),
+    ({"frequency_hz": float("nan")}, "frequency_hz"),
+    ({"damping_ratio": -0.5}, "damping_ratio: expected a finite number in [0, inf], got -0.5"),
+    ({"damping_ratio": float("inf")}, "damping_ratio"),
+    ({"kp": -1.0}, "kp"), ({"kd": float("nan")}, "kd"),
+])
+def test_standing_arguments_are_checked(robots, kwargs, needle):
+    with pytest.raises(ValueError, match=re.escape(needle)):
+        StandingController(robots["hyq"], **kwargs)
+
+
+def test_explicit_standing_gains_override(robots):
+    robot = robots["hyq"]
+    relative = StandingController(robot)
+    both = StandingController(robot, kp=1000.0, kd=30.0)
+    assert np.all(both.kp == 1000.0) and np.all(both.kd == 30.0)
+    only_kp = StandingController(robot, kp=50.0)
+    assert np.all(only_kp.kp == 50.0)
+    np.testing.assert_array_equal(only_kp.kd, relative.kd)
+
+
+@pytest.mark.parametrize("kwargs,needle", [
+    ({"frequency_x_hz": 0.0}, "frequency_x_hz"),
+    ({"frequency_theta_hz": -1.0}, "frequency_theta_hz"),
+    ({"damping_ratio_x": float("nan")}, "damping_ratio_x"),
+    ({"damping_ratio_theta": -1.0}, "damping_ratio_theta"),
+])
+def test_trunk_arguments_are_checked(quadrupeds, kwargs, needle):
+    with pytest.raises(ValueError, match=needle):
+        TrunkImpedance.for_robot(quadrupeds["go1"], **kwargs)
+
+
+@pytest.mark.parametrize("kwargs,needle", [
+    ({"f_max_weights": 0.0}, "f_max_weights"), ({"f_max_weights": float("nan")}, "f_max_weights"),
+    ({"f_min": 1e6}, "f_max_weights"),  # the derived bound must exceed f_min
+])
+def test_force_bound_arguments_are_checked(quadrupeds, kwargs, needle):
+    robot = quadrupeds["go1"]
+    with pytest.raises(ValueError, match=needle):
+        PassiveWBC(robot, planner(robot), **kwargs)
+    with pytest.raises(ValueError, match="f_max_weights"):
+        PassiveConfig(f_max_weights=-1.0)
+
+
+def test_stand_scenario_declares_frequency_and_damping_ratio():
+    params = {p.name: p for p in get_scenario("stand").parameters}
+    freq, zeta = params["frequency_hz"], params["damping_ratio"]
+    assert freq.low == 0.0 and freq.low_open and math.isfinite(freq.high)
+    assert zeta.low == 0.0 and math.isfinite(zeta.high)
+    assert freq.parse("5") == 5.0 and zeta.parse("0.7") == 0.7
+    for p, bad in ((freq, "0"), (freq, "1e6"), (zeta, "-0.1"), (zeta, "nan")):
+        with pytest.raises(ValueError, match=f"--set {p.name}"):
+            p.parse(bad)
+    # kp / kd: -1 (derived) or an explicit gain >= 0
+    assert params["kp"].parse("-1") == -1.0 and params["kp"].parse("1000") == 1000.0
+    with pytest.raises(ValueError, match="--set kd"):
+        params["kd"].parse("-5")
