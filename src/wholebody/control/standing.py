@@ -88,6 +88,7 @@ class StandingController:
         self.kd = kd_rel if kd is None else np.broadcast_to(
             check_gain(kd, "kd", robot.na, matrix=False), robot.na).copy()
         self.q_joint_ref = q_ref[7:].copy()
+
     def compute(self, q, v, t: float = 0.0) -> ControlResult:
         robot = self.robot
         robot.update(q, v)

@@ -88,7 +88,6 @@ def force_bound(robot, weights: float = F_MAX_WEIGHTS) -> float:
     return REFERENCE_F_MAX * (robot.mass / REFERENCE_MASS) * (weights / F_MAX_WEIGHTS)
 
 
-
 def _diagonal_gain(value, field, obj=None) -> np.ndarray:
     """A diagonal impedance gain: a number or 3 numbers (x, y, z), finite and >= 0, as a new
     3-vector."""
