@@ -92,8 +92,8 @@ def test_trunk_terrain_is_continuous_and_exact_away_from_features():
 def test_course_planner_keeps_footholds_out_of_the_gap(hyq):
     course = gap_course(0.22, 0.07, x_start=0.7)
     command = VelocityCommand.speed_ramp(0.0, 0.1, 1.0, 3.0)
-    planner = CoursePlanner.on_course(hyq, make_schedule("crawl", 1.0), command, course)
-    plain = GaitPlanner.for_robot(hyq, make_schedule("crawl", 1.0), command, course.terrain)
+    planner = CoursePlanner.on_course(hyq, make_schedule(hyq, "crawl", 1.0), command, course)
+    plain = GaitPlanner.for_robot(hyq, make_schedule(hyq, "crawl", 1.0), command, course.terrain)
     a, b = course.gaps[0]
     in_gap = moved = 0
     for leg in planner.legs:
@@ -116,7 +116,7 @@ def test_trot_climbs_a_15_degree_ramp_with_roll_pitch_error_below_0_2_rad(hyq):
     simulator's roll and pitch stay within 0.2 rad of the reference."""
     course = ramp_course(15.0, up=1.6, top=1.0, down=1.6, x_start=0.5)
     command = VelocityCommand.speed_ramp(0.0, 0.15, 1.0, 3.0)
-    planner = CoursePlanner.on_course(hyq, make_schedule("trot", 1.0), command, course)
+    planner = CoursePlanner.on_course(hyq, make_schedule(hyq, "trot", 1.0), command, course)
     rpy = []
 
     def record(t, result, ctrl, sim):
@@ -143,7 +143,7 @@ def test_crawl_front_legs_cross_the_gap_onto_the_step(hyq):
     hole (simulator foot heights) and the planner had to move footholds out of the gap."""
     course = gap_course(0.22, 0.07, x_start=0.5)
     command = VelocityCommand.speed_ramp(0.0, 0.1, 1.0, 3.0)
-    planner = CoursePlanner.on_course(hyq, make_schedule("crawl", 1.0), command, course)
+    planner = CoursePlanner.on_course(hyq, make_schedule(hyq, "crawl", 1.0), command, course)
     run = run_gait(hyq, "passive", duration=9.0, environment=course_environment(course),
                    planner=planner)
     assert not run.fell and run.failures == 0
@@ -201,7 +201,7 @@ def test_stone_rolls_away_under_rf_foot_and_robot_keeps_walking(hyq):
 
 # ---------------------------------------------------------------- passivity (Sect. III)
 def test_desired_generalized_velocity_realises_the_desired_task_velocities(hyq, rng):
-    planner = GaitPlanner.for_robot(hyq, make_schedule("trot", 0.0),
+    planner = GaitPlanner.for_robot(hyq, make_schedule(hyq, "trot", 0.0),
                                     VelocityCommand.constant(0.2))
     plan = planner.update(0.2).copy()  # LF, RH swinging
     assert plan.contact.tolist() == [False, True, True, False]
@@ -222,8 +222,8 @@ def test_desired_generalized_velocity_realises_the_desired_task_velocities(hyq, 
 
 
 def test_swing_feedforward_off_wrapper_only_zeroes_the_acceleration(hyq):
-    inner = GaitPlanner.for_robot(hyq, make_schedule("trot", 0.0), VelocityCommand.constant(0.2))
-    twin = GaitPlanner.for_robot(hyq, make_schedule("trot", 0.0), VelocityCommand.constant(0.2))
+    inner = GaitPlanner.for_robot(hyq, make_schedule(hyq, "trot", 0.0), VelocityCommand.constant(0.2))
+    twin = GaitPlanner.for_robot(hyq, make_schedule(hyq, "trot", 0.0), VelocityCommand.constant(0.2))
     wrapped = SwingFeedForwardOff(inner)
     assert wrapped.legs == inner.legs
     nonzero = 0
@@ -242,7 +242,7 @@ def test_storage_function_bookkeeping_in_closed_loop(hyq):
     and the supply is integrated over every WBC interval from the simulator's log."""
     impedance = TrunkImpedance(feedforward=False)
     planner = SwingFeedForwardOff(GaitPlanner.for_robot(
-        hyq, make_schedule("crawl", 1.0), VelocityCommand.speed_ramp(0.0, 0.1, 1.0, 3.0)))
+        hyq, make_schedule(hyq, "crawl", 1.0), VelocityCommand.speed_ramp(0.0, 0.1, 1.0, 3.0)))
     meter = StorageMeter(hyq, impedance, 2000.0, 20.0)
     run = run_gait(hyq, "passive", duration=3.5, planner=planner, on_cycle=meter,
                    controller_options={"impedance": impedance})

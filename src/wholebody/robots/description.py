@@ -11,7 +11,9 @@ Fields (``*`` = required)::
                    {joint = value}); the MuJoCo twin uses the same value, default 0
     contacts*      list of {name, frame, type = "point", radius} or
                    {name, frame, type = "rectangle", half_size = [hx, hy]} (sole half-lengths along
-                   the frame's x and y axes, centred on the frame origin)
+                   the frame's x and y axes, centred on the frame origin); each may carry a
+                   ``role`` (one of ``ROLES``: which foot or sole it is), else the role is found
+                   from where the contact is (:mod:`wholebody.robots.roles`)
     torque_limits  {scale = 1.0, overrides = {joint = Nm}, linkage = {joint = {...}}} (see
                    :mod:`wholebody.robots.torque_limits`)
     friction       nominal Coulomb friction coefficient of the feet used by controllers, default 0.8
@@ -35,8 +37,11 @@ import numpy as np
 from .. import validation
 
 CONTACT_TYPES = ("point", "rectangle")
-CONTACT_KEYS = {"point": ("name", "frame", "type", "radius"),
-                "rectangle": ("name", "frame", "type", "half_size")}
+CONTACT_KEYS = {"point": ("name", "frame", "type", "radius", "role"),
+                "rectangle": ("name", "frame", "type", "half_size", "role")}
+#: the roles a contact can declare: a quadruped's feet, a biped's soles
+ROLES = {"point": ("left-front", "right-front", "left-hind", "right-hind"),
+         "rectangle": ("left", "right")}
 TORQUE_LIMIT_KEYS = ("scale", "overrides", "linkage")
 LINKAGE_KEYS = ("a", "b", "force", "q_peak")
 
@@ -144,6 +149,8 @@ class ContactSpec:
     type: str
     radius: float = 0.0
     half_size: tuple[float, float] = (0.0, 0.0)
+    #: which foot or sole this is (one of ``ROLES[type]``); None: found from the geometry
+    role: str | None = None
 
     @property
     def dim(self) -> int:
@@ -204,6 +211,10 @@ class RobotDescription:
         names = [c.name for c in contacts]
         if len(set(names)) != len(names):
             raise DescriptionError(f"{where}: field 'contacts' has duplicate names {names}")
+        roles = [c.role for c in contacts if c.role is not None]
+        if len(set(roles)) != len(roles):
+            raise DescriptionError(f"{where}: field 'contacts' gives a role to more than one "
+                                   f"contact: {roles}")
         locked = _list(data.get("locked_joints", ()), "locked_joints", where,
                        "a list of joint names")
         locked = tuple(_name(j, f"locked_joints[{i}]", where) for i, j in enumerate(locked))
@@ -246,11 +257,15 @@ def _parse_contact(raw: Any, index: int, where: str) -> ContactSpec:
     _no_unknown_keys(raw, CONTACT_KEYS[kind], path, where, f" for a {kind} contact")
     name = _name(raw["name"], f"{path}.name", where)
     frame = _name(raw["frame"], f"{path}.frame", where)
+    role = raw.get("role")
+    if role is not None and role not in ROLES[kind]:
+        raise DescriptionError(f"{where}: field '{path}.role' is {role!r}, expected one of "
+                               f"{ROLES[kind]} for a {kind} contact")
     if kind == "point":
         if "radius" not in raw:
             raise DescriptionError(f"{where}: missing required field '{path}.radius'")
         radius = _checked(validation.nonnegative, raw["radius"], f"{path}.radius", where)
-        return ContactSpec(name, frame, kind, radius=radius)
+        return ContactSpec(name, frame, kind, radius=radius, role=role)
     if "half_size" not in raw:
         raise DescriptionError(f"{where}: missing required field '{path}.half_size'")
     expected = "two positive numbers [hx, hy] (half-lengths in m)"
@@ -260,4 +275,4 @@ def _parse_contact(raw: Any, index: int, where: str) -> ContactSpec:
                                f"{raw['half_size']!r}")
     hx, hy = (_checked(validation.positive, x, f"{path}.half_size[{k}]", where)
               for k, x in enumerate(half))
-    return ContactSpec(name, frame, kind, half_size=(hx, hy))
+    return ContactSpec(name, frame, kind, half_size=(hx, hy), role=role)

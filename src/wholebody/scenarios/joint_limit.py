@@ -49,6 +49,7 @@ import numpy as np
 
 from ..report.locomotion_figures import joint_limit_figure
 from ..robot import FREE_FLYER_NQ
+from ..robots.roles import contact_roles, foot_of_joint, leg_joints
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
 from .locomotion import (CRAWL_SPEED, check_joint, check_positive, check_quadruped, run_gait,
@@ -57,7 +58,8 @@ from .locomotion import (CRAWL_SPEED, check_joint, check_positive, check_quadrup
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
-    Parameter("joint", "lh_hfe_joint", "the joint whose limit is changed in the controller"),
+    Parameter("joint", "", "the joint whose limit is changed in the controller (empty: the "
+                           "left-hind hip flexion, the second joint of that leg; Fig. 2: LH HFE)"),
     Parameter("side", "lower", "which of its limits is changed: lower or upper",
               choices=("lower", "upper")),
     Parameter("limit", -0.85, "the changed limit in the controller (rad), inside the real range",
@@ -102,11 +104,16 @@ def controller_joint_limits(robot, joint: str, lower: float | None = None,
         robot.q_min, robot.q_max = saved
 
 
+def limited_joint(robot, joint: str) -> str:
+    """``joint``, or for "" the hip flexion (second joint) of the left-hind leg."""
+    return joint or leg_joints(robot, contact_roles(robot)["left-hind"])[1]
+
+
 def validate(robot, params: dict) -> None:
     check_quadruped(robot, "joint-limit")
-    joint = params["joint"]
+    joint = limited_joint(robot, params["joint"])
     check_joint(robot, joint)
-    if f"{joint.split('_')[0]}_foot" not in robot.contact_names:
+    if foot_of_joint(robot, joint) is None:
         raise ValueError(f"--set joint: '{joint}' is not a joint of a leg with a foot contact")
     i = robot.joint_names.index(joint)
     if params["side"] not in ("lower", "upper"):
@@ -179,9 +186,9 @@ def run_metrics(r, i: int, leg: int, lim_lo: float, lim_hi: float, p: dict) -> d
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     p = params
-    joint = p["joint"]
+    joint = limited_joint(robot, p["joint"])
     i = robot.joint_names.index(joint)
-    contact = f"{joint.split('_')[0]}_foot"
+    contact = foot_of_joint(robot, joint)
     lower = p["limit"] if p["side"] == "lower" else None
     upper = p["limit"] if p["side"] == "upper" else None
     real = (float(robot.q_min[i]), float(robot.q_max[i]))

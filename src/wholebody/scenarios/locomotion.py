@@ -27,6 +27,7 @@ from ..planning.gait import crawl, stand, trot
 from ..planning.planner import GaitPlanner
 from ..planning.terrain import Terrain
 from ..planning.trunk import VelocityCommand
+from ..robots.roles import quadruped_legs
 from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
 from .base import TIME_SPAN, Parameter
@@ -51,10 +52,11 @@ RUN_DURATION = Parameter("duration", 10.0, "simulated time per run (s); the craw
 
 
 def check_quadruped(robot, scenario: str) -> None:
-    """ValueError unless ``robot`` has four point-foot contacts."""
-    if any(c.spec.type != "point" for c in robot.contacts) or len(robot.contacts) != 4:
-        raise ValueError(f"robot '{robot.name}': {scenario} needs a quadruped with point feet "
-                         "(hyq)")
+    """ValueError unless ``robot`` has four point-foot contacts whose roles are known."""
+    try:
+        quadruped_legs(robot)
+    except ValueError as exc:
+        raise ValueError(f"{scenario}: {exc}") from None
 
 
 def check_joint(robot, joint: str) -> None:
@@ -98,13 +100,16 @@ def ramped_command(speed: float) -> VelocityCommand:
     return VelocityCommand.speed_ramp(0.0, speed, 1.0, 3.0)
 
 
-def make_schedule(gait: str, start: float = 1.0):
+def make_schedule(robot, gait: str, start: float = 1.0):
+    """The ``gait`` schedule (crawl, trot or stand) of ``robot``'s four feet, addressed by role
+    (:func:`~wholebody.robots.roles.quadruped_legs`), starting at ``start`` s."""
+    legs = quadruped_legs(robot)
     if gait == "crawl":
-        return crawl(start=start)
+        return crawl(start=start, legs=legs)
     if gait == "trot":
-        return trot(start=start)
+        return trot(start=start, legs=legs)
     if gait == "stand":
-        return stand()
+        return stand(legs=legs)
     raise ValueError(f"gait: expected one of {GAITS}, got '{gait}'")
 
 
@@ -216,7 +221,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     are then ignored.
     """
     if planner is None:
-        planner = GaitPlanner.for_robot(robot, make_schedule(gait, start), command, terrain,
+        planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start), command, terrain,
                                         t0=0.0, **(planner_options or {}))
     options = dict(controller_options or {})
     if controller == "passive":

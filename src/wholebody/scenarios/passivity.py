@@ -163,7 +163,7 @@ def validate(robot, params: dict) -> None:
 def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10.0,
             feedforward: bool = False, progress: bool = False):
     """Run the gait and return (run, storage arrays, energy balance)."""
-    planner = GaitPlanner.for_robot(robot, make_schedule(gait, 1.0), ramped_command(speed))
+    planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, 1.0), ramped_command(speed))
     if not feedforward:
         planner = SwingFeedForwardOff(planner)
     impedance = TrunkImpedance.for_robot(robot, feedforward=feedforward)

@@ -113,7 +113,7 @@ def crossing(robot, params: dict, progress: bool = False):
     duration = p["duration"]
     if duration <= 0.0:  # the hind feet (~0.4 m behind the CoM) past the end, plus margin
         duration = 3.0 + (end + 0.6) / p["speed"] + 2.0
-    planner = CoursePlanner.on_course(robot, make_schedule(p["gait"], 1.0),
+    planner = CoursePlanner.on_course(robot, make_schedule(robot, p["gait"], 1.0),
                                       ramped_command(p["speed"]), course)
     rec = _Recorder()
     run = run_gait(robot, "passive", duration=duration, environment=course_environment(course),

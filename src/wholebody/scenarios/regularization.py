@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..report.locomotion_figures import regularization_figure
+from ..robots.roles import leg_joints
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .locomotion import check_gait, check_quadruped, parse_positive_floats, run_gait, steady_command
 
@@ -53,8 +54,9 @@ PARAMETERS = (
 
 def validate(robot, params: dict) -> None:
     check_quadruped(robot, "regularization")
-    if not any(j.endswith("kfe_joint") for j in robot.joint_names):
-        raise ValueError(f"robot '{robot.name}': no *_kfe_joint to weight")
+    if any(len(leg_joints(robot, foot)) < 2 for foot in robot.contact_names):
+        raise ValueError(f"robot '{robot.name}': a leg with fewer than two joints has no hip "
+                         f"flexion and knee to compare")
     parse_positive_floats(params["kfe_weights"], "kfe_weights")
     check_gait(params, ("stand", "crawl"))
     if not (params["other_weight"] > 0 and params["duration"] > params["window"] > 0):
@@ -62,8 +64,9 @@ def validate(robot, params: dict) -> None:
 
 
 def knee_joints(robot, contact: str) -> tuple[str, str]:
-    prefix = contact.split("_")[0]
-    return f"{prefix}_hfe_joint", f"{prefix}_kfe_joint"
+    """(hip flexion, knee): the last two joints of ``contact``'s leg."""
+    hfe, kfe = leg_joints(robot, contact)[-2:]
+    return hfe, kfe
 
 
 def grf_measures(run, robot, window: float) -> dict:
@@ -122,7 +125,8 @@ def regularization_run(robot, scheme: str, weights: np.ndarray | None, params: d
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     p = params
     kfe_weights = parse_positive_floats(p["kfe_weights"], "kfe_weights")
-    kfe = np.array([j.endswith("kfe_joint") for j in robot.joint_names])
+    knees = {knee_joints(robot, foot)[1] for foot in robot.contact_names}
+    kfe = np.array([j in knees for j in robot.joint_names])
     runs, metrics = {}, {}
     runs["force-normal"] = regularization_run(robot, "force-normal", None, p, progress)
     for w in kfe_weights:

@@ -35,15 +35,18 @@ import numpy as np
 
 from ..planning.planner import GaitPlanner
 from ..planning.swing import quintic_blend
+from ..robots.roles import contact_roles
 from ..report.locomotion_figures import unstable_foothold_figure
 from ..sim.environment import Box, Environment, Platform
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import DURATION, GAIT, check_gait, make_schedule, ramped_command, run_gait
+from .locomotion import (DURATION, GAIT, check_gait, check_quadruped, make_schedule, ramped_command,
+                         run_gait)
 
 log = logging.getLogger(__name__)
 
-LEG = "rf_foot"
+#: the foot whose stone rolls away (Fig. 6: the right-front foot)
+LEG_ROLE = "right-front"
 WINDOW = 2.0  # s after the release over which the tracking is judged
 HORIZONTAL_LIMIT = 0.02  # m
 
@@ -66,9 +69,7 @@ PARAMETERS = (
 
 
 def validate(robot, params: dict) -> None:
-    if any(c.spec.type != "point" for c in robot.contacts) or LEG not in robot.contact_names:
-        raise ValueError(f"robot '{robot.name}': the unstable-foothold scenario needs a quadruped "
-                         f"with point feet and an '{LEG}' contact (hyq)")
+    check_quadruped(robot, "unstable-foothold")
     check_gait(params)
     if not (0.0 < params["depth"] <= 0.15 and 0.08 <= params["size"] <= 0.4):
         raise ValueError("--set depth/size: expected 0 < depth <= 0.15 m, 0.08 <= size <= 0.4 m")
@@ -76,8 +77,13 @@ def validate(robot, params: dict) -> None:
         raise ValueError("--set release_time: must lie between 3 s and the duration")
 
 
+def stone_foot(robot) -> str:
+    """The contact name of the foot whose stone rolls away (role ``LEG_ROLE``)."""
+    return contact_roles(robot)[LEG_ROLE]
+
+
 def _planner(robot, params):
-    return GaitPlanner.for_robot(robot, make_schedule(params["gait"], 1.0),
+    return GaitPlanner.for_robot(robot, make_schedule(robot, params["gait"], 1.0),
                                  ramped_command(params["speed"]))
 
 
@@ -85,14 +91,14 @@ def stone_site(robot, params: dict) -> tuple[np.ndarray, float]:
     """(contact point, touchdown time) of the RF foot's last touchdown before the release; raises
     if the RF foot is not in stance at the release."""
     planner = _planner(robot, params)
-    sch, t_r = planner.schedule, params["release_time"]
-    if sch.in_swing(LEG, t_r):
+    sch, t_r, foot = planner.schedule, params["release_time"], stone_foot(robot)
+    if sch.in_swing(foot, t_r):
         raise ValueError(f"release_time {t_r}: the RF foot swings then; choose a stance instant")
-    k = sch.swing_index(LEG, t_r) - 1  # the swing that ended last
+    k = sch.swing_index(foot, t_r) - 1  # the swing that ended last
     if k < 0:
         raise ValueError(f"release_time {t_r}: the RF foot has not stepped yet")
-    t_td = sch.touchdown_time(LEG, k)
-    return planner.touchdown_target(LEG, t_td).point, t_td
+    t_td = sch.touchdown_time(foot, k)
+    return planner.touchdown_target(foot, t_td).point, t_td
 
 
 def stone_motion(params: dict):
@@ -150,13 +156,13 @@ def window_errors(run, t0: float, t1: float) -> dict:
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     disturbed, point, t_td = walk(robot, params, True, progress)
     reference, _, _ = walk(robot, params, False, progress)
-    t_r = params["release_time"]
-    leg = robot.contact_names.index(LEG)
+    t_r, foot = params["release_time"], stone_foot(robot)
+    leg = robot.contact_names.index(foot)
     sim = disturbed.sim.log.arrays()
     ts = sim["t"]
     feet = disturbed.log["feet"]
     t = disturbed.log["t"]
-    lift = _planner(robot, params).schedule.next_liftoff(LEG, t_r)
+    lift = _planner(robot, params).schedule.next_liftoff(foot, t_r)
     before = (t >= t_r - 0.2) & (t < t_r)
     after = (t >= t_r) & (t < min(lift, t_r + WINDOW))  # the rest of the RF stance
     z_before = float(feet[before, leg, 2].mean())

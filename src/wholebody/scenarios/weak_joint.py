@@ -39,6 +39,7 @@ import numpy as np
 
 from ..guard import Outcome
 from ..report.locomotion_figures import weak_joint_figure
+from ..robots.roles import contact_roles, foot_of_joint, leg_joints
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
 from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_joint, check_positive, check_quadruped,
@@ -47,7 +48,8 @@ from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_joint, check_positive,
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
-    Parameter("joint", "lf_kfe_joint", "the weakened joint (its leg's HAA/HFE are compared)"),
+    Parameter("joint", "", "the weakened joint (its leg's HAA/HFE are compared; empty: the "
+                           "left-front knee)"),
     Parameter("limit", 26.0, "its torque limit in the WBC (Nm), symmetric", low=0.0, low_open=True),
     CRAWL_SPEED,
     RUN_DURATION,
@@ -58,21 +60,32 @@ PARAMETERS = (
 )
 
 
-def leg_joints(robot, joint: str) -> tuple[str, list[str], str]:
-    """(leg prefix, its three joint names HAA/HFE/KFE, its contact name) for a joint like lf_kfe_joint."""
-    prefix = joint.split("_")[0]
-    names = [f"{prefix}_{j}_joint" for j in ("haa", "hfe", "kfe")]
-    contact = f"{prefix}_foot"
-    if any(n not in robot.joint_names for n in names) or contact not in robot.contact_names:
-        raise ValueError(f"--set joint: '{joint}' is not a HAA/HFE/KFE joint of a leg with a foot "
-                         f"contact; joints: {', '.join(robot.joint_names)}")
-    return prefix, names, contact
+#: the labels of a leg's three joints, base first (hip abduction, hip flexion, knee flexion)
+LEG_JOINT_LABELS = ("HAA", "HFE", "KFE")
+
+
+def weakened_joint(robot, joint: str) -> str:
+    """``joint``, or for "" the knee (last joint) of the left-front leg (Fig. 3: LF KFE)."""
+    return joint or leg_joints(robot, contact_roles(robot)["left-front"])[-1]
+
+
+def weak_leg(robot, joint: str) -> tuple[tuple[str, ...], str]:
+    """(the three joints HAA/HFE/KFE of the leg that ``joint`` belongs to, base first, and its foot
+    contact); ValueError naming ``--set joint`` unless it is a joint of a three-joint leg."""
+    foot = foot_of_joint(robot, joint)
+    joints = leg_joints(robot, foot) if foot is not None else ()
+    if len(joints) == len(LEG_JOINT_LABELS):
+        return joints, foot
+    raise ValueError(f"--set joint: '{joint}' is not a joint of a three-joint leg (hip "
+                     f"abduction, hip flexion, knee) with a foot contact; joints: "
+                     f"{', '.join(robot.joint_names)}")
 
 
 def validate(robot, params: dict) -> None:
     check_quadruped(robot, "weak-joint")
-    check_joint(robot, params["joint"])
-    leg_joints(robot, params["joint"])
+    joint = weakened_joint(robot, params["joint"])
+    check_joint(robot, joint)
+    weak_leg(robot, joint)
     parse_positive_floats(params["sweep"], "sweep", allow_empty=True)
     check_positive(params, ("limit", "speed", "duration", "trunk_tolerance"))
 
@@ -123,8 +136,8 @@ def leg_load(run, robot, joints: list[str], contact: str, t_from: float = 1.0,
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     p = params
-    joint, limit = p["joint"], p["limit"]
-    prefix, joints, contact = leg_joints(robot, joint)
+    joint, limit = weakened_joint(robot, p["joint"]), p["limit"]
+    joints, contact = weak_leg(robot, joint)
     sweep = parse_positive_floats(p["sweep"], "sweep", allow_empty=True)
     limits = [limit] + [x for x in sweep if x != limit]
     runs = weak_joint_runs(robot, joint, limits, p["speed"], p["duration"], progress)
@@ -185,8 +198,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                if m["first_failed_cycle_s"] is not None else "") + f", {joint} peak "
             f"sent {m[f'{joint}_max_abs_sent_Nm']:.2f} / applied {m[f'{joint}_max_abs_applied_Nm']:.2f}"
             " Nm; stance mean |tau| nominal -> limited: " + ", ".join(
-                f"{jn.split('_')[1].upper()} {load_n['mean_abs_tau_Nm'][jn]:.1f} -> "
-                f"{lw['mean_abs_tau_Nm'][jn]:.1f}" for jn in joints)
+                f"{label} {load_n['mean_abs_tau_Nm'][jn]:.1f} -> "
+                f"{lw['mean_abs_tau_Nm'][jn]:.1f}" for label, jn in zip(LEG_JOINT_LABELS, joints))
             + f" Nm; trunk RMS linear {nom['linear_rms_m'] * 1e3:.2f} -> {m['linear_rms_m'] * 1e3:.2f}"
             f" mm, angular {nom['angular_rms_rad'] * 1e3:.2f} -> {m['angular_rms_rad'] * 1e3:.2f} "
             f"mrad; {contact} GRF angle from vertical {load_n['grf_angle_from_vertical_mean_deg']:.1f}"

@@ -1,0 +1,103 @@
+"""Contact roles: which contact is a quadruped's left-front foot, which a biped's left sole.
+
+Controllers and scenarios address feet and soles by role, never by name, so that a robot's own
+contact names (``FL_foot``, ``LF_FOOT``, ``l_sole``) work as they are. A role is declared in the
+description (``role = "left-front"`` on a contact) or, where none is, found from where the
+contacts are in the reference posture, in the base frame (x forward, y left): four point contacts
+are the feet of a quadruped, front/hind by the sign of x about their centre and left/right by the
+sign of y (the base's sagittal plane); two rectangles are the soles of a biped, left/right by y.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .description import ROLES, DescriptionError
+
+#: a quadruped's feet in the order the gait schedules take them (LF, RF, LH, RH)
+QUADRUPED_ROLES = ROLES["point"]
+#: a biped's soles (left, right)
+BIPED_ROLES = ROLES["rectangle"]
+
+
+def contact_roles(robot) -> dict[str, str]:
+    """{role: contact name} for a quadruped (four point contacts) or a biped (two rectangles);
+    {} for any other set of contacts. Declared roles are used when every contact declares one;
+    otherwise all are found from the geometry (module docstring). DescriptionError when some but
+    not all contacts declare a role, or when the geometry does not tell them apart (e.g. two feet
+    on the same side), naming the contacts and what to declare."""
+    contacts = robot.contacts
+    kinds = {c.spec.type for c in contacts}
+    if len(kinds) != 1 or len(contacts) != {"point": 4, "rectangle": 2}[kinds.pop()]:
+        return {}
+    kind = contacts[0].spec.type
+    declared = [c.spec.role for c in contacts]
+    where = f"robot '{robot.name}'"
+    if all(role is not None for role in declared):
+        return {c.spec.role: c.name for c in contacts}
+    if any(role is not None for role in declared):
+        missing = [c.name for c in contacts if c.spec.role is None]
+        raise DescriptionError(f"{where}: contacts {missing} declare no role while others do; "
+                               f"declare one of {ROLES[kind]} on every contact or on none")
+    xy = _base_frame_positions(robot)[:, :2]
+    xy[:, 0] -= xy[:, 0].mean()  # front/hind about the feet's centre, left/right about the base
+    if kind == "point":
+        roles = [("left" if y > 0 else "right") + ("-front" if x > 0 else "-hind") for x, y in xy]
+    else:
+        roles = ["left" if y > 0 else "right" for y in xy[:, 1]]
+    if len(set(roles)) != len(roles):
+        found = ", ".join(f"{c.name}: {r}" for c, r in zip(contacts, roles))
+        raise DescriptionError(f"{where}: the contacts' positions do not tell which is which "
+                               f"({found}); declare role = one of {ROLES[kind]} on each contact")
+    return {role: c.name for role, c in zip(roles, contacts)}
+
+
+def quadruped_legs(robot) -> tuple[str, ...]:
+    """The contact names of the four feet in the order (LF, RF, LH, RH); ValueError unless the
+    robot has four point contacts."""
+    roles = contact_roles(robot)
+    if set(roles) != set(QUADRUPED_ROLES):
+        raise ValueError(f"robot '{robot.name}': a quadruped needs four point-foot contacts; it has "
+                         f"{_listed(robot)}")
+    return tuple(roles[r] for r in QUADRUPED_ROLES)
+
+
+def biped_soles(robot) -> tuple[str, str]:
+    """The contact names of the (left, right) soles; ValueError unless the robot has two
+    rectangular contacts."""
+    roles = contact_roles(robot)
+    if set(roles) != set(BIPED_ROLES):
+        raise ValueError(f"robot '{robot.name}': a biped needs two rectangular sole contacts; it "
+                         f"has {_listed(robot)}")
+    return roles["left"], roles["right"]
+
+
+def leg_joints(robot, contact: str) -> tuple[str, ...]:
+    """The actuated joints between the floating base and ``contact``'s frame, base first (a
+    quadruped leg's hip abduction, hip flexion, knee; a humanoid's hip yaw ... ankle roll)."""
+    model = robot.model
+    joint = model.frames[robot.contact(contact).frame_id].parentJoint
+    chain = []
+    while joint > 1:  # 0 is the universe, 1 the free flyer
+        chain.append(model.names[joint])
+        joint = model.parents[joint]
+    return tuple(reversed(chain))
+
+
+def foot_of_joint(robot, joint: str) -> str | None:
+    """The contact whose leg (:func:`leg_joints`) holds ``joint``; None if no contact's does."""
+    return next((c.name for c in robot.contacts if joint in leg_joints(robot, c.name)), None)
+
+
+def _base_frame_positions(robot) -> np.ndarray:
+    """(n, 3) contact frame origins in the base frame at the reference posture."""
+    q = robot.q_ref
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    R = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()
+    return np.array([R.T @ (data.oMf[c.frame_id].translation - q[:3]) for c in robot.contacts])
+
+
+def _listed(robot) -> str:
+    return ", ".join(f"{c.name} ({c.spec.type})" for c in robot.contacts) or "no contacts"
