@@ -1,4 +1,4 @@
-"""Command line: ``wholebody robots | scenarios | run SCENARIO``.
+"""Command line: ``wholebody robots | check-robot ROBOT | scenarios | run SCENARIO | sweep``.
 
 Exit codes: 0 success; 1 the scenario ran but did not meet its success criterion; 2 bad usage
 (unknown robot, scenario, controller or parameter; a parameter value outside its declared range;
@@ -50,6 +50,35 @@ def _cmd_robots(args) -> int:
         print(f"{r['name']:<10} {r['actuated_dof']:>4} {r['mass_kg']:>10.1f}  "
               f"{', '.join(r['contacts'])}")
     return EXIT_OK
+
+
+def _cmd_check_robot(args) -> int:
+    from .robots.check import check_robot
+
+    report = check_robot(args.robot)
+    if args.json:
+        print(json.dumps(report.as_dict(), indent=2))
+        return EXIT_OK if report.ok else EXIT_USAGE
+    f = report.facts
+    if f:
+        print(f"{f['name']}: {f['actuated_dof']} actuated DoF, {f['mass_kg']:.2f} kg, base "
+              f"{f['standing_base_height_m']:.3f} m above the floor standing, friction "
+              f"{f['friction']:g}")
+        print(f"  CoM {1000 * f.get('com_support_margin_m', float('nan')):.0f} mm inside the "
+              f"support polygon; holding the posture takes "
+              f"{100 * f['holding_torque_max_fraction_of_limit']:.0f} % of the nearest torque limit")
+    for c in report.contacts:
+        size = (f"radius {c['radius_m']:g} m" if c["type"] == "point"
+                else f"{2 * c['half_size_m'][0]:g} x {2 * c['half_size_m'][1]:g} m")
+        where = f", {round(1000 * c['height_above_floor_m'], 1) + 0.0:.1f} mm above the floor"
+        tilt = f", tilted {c['tilt_deg']:.1f} deg" if "tilt_deg" in c else ""
+        print(f"  contact {c['name']} ({c['role'] or 'no role'}): {c['type']} on frame "
+              f"'{c['frame']}', {size}{where}{tilt}; leg: {', '.join(c['leg_joints']) or '-'}")
+    for finding in report.findings:
+        print(f"  {finding.level}: {finding.topic}: {finding.message}" +
+              (f"\n    fix: {finding.fix}" if finding.fix else ""))
+    print(f"{report.source}: {'OK' if report.ok else 'ERRORS'}")
+    return EXIT_OK if report.ok else EXIT_USAGE
 
 
 def _cmd_scenarios(args) -> int:
@@ -201,6 +230,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("robots", help="list the robot presets (DoF, mass, contacts)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_robots)
+
+    p = sub.add_parser("check-robot", help="load and check a robot description: size, contacts "
+                                           "and their roles, posture, limits (exit 2 on errors)")
+    p.add_argument("robot", help="preset name or path to a robot .toml")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=_cmd_check_robot)
 
     p = sub.add_parser("scenarios", help="list the scenarios and their parameters")
     p.add_argument("--json", action="store_true", help="machine-readable output")

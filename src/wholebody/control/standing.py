@@ -63,6 +63,16 @@ def relative_joint_gains(robot: Robot, frequency_hz: float = DEFAULT_FREQUENCY_H
     return omega ** 2 * inertia, 2.0 * float(damping_ratio) * omega * inertia
 
 
+def gravity_compensation(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """(τ_g, λ) at the robot's cached state (module docstring): the least-norm contact forces λ
+    balancing the floating-base rows, J_bᵀ λ = h_b (Herzog et al. 2016, eq. 13), and the joint
+    torques τ_g = h_u − J_uᵀ λ (eq. 14)."""
+    J = robot.stacked_contact_jacobian()
+    n = FREE_FLYER_NV
+    lam, *_ = np.linalg.lstsq(J[:, :n].T, robot.h[:n], rcond=None)
+    return robot.h[n:] - J[:, n:].T @ lam, lam
+
+
 class StandingController:
     """tau = h_u - J_{c,u}^T lambda + Kp (q_ref - q) - Kd qdot, saturated to the torque limits
     (outcome ``CLIPPED`` when saturated).
@@ -92,12 +102,8 @@ class StandingController:
     def compute(self, q, v, t: float = 0.0) -> ControlResult:
         robot = self.robot
         robot.update(q, v)
-        J = robot.stacked_contact_jacobian()
-        h = robot.h
+        tau, lam = gravity_compensation(robot)
         n = FREE_FLYER_NV
-        # least-norm contact forces balancing the floating-base rows: J_b^T lambda = h_b
-        lam, *_ = np.linalg.lstsq(J[:, :n].T, h[:n], rcond=None)
-        tau = h[n:] - J[:, n:].T @ lam
         tau += self.kp * (self.q_joint_ref - robot.q[7:]) - self.kd * robot.v[n:]
         tau, outcome, status = guard_torque(tau, *robot.torque_bounds(), Outcome.SOLVED, "solved")
         forces, start = {}, 0

@@ -32,10 +32,10 @@ from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
 from .base import TIME_SPAN, Parameter
 from .loop import run_closed_loop
+from .measures import FALL_HEIGHT_FRACTION
 
 CONTROLLERS = ("passive", "quasi-static")
 GAITS = ("crawl", "trot", "stand")
-FALL_HEIGHT = 0.3  # base closer than this to the planner's terrain under it (m): fallen
 FALL_TILT = np.radians(45.0)
 COURSE_BOX_THICKNESS = 1.0  # thickness of the simulator's level ground boxes of a course (m)
 COURSE_SLOPE_THICKNESS = 0.1  # thickness of the simulator's ramp boxes of a course (m)
@@ -230,6 +230,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     sim = Simulator(robot, environment)
     log = GaitLog()
     base0 = sim.state()[0][:3].copy()
+    # fallen: the base below FALL_HEIGHT_FRACTION of its standing height above the terrain under it
+    fall_height = FALL_HEIGHT_FRACTION * float(robot.q_ref[2])
     fell = False
     legs = planner.legs
     frame_ids = [robot.model.getFrameId(robot.contact(n).spec.frame) for n in legs]
@@ -262,7 +264,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         log.contact_speed.append([np.linalg.norm((robot.contact_jacobians[n] @ robot.v)[:2])
                                   for n in legs])
         tilt = np.arccos(np.clip(pin.Quaternion(q[3:7]).toRotationMatrix()[2, 2], -1, 1))
-        if q[2] - planner.terrain.height(q[0], q[1]) < FALL_HEIGHT or tilt > FALL_TILT:
+        if q[2] - planner.terrain.height(q[0], q[1]) < fall_height or tilt > FALL_TILT:
             fell = True
         if on_cycle is not None:
             on_cycle(t, result, ctrl, sim)

@@ -1,0 +1,213 @@
+"""What a user must know about a robot description before running anything (``wholebody
+check-robot``): its size, its contacts and their roles, whether it stands on them in its posture,
+and the problems of its model, each with a way out.
+
+:func:`check_robot` loads the description and returns a :class:`RobotCheck`: facts (DoF, mass,
+standing base height, contacts) and findings, each an error (the robot cannot stand or cannot be
+loaded), a warning (something works, with a caveat) or a note.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial import ConvexHull, QhullError
+
+from .description import DescriptionError
+from .roles import contact_roles, leg_joints
+
+log = logging.getLogger(__name__)
+
+#: a contact whose lowest point is this fraction of the standing base height above the floor in
+#: the posture does not carry the robot
+FLOATING_CONTACT_FRACTION = 0.01
+#: a sole tilted by more than this (deg) in the posture does not stand flat
+SOLE_TILT_DEG = 1.0
+
+
+@dataclass
+class Finding:
+    """One result: ``level`` error | warning | note, what was found and how to fix it."""
+
+    level: str
+    topic: str
+    message: str
+    fix: str = ""
+
+
+@dataclass
+class RobotCheck:
+    """The facts about a robot and the findings of :func:`check_robot`."""
+
+    source: str
+    facts: dict[str, Any] = field(default_factory=dict)
+    contacts: list[dict[str, Any]] = field(default_factory=list)
+    findings: list[Finding] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not any(f.level == "error" for f in self.findings)
+
+    def add(self, level: str, topic: str, message: str, fix: str = "") -> None:
+        self.findings.append(Finding(level, topic, message, fix))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"source": self.source, "ok": self.ok, "facts": self.facts,
+                "contacts": self.contacts, "findings": [f.__dict__ for f in self.findings]}
+
+
+class _Collect(logging.Handler):
+    """Collects the warnings logged while the robot loads (e.g. placeholder effort limits)."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record):
+        self.messages.append(record.getMessage())
+
+
+def check_robot(name_or_path) -> RobotCheck:
+    """Load ``name_or_path`` (a preset name or a description file) and check it (module
+    docstring). A description that does not load gives one error finding with the loader's
+    message (which names the field)."""
+    from . import load_robot
+
+    report = RobotCheck(str(name_or_path))
+    collect = _Collect()
+    robot_log = logging.getLogger("wholebody.robot")
+    robot_log.addHandler(collect)
+    propagate, robot_log.propagate = robot_log.propagate, False  # reported here, not logged too
+    try:
+        robot = load_robot(name_or_path)
+    except DescriptionError as exc:
+        report.add("error", "description", str(exc), "" if "fix" in str(exc) else
+                   "fix the field named above (docs/robots.md lists every field)")
+        return report
+    except (ValueError, OSError) as exc:
+        report.add("error", "description", str(exc))
+        return report
+    finally:
+        robot_log.removeHandler(collect)
+        robot_log.propagate = propagate
+    for message in collect.messages:
+        report.add("warning", "torque limits", message)
+    _facts(robot, report)
+    _roles(robot, report)
+    _contacts_on_the_floor(robot, report)
+    _support(robot, report)
+    _gravity_torques(robot, report)
+    return report
+
+
+def _facts(robot, report: RobotCheck) -> None:
+    report.facts = {"name": robot.name, "actuated_dof": robot.na, "mass_kg": robot.mass,
+                    "standing_base_height_m": float(robot.q_ref[2]),
+                    "friction": robot.friction}
+
+
+def _roles(robot, report: RobotCheck) -> None:
+    try:
+        roles = {name: role for role, name in contact_roles(robot).items()}
+    except DescriptionError as exc:
+        roles = {}
+        report.add("error", "roles", str(exc))
+    kinds = sorted({c.spec.type for c in robot.contacts})
+    if len(roles) == 4:
+        report.add("note", "class", "a quadruped (four point feet): the quadruped scenarios "
+                   "(crawl, ramp, ...) and stand apply")
+    elif len(roles) == 2:
+        report.add("note", "class", "a biped (two soles): the humanoid scenarios (push, squat, "
+                   "...) and stand apply")
+    elif not report.findings or report.findings[-1].topic != "roles":
+        report.add("warning", "class", f"{len(robot.contacts)} contact(s) of type "
+                   f"{'/'.join(kinds)}: neither a quadruped (four point feet) nor a biped (two "
+                   f"soles); only stand applies",
+                   "describe the feet as four point contacts or the soles as two rectangles")
+    for c in robot.contacts:
+        size = ({"radius_m": c.spec.radius} if c.spec.type == "point"
+                else {"half_size_m": list(c.spec.half_size)})
+        report.contacts.append({"name": c.name, "frame": c.spec.frame, "type": c.spec.type,
+                                **size, "role": roles.get(c.name),
+                                "leg_joints": list(leg_joints(robot, c.name))})
+
+
+def _contacts_on_the_floor(robot, report: RobotCheck) -> None:
+    """Every contact touches the floor in the posture (the robot is placed so that the lowest
+    does), and soles lie flat."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    gap_limit = FLOATING_CONTACT_FRACTION * float(robot.q_ref[2])
+    for c, row in zip(robot.contacts, report.contacts):
+        placement = data.oMf[c.frame_id]
+        height = float(robot.contact_lowest_point(c, placement)[2])
+        row["height_above_floor_m"] = height
+        row["touches_floor"] = height <= gap_limit
+        if height > gap_limit:
+            report.add("error", "posture", f"contact '{c.name}' is {1000 * height:.1f} mm above "
+                       f"the floor in the posture: the robot does not stand on it",
+                       "choose a posture (SRDF state or a joint table) with all feet down, or "
+                       "check the contact's frame and radius/half_size")
+        if c.spec.type == "rectangle":
+            tilt = math.degrees(math.acos(min(1.0, abs(float(placement.rotation[2, 2])))))
+            row["tilt_deg"] = tilt
+            if tilt > SOLE_TILT_DEG:
+                report.add("warning", "posture", f"sole '{c.name}' is tilted {tilt:.1f} deg in "
+                           f"the posture: it touches the floor with an edge",
+                           "adjust the ankle joints of the posture until the soles are flat")
+
+
+def _support(robot, report: RobotCheck) -> None:
+    """The CoM lies over the polygon of the contacts that touch the floor in the posture (margin
+    to its nearest edge)."""
+    data = robot.model.createData()
+    com = pin.centerOfMass(robot.model, data, robot.q_ref)
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    points = []
+    for c, row in zip(robot.contacts, report.contacts):
+        if not row["touches_floor"]:
+            continue
+        placement = data.oMf[c.frame_id]
+        if c.spec.type == "point":
+            points.append(placement.translation[:2])
+        else:
+            hx, hy = c.spec.half_size
+            for sx in (-1, 1):
+                for sy in (-1, 1):
+                    points.append((placement.act(np.array([sx * hx, sy * hy, 0.0])))[:2])
+    try:
+        hull = ConvexHull(np.array(points))
+    except (QhullError, ValueError):
+        report.add("error", "support", "the contacts span no support area (fewer than three "
+                   "points, or all on a line)", "add contacts or give the soles their size")
+        return
+    # hull.equations: n . x + d <= 0 inside; the margin is the smallest distance to an edge
+    margin = float(-np.max(hull.equations[:, :2] @ com[:2] + hull.equations[:, 2]))
+    report.facts["com_support_margin_m"] = margin
+    if margin <= 0:
+        report.add("error", "support", f"the CoM is not inside the polygon of the contacts on "
+                   f"the floor in the posture (margin {1000 * margin:.1f} mm): the robot cannot "
+                   f"stand", "choose another posture, or check the contacts' frames")
+
+
+def _gravity_torques(robot, report: RobotCheck) -> None:
+    """The torques that hold the robot still in its posture (contact-consistent gravity
+    compensation) lie within its limits."""
+    from ..control.standing import gravity_compensation
+
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    need, _ = gravity_compensation(robot)
+    lo, hi = robot.torque_bounds(robot.q_ref)
+    ratio = np.maximum(need / np.maximum(hi, 1e-12), need / np.minimum(lo, -1e-12))
+    worst = int(np.argmax(ratio))
+    report.facts["holding_torque_max_fraction_of_limit"] = float(ratio[worst])
+    if ratio[worst] > 1.0:
+        report.add("error", "torque limits", f"holding the posture needs {need[worst]:.1f} Nm on "
+                   f"'{robot.joint_names[worst]}', beyond its limit "
+                   f"[{lo[worst]:.1f}, {hi[worst]:.1f}] Nm",
+                   "check torque_limits (scale, overrides) or choose a less crouched posture")

@@ -1,0 +1,116 @@
+"""``wholebody check-robot``: every preset passes; each kind of problem is an error or a warning
+that names the contact, joint or link, and exit code 2 for errors."""
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import wholebody as wb
+from wholebody.cli import main
+from wholebody.robots import preset_description, preset_names
+
+
+def check(capsys, *args):
+    code = main(["check-robot", *args])
+    return code, capsys.readouterr().out
+
+
+def write(tmp_path, text, name="robot.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+HYQ = '''name = "myhyq"
+urdf = "erd:hyq_description/robots/hyq_no_sensors.urdf"
+srdf = "erd:hyq_description/srdf/hyq.srdf"
+posture = "standing"
+contacts = [
+  {{ name = "a", frame = "lf_foot", type = "point", radius = 0.02175 }},
+  {{ name = "b", frame = "rf_foot", type = "point", radius = 0.02175 }},
+  {{ name = "c", frame = "lh_foot", type = "point", radius = 0.02175 }},
+  {{ name = "d", frame = "{last}", type = "point", radius = 0.02175 }},
+]
+'''
+
+
+@pytest.mark.parametrize("name", preset_names())
+def test_every_preset_passes(capsys, name):
+    code, out = check(capsys, name, "--json")
+    report = json.loads(out)
+    assert code == 0 and report["ok"], report["findings"]
+    roles = {c["role"] for c in report["contacts"]}
+    assert roles in ({"left-front", "right-front", "left-hind", "right-hind"}, {"left", "right"})
+    assert all(c["touches_floor"] for c in report["contacts"])
+
+
+def test_a_lifted_contact_is_an_error(tmp_path, capsys):
+    """A 'foot' on the knee frame: the check reports it above the floor by the knee's height,
+    measured here from Pinocchio's kinematics at the preset's standing posture."""
+    code, out = check(capsys, write(tmp_path, HYQ.format(last="rh_lowerleg")), "--json")
+    report = json.loads(out)
+    assert code == 2 and not report["ok"]
+    robot = wb.load_robot("hyq")
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    knee = data.oMf[robot.model.getFrameId("rh_lowerleg")].translation[2] - 0.02175
+    row = next(c for c in report["contacts"] if c["name"] == "d")
+    assert row["height_above_floor_m"] == pytest.approx(knee, abs=1e-9)
+    assert any(f["level"] == "error" and "'d'" in f["message"] for f in report["findings"])
+
+
+def test_torque_limits_too_low_to_hold_the_posture(tmp_path, capsys):
+    """At 1 % of HyQ's limits its knees cannot carry it (a quarter of 87 kg on a ~0.3 m lever
+    needs tens of Nm)."""
+    text = HYQ.format(last="rh_foot") + "[torque_limits]\nscale = 0.01\n"
+    code, out = check(capsys, write(tmp_path, text))
+    assert code == 2
+    assert "holding the posture needs" in out and "_joint'" in out
+
+
+def test_zero_inertia_names_the_link(tmp_path, capsys):
+    """iCub's URDF in example-robot-data has a massive link with zero inertia (a known flaw)."""
+    text = '''name = "icub"
+urdf = "erd:icub_description/robots/icub_reduced.urdf"
+srdf = "erd:icub_description/srdf/icub.srdf"
+posture = "half_sitting"
+contacts = [
+  { name = "l", frame = "l_sole", type = "rectangle", half_size = [0.06, 0.03] },
+  { name = "r", frame = "r_sole", type = "rectangle", half_size = [0.06, 0.03] },
+]
+'''
+    code, out = check(capsys, write(tmp_path, text))
+    assert code == 2
+    assert "r_hip_pitch" in out and "inertia" in out
+
+
+def test_placeholder_effort_limits_are_a_warning(tmp_path, capsys):
+    solo = preset_description("solo12")
+    contacts = ",\n".join(f'  {{ name = "{c.name}", frame = "{c.frame}", type = "point", '
+                          f'radius = {c.radius} }}' for c in solo.contacts)
+    text = (f'name = "solo_urdf_limits"\nurdf = "{solo.urdf}"\nsrdf = "{solo.srdf}"\n'
+            f'posture = "standing"\ncontacts = [\n{contacts}\n]\n')
+    code, out = check(capsys, write(tmp_path, text), "--json")
+    report = json.loads(out)
+    assert code == 0
+    warnings = [f for f in report["findings"] if f["level"] == "warning"]
+    assert any("placeholder" in f["message"] and "FL_KFE" in f["message"] for f in warnings)
+
+
+def test_unknown_robot_exits_2(capsys):
+    code, out = check(capsys, "no-such-robot")
+    assert code == 2 and "unknown robot" in out
+
+
+def test_holding_torques_balance_the_robot(robots):
+    """The torques check-robot compares with the limits hold the robot still: with them and the
+    contact forces, the equations of motion give zero acceleration (M·0 + h = Sᵀτ + Jᵀλ)."""
+    from wholebody.control.standing import gravity_compensation
+    robot = robots["talos14"]
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    tau, lam = gravity_compensation(robot)
+    J = robot.stacked_contact_jacobian()
+    residual = robot.h - robot.joint_selection.T @ tau - J.T @ lam
+    assert np.abs(residual).max() < 1e-8 * robot.mass * 9.81
