@@ -83,7 +83,7 @@ def _cmd_check_robot(args) -> int:
 
 def _cmd_scenarios(args) -> int:
     from .scenarios import SCENARIOS
-    from .scenarios.base import BASE_HEIGHT_LEGEND
+    from .scenarios.base import BASE_HEIGHT_LEGEND, RobotRelative
 
     if args.json:
         print(json.dumps({s.name: {"summary": s.summary, "controllers": list(s.controllers),
@@ -97,18 +97,22 @@ def _cmd_scenarios(args) -> int:
         print(f"{s.name}  (robot {s.default_robot}; controllers: {', '.join(s.controllers)})")
         print(f"    {s.summary}")
         for p in s.parameters:
-            setting = f"--set {p.name}={p.default!r}"
+            setting = f"--set {p.name}={p.default_text()}"
             accepted = p.describe()
             print(f"    {setting:<32} {p.help}" + (f"; {accepted}" if accepted else ""))
-            relative |= p.robot_relative
+            relative |= p.robot_relative or isinstance(p.default, RobotRelative)
     if relative:
         print(BASE_HEIGHT_LEGEND)
     return EXIT_OK
 
 
 def _parameter_json(p) -> dict:
-    """One parameter for ``scenarios --json``: default, help, and what it accepts."""
-    out = {"default": p.default, "help": p.help, "type": p.kind.__name__}
+    """One parameter for ``scenarios --json``: default (a value, or for a robot-relative one its
+    data, e.g. ``{"base_height": factor}``), help, and what it accepts."""
+    from .scenarios.base import RobotRelative
+
+    default = p.default.as_data() if isinstance(p.default, RobotRelative) else p.default
+    out = {"default": default, "help": p.help, "type": p.kind.__name__}
     if p.items is not None:
         out["list"] = True  # comma-separated items of that type
     if p.numeric:  # "(0, 600]", "[0, 0.5 h]" (h: the robot's standing base height), and as data
@@ -180,6 +184,7 @@ def _cmd_run(args) -> int:
             raise ValueError(f"robot {robot_name}: {exc.strerror or exc}"
                              f"{f' ({exc.filename})' if exc.filename else ''}") from None
         params = scenario.validate(robot, overrides)
+        _check_observed(args, scenario, params)
     except (ValueError, OSError) as exc:
         return _usage_error(exc)
     out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"
@@ -190,10 +195,13 @@ def _cmd_run(args) -> int:
     except OSError as exc:
         return _usage_error(f"--out {out_dir}: cannot write there ({exc.strerror or exc})")
     controller = args.controller or scenario.controllers[0]
+    recorder, view = _observers(args, out_dir)
+    observers = [o for o in (recorder, view) if o is not None]
     start = time.perf_counter()
     try:
         result = scenario.run(robot, controller, overrides, out_dir,
-                              progress=not args.no_progress and sys.stderr.isatty())
+                              progress=not args.no_progress and sys.stderr.isatty(),
+                              **({"observers": observers} if observers else {}))
     except KeyboardInterrupt:
         elapsed = time.perf_counter() - start
         cut = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
@@ -207,7 +215,12 @@ def _cmd_run(args) -> int:
                                 {"diverged_at_s": exc.t}, params, [str(exc)],
                                 wall_time_s=time.perf_counter() - start)
         _report_cut_short(failed, out_dir, f"FAILED: {exc}")
+        _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): diverged",
+                      out_dir)
         return EXIT_SCENARIO_FAILED
+    finally:
+        if view is not None:
+            view.close()
     status = "SUCCESS" if result.success else "FAILED"
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")
@@ -216,7 +229,52 @@ def _cmd_run(args) -> int:
         print(f"  note: {note}")
     print(f"wrote {out_dir / 'summary.json'}" +
           (f" and {len(result.figures)} figure(s)" if result.figures else ""))
+    _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): {status}", out_dir)
     return EXIT_OK if result.success else EXIT_SCENARIO_FAILED
+
+
+def _check_observed(args, scenario, params: dict) -> None:
+    """ValueError naming the flag if ``--replay``/``--view`` cannot watch this run: the scenario
+    does not declare its simulations or runs too many, or (``--view``) no display."""
+    from .report.replay import MAX_RUNS
+
+    for flag in [f for f, on in (("--replay", args.replay), ("--view", args.view)) if on]:
+        n = scenario.simulation_count(params, args.controller)
+        if n is None:
+            raise ValueError(f"scenario '{scenario.name}' does not declare how many simulations it "
+                             f"runs; {flag} needs a single-run scenario")
+        if n > MAX_RUNS:
+            raise ValueError(f"scenario '{scenario.name}' runs {n} simulations; {flag} needs a "
+                             f"single-run scenario (or a comparison of {MAX_RUNS}, shown side by "
+                             f"side)")
+    if args.view:
+        from .sim.live_view import display_problem
+
+        problem = display_problem()
+        if problem:
+            raise ValueError(f"--view: {problem}; run without --view (--replay writes a replay "
+                             f"to open later)")
+
+
+def _observers(args, out_dir: Path):
+    """The replay recorder (``--replay``; an earlier replay.html removed) and the live view
+    (``--view``), or None."""
+    from .sim.live_view import LiveView
+    from .sim.recorder import ReplayRecorder
+
+    if args.replay:
+        (out_dir / "replay.html").unlink(missing_ok=True)
+    return (ReplayRecorder() if args.replay else None), (LiveView() if args.view else None)
+
+
+def _write_replay(recorder, title: str, out_dir: Path) -> None:
+    """Write ``out_dir/replay.html`` from what ``recorder`` (``--replay``) saw, if anything."""
+    if recorder is None or not any(r.frames for r in recorder.recordings):
+        return
+    from .report.replay import write_replay
+
+    path = write_replay(out_dir / "replay.html", recorder.recordings, title)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -250,6 +308,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output directory, created and checked to be writable before "
                                  "the run (default: results/SCENARIO-ROBOT)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--replay", action="store_true",
+                   help="also write DIR/replay.html: a 3D replay that opens from disk")
+    p.add_argument("--view", action="store_true",
+                   help="watch the run live in MuJoCo's viewer (needs a display)")
     p.set_defaults(func=_cmd_run)
     return parser
 

@@ -110,7 +110,7 @@ class Robot:
         where = f"robot '{self.name}'"
         urdf = resolve_model_path(description.urdf, description.base_dir)
         full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
-        q_posture = self._posture(full, description)
+        q_posture = self.full_posture(full, description)
         if description.locked_joints:
             joints = _model_joint_names(full)
             missing = [j for j in description.locked_joints if j not in joints]
@@ -178,7 +178,10 @@ class Robot:
 
     # ------------------------------------------------------------------ construction helpers
     @staticmethod
-    def _posture(full: pin.Model, d: RobotDescription) -> np.ndarray:
+    def full_posture(full: pin.Model, d: RobotDescription) -> np.ndarray:
+        """The posture of ``d`` as a configuration of the unreduced model ``full`` (its URDF, locked
+        joints included): the SRDF group state or the joint table (other joints at 0), then the
+        ``posture_overrides``."""
         if isinstance(d.posture, str):
             from .robots.locate import resolve_model_path
 
@@ -188,20 +191,28 @@ class Robot:
                 raise DescriptionError(f"robot '{d.name}': field 'posture' = '{d.posture}' is not "
                                        f"a group state of {srdf.name}; have "
                                        f"{list(full.referenceConfigurations)}")
-            return np.array(full.referenceConfigurations[d.posture], dtype=float)
-        q = pin.neutral(full)
+            q = np.array(full.referenceConfigurations[d.posture], dtype=float)
+        else:
+            q = Robot._set_joint_angles(full, pin.neutral(full), d.posture, "posture", d.name)
+        return Robot._set_joint_angles(full, q, d.posture_overrides, "posture_overrides", d.name)
+
+    @staticmethod
+    def _set_joint_angles(full: pin.Model, q: np.ndarray, table, field: str,
+                          name: str) -> np.ndarray:
+        """``q`` with the angles of ``table`` {joint: angle}, each a 1-DoF joint of the model
+        within its URDF limits (DescriptionError naming ``field``.joint otherwise)."""
         joints = _model_joint_names(full)
-        for joint, value in d.posture.items():
+        for joint, value in table.items():
             if joint not in joints:
-                raise DescriptionError(f"robot '{d.name}': field 'posture' names unknown joint "
+                raise DescriptionError(f"robot '{name}': field '{field}' names unknown joint "
                                        f"'{joint}'; joints of the model: {joints}")
             j = full.joints[full.getJointId(joint)]
             if j.nq != 1:
-                raise DescriptionError(f"robot '{d.name}': posture.{joint}: joint '{joint}' "
+                raise DescriptionError(f"robot '{name}': {field}.{joint}: joint '{joint}' "
                                        f"({j.shortname()}) has no single angle")
             lo, hi = full.lowerPositionLimit[j.idx_q], full.upperPositionLimit[j.idx_q]
             if not lo - 1e-9 <= value <= hi + 1e-9:
-                raise DescriptionError(f"robot '{d.name}': posture.{joint} = {value!r} is outside "
+                raise DescriptionError(f"robot '{name}': {field}.{joint} = {value!r} is outside "
                                        f"the joint's URDF limits [{float(lo):g}, {float(hi):g}]")
             q[j.idx_q] = value
         return q

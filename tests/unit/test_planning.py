@@ -442,6 +442,21 @@ def test_planner_crawl_on_hyq_flat(hyq):
         0.15 * (len(plans) * 4e-3 - 0.6) - 0.15 * sch.period, abs=0.02)
 
 
+def test_trunk_reference_waits_for_the_gait(hyq):
+    """A command that already asks for speed before the gait starts moves the trunk only once the
+    legs step: until then the feet stand still and the CoM reference stays over them."""
+    sch = trot(start=1.0)
+    planner = GaitPlanner.for_robot(hyq, sch, VelocityCommand.constant(0.1))
+    x0 = planner.trunk.nominal(0.0)[0]
+    for t in (0.5, 0.999):
+        xy, v, *_ = planner.trunk.nominal(t)
+        np.testing.assert_array_equal(xy, x0)
+        assert np.all(v == 0.0)
+    xy, v, *_ = planner.trunk.nominal(1.5)
+    np.testing.assert_allclose(xy - x0, [0.05, 0.0], atol=1e-12)  # 0.1 m/s for 0.5 s
+    np.testing.assert_allclose(v, [0.1, 0.0], atol=1e-12)
+
+
 def test_planned_crawl_is_reachable_by_hyq(hyq):
     """At lift-off, mid-swing and touchdown instants of a 0.15 m/s crawl, inverse kinematics with the
     base on the trunk reference reaches all four planned feet within HyQ's joint limits."""

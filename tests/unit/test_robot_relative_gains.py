@@ -129,6 +129,10 @@ def test_gains_scale_with_the_robots_masses(tmp_path, quadrupeds, name):
         np.testing.assert_allclose(getattr(heavy_wbc.impedance, gain),
                                    k * getattr(light.impedance, gain), rtol=1e-9, err_msg=gain)
     assert heavy_wbc.f_max == pytest.approx(k * light.f_max, rel=1e-9)
+    light_qs, heavy_qs = (QuasiStaticController(robot, planner(robot)),
+                          QuasiStaticController(heavy, planner(heavy)))
+    assert heavy_qs.swing_K == pytest.approx(k * light_qs.swing_K, rel=1e-9)
+    assert heavy_qs.swing_D == pytest.approx(k * light_qs.swing_D, rel=1e-9)
 
 
 # ---------------------------------------------------------------------- trunk impedance
@@ -145,6 +149,9 @@ def test_hyq_gets_the_papers_gains(quadrupeds):
         # allowed the last bit elsewhere
         np.testing.assert_allclose(imp.K_theta, PAPER["K_theta"], rtol=1e-13, atol=0)
         np.testing.assert_allclose(imp.D_theta, PAPER["D_theta"], rtol=1e-13, atol=0)
+    # the baseline's swing PD of the crawl comparison keeps the values it was tuned with on HyQ
+    qs = QuasiStaticController(robot, planner(robot))
+    assert (qs.swing_K, qs.swing_D) == (2000.0, 50.0)
     # explicit absolute values still win
     wbc = PassiveWBC(robot, planner(robot), f_max=1500.0, impedance=TrunkImpedance(K_x=123.0))
     assert wbc.f_max == 1500.0 and np.all(wbc.impedance.K_x == 123.0)
@@ -156,9 +163,19 @@ def test_trunk_inertia_is_the_mean_centroidal_moment(quadrupeds):
         assert trunk_inertia(robot) == pytest.approx(expected, rel=1e-9), robot.name
 
 
-def test_small_quadrupeds_get_hyqs_frequencies_and_damping_ratios(quadrupeds):
+def standing_height(robot):
+    """The base above the lowest foot point in the reference posture (Pinocchio kinematics)."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    lowest = min(data.oMf[c.frame_id].translation[2] - c.spec.radius for c in robot.contacts)
+    return robot.q_ref[2] - lowest
+
+
+def test_small_quadrupeds_get_hyqs_dynamics_scaled_to_their_size(quadrupeds):
     """Not HyQ's absolute gains (a 2000 N/m spring on a 2.5 kg Solo12) but its dynamics: the same
-    ω = sqrt(K/m) and ζ = D / (2 sqrt(K m)) for the CoM, and for the trunk rotation on I_G."""
+    damping ratios ζ = D / (2 sqrt(K m)) for the CoM, and for the trunk rotation on I_G, and the
+    frequencies ω = sqrt(K/m) of a dynamically similar robot, HyQ's times sqrt(h_HyQ / h) (h the
+    standing height: the gait's times scale by sqrt(h / h_HyQ))."""
     hyq = quadrupeds["hyq"]
     m0, i0 = hyq.mass, np.trace(centroidal_inertia_by_bodies(hyq)) / 3
     w_x, z_x = math.sqrt(PAPER["K_x"] / m0), PAPER["D_x"] / (2 * math.sqrt(PAPER["K_x"] * m0))
@@ -167,13 +184,14 @@ def test_small_quadrupeds_get_hyqs_frequencies_and_damping_ratios(quadrupeds):
     for name in SMALL:
         robot = quadrupeds[name]
         m, inertia = robot.mass, np.trace(centroidal_inertia_by_bodies(robot)) / 3
+        faster = math.sqrt(standing_height(hyq) / standing_height(robot))
         imp = PassiveWBC(robot, planner(robot)).impedance
         K_x, D_x, K_t, D_t = (float(getattr(imp, g)[0])
                               for g in ("K_x", "D_x", "K_theta", "D_theta"))
-        assert K_x < 0.2 * PAPER["K_x"]  # a fraction of HyQ's: these robots weigh 2.5-16 kg
-        assert math.sqrt(K_x / m) == pytest.approx(w_x, rel=1e-9), name
+        assert K_x < 0.5 * PAPER["K_x"]  # a fraction of HyQ's: these robots weigh 2.5-16 kg
+        assert math.sqrt(K_x / m) == pytest.approx(w_x * faster, rel=1e-9), name
         assert D_x / (2 * math.sqrt(K_x * m)) == pytest.approx(z_x, rel=1e-9), name
-        assert math.sqrt(K_t / inertia) == pytest.approx(w_t, rel=1e-9), name
+        assert math.sqrt(K_t / inertia) == pytest.approx(w_t * faster, rel=1e-9), name
         assert D_t / (2 * math.sqrt(K_t * inertia)) == pytest.approx(z_t, rel=1e-9), name
         f_max = PassiveWBC(robot, planner(robot)).f_max
         assert f_max / (m * G) == pytest.approx(PAPER["f_max"] / (m0 * G), rel=1e-9), name

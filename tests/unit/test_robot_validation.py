@@ -299,3 +299,33 @@ def test_presets_pass_every_check_without_warning(name, caplog):
         robot = wb.load_robot(name)
     assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
     check_inertias(robot.model, name)
+
+
+def test_posture_overrides_change_only_their_joints():
+    """An SRDF state plus a few joints: the SRDF's angles (read here from the SRDF file) except
+    the overridden ones."""
+    import xml.etree.ElementTree as ET
+
+    from wholebody.robots import preset_description
+    from wholebody.robots.locate import resolve_model_path
+
+    d = preset_description("hyq")
+    srdf = ET.parse(resolve_model_path(d.srdf, d.base_dir)).getroot()
+    state = next(s for s in srdf.iter("group_state") if s.get("name") == "standing")
+    srdf_angles = {j.get("name"): float(j.get("value")) for j in state.iter("joint")
+                   if j.get("name") != "root_joint"}
+    data = {"name": "hyq-tall", "urdf": d.urdf, "srdf": d.srdf, "posture": "standing",
+            "posture_overrides": {"lf_kfe_joint": -1.2, "rf_kfe_joint": -1.2},
+            "contacts": [{"name": c.name, "frame": c.frame, "type": c.type, "radius": c.radius}
+                         for c in d.contacts]}
+    robot = wb.load_robot(data)
+    angles = dict(zip(robot.joint_names, robot.q_ref[7:]))
+    for joint, value in srdf_angles.items():
+        expected = -1.2 if joint in ("lf_kfe_joint", "rf_kfe_joint") else value
+        assert angles[joint] == pytest.approx(expected, abs=1e-12), joint
+    with pytest.raises(DescriptionError, match="posture_overrides.*unknown joint 'knee'"):
+        wb.load_robot({**data, "posture_overrides": {"knee": 0.0}})
+    with pytest.raises(DescriptionError, match="posture_overrides.lf_kfe_joint = 1.0 is outside"):
+        wb.load_robot({**data, "posture_overrides": {"lf_kfe_joint": 1.0}})
+    with pytest.raises(DescriptionError, match="posture_overrides.lf_kfe_joint"):
+        wb.load_robot({**data, "posture_overrides": {"lf_kfe_joint": float("nan")}})

@@ -103,3 +103,34 @@ def test_quadruped_scenarios_address_feet_by_role():
     for name in ("weak-joint", "regularization", "crawl"):
         get_scenario(name).validate(go1, {})  # no robot names needed
     get_scenario("joint-limit").validate(go1, {"limit": "0.0"})  # -0.85 rad is outside go1's
+
+
+def test_pitch_joints_are_the_lateral_axes_of_the_urdf(robots):
+    """The flexion joints of a leg, read independently from the URDF's <axis> elements: those
+    along y (Talos' legs are built with the base frame's axes in the posture)."""
+    import xml.etree.ElementTree as ET
+
+    from wholebody.robots.locate import resolve_model_path
+    from wholebody.robots.roles import pitch_joints
+
+    robot = robots["talos14"]
+    urdf = ET.parse(resolve_model_path(robot.description.urdf, robot.description.base_dir))
+    axes = {j.get("name"): [float(x) for x in j.find("axis").get("xyz").split()]
+            for j in urdf.getroot().iter("joint") if j.find("axis") is not None}
+    for sole in ("left_sole", "right_sole"):
+        expected = tuple((j, float(axes[j][1])) for j in leg_joints(robot, sole)
+                         if abs(axes[j][1]) > 0.9)
+        assert pitch_joints(robot, sole) == expected and len(expected) == 3
+
+
+def test_single_support_picks_the_swing_legs_hip_and_knee(robots):
+    from wholebody.scenarios.single_support import config
+    robot = robots["talos14"]
+    scenario = get_scenario("single-support")
+    cfg = config(robot, scenario.validate(robot, {}))  # stance: the left sole
+    assert cfg.sine_joints == ("leg_right_3_joint", "leg_right_4_joint")
+    assert cfg.held_joints == tuple(f"leg_right_{k}_joint" for k in range(1, 7))
+    cfg = config(robot, scenario.validate(robot, {"stance": "right"}))
+    assert cfg.sine_joints == ("leg_left_3_joint", "leg_left_4_joint")
+    with pytest.raises(ValueError, match="lateral-axis joints"):
+        scenario.validate(robot, {"sine_joints": "leg_right_1_joint,leg_right_4_joint"})

@@ -22,6 +22,7 @@ from ..robot import Robot
 from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE, solve_daqp_qp
 from ..tasks.contact import friction_faces, tangent_basis
 from ..tasks.limits import TorqueLimits
+from ..robots import reference
 from ..tasks.wrench import TrunkImpedance, contact_wrench_map, force_bound
 from .base import PlannedController
 from .passive import default_planner
@@ -29,10 +30,24 @@ from .passive import default_planner
 log = logging.getLogger(__name__)
 
 
+#: the baseline's Cartesian swing stiffness (N/m) and damping (N s/m) on HyQ
+REFERENCE_SWING_K, REFERENCE_SWING_D = 2000.0, 50.0
+
+
+def swing_gains(robot) -> tuple[float, float]:
+    """(K, D) of the swing legs' Cartesian PD, force-level: HyQ's 2000 N/m and 50 N s/m times
+    m / m_HyQ, so that a leg whose mass scales with the robot's keeps HyQ's swing frequency and
+    damping ratio (the absolute gains left a 2.5 kg Solo12 beyond its torque limits in every
+    swing)."""
+    ratio = robot.mass / reference.MASS
+    return REFERENCE_SWING_K * ratio, REFERENCE_SWING_D * ratio
+
+
 class QuasiStaticController(PlannedController):
     """Centroidal force distribution + static torque map: ``compute(q, v, t) -> Solution``.
 
-    ``swing_K``/``swing_D``: Cartesian swing-leg stiffness (N/m) and damping (N s/m);
+    ``swing_K``/``swing_D``: Cartesian swing-leg stiffness (N/m) and damping (N s/m), None: 2000 N/m
+    and 50 N s/m on HyQ, scaled by the robot's mass on any other (:func:`swing_gains`);
     ``f_max`` None and ``impedance`` None: the robot-relative defaults of
     :class:`~wholebody.control.passive.PassiveWBC` (the paper's 2000 N and trunk gains on HyQ).
     """
@@ -40,7 +55,7 @@ class QuasiStaticController(PlannedController):
     def __init__(self, robot: Robot, planner=None, mu: float | None = None, f_min: float = 0.0,
                  f_max: float | None = None, impedance: TrunkImpedance | None = None,
                  Q=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), R_force: float = 1e-4,
-                 tangential_weight: float = 1e-3, swing_K: float = 2000.0, swing_D: float = 50.0,
+                 tangential_weight: float = 1e-3, swing_K: float | None = None, swing_D: float | None = None,
                  torque_limit_override: dict[str, float] | None = None):
         if any(c.dim != 3 for c in robot.contacts):
             raise ValueError(f"robot '{robot.name}': the quasi-static controller needs point feet")
@@ -53,7 +68,9 @@ class QuasiStaticController(PlannedController):
         self.impedance = impedance or TrunkImpedance.for_robot(robot)
         self.Q = np.broadcast_to(np.asarray(Q, dtype=float), 6).copy()
         self.R_force, self.tangential_weight = R_force, tangential_weight
-        self.swing_K, self.swing_D = swing_K, swing_D
+        default_K, default_D = swing_gains(robot)
+        self.swing_K = default_K if swing_K is None else swing_K
+        self.swing_D = default_D if swing_D is None else swing_D
         self.torque_limits = TorqueLimits(upper_override=torque_limit_override)
         c = len(self.contacts)
         self.nf = 3 * c

@@ -256,7 +256,11 @@ class GaitSchedule:
 
 
 # ---------------------------------------------------------------------- factories
-def crawl(period: float = 2.5, duty: float = 0.85, start: float = 0.0,
+#: the default gait periods (s), set for HyQ (see :func:`crawl`, :func:`trot`)
+CRAWL_PERIOD, TROT_PERIOD = 2.5, 0.8
+
+
+def crawl(period: float = CRAWL_PERIOD, duty: float = 0.85, start: float = 0.0,
           legs: Sequence[str] = HYQ_LEGS) -> GaitSchedule:
     """Crawl: one leg at a time in the classic LH -> LF -> RH -> RF sequence (phase offsets 0, 1/4,
     1/2, 3/4), as HyQ crawls in Fahmi et al. 2019 (Sect. V-B, V-C, V-E).
@@ -283,7 +287,7 @@ def crawl(period: float = 2.5, duty: float = 0.85, start: float = 0.0,
     return GaitSchedule(period, (0.25, 0.75, 0.0, 0.5), duty, legs, start, "crawl")
 
 
-def trot(period: float = 0.8, duty: float = 0.5, start: float = 0.0,
+def trot(period: float = TROT_PERIOD, duty: float = 0.5, start: float = 0.0,
          legs: Sequence[str] = HYQ_LEGS) -> GaitSchedule:
     """Trot: diagonal pairs (LF with RH, RF with LH) swing together, half a cycle apart (Fahmi et
     al. 2019, Sect. V-H: "the robot uses only two legs at the time").

@@ -162,7 +162,10 @@ class GaitPlanner:
             if sway is not None and first - t0 < 0.125 * schedule.period:  # half a steady blend
                 log.warning("crawl sway: only %.3f s between t0 and the first lift-off; the first CoM "
                             "shift will be abrupt (give the schedule a start delay)", first - t0)
-        trunk = TrunkReference(command, com0, yaw0, None, terrain, t0, sway, align_to_terrain)
+        # the command moves the trunk once the gait starts: before, the feet stand where they are
+        # and a reference walking away from them tilts the robot when the first legs lift off
+        start = max(t0, schedule.start)
+        trunk = TrunkReference(command, com0, yaw0, None, terrain, start, sway, align_to_terrain)
         return cls(schedule, trunk, footprint, terrain, clearance, feedback_gain, max_step, feet, t0)
 
     # ------------------------------------------------------------------ footholds

@@ -6,6 +6,8 @@ Fields (``*`` = required)::
     urdf*          "erd:<path inside example-robot-data/robots>" or a file path (relative to the TOML)
     srdf           same; needed when ``posture`` is a group-state name
     posture*       SRDF group-state name (e.g. "half_sitting") or a table {joint name = angle}
+    posture_overrides  {joint = angle} applied on top of the posture (e.g. an SRDF state with the
+                   knees straighter), default none
     locked_joints  joints frozen at the posture (Pinocchio ``buildReducedModel``), default none
     armature       rotor inertia added to the joint-space inertia of every actuated joint (scalar or
                    {joint = value}); the MuJoCo twin uses the same value, default 0
@@ -166,6 +168,7 @@ class RobotDescription:
     urdf: str
     posture: str | dict[str, float]
     contacts: tuple[ContactSpec, ...]
+    posture_overrides: dict[str, float] = field(default_factory=dict)
     srdf: str | None = None
     locked_joints: tuple[str, ...] = ()
     armature: float | dict[str, float] = 0.0
@@ -187,8 +190,8 @@ class RobotDescription:
                 raise DescriptionError(f"{where}: missing required field '{key}'")
             return data[key]
 
-        known = {"name", "urdf", "srdf", "posture", "locked_joints", "armature", "contacts",
-                 "torque_limits", "friction", "description"}
+        known = {"name", "urdf", "srdf", "posture", "posture_overrides", "locked_joints",
+                 "armature", "contacts", "torque_limits", "friction", "description"}
         unknown = sorted(str(k) for k in set(data) - known)
         if unknown:
             raise DescriptionError(f"{where}: unknown field(s) {unknown}; known: {sorted(known)}")
@@ -201,6 +204,9 @@ class RobotDescription:
         elif not isinstance(posture, str):
             raise DescriptionError(f"{where}: field 'posture' must be a group-state name or a "
                                    f"table {{joint = angle}}, got {posture!r}")
+        overrides = _table(data.get("posture_overrides", {}), "posture_overrides", where)
+        overrides = {str(k): _checked(validation.number, v, f"posture_overrides.{k}", where)
+                     for k, v in overrides.items()}
         srdf = data.get("srdf")
         if srdf is not None and srdf != "":
             srdf = _name(srdf, "srdf", where)
@@ -227,6 +233,7 @@ class RobotDescription:
         friction = _checked(validation.positive, data.get("friction", 0.8), "friction", where)
         return cls(
             name=name, urdf=urdf, srdf=srdf or None, posture=posture, contacts=contacts,
+            posture_overrides=overrides,
             locked_joints=locked, armature=armature,
             torque_limits=check_torque_limits(data.get("torque_limits"), where),
             friction=friction, base_dir=base_dir,

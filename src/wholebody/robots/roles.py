@@ -85,6 +85,33 @@ def leg_joints(robot, contact: str) -> tuple[str, ...]:
     return tuple(reversed(chain))
 
 
+def joint_axis(robot, joint: str) -> np.ndarray:
+    """The unit rotation axis of the revolute ``joint`` in its own frame (from its motion
+    subspace; the axis is fixed in that frame)."""
+    model = robot.model
+    jid = model.getJointId(joint)
+    data = model.createData()
+    pin.forwardKinematics(model, data, robot.q_ref)
+    angular = np.asarray(data.joints[jid].S).reshape(6, -1)[3:, 0]
+    return angular / np.linalg.norm(angular)
+
+
+def pitch_joints(robot, contact: str) -> tuple[tuple[str, float], ...]:
+    """The joints of ``contact``'s leg that flex it in the sagittal plane, base first (a humanoid's
+    hip flexion, knee, ankle flexion), each with the sign of its axis along the base's y (left):
+    those whose axis is within 30 deg of the base's lateral axis in the reference posture."""
+    model = robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, robot.q_ref)
+    base = data.oMi[1].rotation
+    out = []
+    for joint in leg_joints(robot, contact):
+        axis = base.T @ data.oMi[model.getJointId(joint)].rotation @ joint_axis(robot, joint)
+        if abs(axis[1]) > np.cos(np.radians(30.0)):
+            out.append((joint, float(np.sign(axis[1]))))
+    return tuple(out)
+
+
 def foot_of_joint(robot, joint: str) -> str | None:
     """The contact whose leg (:func:`leg_joints`) holds ``joint``; None if no contact's does."""
     return next((c.name for c in robot.contacts if joint in leg_joints(robot, c.name)), None)

@@ -8,7 +8,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable, ClassVar, Sequence
 
 import numpy as np
 
@@ -17,8 +17,20 @@ from ..cycle import ENGINES
 log = logging.getLogger(__name__)
 
 
+class RobotRelative:
+    """A parameter default that depends on the robot (a length in proportion to its height, a
+    speed scaled by it): resolved with :meth:`value` once the robot is known
+    (:meth:`Scenario.validate`), listed by ``str`` and as :meth:`as_data`."""
+
+    def value(self, robot) -> float:
+        raise NotImplementedError
+
+    def as_data(self) -> dict[str, float]:
+        raise NotImplementedError
+
+
 @dataclass(frozen=True)
-class BaseHeight:
+class BaseHeight(RobotRelative):
     """A robot-relative bound of a size parameter: ``factor`` x the robot's standing base height
     ``h`` (its base above the ground in the reference posture, ``robot.q_ref[2]``). Declared as
     ``0.5 * Parameter.H``, shown as ``0.5 h``, checked when the robot is known
@@ -40,10 +52,15 @@ class BaseHeight:
     def __str__(self) -> str:
         return {1.0: "h", -1.0: "-h"}.get(self.factor, f"{self.factor:g} h")
 
+    def as_data(self) -> dict[str, float]:
+        return {"base_height": self.factor}
+
 
 #: what ``h`` stands for in the ranges listed by ``wholebody scenarios``
 BASE_HEIGHT_LEGEND = ("h: the robot's standing base height (its base above the ground in the "
-                      "reference posture); checked once the robot is known")
+                      "reference posture), in m; bounds and defaults in h are resolved once the "
+                      "robot is known (a default 'v sqrt(h / h0)' is a speed v set on a robot "
+                      "h0 high, scaled to keep the gait's Froude number)")
 
 _NOUNS = {bool: ("a boolean (true/false)", "booleans"), int: ("a whole number", "whole numbers"),
           float: ("a number", "numbers"), str: ("a text", "texts")}
@@ -91,8 +108,15 @@ class Parameter:
 
     @property
     def kind(self) -> type:
-        """The type of one value: ``items`` for list parameters, else the default's type."""
+        """The type of one value: ``items`` for list parameters, float for a robot-relative
+        default, else the default's type."""
+        if isinstance(self.default, RobotRelative):
+            return float
         return self.items or type(self.default)
+
+    def default_text(self) -> str:
+        """The default as listed: ``0.15``, ``'crawl'``, or ``0.367 h`` for a robot-relative one."""
+        return str(self.default) if isinstance(self.default, RobotRelative) else repr(self.default)
 
     @property
     def numeric(self) -> bool:
@@ -178,7 +202,13 @@ class Parameter:
 
     def check(self, value: Any, robot=None) -> Any:
         """``value`` (of the parameter's type, e.g. from :meth:`parse` or the default) checked
-        against the whole range, robot-relative bounds against ``robot`` (skipped if None)."""
+        against the whole range, robot-relative bounds against ``robot`` (skipped if None).
+        Returns the value, a robot-relative default (:class:`RobotRelative`) resolved for
+        ``robot`` (unchanged without one)."""
+        if isinstance(value, RobotRelative):
+            if robot is None:
+                return value
+            value = value.value(robot)
         if self.items is not None:
             for item in (x.strip() for x in str(value).split(",")):
                 if item:
@@ -358,7 +388,14 @@ RunFunction = Callable[..., ScenarioResult]
 
 @dataclass(frozen=True)
 class Scenario:
-    """A registered experiment: ``run(robot, controller, params, out_dir, progress)``."""
+    """A registered experiment: ``run(robot, controller, params, out_dir, progress)``.
+
+    ``simulations``: how many simulations one run makes, a number or a function
+    ``(params, controller) -> number``; None if not declared. A scenario that declares it takes
+    ``observers`` (:class:`~wholebody.sim.simulator.SimObserver`, e.g. the replay recorder or the
+    live viewer): its run function accepts ``observers=`` and passes them to every
+    :class:`~wholebody.sim.simulator.Simulator` it builds.
+    """
 
     name: str
     summary: str
@@ -367,6 +404,14 @@ class Scenario:
     default_robot: str
     run_function: RunFunction
     validate_function: Callable[[Any, dict], None] | None = None
+    simulations: int | Callable[[dict, str], int] | None = None
+
+    def simulation_count(self, params: dict, controller: str | None = None) -> int | None:
+        """How many simulations a run with ``params`` and ``controller`` makes (None: not
+        declared)."""
+        if self.simulations is None or isinstance(self.simulations, int):
+            return self.simulations
+        return int(self.simulations(params, controller or self.controllers[0]))
 
     def validate(self, robot, overrides: dict[str, str] | None = None) -> dict[str, Any]:
         """Parameters resolved and checked against ``robot``: every declared range (the
@@ -374,7 +419,7 @@ class Scenario:
         the problem)."""
         params = self.resolve(overrides or {})
         for p in self.parameters:
-            p.check(params[p.name], robot)
+            params[p.name] = p.check(params[p.name], robot)
         if self.validate_function is not None:
             self.validate_function(robot, params)
         return params
@@ -392,14 +437,23 @@ class Scenario:
         return values
 
     def run(self, robot, controller: str | None = None, overrides: dict[str, str] | None = None,
-            out_dir: Path | None = None, progress: bool = False) -> ScenarioResult:
+            out_dir: Path | None = None, progress: bool = False,
+            observers: Sequence = ()) -> ScenarioResult:
+        """Run the scenario; ``observers`` watch its simulations (only for a scenario that
+        declares ``simulations``, ValueError otherwise)."""
         controller = controller or self.controllers[0]
         if controller not in self.controllers:
             raise ValueError(f"scenario '{self.name}' has no controller '{controller}'; "
                              f"controllers: {', '.join(self.controllers)}")
         params = self.validate(robot, overrides)
+        extra = {}
+        if observers:
+            if self.simulations is None:
+                raise ValueError(f"scenario '{self.name}' does not declare its simulations; it "
+                                 f"takes no observers")
+            extra["observers"] = tuple(observers)
         start = time.perf_counter()
-        result = self.run_function(robot, controller, params, out_dir, progress)
+        result = self.run_function(robot, controller, params, out_dir, progress, **extra)
         result.wall_time_s = time.perf_counter() - start
         if out_dir is not None:
             result.write(Path(out_dir))

@@ -22,12 +22,12 @@ from ..planning.trunk import VelocityCommand
 from ..report.locomotion_figures import crawl_tracking_figure
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import GAIT, check_gait, check_quadruped, run_gait
+from .locomotion import GAIT, PaperSpeed, check_gait, check_quadruped, run_gait
 
 PARAMETERS = (
-    Parameter("speed_start", 0.04, "forward speed at the start of the ramp (m/s)",
+    Parameter("speed_start", PaperSpeed(0.04), "forward speed at the start of the ramp (m/s)",
               low=0.0, high=5.0),
-    Parameter("speed_end", 0.15, "forward speed at the end of the ramp (m/s)", low=0.0, high=5.0),
+    Parameter("speed_end", PaperSpeed(0.15), "forward speed at the end of the ramp (m/s)", low=0.0, high=5.0),
     Parameter("ramp_time", 10.0, "duration of the speed ramp (s), after 1 s of standing",
               **TIME_SPAN),
     Parameter("duration", 12.0, "simulated time (s)",
@@ -53,12 +53,13 @@ def validate(robot, params: dict) -> None:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     names = controller.split("+")
     command = VelocityCommand.speed_ramp(params["speed_start"], params["speed_end"], 1.0,
                                          1.0 + params["ramp_time"])
     runs = {name: run_gait(robot, name, params["gait"], command, params["duration"],
-                           progress=progress, controller_options=(
+                           progress=progress, observers=observers, controller_options=(
                                {"engine": params["engine"]} if name == "passive" else None))
             for name in names}
     expected = commanded_distance(params)
@@ -82,8 +83,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     figures = []
     if out_dir is not None:
         figures.append(str(crawl_tracking_figure(
-            Path(out_dir) / "crawl_tracking.png", runs, f"HyQ {params['gait']}, speed ramp "
-            f"{params['speed_start']}->{params['speed_end']} m/s")))
+            Path(out_dir) / "crawl_tracking.png", runs, f"{robot.name} {params['gait']}, speed ramp "
+            f"{params['speed_start']:.3g}->{params['speed_end']:.3g} m/s")))
     return ScenarioResult("crawl", robot.name, controller, success, metrics, params, notes,
                           figures=figures)
 
@@ -97,4 +98,5 @@ SCENARIO = Scenario(
     default_robot="hyq",
     run_function=run,
     validate_function=validate,
+    simulations=lambda params, controller: len(controller.split("+")),
 )

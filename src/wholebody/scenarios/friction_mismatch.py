@@ -43,8 +43,8 @@ from ..report.locomotion_figures import friction_mismatch_figure
 from ..sim.environment import Environment
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import IMPACT_SKIP, outcome, settled_stance, slip_events
-from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_positive, check_quadruped, run_gait,
-                         steady_command)
+from .locomotion import (CRAWL_SPEED, RUN_DURATION, PaperSpeed, check_positive, check_quadruped,
+                         paper_length, run_gait, steady_command)
 
 log = logging.getLogger(__name__)
 
@@ -54,17 +54,17 @@ PARAMETERS = (
     Parameter("controller_mu", 1.0, "friction coefficient in the WBC's cones (the wrong estimate)",
               low=0.0, low_open=True, high=10.0),
     CRAWL_SPEED,
-    Parameter("fast_speed", 0.16, "speed of the corrected-mu run at higher speed (m/s)",
+    Parameter("fast_speed", PaperSpeed(0.16), "speed of the corrected-mu run at higher speed (m/s)",
               low=0.0, low_open=True, high=5.0),
     RUN_DURATION,
     Parameter("K_st", 200.0, "stance-task stiffness of eq. 32 (1/s^2) in the stance-task runs",
               low=0.0, low_open=True),
     Parameter("D_st", 30.0, "stance-task damping of eq. 32 (1/s)", low=0.0),
-    Parameter("slip_speed", 0.02, "slip-event threshold on the contact-point speed (m/s)",
+    Parameter("slip_speed", PaperSpeed(0.02), "slip-event threshold on the contact-point speed (m/s)",
               low=0.0, low_open=True, high=5.0),
     Parameter("slip_time", 0.02, "slip-event minimum duration (s)",
               **TIME_SPAN),
-    Parameter("slip_bound", 0.25, "largest per-stance slip (m) accepted as 'bounded'",
+    Parameter("slip_bound", paper_length(0.25), "largest per-stance slip (m) accepted as 'bounded'",
               low=0.0, low_open=True, high=Parameter.H),
 )
 
@@ -148,7 +148,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         "pyramid of eq. 14 with half-width mu circumscribes the simulator's cone (corners at "
         "sqrt(2) mu); the paper says slip events disappear once mu is corrected",
         f"controller mu = {inscribed:.3f} (inscribed pyramid): "
-        f"{metrics['corrected, inscribed']['slip_events']} slip events at {p['speed']} m/s, "
+        f"{metrics['corrected, inscribed']['slip_events']} slip events at {p['speed']:.3g} m/s, "
         f"{metrics['corrected, fast']['slip_events']} at {p['fast_speed']} m/s (worst slip "
         f"{metrics['corrected, fast']['max_stance_slip_m'] * 1e3:.1f} mm)",
         f"reference, floor mu = WBC mu = {p['controller_mu']}: "

@@ -23,26 +23,70 @@ import pinocchio as pin
 
 from ..control.passive import PassiveWBC
 from ..control.quasi_static import QuasiStaticController
-from ..planning.gait import crawl, stand, trot
+from ..planning.gait import CRAWL_PERIOD, TROT_PERIOD, crawl, stand, trot
 from ..planning.planner import GaitPlanner
 from ..planning.terrain import Terrain
 from ..planning.trunk import VelocityCommand
+from ..robots import reference
+from ..robots.reference import froude_ratio
 from ..robots.roles import quadruped_legs
 from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
-from .base import TIME_SPAN, Parameter
+from .base import TIME_SPAN, BaseHeight, Parameter, RobotRelative
 from .loop import run_closed_loop
 from .measures import FALL_HEIGHT_FRACTION
 
 CONTROLLERS = ("passive", "quasi-static")
 GAITS = ("crawl", "trot", "stand")
 FALL_TILT = np.radians(45.0)
+#: the set-ups of Fahmi et al. 2019 are HyQ's, whose standing base height this is:
+#: :func:`paper_length` and :class:`PaperSpeed` keep their proportions on any other robot
+PAPER_BASE_HEIGHT = reference.BASE_HEIGHT
+
+
+@dataclass(frozen=True)
+class PaperLength(BaseHeight):
+    """A length of the paper's set-ups, ``metres`` on HyQ, as a robot-relative parameter default:
+    the same fraction of any robot's standing base height h (exactly ``metres`` on HyQ)."""
+
+    metres: float = 0.0
+
+    def value(self, robot) -> float:
+        return self.metres * (float(robot.q_ref[2]) / PAPER_BASE_HEIGHT)
+
+
+    def as_data(self) -> dict[str, float]:
+        return {"base_height": self.factor, "metres_on_reference": self.metres,
+                "reference_base_height_m": PAPER_BASE_HEIGHT}
+
+
+def paper_length(metres: float) -> PaperLength:
+    """``metres`` of the paper's HyQ set-ups as a :class:`PaperLength` (``--set`` shows it in h)."""
+    return PaperLength(metres / PAPER_BASE_HEIGHT, float(metres))
+
+
+@dataclass(frozen=True)
+class PaperSpeed(RobotRelative):
+    """A speed of the paper's HyQ set-ups (``mps`` on HyQ) as a robot-relative default: scaled by
+    :func:`froude_ratio`, so that a small robot walks as fast relative to its size."""
+
+    mps: float
+
+    def value(self, robot) -> float:
+        return self.mps * froude_ratio(robot)
+
+    def __str__(self) -> str:
+        return f"{self.mps:g} sqrt(h / {PAPER_BASE_HEIGHT:.3g})"
+
+    def as_data(self) -> dict[str, float]:
+        return {"mps_on_reference": self.mps, "reference_base_height_m": PAPER_BASE_HEIGHT}
+
 COURSE_BOX_THICKNESS = 1.0  # thickness of the simulator's level ground boxes of a course (m)
 COURSE_SLOPE_THICKNESS = 0.1  # thickness of the simulator's ramp boxes of a course (m)
 
 #: parameters declared alike by several quadruped scenarios
 GAIT = Parameter("gait", "crawl", "crawl or trot", choices=("crawl", "trot"))
-CRAWL_SPEED = Parameter("speed", 0.11,
+CRAWL_SPEED = Parameter("speed", PaperSpeed(0.11),
                         "forward crawl speed (m/s), reached 1 s after the gait starts",
                         low=0.0, low_open=True, high=5.0)
 DURATION = Parameter("duration", 10.0, "simulated time (s)",
@@ -100,14 +144,21 @@ def ramped_command(speed: float) -> VelocityCommand:
     return VelocityCommand.speed_ramp(0.0, speed, 1.0, 3.0)
 
 
+def gait_options(robot) -> dict:
+    """The planner options that scale with the robot: the swing apex ``clearance`` (0.1 m on HyQ,
+    :func:`paper_length`)."""
+    return {"clearance": paper_length(0.1).value(robot)}
+
+
 def make_schedule(robot, gait: str, start: float = 1.0):
     """The ``gait`` schedule (crawl, trot or stand) of ``robot``'s four feet, addressed by role
-    (:func:`~wholebody.robots.roles.quadruped_legs`), starting at ``start`` s."""
+    (:func:`~wholebody.robots.roles.quadruped_legs`), starting at ``start`` s, its period HyQ's
+    times :func:`froude_ratio` (dynamically similar steps)."""
     legs = quadruped_legs(robot)
     if gait == "crawl":
-        return crawl(start=start, legs=legs)
+        return crawl(CRAWL_PERIOD * froude_ratio(robot), start=start, legs=legs)
     if gait == "trot":
-        return trot(start=start, legs=legs)
+        return trot(TROT_PERIOD * froude_ratio(robot), start=start, legs=legs)
     if gait == "stand":
         return stand(legs=legs)
     raise ValueError(f"gait: expected one of {GAITS}, got '{gait}'")
@@ -211,23 +262,23 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              environment: Environment | None = None, terrain: Terrain | None = None,
              control_period: float = 0.004, controller_options: dict | None = None,
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
-             on_cycle=None, planner=None) -> GaitRun:
+             on_cycle=None, planner=None, observers=()) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
     sees ``environment``. ``on_cycle(t, result, ctrl, sim)`` is called after every WBC cycle.
     ``planner``: a ready-made planner (e.g. with foothold adjustment or its own trunk terrain) used
     instead of building one; ``gait``, ``command``, ``terrain``, ``planner_options`` and ``start``
-    are then ignored.
+    are then ignored. ``observers`` watch the simulation (labelled with the controller's name).
     """
     if planner is None:
         planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start), command, terrain,
-                                        t0=0.0, **(planner_options or {}))
+                                        t0=0.0, **{**gait_options(robot), **(planner_options or {})})
     options = dict(controller_options or {})
     if controller == "passive":
         options.setdefault("control_period", control_period)
     ctrl = make_controller(robot, controller, planner, **options)
-    sim = Simulator(robot, environment)
+    sim = Simulator(robot, environment, observers=observers, label=controller)
     log = GaitLog()
     base0 = sim.state()[0][:3].copy()
     # fallen: the base below FALL_HEIGHT_FRACTION of its standing height above the terrain under it

@@ -52,8 +52,8 @@ from ..report.locomotion_figures import passivity_figure
 from ..tasks.wrench import TrunkImpedance
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
-from .locomotion import (DURATION, GAIT, check_gait, check_quadruped, make_schedule,
-                         ramped_command, run_gait)
+from .locomotion import (DURATION, GAIT, PaperSpeed, check_gait, check_quadruped, gait_options,
+                         make_schedule, ramped_command, run_gait)
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ NEAR_SWITCH = 0.05  # s: "right after a lift-off or touchdown"
 
 PARAMETERS = (
     GAIT,
-    Parameter("speed", 0.1, "forward speed after the ramp-up (m/s)", low=0.0, high=5.0),
+    Parameter("speed", PaperSpeed(0.1), "forward speed after the ramp-up (m/s)", low=0.0, high=5.0),
     DURATION,
     Parameter("feedforward", False, "keep the feed-forward terms on (Assumption 2 needs them off)"),
 )
@@ -163,7 +163,8 @@ def validate(robot, params: dict) -> None:
 def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10.0,
             feedforward: bool = False, progress: bool = False):
     """Run the gait and return (run, storage arrays, energy balance)."""
-    planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, 1.0), ramped_command(speed))
+    planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, 1.0), ramped_command(speed),
+                                    **gait_options(robot))
     if not feedforward:
         planner = SwingFeedForwardOff(planner)
     impedance = TrunkImpedance.for_robot(robot, feedforward=feedforward)
@@ -237,7 +238,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     if out_dir is not None:
         margin = balance["supply"] - balance["Vdot"]
         violations = intervals(balance["t"], (margin < -TOLERANCE) & ~balance["switched"])
-        title = (f"HyQ {params['gait']} {params['speed']} m/s, feed-forward "
+        title = (f"{robot.name} {params['gait']} {params['speed']:.3g} m/s, feed-forward "
                  f"{'on' if params['feedforward'] else 'off'} (Assumption 2)")
         figures.append(str(passivity_figure(Path(out_dir) / "passivity.png", storage, balance,
                                             title, TOLERANCE, violations)))

@@ -115,14 +115,15 @@ def platform_motion(params: dict, center_z: float) -> WaypointMotion:
     return WaypointMotion(points, params["move_time"], params["start"])
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     mid = sole_midpoint(robot)
     height = 0.1
     motion = platform_motion(params, height)
     env = Environment(platform=Platform(half_size=(0.6, 0.6, 0.02),
                                         center=(mid[0], mid[1], height),
                                         motion=lambda t: (motion(t)[:3], motion(t)[3:])))
-    sim = Simulator(robot, env)
+    sim = Simulator(robot, env, observers=observers, label=controller)
     support_acc = None
     if params["feedforward"]:
         # acceleration of the board point under the soles (top-centre: translation + yaw about it)
@@ -179,4 +180,5 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=validate,
+    simulations=1,
 )

@@ -37,8 +37,9 @@ PARAMETERS = (
 )
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
-    trial = push_trial(robot, controller, params, progress)
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
+    trial = push_trial(robot, controller, params, progress, observers)
     push = trial.push
     notes = []
     if controller != "lqr" and params.get("q_integral", 0.0) > 0:
@@ -67,4 +68,5 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=check_push,
+    simulations=1,
 )

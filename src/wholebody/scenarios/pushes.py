@@ -117,13 +117,15 @@ class PushTrial:
     momentum: np.ndarray  # (N, 6) h_G
 
 
-def push_trial(robot, controller: str, params: dict, progress: bool = False) -> PushTrial:
+def push_trial(robot, controller: str, params: dict, progress: bool = False,
+               observers=()) -> PushTrial:
     """One push (``make_push(params)``) on the standing robot under :class:`MomentumBalance` for
     ``duration`` s. Survived: the feet stay flat and in place and the CoG returns within 5 mm of its
-    reference within 3 s after the push (:mod:`~wholebody.scenarios.measures`)."""
+    reference within 3 s after the push (:mod:`~wholebody.scenarios.measures`). ``observers``
+    watch the simulation."""
     push = make_push(params)
     ctrl = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
-    sim = Simulator(robot)
+    sim = Simulator(robot, observers=observers, label=controller)
     sim.add_push(push)
     start_feet = sim.contact_frame_poses()
     com, momentum, feet_tilt, feet_slip = [], [], [], []

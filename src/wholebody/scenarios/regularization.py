@@ -32,9 +32,10 @@ import numpy as np
 import pinocchio as pin
 
 from ..report.locomotion_figures import regularization_figure
-from ..robots.roles import leg_joints
+from ..robots.roles import joint_axis, leg_joints
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
-from .locomotion import check_gait, check_quadruped, parse_positive_floats, run_gait, steady_command
+from .locomotion import (PaperSpeed, check_gait, check_quadruped, parse_positive_floats, run_gait,
+                         steady_command)
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +45,7 @@ PARAMETERS = (
     Parameter("other_weight", 1e-4, "R_tau weight of the HAA and HFE joints",
               low=0.0, low_open=True),
     Parameter("gait", "stand", "stand or crawl", choices=("stand", "crawl")),
-    Parameter("speed", 0.11, "crawl speed (m/s) when gait=crawl", low=0.0, high=5.0),
+    Parameter("speed", PaperSpeed(0.11), "crawl speed (m/s) when gait=crawl", low=0.0, high=5.0),
     Parameter("duration", 2.0, "simulated time per run (s)",
               **TIME_SPAN),
     Parameter("window", 0.5, "averaging window at the end of each run (s)",
@@ -87,7 +88,7 @@ def grf_measures(run, robot, window: float) -> dict:
             hfe, kfe = knee_joints(robot, name)
             jid = robot.model.getJointId(kfe)
             knee = data.oMi[jid]
-            axis = knee.rotation @ _joint_axis(robot, jid)
+            axis = knee.rotation @ joint_axis(robot, kfe)
             foot = data.oMf[robot.contact(name).frame_id].translation
             lever = knee.translation - foot
             lever -= axis * (axis @ lever)  # foot -> knee axis, perpendicular to the axis
@@ -101,14 +102,6 @@ def grf_measures(run, robot, window: float) -> dict:
             "grf_angle_to_knee_deg": float(np.mean(to_knee)),
             "mean_abs_tau_kfe_Nm": float(np.mean(tau_kfe)),
             "mean_abs_tau_hfe_Nm": float(np.mean(tau_hfe))}
-
-
-def _joint_axis(robot, jid: int) -> np.ndarray:
-    """Unit rotation axis of a revolute joint in its own frame (from its motion subspace)."""
-    data = robot.model.createData()
-    pin.forwardKinematics(robot.model, data, pin.neutral(robot.model))
-    motion = np.asarray(data.joints[jid].S).reshape(6, -1)[:, 0]
-    return motion[3:] / np.linalg.norm(motion[3:])
 
 
 def regularization_run(robot, scheme: str, weights: np.ndarray | None, params: dict,

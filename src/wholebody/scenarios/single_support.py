@@ -25,6 +25,7 @@ import numpy as np
 from ..control.contact_switch import ContactSwitch, ContactSwitchConfig, Timeline
 from ..report.balance_figures import fig11, single_support_figure
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
+from ..robots.roles import BIPED_ROLES, biped_soles, leg_joints, pitch_joints
 from ..sim.simulator import Simulator
 from .base import Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter
 from .loop import run_closed_loop
@@ -35,7 +36,8 @@ from .pushes import LOCATIONS, location_of, make_push
 log = logging.getLogger(__name__)
 
 PARAMETERS = (
-    Parameter("stance", "left_sole", "contact kept (the other sole is lifted)"),
+    Parameter("stance", "left", "the sole kept, by role (the other is lifted)",
+              choices=BIPED_ROLES),
     Parameter("shift_time", 2.0, "duration of the CoG shift (s)",
               **TIME_SPAN),
     Parameter("unload_time", 0.5, "duration of the unloading (s)",
@@ -103,40 +105,45 @@ def parse_forces(text) -> list[float]:
     return [v for v in values if v > 0]
 
 
-def sine_joints(robot, swing_contact: str, text: str) -> tuple[str, str]:
-    """The hip and knee flexion joints of the swing leg (Talos naming unless given)."""
+def stance_and_swing(robot, params: dict) -> tuple[str, str]:
+    """The contact names of the (stance, swing) soles for ``--set stance`` (a role)."""
+    left, right = biped_soles(robot)
+    return (left, right) if params["stance"] == "left" else (right, left)
+
+
+def sine_joints(robot, swing_contact: str, text: str) -> tuple[tuple[str, str], tuple[int, int]]:
+    """The hip and knee flexion joints of the swing leg (default: its first two joints whose axes
+    are lateral, :func:`~wholebody.robots.roles.pitch_joints`) and the signs that make a positive
+    amplitude lift the thigh and bend the knee: (-s_hip, s_knee), s the sign of the joint axis
+    along the base's y (a rotation about +y pitches the thigh down and bends a knee backwards)."""
+    flexion = dict(pitch_joints(robot, swing_contact))
     if text:
         joints = tuple(j.strip() for j in text.split(",") if j.strip())
     else:
-        side = "right" if "right" in swing_contact else "left"
-        joints = (f"leg_{side}_3_joint", f"leg_{side}_4_joint")
+        joints = tuple(flexion)[:2]
     missing = [j for j in joints if j not in robot.joint_names]
-    if len(joints) != 2 or missing:
+    if len(joints) != 2 or missing or any(j not in flexion for j in joints):
         raise ValueError(f"--set sine_joints: expected the swing leg's hip and knee flexion joints "
-                         f"of robot '{robot.name}', got {list(joints)} (unknown: {missing})")
-    return joints
-
-
-def leg_joints(robot, joint: str) -> tuple[str, ...]:
-    """The joints of the leg of ``joint`` (Talos naming: the same ``leg_<side>`` prefix)."""
-    prefix = joint.rsplit("_", 2)[0]
-    return tuple(n for n in robot.joint_names if n.startswith(prefix))
+                         f"of robot '{robot.name}' (its lateral-axis joints: "
+                         f"{', '.join(flexion) or 'none'}), got {list(joints)}"
+                         + (f" (unknown: {missing})" if missing else ""))
+    return joints, (-int(flexion[joints[0]]), int(flexion[joints[1]]))
 
 
 def config(robot, params: dict) -> ContactSwitchConfig:
     """The :class:`ContactSwitchConfig` of the scenario parameters (the swing leg's hip and knee
     flexion joints and their Talos flexion signs: hip positive = thigh up, knee positive = more
     bent)."""
-    swing = next(n for n in robot.contact_names if n != params["stance"])
-    joints = sine_joints(robot, swing, params.get("sine_joints", ""))
+    _, swing = stance_and_swing(robot, params)
+    joints, signs = sine_joints(robot, swing, params.get("sine_joints", ""))
     return ContactSwitchConfig(
         shift_time=params["shift_time"], unload_time=params["unload_time"],
         lift_time=params["lift_time"], lift=params["lift"],
         push_forces=tuple(parse_forces(params["push_forces"])), push_start=params["push_start"],
         push_interval=params["push_interval"], sine_time=params["sine_time"],
         sine_frequency=params["sine_frequency"],
-        sine_amplitudes=(-params["hip_amplitude"], params["knee_amplitude"]),
-        sine_ramp=params["sine_ramp"], sine_joints=joints, held_joints=leg_joints(robot, joints[0]),
+        sine_amplitudes=(signs[0] * params["hip_amplitude"], signs[1] * params["knee_amplitude"]),
+        sine_ramp=params["sine_ramp"], sine_joints=joints, held_joints=leg_joints(robot, swing),
         sine_kp=params["sine_kp"], sine_kd=params["sine_kd"],
         sine_push_force=params["sine_push_force"], sine_push_at=params["sine_push_at"],
         settle=params["settle"], q_angular=params["q_angular"], lqr_blend=params["lqr_blend"])
@@ -148,10 +155,7 @@ def timeline(robot, params: dict) -> Timeline:
 
 
 def validate(robot, params: dict) -> None:
-    if params["stance"] not in robot.contact_names or len(robot.contact_names) != 2 or any(
-            c.spec.type != "rectangle" for c in robot.contacts):
-        raise ValueError(f"--set stance: '{params['stance']}' must be one of the two soles of a "
-                         f"biped; robot '{robot.name}' has {list(robot.contact_names)}")
+    biped_soles(robot)  # ValueError unless a biped
     parse_forces(params["push_forces"])
     for key in ("push_location", "sine_push_location"):
         if params[key] not in LOCATIONS:
@@ -164,8 +168,7 @@ def validate(robot, params: dict) -> None:
         if not params[key] > 0:
             raise ValueError(f"--set {key}: must be > 0, got {params[key]}")
     if params["sine_time"] > 0:
-        swing = next(n for n in robot.contact_names if n != params["stance"])
-        sine_joints(robot, swing, params["sine_joints"])
+        sine_joints(robot, stance_and_swing(robot, params)[1], params["sine_joints"])
 
 
 def _push(location: str, force: float, start: float, duration: float):
@@ -174,7 +177,8 @@ def _push(location: str, force: float, start: float, duration: float):
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
-    ctrl = ContactSwitch(robot, params["stance"], config(robot, params), gains=controller)
+    stance, _ = stance_and_swing(robot, params)
+    ctrl = ContactSwitch(robot, stance, config(robot, params), gains=controller)
     tl = ctrl.timeline
     duration = params["duration"] if params["duration"] > 0 else tl.end
     sim = Simulator(robot)
@@ -185,10 +189,10 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                             params["sine_push_duration"]))
     for push in pushes:
         sim.add_push(push)
-    stance_start = sim.contact_frame_poses()[params["stance"]]
+    stance_start = sim.contact_frame_poses()[stance]
     com_err, swing_z, tilt, slip, tau, cop, h, jerr = [], [], [], [], [], [], [], []
-    half_size = np.asarray(robot.contact(params["stance"]).spec.half_size)
-    k_stance = robot.contact_names.index(params["stance"])
+    half_size = np.asarray(robot.contact(stance).spec.half_size)
+    k_stance = robot.contact_names.index(stance)
 
     def observe(t, sol):
         # the simulator's state through the (exact) model: the twin's CoG
@@ -196,7 +200,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         h.append(robot.h_G.copy())
         poses = sim.contact_frame_poses()
         swing_z.append(poses[ctrl.swing_contact][0][2])
-        p, R = poses[params["stance"]]
+        p, R = poses[stance]
         tilt.append(tilt_deg(R))
         slip.append(sole_slip(p, stance_start[0]))
         cop.append(cop_in_sole(sim.contact_wrenches_array()[k_stance], R, min_force=1.0)[0])
@@ -270,7 +274,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         "pushes_recovered": sum(r["recovered"] for r in push_rows),
     }
     if controller == "lqr":
-        g = ctrl.lqr.gains(robot, (params["stance"],)) if ctrl.unload_start is not None else None
+        g = ctrl.lqr.gains(robot, (stance,)) if ctrl.unload_start is not None else None
         metrics["lqr_slowest_pole_single_rad_s"] = (float(np.max(g.poles.real)) if g else None)
         metrics["lqr_slowest_pole_double_rad_s"] = float(np.max(
             ctrl.lqr.gains(robot, ctrl.double_contacts).poles.real))

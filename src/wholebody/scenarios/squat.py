@@ -79,7 +79,8 @@ def validate(robot, params: dict) -> None:
         raise ValueError("--set active_margin: expected 0 <= margin < 1")
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     f = params["frequency"]
     margin = params["active_margin"] if params["variant"] == "cop-active" else 0.0
     bound = params["max_cog_error"] or (0.02 if margin else 0.01)
@@ -88,7 +89,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
                            Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
                            engine=params["engine"])
-    sim = Simulator(robot)
+    sim = Simulator(robot, observers=observers, label=controller)
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=margin)
     vel = []
 
@@ -163,4 +164,5 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=validate,
+    simulations=1,
 )

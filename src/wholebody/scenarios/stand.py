@@ -51,8 +51,9 @@ def standing_metrics(arrays: dict, robot) -> dict:
     }
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
-    sim = Simulator(robot, Environment(floor_friction=params["friction"]))
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
+    sim = Simulator(robot, Environment(floor_friction=params["friction"]), observers=observers)
     ctrl = StandingController(robot, kp=None if params["kp"] == -1.0 else params["kp"],
                               kd=None if params["kd"] == -1.0 else params["kd"],
                               frequency_hz=params["frequency_hz"],
@@ -95,4 +96,5 @@ SCENARIO = Scenario(
     controllers=("standing",),
     default_robot="talos14",
     run_function=run,
+    simulations=1,
 )

@@ -138,14 +138,15 @@ def validate(robot, params: dict) -> None:
         raise ValueError("--set move_time, drop_acceleration and elevation must be > 0")
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     mid = sole_midpoint(robot)
     board = BoardMotion(params)
     # the board's top-centre under the soles; high enough that its lowest edge stays off the floor
     height = 0.1 + board.lever * np.sin(-board.theta_min)
     env = Environment(platform=Platform(half_size=(0.5, 0.5, 0.02), center=(mid[0], mid[1], height),
                                         motion=board))
-    sim = Simulator(robot, env)
+    sim = Simulator(robot, env, observers=observers, label=controller)
     ctrl = MomentumBalance(robot, gains=controller, reference=SoleFrameReference(robot),
                            Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
                            engine=params["engine"])
@@ -233,4 +234,5 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=validate,
+    simulations=1,
 )

@@ -40,8 +40,8 @@ from ..report.locomotion_figures import unstable_foothold_figure
 from ..sim.environment import Box, Environment, Platform
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (DURATION, GAIT, check_gait, check_quadruped, make_schedule, ramped_command,
-                         run_gait)
+from .locomotion import (DURATION, GAIT, PaperSpeed, check_gait, check_quadruped, gait_options,
+                         make_schedule, paper_length, ramped_command, run_gait)
 
 log = logging.getLogger(__name__)
 
@@ -55,14 +55,14 @@ PARAMETERS = (
               low=3.0, low_open=True, high=Parameter.MAX_TIME),
     Parameter("roll_time", 0.25, "how long the stone takes to roll away (s)",
               **TIME_SPAN),
-    Parameter("depth", 0.06, "stone height = depth of the pit the foot drops into (m)",
+    Parameter("depth", paper_length(0.06), "stone height = depth of the pit the foot drops into (m)",
               low=0.0, low_open=True, high=0.25 * Parameter.H),
-    Parameter("size", 0.2, "stone (and pit) side length (m)",
+    Parameter("size", paper_length(0.2), "stone (and pit) side length (m)",
               low=0.13 * Parameter.H, high=0.67 * Parameter.H),
-    Parameter("shift", 0.12, "outward slide of the stone (m)",
+    Parameter("shift", paper_length(0.12), "outward slide of the stone (m)",
               low=-0.5 * Parameter.H, high=0.5 * Parameter.H),
     Parameter("tilt", 20.0, "roll of the stone about x while it goes (deg)", low=-90.0, high=90.0),
-    Parameter("speed", 0.1, "crawl speed after a 2 s ramp-up (m/s)", low=0.0, high=5.0),
+    Parameter("speed", PaperSpeed(0.1), "crawl speed after a 2 s ramp-up (m/s)", low=0.0, high=5.0),
     DURATION,
     GAIT,
 )
@@ -71,8 +71,6 @@ PARAMETERS = (
 def validate(robot, params: dict) -> None:
     check_quadruped(robot, "unstable-foothold")
     check_gait(params)
-    if not (0.0 < params["depth"] <= 0.15 and 0.08 <= params["size"] <= 0.4):
-        raise ValueError("--set depth/size: expected 0 < depth <= 0.15 m, 0.08 <= size <= 0.4 m")
     if not params["duration"] > params["release_time"] > 3.0:
         raise ValueError("--set release_time: must lie between 3 s and the duration")
 
@@ -84,7 +82,7 @@ def stone_foot(robot) -> str:
 
 def _planner(robot, params):
     return GaitPlanner.for_robot(robot, make_schedule(robot, params["gait"], 1.0),
-                                 ramped_command(params["speed"]))
+                                 ramped_command(params["speed"]), **gait_options(robot))
 
 
 def stone_site(robot, params: dict) -> tuple[np.ndarray, float]:

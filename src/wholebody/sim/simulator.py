@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Protocol, Sequence
 
 import mujoco
 import numpy as np
@@ -62,17 +63,38 @@ class SimLog:
         np.savez_compressed(path, **self.arrays())
 
 
+class SimObserver(Protocol):
+    """Watches a :class:`Simulator`: ``start(sim)`` after every reset (the state at t = 0), then
+    ``step(sim)`` at the start of every step, when the simulator holds what its log records for
+    that step: the state (``sim.t``, ``sim.state()``), the contact wrenches of that state and the
+    pushes applied during the step (``sim.active_pushes``). The replay recorder and the live
+    viewer are observers; one with ``draws_twin = True`` gets a twin with the robot's skeleton
+    geoms (visual only)."""
+
+    def start(self, sim: "Simulator") -> None: ...
+
+    def step(self, sim: "Simulator") -> None: ...
+
+
 class Simulator:
-    """A MuJoCo twin of ``robot`` with an environment, optional model mismatch and pushes."""
+    """A MuJoCo twin of ``robot`` with an environment, optional model mismatch and pushes.
+
+    ``observers`` (:class:`SimObserver`) see every reset and step; ``label`` names the run for them
+    (e.g. the controller of a comparison)."""
 
     def __init__(self, robot: Robot, environment: Environment | None = None,
                  mismatch: Mismatch | None = None, options: SimOptions | None = None,
-                 record: bool = True):
+                 record: bool = True, observers: Sequence[SimObserver] = (), label: str = ""):
         self.robot = robot
+        self.observers = tuple(observers)
+        self.label = label
         self.environment = environment or Environment()
         self.mismatch = mismatch or Mismatch()
         self.options = options or SimOptions()
-        self.twin: Twin = build_twin(robot, self.environment, self.mismatch, self.options)
+        # an observer that draws the twin itself (the live view) asks for the robot's skeleton
+        skeleton = any(getattr(o, "draws_twin", False) for o in self.observers)
+        self.twin: Twin = build_twin(robot, self.environment, self.mismatch, self.options,
+                                     skeleton)
         self.model = self.twin.model
         self.data = mujoco.MjData(self.model)
         self.dt = self.model.opt.timestep
@@ -108,6 +130,9 @@ class Simulator:
         self._delay = deque([np.zeros(robot.na)] * self.mismatch.torque_delay)
         self.log = SimLog(robot.contact_names)
         self.last_clipped = np.zeros(robot.na)
+        self.active_pushes: list[tuple[np.ndarray, np.ndarray]] = []
+        for observer in self.observers:
+            observer.start(self)
 
     @property
     def t(self) -> float:
@@ -132,7 +157,9 @@ class Simulator:
         self._push_offsets.append(frame.placement.act(np.asarray(push.offset, dtype=float)))
 
     def _apply_pushes(self, t: float) -> np.ndarray:
+        """Apply the pushes acting at ``t``; their (point, force) in ``active_pushes`` (world)."""
         self.data.xfrc_applied[:] = 0.0
+        self.active_pushes = []
         total = np.zeros(3)
         for push, body, local in zip(self._pushes, self._push_bodies, self._push_offsets):
             magnitude = push.magnitude(t)
@@ -142,6 +169,7 @@ class Simulator:
             point = self.data.xpos[body] + self.data.xmat[body].reshape(3, 3) @ local
             self.data.xfrc_applied[body, :3] += force
             self.data.xfrc_applied[body, 3:] += np.cross(point - self.data.xipos[body], force)
+            self.active_pushes.append((point, force))
             total += force
         return total
 
@@ -184,6 +212,8 @@ class Simulator:
             self.log.tau_applied.append(clipped)
             self.log.contact_wrenches.append(self.contact_wrenches_array())
             self.log.push_force.append(push_force)
+        for observer in self.observers:
+            observer.step(self)
         t_start = self.data.time
         mujoco.mj_step(self.model, self.data)
         if self.data.time < t_start + 0.5 * self.dt:  # MuJoCo reset its data: it diverged

@@ -62,8 +62,10 @@ def _rpy_to_wxyz(rpy) -> np.ndarray:
 
 
 def build_spec(robot: Robot, environment: Environment | None = None,
-               mismatch: Mismatch | None = None, options: SimOptions | None = None) -> mujoco.MjSpec:
-    """The MjSpec of the twin (compile it with ``spec.compile()``)."""
+               mismatch: Mismatch | None = None, options: SimOptions | None = None,
+               skeleton: bool = False) -> mujoco.MjSpec:
+    """The MjSpec of the twin (compile it with ``spec.compile()``); ``skeleton`` adds the
+    robot's visual-only stick figure (for MuJoCo's viewer)."""
     environment = environment or Environment()
     mismatch = mismatch or Mismatch()
     options = options or SimOptions()
@@ -145,8 +147,39 @@ def build_spec(robot: Robot, environment: Environment | None = None,
             geom.pos = frame.placement.act(np.array([0.0, 0.0, SOLE_THICKNESS]))
             geom.quat = _wxyz(frame.placement.rotation)
 
+    if skeleton:
+        _add_skeleton(robot, bodies)
     _add_environment(spec, environment, options)
     return spec
+
+
+SKELETON_RADIUS = 0.02  # of the skeleton's capsules, in standing base heights
+SKELETON_GROUP = 1  # MuJoCo geom group of the skeleton
+
+
+def _add_skeleton(robot: Robot, bodies: dict) -> None:
+    """A stick figure of the robot for MuJoCo's viewer (the twin has no meshes): a capsule from
+    each joint to each child joint and to each contact frame. Visual only: no collision, no mass
+    (the bodies' inertias are explicit), so the dynamics are unchanged."""
+    model = robot.model
+    radius = SKELETON_RADIUS * float(robot.q_ref[2])
+    ends: dict[int, list[np.ndarray]] = {j: [] for j in range(1, model.njoints)}
+    for j in range(2, model.njoints):
+        ends[model.parents[j]].append(model.jointPlacements[j].translation)
+    for contact in robot.contacts:
+        frame = model.frames[contact.frame_id]
+        ends[frame.parentJoint].append(frame.placement.translation)
+    for j, points in ends.items():
+        for k, end in enumerate(p for p in points if np.linalg.norm(p) > 1e-6):
+            geom = bodies[j].add_geom()
+            geom.name = f"skeleton_{model.names[j]}_{k}"
+            geom.type = mujoco.mjtGeom.mjGEOM_CAPSULE
+            geom.fromto = [0.0, 0.0, 0.0, *end]
+            geom.size = [radius, 0, 0]
+            geom.contype = geom.conaffinity = 0
+            geom.mass = 0.0
+            geom.group = SKELETON_GROUP
+            geom.rgba = [0.55, 0.6, 0.7, 1.0]
 
 
 def _env_geom(body, name: str, friction: float, options: SimOptions):
@@ -195,9 +228,10 @@ def _add_environment(spec: mujoco.MjSpec, env: Environment, options: SimOptions)
 
 
 def build_twin(robot: Robot, environment: Environment | None = None,
-               mismatch: Mismatch | None = None, options: SimOptions | None = None) -> Twin:
+               mismatch: Mismatch | None = None, options: SimOptions | None = None,
+               skeleton: bool = False) -> Twin:
     """Compile the twin and check that its robot joints use Pinocchio's coordinate layout."""
-    spec = build_spec(robot, environment, mismatch, options)
+    spec = build_spec(robot, environment, mismatch, options, skeleton)
     m = spec.compile()
     for jid in range(2, robot.model.njoints):
         name = robot.model.names[jid]

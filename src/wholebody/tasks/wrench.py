@@ -15,22 +15,20 @@ import pinocchio as pin
 
 from ..planning.trunk import TrunkState
 from ..robot import GRAVITY
+from ..robots import reference
 from ..validation import finite_array, nonnegative, positive
 from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, flag
 
-# The reference the robot-relative defaults are taken from: the trunk gains and normal-force bound
-# of Fahmi et al. 2019, Sect. V (K_x = 2000 N/m, D_x = 400 N s/m, K_θ = 1000 Nm/rad,
-# D_θ = 200 Nm s/rad, f_max = 2000 N), tuned on HyQ, whose mass and trunk inertia
-# (:func:`trunk_inertia`; the hyq preset, hyq_no_sensors.urdf at the SRDF's "standing" posture)
-# are these two numbers.
-REFERENCE_MASS = 86.77400500000003  # kg
-REFERENCE_INERTIA = 9.3599731892699  # kg m², trace(I_G) / 3
+# The trunk gains and normal-force bound of Fahmi et al. 2019, Sect. V (K_x = 2000 N/m,
+# D_x = 400 N s/m, K_θ = 1000 Nm/rad, D_θ = 200 Nm s/rad, f_max = 2000 N), tuned on HyQ, whose mass
+# and trunk inertia are REFERENCE_MASS and REFERENCE_INERTIA (:mod:`wholebody.robots.reference`).
+REFERENCE_MASS, REFERENCE_INERTIA = reference.MASS, reference.INERTIA
 REFERENCE_K_X, REFERENCE_D_X = 2000.0, 400.0
 REFERENCE_K_THETA, REFERENCE_D_THETA = 1000.0, 200.0
 REFERENCE_F_MAX = 2000.0  # N
 
-#: default natural frequencies (Hz) and damping ratios of the trunk impedance: those the paper's
-#: gains have on HyQ, ω = sqrt(K / m), ζ = D / (2 sqrt(K m)) (0.764 Hz, 0.480; 1.645 Hz, 1.034)
+#: natural frequencies (Hz) and damping ratios of the trunk impedance that the paper's gains have on
+#: HyQ, ω = sqrt(K / m), ζ = D / (2 sqrt(K m)) (0.764 Hz, 0.480; 1.645 Hz, 1.034)
 FREQUENCY_X_HZ = math.sqrt(REFERENCE_K_X / REFERENCE_MASS) / (2.0 * math.pi)
 DAMPING_RATIO_X = REFERENCE_D_X / (2.0 * math.sqrt(REFERENCE_K_X * REFERENCE_MASS))
 FREQUENCY_THETA_HZ = math.sqrt(REFERENCE_K_THETA / REFERENCE_INERTIA) / (2.0 * math.pi)
@@ -53,18 +51,24 @@ def trunk_inertia(robot, q=None) -> float:
     return float(np.trace(data.Ig.inertia)) / 3.0
 
 
-def trunk_gains(robot, frequency_x_hz: float = FREQUENCY_X_HZ,
+def trunk_gains(robot, frequency_x_hz: float | None = None,
                 damping_ratio_x: float = DAMPING_RATIO_X,
-                frequency_theta_hz: float = FREQUENCY_THETA_HZ,
+                frequency_theta_hz: float | None = None,
                 damping_ratio_theta: float = DAMPING_RATIO_THETA) -> dict[str, float]:
     """Trunk impedance gains (eq. 4) from the robot: K_x = m ω_x², D_x = 2 ζ_x m ω_x,
     K_θ = I ω_θ², D_θ = 2 ζ_θ I ω_θ (ω = 2π × frequency, m the robot's mass, I
     :func:`trunk_inertia`) → {"K_x", "D_x", "K_theta", "D_theta"}.
 
-    The defaults are the frequencies and damping ratios the paper's gains have on HyQ, so HyQ gets
-    exactly those gains and any other robot the same dynamics of its CoM and trunk. The formulas
+    The defaults are the damping ratios the paper's gains have on HyQ and its frequencies divided
+    by :func:`~wholebody.robots.reference.froude_ratio` (a smaller robot's gait is faster in the
+    same proportion, :func:`~wholebody.scenarios.locomotion.make_schedule`), so HyQ gets exactly
+    the paper's gains and any other robot dynamically similar CoM and trunk loops. The formulas
     are evaluated as the reference gains times m / m_ref and (ω / ω_ref)² (the same numbers), so
     that the reference robot's gains come out exactly, not to rounding."""
+    if frequency_x_hz is None:
+        frequency_x_hz = FREQUENCY_X_HZ / reference.froude_ratio(robot)
+    if frequency_theta_hz is None:
+        frequency_theta_hz = FREQUENCY_THETA_HZ / reference.froude_ratio(robot)
     for name, value in (("frequency_x_hz", frequency_x_hz),
                         ("frequency_theta_hz", frequency_theta_hz)):
         positive(value, name)
@@ -119,13 +123,13 @@ class TrunkImpedance:
         self.last_errors = np.zeros(12)  # [Δx, Δθ, Δv, Δω] of the last call, world axes
 
     @classmethod
-    def for_robot(cls, robot, frequency_x_hz: float = FREQUENCY_X_HZ,
+    def for_robot(cls, robot, frequency_x_hz: float | None = None,
                   damping_ratio_x: float = DAMPING_RATIO_X,
-                  frequency_theta_hz: float = FREQUENCY_THETA_HZ,
+                  frequency_theta_hz: float | None = None,
                   damping_ratio_theta: float = DAMPING_RATIO_THETA,
                   feedforward: bool = True) -> "TrunkImpedance":
-        """The impedance with the robot-relative gains of :func:`trunk_gains` (default: the
-        paper's frequencies and damping ratios, i.e. exactly the paper's gains on HyQ)."""
+        """The impedance with the robot-relative gains of :func:`trunk_gains` (default: exactly
+        the paper's gains on HyQ, dynamically similar ones on any other robot)."""
         gains = trunk_gains(robot, frequency_x_hz, damping_ratio_x, frequency_theta_hz,
                             damping_ratio_theta)
         return cls(**gains, feedforward=feedforward)

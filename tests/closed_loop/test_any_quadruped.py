@@ -1,0 +1,41 @@
+"""The passive WBC walks every quadruped preset on its defaults: the gait, speeds, trunk gains and
+force bounds derived from the robot (its roles, standing height, mass and inertia), never from
+HyQ's absolute numbers. Short runs in the twin: a crawl and a trot, judged by the simulator
+(no fall, every cycle solved, the robot went forward about as commanded)."""
+
+import pytest
+
+import wholebody as wb
+from wholebody.planning.trunk import VelocityCommand
+from wholebody.robots.reference import froude_ratio
+from wholebody.scenarios.locomotion import run_gait
+
+pytestmark = pytest.mark.slow
+
+DURATION = 5.0  # s: 1 s standing, then the gait
+
+
+START_TILT = pytest.mark.xfail(strict=True, reason=(
+    "the first trot steps from the standing posture tilt the trunk by more than 20 deg on Go1 and A1, "
+    "whose CoM stands 3 cm behind their feet's centroid (the footholds are centred on the CoM, the "
+    "first stance is not); the trot then settles"))
+CASES = [(name, gait) for name in ("go1", "go2", "a1", "solo12") for gait in ("crawl", "trot")]
+
+
+@pytest.mark.parametrize("name, gait", [
+    pytest.param(n, g, marks=START_TILT) if (n, g) in (("go1", "trot"), ("a1", "trot")) else (n, g)
+    for n, g in CASES])
+def test_passive_wbc_walks_every_quadruped_preset(name, gait):
+    robot = wb.load_robot(name)
+    speed = 0.1 * froude_ratio(robot)  # the paper's 0.1 m/s on HyQ, Froude-scaled
+    # as the scenarios do: from a third of the speed at the gait start to all of it 2 s later
+    command = VelocityCommand.speed_ramp(speed / 3, speed, 1.0, 3.0)
+    run = run_gait(robot, "passive", gait, command, DURATION)
+    assert not run.fell and run.failures == 0, (name, gait, run.failures)
+    # the base went forward, as far as commanded within a quarter (the gait starts at 1 s)
+    expected = (speed * 2 / 3) * 2.0 + speed * (DURATION - 3.0)
+    assert run.distance == pytest.approx(expected, rel=0.25), run.distance
+    tracking = run.tracking(t_from=1.0)
+    # trunk errors small against the robot's size: mm-level CoM, a few degrees of tilt
+    assert tracking["linear_max_m"] < 0.1 * robot.q_ref[2], tracking
+    assert tracking["angular_max_rad"] < 0.35, tracking

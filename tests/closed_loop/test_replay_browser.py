@@ -1,0 +1,95 @@
+"""``wholebody run ... --replay`` writes a replay.html that headless Chromium opens from disk and
+renders: not blank, no page or console errors, no network request, and moving the time slider
+moves the robot. Without /usr/bin/chromium (or playwright) the test skips, unless
+WHOLEBODY_REQUIRE_BROWSER=1 (CI) makes that a failure."""
+
+from __future__ import annotations
+
+import io
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wholebody.cli import main
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
+import replay_screenshots as browser  # noqa: E402  (the headless-Chromium helpers)
+
+pytestmark = pytest.mark.slow
+
+#: scenario, robot, short settings, two slider times (s)
+CASES = [
+    ("push", "talos14", ["--set", "duration=1.2", "--set", "start=0.2", "--set",
+                         "peak_force=150"], (0.0, 0.45)),
+    ("crawl", "hyq", ["--set", "duration=3", "--set", "ramp_time=1", "--set", "speed_start=0.1",
+                      "--set", "speed_end=0.2"], (0.5, 2.9)),
+]
+
+
+def _browser_or_skip() -> None:
+    problem = None
+    if not Path(browser.CHROMIUM).is_file():
+        problem = f"{browser.CHROMIUM} not found (Debian: apt-get install chromium)"
+    else:
+        try:
+            import playwright.sync_api  # noqa: F401
+        except ImportError:
+            problem = "playwright is not installed (pip install -e '.[test]')"
+    if problem is None:
+        return
+    if os.environ.get("WHOLEBODY_REQUIRE_BROWSER") == "1":
+        pytest.fail(f"{problem}, and WHOLEBODY_REQUIRE_BROWSER=1 requires the browser test")
+    pytest.skip(problem)
+
+
+def _pixels(page) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB"), dtype=np.int16)
+
+
+def _changed(a: np.ndarray, b: np.ndarray, threshold: int = 24) -> np.ndarray:
+    return np.abs(a - b).max(axis=2) > threshold
+
+
+def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
+    out = mask.copy()
+    for axis in (0, 1):
+        for shift in range(1, r + 1):
+            out |= np.roll(mask, shift, axis) | np.roll(mask, -shift, axis)
+    return out
+
+
+@pytest.mark.parametrize(("scenario", "robot", "settings", "times"), CASES,
+                         ids=[f"{c[0]}-{c[1]}" for c in CASES])
+def test_replay_renders_and_the_slider_moves_the_robot(scenario, robot, settings, times,
+                                                       tmp_path):
+    _browser_or_skip()
+    out = tmp_path / scenario
+    code = main(["run", scenario, "--robot", robot, *settings, "--replay", "--no-progress",
+                 "--out", str(out)])
+    assert code in (0, 1)  # short runs may miss the success criterion; the replay is written
+    replay = out / "replay.html"
+    assert replay.is_file() and replay.stat().st_size > 100_000
+    with browser.replay_page(replay) as (page, problems):
+        shots, robot_masks = [], []
+        for t in times:
+            browser.move_slider(page, t)
+            shots.append(_pixels(page))
+            browser.show_robots(page, False)
+            robot_masks.append(_changed(shots[-1], _pixels(page)))
+            browser.show_robots(page, True)
+        shown = page.evaluate("document.getElementById('wb-clock').textContent")
+        assert f"t = {times[-1]:.2f}" in shown
+    assert not problems, problems
+    for image in shots:  # not blank: varied, many colours
+        assert image.std() > 20
+        assert len(np.unique(image.reshape(-1, 3) // 16, axis=0)) > 50
+    robot_area = _dilate(robot_masks[0] | robot_masks[1], 3)
+    assert robot_area.mean() > 0.01, "the robot is not on screen"
+    moved = _changed(shots[0], shots[1])
+    assert (moved & robot_area).sum() > 300, "the robot did not move between the slider positions"
+    assert (moved & robot_area).sum() > 0.5 * moved.sum(), "what changed is not the robot"

@@ -1,0 +1,200 @@
+"""The replay page without a browser: self-contained (nothing fetched from the network), its frames
+are the simulator's log subsampled, its robot poses are Pinocchio's forward kinematics; and the
+command line refuses --replay/--view where they cannot work, before anything is simulated."""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from wholebody.cli import main
+from wholebody.control.standing import StandingController
+from wholebody.report.replay import replay_html, unpack
+from wholebody.robots.locate import resolve_model_path
+from wholebody.scenarios import SCENARIOS, get_scenario
+from wholebody.scenarios.base import Scenario
+from wholebody.scenarios.loop import run_closed_loop
+from wholebody.sim.recorder import ReplayRecorder
+from wholebody.sim.simulator import Simulator
+
+#: XML namespace names (three.js createElementNS, Collada meshes): identifiers, never fetched
+NAMESPACES = {"http://www.w3.org/1999/xhtml", "http://www.w3.org/2000/svg",
+              "http://www.collada.org/2005/11/COLLADASchema"}
+DURATION, FPS = 0.3, 40.0
+
+
+@pytest.fixture(scope="module")
+def replay(robots):
+    """A short standing run of hyq, recorded; (simulator, recorder, html)."""
+    robot = robots["hyq"]
+    recorder = ReplayRecorder(fps=FPS)
+    sim = Simulator(robot, observers=[recorder])
+    run_closed_loop(sim, StandingController(robot), DURATION)
+    return sim, recorder, replay_html(recorder.recordings, title="hyq stands")
+
+
+def _element(html: str, element_id: str) -> str:
+    match = re.search(rf'<script[^>]*id="{element_id}"[^>]*>(.*?)</script>', html, re.DOTALL)
+    assert match, f"no <script id={element_id}> in the page"
+    return match.group(1)
+
+
+def _commands(html: str) -> list[dict]:
+    return unpack(_element(html, "wb-data"))
+
+
+def test_the_page_fetches_nothing(replay):
+    html = replay[2]
+    urls = set(re.findall(r"""https?://[^\s"'<>)\\]+""", html))
+    assert urls <= NAMESPACES, f"network references: {sorted(urls - NAMESPACES)}"
+    assert not re.search(r"<(script|img|iframe)[^>]*\ssrc=|<link\b", html, re.IGNORECASE)
+    for command in _commands(html):  # textures and meshes are inline too
+        text = repr(command)
+        assert "http" not in text or set(re.findall(r"https?://[^\s'\"]+", text)) <= NAMESPACES
+
+
+def test_frames_are_the_log_subsampled(replay):
+    sim, recorder, html = replay
+    stride = recorder.stride
+    assert stride == round(1.0 / (FPS * sim.dt))
+    log_t, log_q = np.asarray(sim.log.t), np.asarray(sim.log.q)
+    (rec,) = recorder.recordings
+    assert rec.frames == len(log_t[::stride]) == int(np.ceil(round(DURATION / sim.dt) / stride))
+    np.testing.assert_array_equal(rec.t, log_t[::stride])
+    np.testing.assert_array_equal(rec.q, log_q[::stride])
+    settings = json.loads(_element(html, "wb-settings"))
+    assert settings["frames"] == rec.frames
+    assert settings["frame_period"] == pytest.approx(stride * sim.dt)
+    assert settings["duration"] == pytest.approx(rec.t[-1] - rec.t[0])
+    (animate,) = [c for c in _commands(html) if c["type"] == "set_animation"]
+    for entry in animate["animations"]:
+        clip = entry["clip"]
+        assert clip["fps"] == pytest.approx(1.0 / (stride * sim.dt))
+        for track in clip["tracks"]:
+            times = [key["time"] for key in track["keys"]]
+            assert times == list(range(rec.frames)), (entry["path"], track["name"])
+
+
+def test_link_poses_are_forward_kinematics(replay, robots):
+    """The animated pose of the foot meshes at a sampled frame = Pinocchio's kinematics of the
+    logged configuration, computed here from the URDF."""
+    sim, recorder, html = replay
+    robot = robots["hyq"]
+    urdf = resolve_model_path(robot.description.urdf, robot.description.base_dir)
+    model = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+    visual = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.VISUAL,
+                                   package_dirs=[str(p) for p in urdf.parents])
+    frame = recorder.recordings[0].frames // 2
+    q = np.asarray(sim.log.q)[frame * recorder.stride]
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    (animate,) = [c for c in _commands(html) if c["type"] == "set_animation"]
+    clips = {entry["path"]: entry["clip"] for entry in animate["animations"]}
+    deepest = max(range(1, model.njoints), key=lambda j: len(model.supports[j]))
+    checked = 0
+    for g in visual.geometryObjects:
+        if g.parentJoint != deepest:
+            continue
+        expected = data.oMi[g.parentJoint] * g.placement
+        tracks = {t["name"]: t["keys"] for t in
+                  clips[f"/meshcat/run0/robot/visuals/{g.name}"]["tracks"]}
+        position = np.array(tracks[".position"][frame]["value"])
+        x, y, z, w = tracks[".quaternion"][frame]["value"]
+        rotation = pin.Quaternion(w, x, y, z).normalized().toRotationMatrix()
+        # the page stores single precision: 1e-7 relative
+        np.testing.assert_allclose(position, expected.translation, atol=1e-6)
+        np.testing.assert_allclose(rotation, expected.rotation, atol=1e-6)
+        checked += 1
+    assert checked
+
+
+def test_the_scene_holds_robot_floor_and_markers(replay):
+    commands = _commands(replay[2])
+    paths = {c["path"] for c in commands if c["type"] in ("set_object", "clone")}
+    loaded = {c["path"] for c in commands if c["type"] == "set_object"}
+    assert all(c["source"] in loaded for c in commands if c["type"] == "clone")
+    assert any(p.startswith("/meshcat/run0/robot/visuals/") for p in paths)
+    assert "/meshcat/run0/scene/floor" in paths
+    assert {"/meshcat/run0/com", "/meshcat/run0/cop"} <= paths
+    assert sum(p.startswith("/meshcat/run0/forces/") for p in paths) == 2 * 4  # shaft + head
+
+
+def test_a_reset_before_any_step_starts_the_recording_over(robots):
+    recorder = ReplayRecorder()
+    sim = Simulator(robots["hyq"], observers=[recorder])
+    sim.reset()
+    assert len(recorder.recordings) == 1 and recorder.recordings[0].frames == 0
+
+
+def test_scenarios_declare_their_simulations():
+    params = get_scenario("crawl").resolve({})
+    assert get_scenario("crawl").simulation_count(params, "passive+quasi-static") == 2
+    assert get_scenario("crawl").simulation_count(params, "passive") == 1
+    for name in ("push", "stand", "squat", "platform", "tilt-board", "ramp"):
+        assert get_scenario(name).simulation_count(get_scenario(name).resolve({})) == 1, name
+
+
+def test_observers_need_a_declared_scenario(robots):
+    undeclared = next(s for s in SCENARIOS.values() if s.simulations is None)
+    with pytest.raises(ValueError, match="does not declare"):
+        undeclared.run(robots["hyq"], observers=[ReplayRecorder()])
+
+
+def _never(*args, **kwargs):
+    raise AssertionError("the scenario ran")
+
+
+@pytest.mark.parametrize("flag", ["--replay", "--view"])
+def test_many_simulations_are_refused_before_running(flag, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(SCENARIOS, "many", Scenario("many", "runs 3", (), ("x",), "hyq", _never,
+                                                    simulations=3))
+    assert main(["run", "many", flag, "--out", str(tmp_path / "many")]) == 2
+    err = capsys.readouterr().err
+    assert f"scenario 'many' runs 3 simulations; {flag} needs a single-run scenario" in err
+    monkeypatch.setitem(SCENARIOS, "unknown", Scenario("unknown", "?", (), ("x",), "hyq", _never))
+    assert main(["run", "unknown", flag, "--out", str(tmp_path / "unknown")]) == 2
+    assert f"does not declare how many simulations it runs; {flag} needs" in capsys.readouterr().err
+    assert not (tmp_path / "many").exists() and not (tmp_path / "unknown").exists()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="display variables: Linux")
+def test_view_without_display_is_refused_before_running(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setitem(SCENARIOS, "stand", Scenario("stand", "", (), ("standing",), "hyq",
+                                                     _never, simulations=1))
+    assert main(["run", "stand", "--view", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "--view: no display (neither DISPLAY nor WAYLAND_DISPLAY is set)" in err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("name", ["talos14", "hyq"])
+def test_the_live_views_skeleton_leaves_the_dynamics_alone(name, robots, rng):
+    import mujoco
+
+    from wholebody.sim import convert
+    from wholebody.sim.twin import build_twin
+
+    robot = robots[name]
+    plain, drawn = build_twin(robot).model, build_twin(robot, skeleton=True).model
+    assert drawn.ngeom > plain.ngeom
+    np.testing.assert_array_equal(drawn.body_mass, plain.body_mass)
+    np.testing.assert_array_equal(drawn.body_inertia, plain.body_inertia)
+    q, v = robot.random_state(rng)
+    matrices = []
+    for m in (plain, drawn):
+        d = mujoco.MjData(m)
+        d.qpos[:robot.nq], d.qvel[:robot.nv] = convert.pin_to_mj(q, v)
+        mujoco.mj_forward(m, d)
+        M = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M)
+        matrices.append((M, d.qfrc_bias.copy(), d.ncon))
+    np.testing.assert_array_equal(matrices[0][0], matrices[1][0])
+    np.testing.assert_array_equal(matrices[0][1], matrices[1][1])
+    assert matrices[0][2] == matrices[1][2]
