@@ -313,6 +313,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--view", action="store_true",
                    help="watch the run live in MuJoCo's viewer (needs a display)")
     p.set_defaults(func=_cmd_run)
+
+    from .sweep.command import add_parser as add_sweep_parser  # exit codes: sweep/command.py
+    add_sweep_parser(sub)
     return parser
 
 

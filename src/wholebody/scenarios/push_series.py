@@ -15,6 +15,9 @@ import numpy as np
 from tqdm import tqdm
 
 from ..report.balance_figures import push_series_figure
+from ..robot import Robot
+from ..robots import load_robot
+from ..sweep.executors import ordered, scenario_executor
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
                    duration_parameter, parse_list)
 from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
@@ -36,6 +39,9 @@ PARAMETERS = (
     Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)",
               low=1, high=30),
     ENGINE,
+    Parameter("workers", 1, "processes for the independent pushes (and the points' bisections): "
+                            "1 this process, N a local pool of N, 0 one per core; same metrics",
+              low=0, high=1024),
 )
 CONTROLLERS = ("pd", "lqr")
 
@@ -50,6 +56,7 @@ def validate(robot, params: dict) -> None:
 
 
 def _one(robot, controller, location, force, params):
+    """One push trial: (survived, metrics)."""
     p = {**FIXED_PUSH, "location": location, "peak_force": force,
          "push_duration": params["push_duration"], "start": 0.5, "duration": params["duration"],
          "q_angular": params["q_angular"], "angular_weight": params["angular_weight"],
@@ -59,14 +66,52 @@ def _one(robot, controller, location, force, params):
     return trial.success, trial.metrics
 
 
+def _robot(robot):
+    """The robot of a job: itself in this process, rebuilt from its description in a worker."""
+    return robot if isinstance(robot, Robot) else load_robot(robot)
+
+
+def _trial_job(job):
+    """One push of a job ``(robot, controller, location, force, params)``."""
+    robot, c, loc, f, params = job
+    return _one(_robot(robot), c, loc, f, params)
+
+
+def _bisection_job(job):
+    """The largest survived peak force of one point: ``steps`` sequential pushes, bisecting
+    [0, ``high``]; job ``(robot, controller, location, high, steps, params)``."""
+    robot, c, loc, high, steps, params = job
+    robot = _robot(robot)
+    lo, hi = 0.0, high
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        ok, _ = _one(robot, c, loc, mid, params)
+        lo, hi = (mid, hi) if ok else (lo, mid)
+    return lo
+
+
+def _map(executor, function, jobs, progress: bool, desc: str) -> list:
+    """``function`` over ``jobs`` on ``executor``, results in job order, with a progress bar."""
+    with tqdm(total=len(jobs), disable=not progress, desc=desc, leave=False) as bar:
+        return ordered(executor, function, jobs, progress=lambda i, r: bar.update(1))
+
+
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     locations = parse_list(params["locations"], str, "locations")
     forces = sorted(parse_list(params["forces"], float, "forces"))
-    trials = []  # (controller, location, force, survived, metrics)
     jobs = [(c, loc, f) for c in CONTROLLERS for loc in locations for f in forces]
-    for c, loc, f in tqdm(jobs, disable=not progress, desc="pushes", leave=False):
-        survived, m = _one(robot, c, loc, f, params)
-        trials.append((c, loc, f, survived, m))
+    with scenario_executor(params["workers"]) as executor:
+        # the robot itself in this process; its (picklable) description for a pool's workers
+        shipped = robot if params["workers"] == 1 else robot.description
+        results = _map(executor, _trial_job, [(shipped, c, loc, f, params) for c, loc, f in jobs],
+                       progress, "pushes")
+        trials = [(c, loc, f, survived, m)  # (controller, location, force, survived, metrics)
+                  for (c, loc, f), (survived, m) in zip(jobs, results)]
+        points = [(c, loc) for c in CONTROLLERS for loc in locations]
+        if params["bisection"]:  # the points are independent, each bisection sequential
+            lows = _map(executor, _bisection_job,
+                        [(shipped, c, loc, forces[-1] * 2.0, int(params["bisection_steps"]),
+                          params) for c, loc in points], progress, "bisections")
 
     table = {}
     for c in CONTROLLERS:
@@ -104,16 +149,10 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
 
     if params["bisection"]:
         largest = {}
-        for c in CONTROLLERS:
-            for loc in locations:
-                lo, hi = 0.0, forces[-1] * 2.0
-                for _ in range(int(params["bisection_steps"])):
-                    mid = 0.5 * (lo + hi)
-                    ok, _ = _one(robot, c, loc, mid, params)
-                    lo, hi = (mid, hi) if ok else (lo, mid)
-                impulse = 2.0 / np.pi * lo * params["push_duration"]
-                largest[f"{c}/{loc}"] = {"peak_force_N": lo, "impulse_Ns": impulse,
-                                         "delta_v_mps": impulse / robot.mass}
+        for (c, loc), lo in zip(points, lows):
+            impulse = 2.0 / np.pi * lo * params["push_duration"]
+            largest[f"{c}/{loc}"] = {"peak_force_N": lo, "impulse_Ns": impulse,
+                                     "delta_v_mps": impulse / robot.mass}
         metrics["largest_survived"] = largest
 
     result = ScenarioResult("push-series", robot.name, "pd+lqr", True, metrics, params, notes)

@@ -30,9 +30,12 @@ from tqdm import tqdm
 
 from ..control.balance import MomentumBalance
 from ..report.balance_figures import robust_push_location_figure, robust_push_summary_figure
+from ..robot import Robot
+from ..robots import load_robot
 from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
+from ..sweep.executors import ordered, scenario_executor
 from .base import (ENGINE, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter,
                    parse_list)
 from .loop import run_closed_loop
@@ -91,6 +94,8 @@ PARAMETERS = (
     replace(Q_INTEGRAL, help=Q_INTEGRAL.help + ". NOMINAL was measured without it"),
     INTEGRAL_LIMIT,
     ENGINE,
+    Parameter("workers", 1, "processes for the independent runs: 1 this process, N a local pool "
+                            "of N, 0 one per core; same metrics", low=0, high=1024),
 )
 
 def nominal_force(controller: str, location: str, params: dict) -> float:
@@ -188,22 +193,33 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
             "tilt": tilt}
 
 
+def _run_job(job) -> dict:
+    """:func:`one_run` of a job ``(robot, controller, location, force, mismatch, params)``; the
+    robot itself in this process, its description in a pool's worker."""
+    robot, controller, location, force, mismatch, params = job
+    robot = robot if isinstance(robot, Robot) else load_robot(robot)
+    return one_run(robot, controller, location, force, mismatch, params)
+
+
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     locations = parse_list(params["locations"], str, "locations")
-    jobs = [(loc, i) for loc in locations for i in range(int(params["seeds"]))]
+    seeds = range(int(params["seeds"]))
+    shipped = robot if params["workers"] == 1 else robot.description
+    jobs = [(shipped, controller, loc, params["fraction"] * nominal_force(controller, loc, params),
+             mismatch_for(params, i), params) for loc in locations for i in seeds]
+    if params["baseline"]:  # the same draws, no push (a zero-force push keeps the timeline)
+        jobs += [(shipped, controller, locations[0], 0.0, mismatch_for(params, i), params)
+                 for i in seeds]
+    with scenario_executor(params["workers"]) as executor, \
+            tqdm(total=len(jobs), disable=not progress, desc="mismatch runs", leave=False) as bar:
+        results = ordered(executor, _run_job, jobs, progress=lambda i, r: bar.update(1))
+    pushed = len(locations) * len(seeds)
     runs: dict[str, list[dict]] = {loc: [] for loc in locations}
-    for loc, i in tqdm(jobs, disable=not progress, desc="mismatch runs", leave=False):
-        force = params["fraction"] * nominal_force(controller, loc, params)
-        r = one_run(robot, controller, loc, force, mismatch_for(params, i), params)
+    for k, r in enumerate(results[:pushed]):
+        loc, i = locations[k // len(seeds)], seeds[k % len(seeds)]
         log.info("robust-push %s %s seed %d: %s", controller, loc, i, r["metrics"]["survived"])
         runs[loc].append(r)
-    baseline = {}
-    if params["baseline"]:  # the same draws, no push (a zero-force push keeps the timeline)
-        for i in tqdm(range(int(params["seeds"])), disable=not progress, desc="no-push runs",
-                      leave=False):
-            m = one_run(robot, controller, locations[0], 0.0, mismatch_for(params, i),
-                        params)["metrics"]
-            baseline[m["seed"]] = m
+    baseline = {r["metrics"]["seed"]: r["metrics"] for r in results[pushed:]}
 
     per_location = {}
     for loc, rs in runs.items():
