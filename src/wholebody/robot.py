@@ -153,6 +153,14 @@ class Robot:
         self._all_points = bool(nc) and all(c.dim == 3 for c in self.contacts)
         self._all_rectangles = bool(nc) and all(c.dim == 6 for c in self.contacts)
         self.friction = description.friction
+        #: the frame of the floating base's link, and the upper-body frame that pushes and trunk
+        #: tasks address (the description's ``trunk_frame``, default the base)
+        self.base_frame = next(f.name for f in model.frames
+                               if f.parentJoint == 1 and f.type == pin.FrameType.BODY)
+        self.trunk_frame = description.trunk_frame or self.base_frame
+        if not model.existFrame(self.trunk_frame):
+            raise DescriptionError(f"{where}: field 'trunk_frame' = '{self.trunk_frame}' is not a "
+                                   f"frame of the model")
 
         self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
         self.q_max = model.upperPositionLimit[FREE_FLYER_NQ:].copy()

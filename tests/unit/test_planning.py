@@ -18,10 +18,10 @@ from scipy.integrate import solve_ivp
 
 import wholebody as wb
 from wholebody.planning import (
-    HYQ_LEGS, CrawlSway, Footprint, GaitPlanner, GaitSchedule, SwingTrajectory, Terrain,
+    LEGS, CrawlSway, Footprint, GaitPlanner, GaitSchedule, SwingTrajectory, Terrain,
     TrunkReference, VelocityCommand, crawl, raibert_foothold, stand, swing_trajectory, trot)
 
-LF, RF, LH, RH = HYQ_LEGS
+LF, RF, LH, RH = LEGS
 FAST = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -227,7 +227,7 @@ def test_flat_zero_command_foothold_is_the_standing_foot(hyq):
         np.testing.assert_allclose(fh.position, foot, atol=1e-9)
         np.testing.assert_allclose(fh.point, [foot[0], foot[1], 0.0], atol=1e-9)
         np.testing.assert_allclose(fh.normal, [0, 0, 1])
-    assert fp.foot_radius == pytest.approx(hyq.contact(LF).spec.radius)
+    assert fp.foot_radius == pytest.approx(hyq.contact("lf_foot").spec.radius)
     np.testing.assert_allclose(base + fp.com, hyq.com, atol=1e-9)
 
 
@@ -490,7 +490,7 @@ def test_planner_crawl_up_a_ramp(hyq):
     a = math.radians(12.0)
     terrain = Terrain(lambda x, y: math.tan(a) * x)
     fp = Footprint.from_robot(hyq)
-    sch = crawl(start=0.6)
+    sch = crawl(start=0.6, legs=hyq.contact_names)  # the constructor takes the footprint's legs
     com0 = hyq.q_ref[:3] + fp.com
     com0[2] += terrain.height(com0[0], com0[1])
     trunk = TrunkReference(VelocityCommand.constant(0.1), com0, terrain=terrain,

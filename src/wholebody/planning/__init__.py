@@ -19,7 +19,7 @@ Typical use::
 
 from .courses import Course, CoursePlanner, build_course, gap_course, ramp_course
 from .footholds import Foothold, Footprint, raibert_foothold
-from .gait import HYQ_LEGS, GaitEvent, GaitSchedule, Swing, crawl, stand, trot
+from .gait import LEGS, GaitEvent, GaitSchedule, Swing, crawl, stand, trot
 from .planner import GaitPlanner, PlanState
 from .swing import SwingTrajectory, quintic_blend, swing_trajectory
 from .terrain import Terrain
@@ -28,7 +28,7 @@ from .trunk import CrawlSway, TrunkReference, TrunkState, VelocityCommand
 __all__ = [
     "Course", "CoursePlanner", "build_course", "gap_course", "ramp_course",
     "CrawlSway", "Foothold", "Footprint", "GaitEvent", "GaitPlanner",
-    "GaitSchedule", "HYQ_LEGS", "PlanState", "Swing", "SwingTrajectory", "Terrain",
+    "GaitSchedule", "LEGS", "PlanState", "Swing", "SwingTrajectory", "Terrain",
     "TrunkReference", "TrunkState", "VelocityCommand", "crawl", "quintic_blend",
     "raibert_foothold", "stand", "swing_trajectory", "trot",
 ]

@@ -25,8 +25,10 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-#: HyQ's contact names, in the order of ``wb.load_robot("hyq").contact_names``: LF, RF, LH, RH.
-HYQ_LEGS = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
+#: the default legs of the schedules: a quadruped's foot roles (:mod:`wholebody.robots.roles`),
+#: LF, RF, LH, RH; :meth:`GaitPlanner.for_robot <wholebody.planning.planner.GaitPlanner.for_robot>`
+#: addresses them to the robot's own contacts
+LEGS = ("left-front", "right-front", "left-hind", "right-hind")
 
 _EPS = 1e-9  # in cycles: event instants belong to the phase that starts there
 
@@ -59,13 +61,13 @@ class GaitSchedule:
     in cycles) and ``duty`` factors (stance fraction, in (0, 1]; a scalar applies to every leg),
     optional ``start`` time before which all legs are in stance.
 
-    Legs are addressed by name (``"lf_foot"``) or index into ``legs``.
+    Legs are addressed by name (``"left-front"``, or a robot's contact name) or index into ``legs``.
     """
 
     period: float
     offsets: Sequence[float]
     duty: float | Sequence[float]
-    legs: Sequence[str] = HYQ_LEGS
+    legs: Sequence[str] = LEGS
     start: float = 0.0
     name: str = "gait"
 
@@ -261,7 +263,7 @@ CRAWL_PERIOD, TROT_PERIOD = 2.5, 0.8
 
 
 def crawl(period: float = CRAWL_PERIOD, duty: float = 0.85, start: float = 0.0,
-          legs: Sequence[str] = HYQ_LEGS) -> GaitSchedule:
+          legs: Sequence[str] = LEGS) -> GaitSchedule:
     """Crawl: one leg at a time in the classic LH -> LF -> RH -> RF sequence (phase offsets 0, 1/4,
     1/2, 3/4), as HyQ crawls in Fahmi et al. 2019 (Sect. V-B, V-C, V-E).
 
@@ -288,7 +290,7 @@ def crawl(period: float = CRAWL_PERIOD, duty: float = 0.85, start: float = 0.0,
 
 
 def trot(period: float = TROT_PERIOD, duty: float = 0.5, start: float = 0.0,
-         legs: Sequence[str] = HYQ_LEGS) -> GaitSchedule:
+         legs: Sequence[str] = LEGS) -> GaitSchedule:
     """Trot: diagonal pairs (LF with RH, RF with LH) swing together, half a cycle apart (Fahmi et
     al. 2019, Sect. V-H: "the robot uses only two legs at the time").
 
@@ -303,6 +305,6 @@ def trot(period: float = TROT_PERIOD, duty: float = 0.5, start: float = 0.0,
     return GaitSchedule(period, (0.0, 0.5, 0.5, 0.0), duty, legs, start, "trot")
 
 
-def stand(legs: Sequence[str] = HYQ_LEGS, period: float = 1.0) -> GaitSchedule:
+def stand(legs: Sequence[str] = LEGS, period: float = 1.0) -> GaitSchedule:
     """All legs in stance forever (duty 1)."""
     return GaitSchedule(period, (0.0,) * len(legs), 1.0, legs, 0.0, "stand")

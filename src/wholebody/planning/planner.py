@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
 
+from ..robots.roles import contact_roles
 from .footholds import Foothold, Footprint, raibert_foothold
 from .gait import GaitSchedule
 from .swing import SwingTrajectory
@@ -143,6 +144,9 @@ class GaitPlanner:
         feet (see :meth:`Footprint.centered_on_com`).
         """
         q = robot.q_ref if q is None else np.asarray(q, dtype=float)
+        roles = contact_roles(robot)
+        if set(schedule.legs) <= set(roles):  # a schedule of roles: to the robot's contacts
+            schedule = replace(schedule, legs=tuple(roles[leg] for leg in schedule.legs))
         legs = tuple(schedule.legs)
         footprint = Footprint.from_robot(robot, q, legs)
         R = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()

@@ -19,6 +19,7 @@ Fields (``*`` = required)::
     torque_limits  {scale = 1.0, overrides = {joint = Nm}, linkage = {joint = {...}}} (see
                    :mod:`wholebody.robots.torque_limits`)
     friction       nominal Coulomb friction coefficient of the feet used by controllers, default 0.8
+    trunk_frame    the upper-body frame that pushes and trunk tasks address, default the base
 
 Every number is checked here, with a :class:`DescriptionError` naming its path (``posture.<joint>``,
 ``armature.<joint>``, ``contacts[i].radius``, ``torque_limits.overrides.<joint>``...) and the value:
@@ -174,6 +175,7 @@ class RobotDescription:
     armature: float | dict[str, float] = 0.0
     torque_limits: dict[str, Any] = field(default_factory=dict)
     friction: float = 0.8
+    trunk_frame: str | None = None
     base_dir: Path | None = None
 
     @classmethod
@@ -191,7 +193,8 @@ class RobotDescription:
             return data[key]
 
         known = {"name", "urdf", "srdf", "posture", "posture_overrides", "locked_joints",
-                 "armature", "contacts", "torque_limits", "friction", "description"}
+                 "armature", "contacts", "torque_limits", "friction", "trunk_frame",
+                 "description"}
         unknown = sorted(str(k) for k in set(data) - known)
         if unknown:
             raise DescriptionError(f"{where}: unknown field(s) {unknown}; known: {sorted(known)}")
@@ -231,12 +234,14 @@ class RobotDescription:
         else:
             armature = _checked(validation.nonnegative, armature, "armature", where)
         friction = _checked(validation.positive, data.get("friction", 0.8), "friction", where)
+        trunk = data.get("trunk_frame")
+        trunk = None if trunk is None else _name(trunk, "trunk_frame", where)
         return cls(
             name=name, urdf=urdf, srdf=srdf or None, posture=posture, contacts=contacts,
             posture_overrides=overrides,
             locked_joints=locked, armature=armature,
             torque_limits=check_torque_limits(data.get("torque_limits"), where),
-            friction=friction, base_dir=base_dir,
+            friction=friction, trunk_frame=trunk, base_dir=base_dir,
         )
 
     @classmethod

@@ -1,4 +1,4 @@
-"""The robot the papers' quadruped numbers were set on, from which robot-relative defaults scale.
+"""The robots the papers' numbers were set on, from which robot-relative defaults scale.
 
 Fahmi et al. 2019 tuned its gains, force bounds, speeds and set-ups on HyQ; these are the hyq
 preset's own quantities (``hyq_no_sensors.urdf`` at the SRDF's ``standing`` posture), so that HyQ
@@ -17,6 +17,9 @@ import math
 MASS = 86.77400500000003  # kg
 INERTIA = 9.3599731892699  # kg m², trace(I_G) / 3 (wholebody.tasks.wrench.trunk_inertia)
 BASE_HEIGHT = 0.5992595750374548  # m, the base above the floor standing (robot.q_ref[2])
+#: the humanoid our push set-ups (Herzog et al. 2016 Sect. 5.2.2 on talos14) were made for: its
+#: standing base height (m), from which push points scale
+HUMANOID_BASE_HEIGHT = 1.0193830429027237
 
 
 def froude_ratio(robot) -> float:

@@ -9,6 +9,8 @@ returns within 5 mm of its reference within 3 s after the push.
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 from ..report.balance_figures import push_figure
@@ -25,6 +27,9 @@ PARAMETERS = (
     Parameter("height", 0.1, "with location=angle: height of the point above the base (m)",
               low=-Parameter.H, high=Parameter.H),
     Parameter("peak_force", 100.0, "peak of the half-sine force (N)", low=0.0),
+    Parameter("dv", 0.0, "the push as the velocity change it gives the robot (m/s): impulse "
+                         "m dv, the peak force 0.5 pi m dv / push_duration (0: peak_force)",
+              low=0.0, high=5.0),
     Parameter("push_duration", 0.1, "duration of the push (s), 0.05-0.15 in the paper",
               **TIME_SPAN),
     Parameter("start", 0.5, "time of the push (s)", low=0.0, high=Parameter.MAX_TIME),
@@ -37,8 +42,18 @@ PARAMETERS = (
 )
 
 
+def with_peak_force(robot, params: dict) -> dict:
+    """``params`` with ``peak_force`` from ``dv`` when it is set: a half-sine of peak F over T
+    carries the impulse 2 F T / pi, which is m dv."""
+    if params["dv"] <= 0.0:
+        return params
+    return {**params, "peak_force": 0.5 * math.pi * robot.mass * params["dv"]
+            / params["push_duration"]}
+
+
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
         observers=()) -> ScenarioResult:
+    params = with_peak_force(robot, params)
     trial = push_trial(robot, controller, params, progress, observers)
     push = trial.push
     notes = []

@@ -15,23 +15,36 @@ import numpy as np
 from ..control.balance import MomentumBalance, lqr_q
 from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
+from ..robots import reference
+from ..robots.roles import biped_soles
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
 from .base import ENGINE, Q_ANGULAR, Parameter, check_engine
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
 
-# location -> (frame, direction of the force, point of application in the frame)
+# location -> (the robot's frame, ``trunk_frame`` or ``base_frame``, direction of the force, point
+# of application in that frame, in m on talos14: scaled by the robot's standing height,
+# :func:`push_point`)
 TORSO_OFFSET, SURFACE = 0.1, 0.12
 LOCATIONS = {
-    "front": ("torso_2_link", (-1.0, 0.0, 0.0), (SURFACE, 0.0, TORSO_OFFSET)),
-    "right": ("torso_2_link", (0.0, 1.0, 0.0), (0.0, -SURFACE, TORSO_OFFSET)),
-    "back": ("torso_2_link", (1.0, 0.0, 0.0), (-SURFACE, 0.0, TORSO_OFFSET)),
-    "left": ("torso_2_link", (0.0, -1.0, 0.0), (0.0, SURFACE, TORSO_OFFSET)),
-    "hip-front": ("base_link", (-1.0, 0.0, 0.0), (SURFACE, 0.0, 0.0)),
-    "hip-right": ("base_link", (0.0, 1.0, 0.0), (0.0, -SURFACE, 0.0)),
-    "hip-left": ("base_link", (0.0, -1.0, 0.0), (0.0, SURFACE, 0.0)),
+    "front": ("trunk_frame", (-1.0, 0.0, 0.0), (SURFACE, 0.0, TORSO_OFFSET)),
+    "right": ("trunk_frame", (0.0, 1.0, 0.0), (0.0, -SURFACE, TORSO_OFFSET)),
+    "back": ("trunk_frame", (1.0, 0.0, 0.0), (-SURFACE, 0.0, TORSO_OFFSET)),
+    "left": ("trunk_frame", (0.0, -1.0, 0.0), (0.0, SURFACE, TORSO_OFFSET)),
+    "hip-front": ("base_frame", (-1.0, 0.0, 0.0), (SURFACE, 0.0, 0.0)),
+    "hip-right": ("base_frame", (0.0, 1.0, 0.0), (0.0, -SURFACE, 0.0)),
+    "hip-left": ("base_frame", (0.0, -1.0, 0.0), (0.0, SURFACE, 0.0)),
 }
+
+
+def push_point(robot, part: str, offset) -> tuple[str, np.ndarray]:
+    """(frame name, point in it) of a push point: ``part`` the robot's attribute naming the frame
+    (``trunk_frame`` or ``base_frame``), ``offset`` in m on talos14, scaled by the robot's
+    standing base height."""
+    frame = getattr(robot, part)
+    scale = float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT
+    return frame, scale * np.asarray(offset, dtype=float)
 
 #: momentum-balance options of the push scenarios (see :func:`controller_options`)
 ANGULAR_WEIGHT = Parameter(
@@ -65,38 +78,36 @@ def controller_options(controller: str, params: dict) -> dict:
     return opts
 
 
-def make_push(params: dict) -> Push:
-    """The half-sine push of ``location`` (or ``angle``/``height``), ``peak_force``, ``start``,
-    ``push_duration``."""
+def make_push(params: dict, robot) -> Push:
+    """The half-sine push on ``robot`` at ``location`` (or along ``angle``, ``height`` m above the
+    base), ``peak_force``, ``start``, ``push_duration``."""
     location = params["location"]
     if location == "angle":
         a = np.radians(params["angle"])
         direction = (-np.cos(a), -np.sin(a), 0.0)
-        offset = (SURFACE * np.cos(a), SURFACE * np.sin(a), params["height"])
-        frame = "base_link"
+        frame, offset = push_point(robot, "base_frame", (SURFACE * np.cos(a), SURFACE * np.sin(a), 0.0))
+        offset[2] = params["height"]
     elif location in LOCATIONS:
-        frame, direction, offset = LOCATIONS[location]
+        part, direction, offset = LOCATIONS[location]
+        frame, offset = push_point(robot, part, offset)
     else:
         raise ValueError(f"--set location: '{location}' is not one of {', '.join(LOCATIONS)}, angle")
     return Push(frame, direction, params["peak_force"], params["start"], params["push_duration"],
-                offset=offset)
+                offset=tuple(float(x) for x in offset))
 
 
-def location_of(push: Push) -> str:
-    """The name in :data:`LOCATIONS` of a push's point."""
-    return next(k for k, v in LOCATIONS.items() if v[0] == push.frame and
-                np.allclose(v[1], push.direction))
+def location_of(push: Push, robot) -> str:
+    """The name in :data:`LOCATIONS` of a push's point on ``robot``."""
+    return next(k for k, (part, direction, offset) in LOCATIONS.items()
+                if push_point(robot, part, offset)[0] == push.frame
+                and np.allclose(direction, push.direction))
 
 
 def check_push(robot, params: dict) -> None:
     """ValueError unless the engine is known, ``robot`` has the push's frame and rectangular soles."""
     check_engine(params)
-    push = make_push(params)
-    if not robot.model.existFrame(push.frame):
-        raise ValueError(f"robot '{robot.name}' has no frame '{push.frame}' to push at; the push "
-                         f"scenario is for the Talos humanoids (talos14, talos)")
-    if any(c.spec.type != "rectangle" for c in robot.contacts):
-        raise ValueError(f"robot '{robot.name}': momentum balance needs rectangular soles")
+    biped_soles(robot)  # ValueError unless two rectangular soles
+    make_push(params, robot)
 
 
 def check_locations(locations) -> None:
@@ -123,7 +134,7 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
     ``duration`` s. Survived: the feet stay flat and in place and the CoG returns within 5 mm of its
     reference within 3 s after the push (:mod:`~wholebody.scenarios.measures`). ``observers``
     watch the simulation."""
-    push = make_push(params)
+    push = make_push(params, robot)
     ctrl = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
     sim = Simulator(robot, observers=observers, label=controller)
     sim.add_push(push)

@@ -137,7 +137,7 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
             params: dict) -> dict:
     """One push on one mismatched twin; returns the metrics and the time series."""
     push = make_push({"location": location, "peak_force": force, "start": params["start"],
-                      "push_duration": params["push_duration"]})
+                      "push_duration": params["push_duration"]}, robot)
     ctrl = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
     sim = Simulator(robot, mismatch=mismatch, record=False)
     sim.add_push(push)
