@@ -23,16 +23,6 @@ from . import __version__
 EXIT_OK, EXIT_SCENARIO_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
-def _parse_sets(pairs: list[str]) -> dict[str, str]:
-    out = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"--set expects key=value, got '{pair}'")
-        out[key.strip()] = value.strip()
-    return out
-
-
 def _usage_error(exc: Exception) -> int:
     print(f"wholebody: error: {exc}", file=sys.stderr)
     return EXIT_USAGE
@@ -165,12 +155,12 @@ def _report_cut_short(result, out_dir: Path, what: str, mark: str = "") -> None:
 def _cmd_run(args) -> int:
     from .robots import load_robot
     from .scenarios import get_scenario
-    from .scenarios.base import ScenarioResult
+    from .scenarios.base import ScenarioResult, parse_sets
     from .sim.simulator import SimulationDiverged
 
     try:  # every usage error surfaces here, before anything runs
         scenario = get_scenario(args.scenario)
-        overrides = _parse_sets(args.set)
+        overrides = parse_sets(args.set)
         scenario.resolve(overrides)
         if args.controller and args.controller not in scenario.controllers:
             raise ValueError(f"scenario '{scenario.name}' has no controller '{args.controller}'; "

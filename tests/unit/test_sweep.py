@@ -13,11 +13,10 @@ import pytest
 
 from wholebody.cli import main
 from wholebody.scenarios import get_scenario
-from wholebody.scenarios.base import Scenario, ScenarioResult
+from wholebody.scenarios.base import Scenario, ScenarioResult, parse_sets
 from wholebody.sweep import (LocalPoolExecutor, SerialExecutor, SweepRun, expand, ordered,
                              parse_grid)
 from wholebody.sweep.executors import SINGLE_THREAD_ENV
-from wholebody.sweep.grid import parse_sets
 from wholebody.sweep.table import columns, write_csv, write_figure, write_json
 from wholebody.sweep.worker import flatten_metrics
 

@@ -265,6 +265,17 @@ class Parameter:
                              f"{self.range_text()[len(extra):]}{note}, got {item}{shown}")
 
 
+def parse_sets(pairs: list[str]) -> dict[str, str]:
+    """``--set key=value`` texts as a dict; ValueError naming the malformed one."""
+    out = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--set expects key=value, got '{pair}'")
+        out[key.strip()] = value.strip()
+    return out
+
+
 def _as_text(value: Any) -> str:
     """A programmatic override (a number, a bool, a list) as the text ``--set`` would give."""
     if isinstance(value, bool):

@@ -121,7 +121,8 @@ def command(args) -> int:
     """``wholebody sweep``: validate everything, run, write the table."""
     from ..scenarios import get_scenario
     from .executors import make_executor
-    from .grid import expand, parse_grid, parse_sets, robot_reference
+    from ..scenarios.base import parse_sets
+    from .grid import expand, parse_grid, robot_reference
     from .table import metric_names
     from .worker import run_one
 

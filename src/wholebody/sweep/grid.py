@@ -29,17 +29,6 @@ class SweepRun:
         return " ".join(parts + [f"repeat={self.repeat}"])
 
 
-def parse_sets(pairs: list[str]) -> dict[str, str]:
-    """``--set key=value`` texts as a dict; ValueError naming the malformed one."""
-    out = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"--set expects key=value, got '{pair}'")
-        out[key.strip()] = value.strip()
-    return out
-
-
 def parse_grid(texts: list[str]) -> dict[str, list[str]]:
     """``--grid key=v1,v2,...`` texts as ``{key: [v1, v2, ...]}`` in the order given.
 
