@@ -15,9 +15,9 @@ from wholebody.control.passivity import (StorageMeter, SwingFeedForwardOff,
 from wholebody.planning.courses import CoursePlanner, build_course, gap_course, ramp_course
 from wholebody.planning.planner import GaitPlanner
 from wholebody.planning.trunk import VelocityCommand
+from wholebody.scenarios import get_scenario
 from wholebody.scenarios.locomotion import course_environment, make_schedule, run_gait
 from wholebody.scenarios.passivity import energy_balance, summarize
-from wholebody.scenarios.unstable_foothold import PARAMETERS as UF_PARAMETERS
 from wholebody.scenarios.unstable_foothold import environment as stone_environment
 from wholebody.scenarios.unstable_foothold import stone_site, walk
 from wholebody.sim.simulator import Simulator
@@ -160,14 +160,13 @@ def test_crawl_front_legs_cross_the_gap_onto_the_step(hyq):
 
 
 # ---------------------------------------------------------------- closed loop: unstable foothold
-def _uf_params(**over):
-    p = {x.name: x.default for x in UF_PARAMETERS}
-    p.update(over)
-    return p
+def _uf_params(robot, **over):
+    """The scenario's parameters for ``robot`` (robot-relative defaults resolved), with ``over``."""
+    return get_scenario("unstable-foothold").validate(robot, {k: str(v) for k, v in over.items()})
 
 
-def test_still_stone_does_not_move():
-    p = _uf_params()
+def test_still_stone_does_not_move(hyq):
+    p = _uf_params(hyq)
     env = stone_environment(np.array([0.8, -0.3, 0.0]), p, moving=False)
     for t in (0.0, 6.5, 7.0, 20.0):
         pos, rpy = env.platform.motion(t)
@@ -179,7 +178,7 @@ def test_stone_rolls_away_under_rf_foot_and_robot_keeps_walking(hyq):
     """Fig. 6: the stone under the RF foot (where the planner put it) goes at 6.5 s; in the
     simulator the RF foot drops into the pit and unloads, the robot keeps walking without falling
     and its horizontal CoM stays within 3 cm of the reference."""
-    p = _uf_params(duration=8.0)
+    p = _uf_params(hyq, duration=8.0)
     point, t_td = stone_site(hyq, p)
     run, _, _ = walk(hyq, p, moving=True)
     leg = hyq.contact_names.index("rf_foot")
