@@ -99,8 +99,10 @@ def check_robot(name_or_path) -> RobotCheck:
         report.add("warning", "torque limits", message)
     _facts(robot, report)
     _roles(robot, report)
-    _contacts_on_the_floor(robot, report)
-    _support(robot, report)
+    data = robot.model.createData()  # the posture's kinematics, for the two checks below
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    _contacts_on_the_floor(robot, data, report)
+    _support(robot, data, report)
     _gravity_torques(robot, report)
     return report
 
@@ -114,9 +116,11 @@ def _facts(robot, report: RobotCheck) -> None:
 def _roles(robot, report: RobotCheck) -> None:
     try:
         roles = {name: role for role, name in contact_roles(robot).items()}
-    except DescriptionError as exc:
-        roles = {}
+    except DescriptionError as exc:  # a quadruped or biped whose contacts can't be told apart
+        roles, ambiguous = {}, True
         report.add("error", "roles", str(exc))
+    else:
+        ambiguous = False
     kinds = sorted({c.spec.type for c in robot.contacts})
     if len(roles) == 4:
         report.add("note", "class", "a quadruped (four point feet): the quadruped scenarios "
@@ -124,7 +128,7 @@ def _roles(robot, report: RobotCheck) -> None:
     elif len(roles) == 2:
         report.add("note", "class", "a biped (two soles): the humanoid scenarios (push, squat, "
                    "...) and stand apply")
-    elif not report.findings or report.findings[-1].topic != "roles":
+    elif not ambiguous:
         report.add("warning", "class", f"{len(robot.contacts)} contact(s) of type "
                    f"{'/'.join(kinds)}: neither a quadruped (four point feet) nor a biped (two "
                    f"soles); only stand applies",
@@ -137,11 +141,9 @@ def _roles(robot, report: RobotCheck) -> None:
                                 "leg_joints": list(leg_joints(robot, c.name))})
 
 
-def _contacts_on_the_floor(robot, report: RobotCheck) -> None:
+def _contacts_on_the_floor(robot, data, report: RobotCheck) -> None:
     """Every contact touches the floor in the posture (the robot is placed so that the lowest
     does), and soles lie flat."""
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
     gap_limit = FLOATING_CONTACT_FRACTION * float(robot.q_ref[2])
     for c, row in zip(robot.contacts, report.contacts):
         placement = data.oMf[c.frame_id]
@@ -162,12 +164,10 @@ def _contacts_on_the_floor(robot, report: RobotCheck) -> None:
                            "adjust the ankle joints of the posture until the soles are flat")
 
 
-def _support(robot, report: RobotCheck) -> None:
+def _support(robot, data, report: RobotCheck) -> None:
     """The CoM lies over the polygon of the contacts that touch the floor in the posture (margin
     to its nearest edge)."""
-    data = robot.model.createData()
     com = pin.centerOfMass(robot.model, data, robot.q_ref)
-    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
     points = []
     for c, row in zip(robot.contacts, report.contacts):
         if not row["touches_floor"]:

@@ -85,13 +85,15 @@ def leg_joints(robot, contact: str) -> tuple[str, ...]:
     return tuple(reversed(chain))
 
 
-def joint_axis(robot, joint: str) -> np.ndarray:
+def joint_axis(robot, joint: str, data=None) -> np.ndarray:
     """The unit rotation axis of the revolute ``joint`` in its own frame (from its motion
-    subspace; the axis is fixed in that frame)."""
+    subspace; the axis is fixed in that frame). ``data``: a Pinocchio data after forward
+    kinematics (default: a new one at the reference posture)."""
     model = robot.model
     jid = model.getJointId(joint)
-    data = model.createData()
-    pin.forwardKinematics(model, data, robot.q_ref)
+    if data is None:
+        data = model.createData()
+        pin.forwardKinematics(model, data, robot.q_ref)
     angular = np.asarray(data.joints[jid].S).reshape(6, -1)[3:, 0]
     return angular / np.linalg.norm(angular)
 
@@ -106,7 +108,7 @@ def pitch_joints(robot, contact: str) -> tuple[tuple[str, float], ...]:
     base = data.oMi[1].rotation
     out = []
     for joint in leg_joints(robot, contact):
-        axis = base.T @ data.oMi[model.getJointId(joint)].rotation @ joint_axis(robot, joint)
+        axis = base.T @ data.oMi[model.getJointId(joint)].rotation @ joint_axis(robot, joint, data)
         if abs(axis[1]) > np.cos(np.radians(30.0)):
             out.append((joint, float(np.sign(axis[1]))))
     return tuple(out)
