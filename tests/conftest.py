@@ -12,7 +12,7 @@ import wholebody as wb
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import fuzz  # noqa: E402  (the fuzz harness's state and plan samplers)
 
-PRESETS = ("talos14", "talos", "hyq")
+PRESETS = ("talos14", "talos", "hyq", "anymal_c", "romeo")
 
 
 @pytest.fixture(scope="session")

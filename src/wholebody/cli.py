@@ -62,8 +62,11 @@ def _cmd_check_robot(args) -> int:
                 else f"{2 * c['half_size_m'][0]:g} x {2 * c['half_size_m'][1]:g} m")
         where = f", {round(1000 * c['height_above_floor_m'], 1) + 0.0:.1f} mm above the floor"
         tilt = f", tilted {c['tilt_deg']:.1f} deg" if "tilt_deg" in c else ""
+        offset = (f" + [{', '.join(f'{x:g}' for x in c['offset_m'])}] m" if any(c["offset_m"])
+                  else "")
         print(f"  contact {c['name']} ({c['role'] or 'no role'}): {c['type']} on frame "
-              f"'{c['frame']}', {size}{where}{tilt}; leg: {', '.join(c['leg_joints']) or '-'}")
+              f"'{c['frame']}'{offset}, {size}{where}{tilt}; leg: "
+              f"{', '.join(c['leg_joints']) or '-'}")
     for finding in report.findings:
         print(f"  {finding.level}: {finding.topic}: {finding.message}" +
               (f"\n    fix: {finding.fix}" if finding.fix else ""))

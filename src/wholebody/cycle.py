@@ -18,6 +18,7 @@ cycle's own :attr:`HierarchyCycle.com`, :attr:`~HierarchyCycle.vcom`, :attr:`~Hi
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -51,6 +52,12 @@ ENGINES = ("auto", "native", "python")
 def native_available() -> bool:
     """True when the compiled cycle was built."""
     return _hierarchy_cycle is not None
+
+
+@functools.lru_cache(maxsize=None)
+def warn_python_fallback(what: str, reason: str) -> None:
+    """Log once per (controller, reason) that ``engine="auto"`` runs the Python reference."""
+    log.warning("%s: engine 'auto' runs the Python engine: %s", what, reason)
 
 
 # ---------------------------------------------------------------------------- task kinds
@@ -446,6 +453,11 @@ class HierarchyCycle:
                                  f"{sorted({type(t).__name__ for t in missing})}); use engine='python'")
         if engine == "auto":
             engine = "native" if _hierarchy_cycle is not None and not missing else "python"
+            if engine == "python":
+                reason = ("the compiled extension wholebody._hierarchy_cycle is not built"
+                          if _hierarchy_cycle is None else
+                          f"no compiled counterpart for tasks {[t.name for t in missing]}")
+                warn_python_fallback("HierarchyCycle", reason)
         self.robot, self.stack, self.engine_name = robot, stack, engine
         self.formulation = Formulation(robot, reduced=reduced)
         self.method, self.backend = method, backend

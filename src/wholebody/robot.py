@@ -36,10 +36,12 @@ PLACEHOLDER_TORQUE_FACTOR = 10.0
 
 @dataclass(frozen=True)
 class Contact:
-    """A contact of the robot: the description plus the resolved Pinocchio frame id."""
+    """A contact of the robot: the description plus the resolved Pinocchio frame: the described
+    frame itself, or a frame added at its ``offset`` (the sphere or sole centre)."""
 
     spec: ContactSpec
     frame_id: int
+    frame: str
 
     @property
     def name(self) -> str:
@@ -60,6 +62,27 @@ def check_vector(value, size: int, field: str) -> np.ndarray:
         if bad.size:  # (a finite vector whose sum overflows is accepted)
             raise ValueError(f"{field}: contains NaN or inf at indices {bad.tolist()}")
     return arr
+
+
+def _resolve_contact(model: pin.Model, spec: ContactSpec, index: int, where: str) -> Contact:
+    """The contact's frame in ``model``; a contact with an ``offset`` gets a frame of its own,
+    ``<name>_contact``, on the same joint at the offset (axes of the described frame)."""
+    if not model.existFrame(spec.frame):
+        raise DescriptionError(f"{where}: contacts[{index}].frame = '{spec.frame}' (contact "
+                               f"'{spec.name}') is not a frame of the model")
+    frame_id = int(model.getFrameId(spec.frame))
+    if not any(spec.offset):
+        return Contact(spec, frame_id, spec.frame)
+    name = f"{spec.name}_contact"
+    if model.existFrame(name):
+        raise DescriptionError(f"{where}: contacts[{index}]: contact '{spec.name}' has an offset, "
+                               f"and the frame '{name}' it would add exists in the model already; "
+                               f"rename the contact")
+    parent = model.frames[frame_id]
+    placement = parent.placement * pin.SE3(np.eye(3), np.array(spec.offset, dtype=float))
+    added = model.addFrame(pin.Frame(name, parent.parentJoint, frame_id, placement,
+                                     pin.FrameType.OP_FRAME))
+    return Contact(spec, int(added), name)
 
 
 def _model_joint_names(model: pin.Model) -> list[str]:
@@ -128,15 +151,10 @@ class Robot:
         self._check_joint_types()
         check_inertias(model, where)
         self._set_armature(description.armature)
+        self.contacts: tuple[Contact, ...] = tuple(
+            _resolve_contact(model, spec, i, where) for i, spec in enumerate(description.contacts))
         self.data: pin.Data = model.createData()
         self.mass = float(pin.computeTotalMass(model))
-
-        for i, spec in enumerate(description.contacts):
-            if not model.existFrame(spec.frame):
-                raise DescriptionError(f"{where}: contacts[{i}].frame = '{spec.frame}' (contact "
-                                       f"'{spec.name}') is not a frame of the model")
-        self.contacts: tuple[Contact, ...] = tuple(
-            Contact(spec, self.frame_id(spec.frame)) for spec in description.contacts)
         self.contact_names = tuple(c.name for c in self.contacts)
         self._contacts_by_name = {c.name: c for c in self.contacts}
         self._contact_index = {c.name: i for i, c in enumerate(self.contacts)}

@@ -19,7 +19,8 @@ START_TILT = pytest.mark.xfail(strict=True, reason=(
     "the first trot steps from the standing posture tilt the trunk by more than 20 deg on Go1 and A1, "
     "whose CoM stands 3 cm behind their feet's centroid (the footholds are centred on the CoM, the "
     "first stance is not); the trot then settles"))
-CASES = [(name, gait) for name in ("go1", "go2", "a1", "solo12") for gait in ("crawl", "trot")]
+CASES = [(name, gait) for name in ("go1", "go2", "a1", "solo12", "anymal_c")
+         for gait in ("crawl", "trot")]
 
 
 @pytest.mark.parametrize("name, gait", [

@@ -216,7 +216,7 @@ def test_desired_generalized_velocity_realises_the_desired_task_velocities(hyq, 
         if plan.contact[i]:
             assert np.allclose(hyq.contact_jacobians[name] @ nu, 0.0, atol=1e-10)
         else:
-            J = hyq.frame_jacobian(hyq.contact(name).spec.frame)[:3]
+            J = hyq.frame_jacobian(hyq.contact(name).frame)[:3]
             assert np.allclose(J @ nu, plan.foot_velocity[i])
 
 

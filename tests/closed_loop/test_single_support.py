@@ -26,7 +26,7 @@ def test_quintic_blend_has_zero_rate_and_acceleration_at_both_ends():
 
 
 def test_timeline_orders_the_phases(robots):
-    p = get_scenario("single-support").resolve({"push_forces": "50,150"})
+    p = get_scenario("single-support").validate(robots["talos14"], {"push_forces": "50,150"})
     tl = timeline(robots["talos14"], p)
     assert tl.shift_end < tl.switch < tl.lift_end < tl.pushes[0][0] < tl.pushes[1][0]
     assert [f for _, f in tl.pushes] == [50.0, 150.0]
@@ -56,7 +56,7 @@ def test_single_support_contact_switch(robots, controller):
     assert np.abs(np.diff(tau, axis=0)).max() < 10.0
     # the CoG, from the simulator's final state, is over the stance sole
     robot.update(log["q"][-1], log["v"][-1])
-    sole = robot.frame_placement(robot.contact("left_sole").spec.frame)[0]
+    sole = robot.frame_placement(robot.contact("left_sole").frame)[0]
     assert np.linalg.norm(robot.com[:2] - sole[:2]) < 5e-3
 
 
@@ -84,7 +84,7 @@ def test_push_in_single_support_is_recovered(robots):
     errors = []
     for k in np.flatnonzero(t > push["time_s"])[::20]:
         robot.update(q[k], log["v"][k])
-        sole = robot.frame_placement(robot.contact("left_sole").spec.frame)[0]
+        sole = robot.frame_placement(robot.contact("left_sole").frame)[0]
         errors.append(np.linalg.norm(robot.com[:2] - sole[:2]))
     assert max(errors) > 1e-3 and errors[-1] < 5e-3
 

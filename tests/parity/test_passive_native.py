@@ -95,7 +95,7 @@ def test_matches_python_engine(robots, trot_states, name, ramp):
     (the stance anchors of eq. 32 evolve in both)."""
     robot = robots["hyq"]
     options = CONFIGS[name]
-    python = PassiveWBC(robot, planner=planner(robot), **options)
+    python = PassiveWBC(robot, planner=planner(robot), engine="python", **options)
     native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
     if name.startswith("no feed-forward"):
         for wbc in (python, native):
@@ -118,7 +118,8 @@ def test_observer_matches_python_engine(robots, trot_states):
     """With the W_ext observer (its input is the engine's centroidal momentum and commanded
     wrench) both engines stay equal."""
     robot = robots["hyq"]
-    python = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0))
+    python = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
+                         engine="python")
     native = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
                         engine="native")
     for q, v, plan in trot_states[:150]:
@@ -131,7 +132,7 @@ def test_observer_matches_python_engine(robots, trot_states):
 def test_configure_hands_over_changed_settings(robots, trot_states):
     """Settings are copied when the engine is built: a change is seen only after configure()."""
     robot = robots["hyq"]
-    python = PassiveWBC(robot, planner=planner(robot))
+    python = PassiveWBC(robot, planner=planner(robot), engine="python")
     native = PassiveWBC(robot, planner=planner(robot), engine="native")
     q, v, plan = next(s for s in trot_states if not s[2].contact.all())
     for wbc in (python, native):
@@ -148,7 +149,7 @@ def test_infeasible_is_a_flagged_value(robots, rng):
     same finite, limited torque as the Python engine."""
     robot = robots["hyq"]
     options = {"f_min": 1500.0, "f_max": 2000.0, "torque_limit_override": {"lf_kfe_joint": 1.0}}
-    python = PassiveWBC(robot, planner=planner(robot), **options)
+    python = PassiveWBC(robot, planner=planner(robot), engine="python", **options)
     native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
     q = robot.q_ref.copy()
     q[7:] += rng.normal(scale=0.02, size=robot.na)

@@ -14,11 +14,13 @@ def test_robots_lists_presets(capsys):
     assert main(["robots"]) == 0
     out = capsys.readouterr().out
     for name, dof in (("talos14", "14"), ("talos", "32"), ("hyq", "12"), ("go1", "12"),
-                      ("go2", "12"), ("a1", "12"), ("solo12", "12")):
+                      ("go2", "12"), ("a1", "12"), ("solo12", "12"), ("anymal_c", "12"),
+                      ("romeo", "13")):
         assert any(line.split()[:2] == [name, dof] for line in out.splitlines()), out
     assert main(["robots", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert {r["name"] for r in rows} == {"talos14", "talos", "hyq", "go1", "go2", "a1", "solo12"}
+    assert {r["name"] for r in rows} == {"talos14", "talos", "hyq", "go1", "go2", "a1", "solo12",
+                                        "anymal_c", "romeo"}
 
 
 def test_scenarios_lists_parameters(capsys):
@@ -68,7 +70,7 @@ def test_run_with_robot_file(tmp_path):
 @pytest.mark.parametrize("argv,needle", [
     (["run", "fly"], "unknown scenario 'fly'; scenarios: "),
     (["run", "stand", "--robot", "atlas"],
-     "unknown robot 'atlas'; presets: a1, go1, go2, hyq, solo12, talos, talos14"),
+     "unknown robot 'atlas'; presets: a1, anymal_c, go1, go2, hyq, romeo, solo12, talos, talos14"),
     (["run", "stand", "--set", "speed=3"], "no parameter 'speed'"),
     (["run", "stand", "--set", "duration"], "--set expects key=value"),
     (["run", "stand", "--controller", "mpc"], "no controller 'mpc'"),

@@ -30,7 +30,7 @@ def test_solution_satisfies_dynamics_and_constraints(robots, rng, stance, plan_f
     """Eq. 1 (all n+6 rows, via RNEA), eq. 10/32 on stance feet, friction pyramid + normal bounds
     (eqs. 13-14), torque limits (eq. 15) and joint-acceleration bounds (eq. 18)."""
     robot = robots["hyq"]
-    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), mu=0.6)
+    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), mu=0.6, engine="python")
     for _ in range(3):
         robot.update(*standing_state(robot, rng))
         sol = wbc.solve(plan_for(robot, rng, stance))
@@ -65,7 +65,7 @@ def test_matches_two_level_stack(robots, rng, stance, options, plan_for):
     """The dedicated assembly and the generic Formulation (two levels, method="weighted", DAQP)
     solve the same problem: same torques."""
     robot = robots["hyq"]
-    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), **options)
+    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), engine="python", **options)
     robot.update(*standing_state(robot, rng))
     plan = plan_for(robot, rng, stance)
     if options.get("swing_slack") == "none":  # a hard swing task must be reachable: small targets

@@ -38,7 +38,7 @@ def test_adapter_optimum_matches_quadprog(robots, rng, options, plan_for):
     """Cycle after cycle (so that DAQP is warm-started from the previous multipliers), the x the
     controller got through the adapter is quadprog's optimum of the same arrays."""
     robot = robots["hyq"]
-    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), **options)
+    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), engine="python", **options)
     for k in range(8):
         q = robot.q_ref.copy()
         q[7:] += rng.normal(scale=0.03, size=robot.na)

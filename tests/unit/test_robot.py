@@ -81,7 +81,7 @@ def _contact_offset(robot, name) -> np.ndarray:
 def _material_point_velocity(robot, name, offset_local) -> np.ndarray:
     """Velocity [linear(; angular)] of the point fixed in the contact frame at ``offset_local``."""
     c = robot.contact(name)
-    twist = robot.frame_velocity(c.spec.frame)
+    twist = robot.frame_velocity(c.frame)
     R = robot.data.oMf[c.frame_id].rotation
     out = twist.copy()
     out[:3] += np.cross(twist[3:], R @ offset_local)
@@ -217,5 +217,5 @@ def test_bad_description_is_named(patch, needle):
 
 
 def test_unknown_preset_lists_presets():
-    with pytest.raises(ValueError, match="a1, go1, go2, hyq, solo12, talos, talos14"):
+    with pytest.raises(ValueError, match="a1, anymal_c, go1, go2, hyq, romeo, solo12, talos, talos14"):
         wb.load_robot("atlas")

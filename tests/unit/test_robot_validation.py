@@ -121,6 +121,9 @@ TALOS_BAD = [
     (("contacts", 1, "half_size"), [-0.105, 0.065], "contacts[1].half_size[0]", "-0.105"),
     (("contacts", 1, "half_size"), [0.105, 0.0], "contacts[1].half_size[1]", "0.0"),
     (("contacts", 1, "radius"), 0.02, "contacts[1]", "'radius'"),
+    (("contacts", 0, "offset"), [0.0, 0.1], "contacts[0].offset", "[0.0, 0.1]"),
+    (("contacts", 0, "offset"), 0.1, "contacts[0].offset", "0.1"),
+    (("contacts", 1, "offset"), [0.0, NAN, 0.0], "contacts[1].offset[1]", "nan"),
 ]
 
 

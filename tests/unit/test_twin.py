@@ -12,7 +12,7 @@ from wholebody.sim.mismatch import Mismatch
 from wholebody.sim.simulator import Simulator
 from wholebody.sim.twin import build_twin
 
-PRESETS = ("talos14", "talos", "hyq")
+PRESETS = ("talos14", "talos", "hyq", "anymal_c", "romeo")
 
 
 def _rel(a, b):
@@ -47,7 +47,7 @@ def test_contact_sites_at_contact_frames(robots, name, rng):
     sim.reset(q, v)
     robot.update(q, v)
     for n, (p, R) in sim.contact_frame_poses().items():
-        p_pin, R_pin = robot.frame_placement(robot.contact(n).spec.frame)
+        p_pin, R_pin = robot.frame_placement(robot.contact(n).frame)
         np.testing.assert_allclose(p, p_pin, atol=1e-12)
         np.testing.assert_allclose(R, R_pin, atol=1e-12)
 

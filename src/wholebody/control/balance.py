@@ -133,7 +133,7 @@ class SoleFrameReference:
         if support_acceleration is not None and not callable(support_acceleration):
             raise ValueError(f"support_acceleration: expected None or a callable t -> (3,), got "
                              f"{support_acceleration!r}")
-        self.frames = [robot.contact(n).spec.frame for n in self.contacts]
+        self.frames = [robot.contact(n).frame for n in self.contacts]
         robot.update(robot.q_ref, np.zeros(robot.nv))
         p0, yaw0 = self._frame(robot)
         Rz0 = pin.rpy.rpyToMatrix(0.0, 0.0, yaw0)
@@ -195,10 +195,10 @@ class MomentumBalance:
     our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
     accumulated here, one step per :meth:`compute` call with ``dt`` the time since the previous
     call, clamped to ``+-integral_limit`` (m s, anti-windup); :meth:`reset_integral` zeroes it.
-    ``engine``: ``"python"`` (default: ``Formulation.solve``) or ``"native"``/``"auto"`` — the
-    stack solved by a :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and
-    rows, the same solution); ``robot.update`` still runs every cycle for the references and
-    the LQR.
+    ``engine``: ``"auto"`` (default: native when built), ``"native"`` — the stack solved by a
+    :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and rows, the same
+    solution; ``robot.update`` still runs every cycle for the references and the LQR) — or
+    ``"python"`` (``Formulation.solve``, the reference).
 
     ``contacts``: None (default) = all the robot's contacts; an empty list is a ValueError
     (balance needs a support; the LQR model has no input without contacts). Checked at
@@ -215,7 +215,7 @@ class MomentumBalance:
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
                  cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT,
-                 engine: str = "python"):
+                 engine: str = "auto"):
         if gains not in GAINS:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
         if gains != "lqr" and q_integral is not None and np.any(np.asarray(q_integral) != 0):

@@ -117,7 +117,7 @@ class ContactSwitch:
         self.robot, self.config, self.gains_kind = robot, config, gains
         self.stance, self.swing_contact = stance, swing_contact
         self.timeline = Timeline.from_config(config)
-        self.swing_frame = robot.contact(swing_contact).spec.frame
+        self.swing_frame = robot.contact(swing_contact).frame
         self.formulation = Formulation(robot)
         lqr = gains == "lqr"
         self.double_contacts = tuple(robot.contact_names)
@@ -140,7 +140,7 @@ class ContactSwitch:
                                                    for j in config.held_joints], dtype=int)
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_start = robot.com.copy()
-        stance_pos = robot.frame_placement(robot.contact(stance).spec.frame)[0]
+        stance_pos = robot.frame_placement(robot.contact(stance).frame)[0]
         self.com_target = np.array([stance_pos[0], stance_pos[1], self.com_start[2]])
         self.lqr = None
         if lqr:

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..cycle import warn_python_fallback
 from ..formulation import Solution, TaskReport
 from ..guard import Outcome, guard_torque
 from ..robot import Robot
@@ -53,7 +54,7 @@ from .passive_stack import passive_stack
 log = logging.getLogger(__name__)
 
 SLACKS = ("per-direction", "single", "none")
-ENGINES = ("python", "native")
+ENGINES = ("auto", "native", "python")
 REGULARIZATIONS = ("force-normal", "torque")
 
 
@@ -71,7 +72,8 @@ class PassiveConfig:
     ``torque_weights`` (per joint, torque; None: 1e-4 each; footnote 16);
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
-    ``ENGINES``.
+    ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, else Python with
+    one logged warning).
     """
 
     mu: float | None = None
@@ -90,7 +92,7 @@ class PassiveConfig:
     torque_weights: tuple | None = None
     torque_limit_override: dict[str, float] | None = None
     control_period: float = 0.004
-    engine: str = "python"
+    engine: str = "auto"
 
     def __post_init__(self):
         if self.swing_slack not in SLACKS:
@@ -240,7 +242,7 @@ class PassiveWBC(PlannedController):
         self._failing = 0  # length of the current streak of failed cycles
         self.observer = observer
         self._commanded_wrench: np.ndarray | None = None  # G F of the last solved cycle
-        self.engine = config.engine
+        self.engine = self._resolve_engine(config)
         self._native = None
         if self.engine == "native":
             self._native = self._build_native()
@@ -401,6 +403,22 @@ class PassiveWBC(PlannedController):
                         tasks=reports, timings=timings, contacts=tuple(forces))
 
     # ------------------------------------------------------------------ native engine
+    @staticmethod
+    def _resolve_engine(config: PassiveConfig) -> str:
+        """``config.engine``, with "auto" resolved: native when built and the slack supported."""
+        if config.engine != "auto":
+            return config.engine
+        if config.swing_slack == "single":
+            warn_python_fallback("PassiveWBC", "the native engine has no 'single' swing slack")
+            return "python"
+        try:
+            from .. import _passive_cycle  # noqa: F401
+        except ImportError:
+            warn_python_fallback("PassiveWBC", "the compiled cycle wholebody._passive_cycle is "
+                                               "not built")
+            return "python"
+        return "native"
+
     def _build_native(self):
         try:
             from .. import _passive_cycle

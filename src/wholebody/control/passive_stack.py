@@ -45,7 +45,7 @@ def passive_stack(wbc, plan):
                                                     contacts=stance, normals=normals))
     for i, n in swing:
         foot = leg[i]
-        task = FrameTask(robot.contact(n).spec.frame, kp=wbc.swing.K, kd=wbc.swing.D,
+        task = FrameTask(robot.contact(n).frame, kp=wbc.swing.K, kd=wbc.swing.D,
                          mask="position", name=f"swing {n}",
                          weight=1.0 if wbc.swing_slack == "none" else np.sqrt(wbc.slack_weight))
         task.position = np.array(plan.foot_position[foot], dtype=float)

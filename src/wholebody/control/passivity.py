@@ -59,7 +59,7 @@ def desired_generalized_velocity(robot, plan, legs) -> tuple[np.ndarray, float]:
             rows.append(robot.contact_jacobians[name])
             rhs.append(np.zeros(3))
         else:
-            rows.append(robot.frame_jacobian(robot.contact(name).spec.frame)[:3])
+            rows.append(robot.frame_jacobian(robot.contact(name).frame)[:3])
             rhs.append(np.asarray(plan.foot_velocity[i], dtype=float))
     A, b = np.vstack(rows), np.concatenate(rhs)
     nu, *_ = np.linalg.lstsq(A, b, rcond=None)
@@ -119,7 +119,7 @@ class StorageMeter:
         for i, name in enumerate(legs):
             if plan.contact[i]:
                 continue
-            frame = robot.contact(name).spec.frame
+            frame = robot.contact(name).frame
             J = robot.frame_jacobian(frame)[:3]
             if Minv is None:
                 Minv = np.linalg.inv(robot.M)

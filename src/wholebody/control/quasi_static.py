@@ -125,7 +125,7 @@ class QuasiStaticController(PlannedController):
             if stance[i]:
                 continue
             leg = self._leg[i]
-            Ji = robot.frame_jacobian(robot.contact(name).spec.frame)[:3]
+            Ji = robot.frame_jacobian(robot.contact(name).frame)[:3]
             pos = robot.data.oMf[robot.contact(name).frame_id].translation
             error = plan.foot_position[leg] - pos
             force = self.swing_K * error + self.swing_D * (plan.foot_velocity[leg] - Ji @ robot.v)

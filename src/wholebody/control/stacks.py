@@ -105,18 +105,25 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
 
 
 def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
-                 lqr: bool = False, full: bool = False, mu: float | None = None) -> Stack:
+                 lqr: bool = False, full: bool = False, mu: float | None = None,
+                 angular_weight: float = ANGULAR_MOMENTUM_WEIGHT) -> Stack:
     """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
     acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
     regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks have no
-    rows)."""
+    rows).
+
+    The angular-momentum rows weigh ``angular_weight`` (default 1e-4; the paper: 1e4) and the
+    posture holds the base, as in :func:`table2_stack`, whose docstring gives the reason:
+    neither eq. 22 nor the LQR state has the trunk orientation."""
     stance = _contacts(robot, stance, "stance", default_all=False)
     swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
     return Stack([
         _dynamics(full),
         _contact_conditions(robot, stance, mu),
-        [momentum_task(lqr), ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
-        + swing + [PostureTask(name="posture", weight=1e-1, kp=50.0, kd=14.0)],
+        [momentum_task(lqr, angular_weight),
+         ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
+        + swing + [PostureTask(name="posture", weight=1e-1, kp=50.0, kd=14.0, base_kp=50.0,
+                               base_kd=14.0)],
         [ForceRegularizer(name="force regularizer", weight=1e-4, contacts=stance)],
     ])
 

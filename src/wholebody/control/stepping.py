@@ -85,14 +85,14 @@ class Stepping:
     """Table 1 stepping controller, ``compute(q, v, t)``, on one formulation (reduced or full).
 
     Wall time of every cycle (update + rows + solve + tau) is appended to ``cycle_times``.
-    ``engine="native"`` solves each stack with a :class:`~wholebody.cycle.HierarchyCycle` (its
-    own compiled rigid-body pass and rows); the Python ``robot.update`` then runs only when a
+    ``engine="native"`` (or ``"auto"``, the default, when native is built) solves each stack with
+    a :class:`~wholebody.cycle.HierarchyCycle` (its own compiled rigid-body pass and rows); the Python ``robot.update`` then runs only when a
     phase begins (the swing foot's lift-off placement), so ``robot``'s cached terms are those
     of that cycle — the scenario's records update it themselves, outside the cycle time.
     """
 
     def __init__(self, robot, config: SteppingConfig, reduced: bool = True,
-                 engine: str = "python"):
+                 engine: str = "auto"):
         self.robot, self.config, self.reduced = robot, config, reduced
         self.phases = timeline(config)
         self.formulation = Formulation(robot, reduced=reduced)
@@ -113,7 +113,7 @@ class Stepping:
         self.single, self.single_vars, self.swing_task = {}, {}, {}
         for stance in contacts:
             swing = next(c for c in contacts if c != stance)
-            frame = robot.contact(swing).spec.frame
+            frame = robot.contact(swing).frame
             self.single[stance] = table1_stack(robot, [stance], [frame], full=full)
             self.single[stance].find("contacts").kd = config.contact_kd
             self.single_vars[stance] = Variables(robot, [stance])
@@ -124,7 +124,7 @@ class Stepping:
                            for st in [self.double, *self.single.values()]}
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_middle = robot.com.copy()
-        self.sole_xy = {c: robot.frame_placement(robot.contact(c).spec.frame)[0][:2].copy()
+        self.sole_xy = {c: robot.frame_placement(robot.contact(c).frame)[0][:2].copy()
                         for c in contacts}
         self.com_task = self.double.find("com")
         self.com_from = self.com_middle.copy()
@@ -175,7 +175,7 @@ class Stepping:
                 self.unload[ph.swing].targets[ph.swing] = self.unload_start.copy()
                 self.unload[ph.swing].weight = 1.0
             elif ph.kind == "single":
-                frame = robot.contact(ph.swing).spec.frame
+                frame = robot.contact(ph.swing).frame
                 self.lift_start, rotation = robot.frame_placement(frame)
                 self.swing_task[ph.stance].rotation = rotation
             elif ph.kind == "reload":  # touch-down: the new contact's wrench ramps to a preload

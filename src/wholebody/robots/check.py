@@ -137,7 +137,7 @@ def _roles(robot, report: RobotCheck) -> None:
         size = ({"radius_m": c.spec.radius} if c.spec.type == "point"
                 else {"half_size_m": list(c.spec.half_size)})
         report.contacts.append({"name": c.name, "frame": c.spec.frame, "type": c.spec.type,
-                                **size, "role": roles.get(c.name),
+                                **size, "offset_m": list(c.spec.offset), "role": roles.get(c.name),
                                 "leg_joints": list(leg_joints(robot, c.name))})
 
 
@@ -154,7 +154,7 @@ def _contacts_on_the_floor(robot, data, report: RobotCheck) -> None:
             report.add("error", "posture", f"contact '{c.name}' is {1000 * height:.1f} mm above "
                        f"the floor in the posture: the robot does not stand on it",
                        "choose a posture (SRDF state or a joint table) with all feet down, or "
-                       "check the contact's frame and radius/half_size")
+                       "check the contact's frame, offset and radius/half_size")
         if c.spec.type == "rectangle":
             tilt = math.degrees(math.acos(min(1.0, abs(float(placement.rotation[2, 2])))))
             row["tilt_deg"] = tilt

@@ -13,8 +13,10 @@ Fields (``*`` = required)::
                    {joint = value}); the MuJoCo twin uses the same value, default 0
     contacts*      list of {name, frame, type = "point", radius} or
                    {name, frame, type = "rectangle", half_size = [hx, hy]} (sole half-lengths along
-                   the frame's x and y axes, centred on the frame origin); each may carry a
-                   ``role`` (one of ``ROLES``: which foot or sole it is), else the role is found
+                   the frame's x and y axes); ``offset = [x, y, z]`` (m, in the frame's axes,
+                   default 0) places the sphere centre or the sole centre relative to the frame
+                   (a foot frame below its sphere, a sole declared on the ankle link); each may
+                   carry a ``role`` (one of ``ROLES``: which foot or sole it is), else the role is found
                    from where the contact is (:mod:`wholebody.robots.roles`)
     torque_limits  {scale = 1.0, overrides = {joint = Nm}, linkage = {joint = {...}}} (see
                    :mod:`wholebody.robots.torque_limits`)
@@ -40,8 +42,8 @@ import numpy as np
 from .. import validation
 
 CONTACT_TYPES = ("point", "rectangle")
-CONTACT_KEYS = {"point": ("name", "frame", "type", "radius", "role"),
-                "rectangle": ("name", "frame", "type", "half_size", "role")}
+CONTACT_KEYS = {"point": ("name", "frame", "type", "radius", "offset", "role"),
+                "rectangle": ("name", "frame", "type", "half_size", "offset", "role")}
 #: the roles a contact can declare: a quadruped's feet, a biped's soles
 ROLES = {"point": ("left-front", "right-front", "left-hind", "right-hind"),
          "rectangle": ("left", "right")}
@@ -154,6 +156,8 @@ class ContactSpec:
     half_size: tuple[float, float] = (0.0, 0.0)
     #: which foot or sole this is (one of ``ROLES[type]``); None: found from the geometry
     role: str | None = None
+    #: the sphere centre (point) or the sole centre (rectangle) in the frame's coordinates (m)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def dim(self) -> int:
@@ -273,11 +277,20 @@ def _parse_contact(raw: Any, index: int, where: str) -> ContactSpec:
     if role is not None and role not in ROLES[kind]:
         raise DescriptionError(f"{where}: field '{path}.role' is {role!r}, expected one of "
                                f"{ROLES[kind]} for a {kind} contact")
+    offset = (0.0, 0.0, 0.0)
+    if "offset" in raw:
+        expected = "three numbers [x, y, z] (m, in the frame's axes)"
+        values = _list(raw["offset"], f"{path}.offset", where, expected)
+        if len(values) != 3:
+            raise DescriptionError(f"{where}: {path}.offset: expected {expected}, got "
+                                   f"{raw['offset']!r}")
+        offset = tuple(_checked(validation.number, x, f"{path}.offset[{k}]", where)
+                       for k, x in enumerate(values))
     if kind == "point":
         if "radius" not in raw:
             raise DescriptionError(f"{where}: missing required field '{path}.radius'")
         radius = _checked(validation.nonnegative, raw["radius"], f"{path}.radius", where)
-        return ContactSpec(name, frame, kind, radius=radius, role=role)
+        return ContactSpec(name, frame, kind, radius=radius, role=role, offset=offset)
     if "half_size" not in raw:
         raise DescriptionError(f"{where}: missing required field '{path}.half_size'")
     expected = "two positive numbers [hx, hy] (half-lengths in m)"
@@ -287,4 +300,4 @@ def _parse_contact(raw: Any, index: int, where: str) -> ContactSpec:
                                f"{raw['half_size']!r}")
     hx, hy = (_checked(validation.positive, x, f"{path}.half_size[{k}]", where)
               for k, x in enumerate(half))
-    return ContactSpec(name, frame, kind, half_size=(hx, hy), role=role)
+    return ContactSpec(name, frame, kind, half_size=(hx, hy), role=role, offset=offset)

@@ -18,8 +18,10 @@ MASS = 86.77400500000003  # kg
 INERTIA = 9.3599731892699  # kg m², trace(I_G) / 3 (wholebody.tasks.wrench.trunk_inertia)
 BASE_HEIGHT = 0.5992595750374548  # m, the base above the floor standing (robot.q_ref[2])
 #: the humanoid our push set-ups (Herzog et al. 2016 Sect. 5.2.2 on talos14) were made for: its
-#: standing base height (m), from which push points scale
+#: standing base height (m), from which push points and lifts scale, and its mass (kg), from which
+#: push forces scale
 HUMANOID_BASE_HEIGHT = 1.0193830429027237
+HUMANOID_MASS = 90.27219199999999
 
 
 def froude_ratio(robot) -> float:

@@ -286,9 +286,10 @@ def _as_text(value: Any) -> str:
 
 
 #: the controller's engine, for the scenarios that take one (momentum balance, stepping)
-ENGINE = Parameter("engine", "python", "controller engine: 'python' (Robot.update + Formulation) "
-                                       "or 'native' (wholebody.cycle.HierarchyCycle: rigid-body "
-                                       "terms and task rows compiled, same torques)",
+ENGINE = Parameter("engine", "auto", "controller engine: 'native' (wholebody.cycle.HierarchyCycle: "
+                                     "rigid-body terms and task rows compiled, same torques), "
+                                     "'python' (Robot.update + Formulation, the reference) or "
+                                     "'auto' (native when built)",
                    choices=ENGINES)
 
 

@@ -33,8 +33,8 @@ PARAMETERS = (
     Parameter("duration", 12.0, "simulated time (s)",
               **TIME_SPAN),
     GAIT,
-    Parameter("engine", "python", "passive WBC engine: python, or native (the compiled cycle)",
-              choices=ENGINES),
+    Parameter("engine", "auto", "passive WBC engine: native (the compiled cycle), python (the "
+                                "reference) or auto (native when built)", choices=ENGINES),
 )
 
 CONTROLLER_CHOICES = ("passive+quasi-static", "passive", "quasi-static")

@@ -285,7 +285,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     fall_height = FALL_HEIGHT_FRACTION * float(robot.q_ref[2])
     fell = False
     legs = planner.legs
-    frame_ids = [robot.model.getFrameId(robot.contact(n).spec.frame) for n in legs]
+    frame_ids = [robot.model.getFrameId(robot.contact(n).frame) for n in legs]
     pin_data = robot.model.createData()
 
     def observe(t, result):

@@ -91,7 +91,7 @@ def cop_in_sole(wrench: np.ndarray, rotation: np.ndarray,
 def sole_midpoint(robot) -> np.ndarray:
     """Midpoint of the contact frames at the reference posture (resting on z = 0)."""
     robot.update(robot.q_ref, np.zeros(robot.nv))
-    return np.mean([robot.frame_placement(robot.contact(n).spec.frame)[0]
+    return np.mean([robot.frame_placement(robot.contact(n).frame)[0]
                     for n in robot.contact_names], axis=0)
 
 

@@ -19,7 +19,7 @@ from ..robots import reference
 from ..robots.roles import biped_soles
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
-from .base import ENGINE, Q_ANGULAR, Parameter, check_engine
+from .base import ENGINE, Q_ANGULAR, Parameter, RobotRelative, check_engine
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
 
@@ -45,6 +45,36 @@ def push_point(robot, part: str, offset) -> tuple[str, np.ndarray]:
     frame = getattr(robot, part)
     scale = float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT
     return frame, scale * np.asarray(offset, dtype=float)
+
+@dataclass(frozen=True)
+class HumanoidScaled(RobotRelative):
+    """A quantity of the humanoid set-ups, ``amount`` on talos14, as a robot-relative default:
+    times (m / m_talos14)^``mass_power`` (h / h_talos14)^``height_power`` — a force with mass
+    power 1 gives the same velocity change, a length with height power 1 the same proportion.
+    ``listed``: the value is the text of a one-item list parameter. Exactly ``amount`` on
+    talos14."""
+
+    amount: float
+    unit: str
+    mass_power: int = 0
+    height_power: int = 0
+    listed: bool = False
+
+    def value(self, robot):
+        x = (self.amount * (robot.mass / reference.HUMANOID_MASS) ** self.mass_power
+             * (float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT) ** self.height_power)
+        return f"{x:.4g}" if self.listed else x
+
+    def __str__(self) -> str:
+        factors = " ".join(f for f, p in (("m", self.mass_power), ("h", self.height_power)) if p)
+        reference = f"{factors}_talos14" if " " not in factors else f"({factors})_talos14"
+        return f"{self.amount:g} {self.unit} x {factors} / {reference}"
+
+    def as_data(self) -> dict[str, float]:
+        return {"amount_on_reference": self.amount, "mass_power": self.mass_power,
+                "height_power": self.height_power, "reference_mass_kg": reference.HUMANOID_MASS,
+                "reference_base_height_m": reference.HUMANOID_BASE_HEIGHT}
+
 
 #: momentum-balance options of the push scenarios (see :func:`controller_options`)
 ANGULAR_WEIGHT = Parameter(

@@ -31,7 +31,7 @@ from .base import Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, dur
 from .loop import run_closed_loop
 from .measures import (COG_TOLERANCE_M, RECOVERY_WINDOW_S, cog_recovery, cop_in_sole,
                        feet_in_place, sole_slip, tilt_deg)
-from .pushes import LOCATIONS, location_of, make_push
+from .pushes import LOCATIONS, HumanoidScaled, location_of, make_push
 
 log = logging.getLogger(__name__)
 
@@ -44,15 +44,17 @@ PARAMETERS = (
               **TIME_SPAN),
     Parameter("lift_time", 1.0, "duration of the swing-foot lift (s)",
               **TIME_SPAN),
-    Parameter("lift", 0.10, "swing-foot lift height (m)",
+    Parameter("lift", HumanoidScaled(0.10, "m", height_power=1), "swing-foot lift height (m)",
               low=0.0, low_open=True, high=0.5 * Parameter.H),
-    Parameter("push_forces", "150", "comma-separated peak forces (N) of the pushes in single "
-                                    "support with the foot held up ('' or 0: none)",
+    Parameter("push_forces", HumanoidScaled(150.0, "N", mass_power=1, listed=True),
+              "comma-separated peak forces (N) of the pushes in single support with the foot held "
+              "up ('' or 0: none); default the paper's 150 N on talos14, the same velocity change "
+              "on any robot",
               low=0.0, items=float),
     Parameter("push_location", "front", f"their push point: {', '.join(LOCATIONS)}",
               choices=tuple(LOCATIONS)),
     Parameter("push_duration", 0.06, "their duration (s); 150 N x 0.06 s half-sine = 5.7 Ns "
-                                     "(the paper: 4.5-5.8 Ns)",
+                                     "on talos14 (the paper: 4.5-5.8 Ns)",
               **TIME_SPAN),
     Parameter("push_start", 1.0, "first push, seconds after the lift ends",
               low=0.0, high=Parameter.MAX_TIME),
@@ -68,11 +70,12 @@ PARAMETERS = (
               low=-np.pi / 2, high=np.pi / 2),
     Parameter("sine_ramp", 1.0, "the amplitude ramps in over this time (s)",
               low=0.0, high=Parameter.MAX_TIME),
-    Parameter("sine_joints", "", "hip and knee flexion joints of the swing leg (default: "
-                                 "leg_<side>_3_joint,leg_<side>_4_joint)"),
+    Parameter("sine_joints", "", "hip and knee flexion joints of the swing leg (default: its "
+                                 "first two joints with a lateral axis)"),
     Parameter("sine_kp", 100.0, "joint tracking stiffness (1/s^2)", low=0.0),
     Parameter("sine_kd", 20.0, "joint tracking damping (1/s)", low=0.0),
-    Parameter("sine_push_force", 150.0, "peak force of the push during the swinging (N; 0: none)",
+    Parameter("sine_push_force", HumanoidScaled(150.0, "N", mass_power=1),
+              "peak force of the push during the swinging (N; 0: none)",
               low=0.0),
     Parameter("sine_push_location", "hip-front", "its push point", choices=tuple(LOCATIONS)),
     Parameter("sine_push_duration", 0.06, "its duration (s)",
@@ -89,8 +92,9 @@ PARAMETERS = (
     Q_ANGULAR,
     Parameter("lqr_blend", True, "LQR: blend the gains during the unloading (Sect. 3.2 remark); "
                                  "false: switch them at the contact switch"),
-    Parameter("max_torque_jump", 10.0, "largest cycle-to-cycle torque change counted as "
-                                       "continuous, outside pushes (Nm)", low=0.0, low_open=True),
+    Parameter("max_torque_jump", HumanoidScaled(10.0, "Nm", mass_power=1, height_power=1),
+              "largest cycle-to-cycle torque change counted as continuous, outside pushes (Nm)",
+              low=0.0, low_open=True),
 )
 
 def parse_forces(text) -> list[float]:

@@ -68,7 +68,7 @@ def test_com_task_holds_the_first_seen_com(robots):
 
 
 def _frames(robot):
-    return [c.spec.frame for c in robot.contacts]
+    return [c.frame for c in robot.contacts]
 
 
 @pytest.mark.parametrize("seed", SEEDS)

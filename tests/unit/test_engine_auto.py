@@ -1,0 +1,58 @@
+"""``engine="auto"``, the default of every controller: the compiled cycle where it is built and
+supports the configuration, else the Python reference with one logged warning. The evidence for
+"native" is the compiled cycle's own object behind the controller and torques equal to the
+reference's."""
+
+import logging
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from conftest import native_cycle_or_skip
+from wholebody.control.balance import MomentumBalance
+from wholebody.control.passive import PassiveWBC
+from wholebody.cycle import warn_python_fallback
+
+
+def planner(robot):
+    return SimpleNamespace(legs=robot.contact_names)
+
+
+def test_passive_wbc_defaults_to_the_compiled_cycle(robots, rng, plan_for):
+    module = native_cycle_or_skip("_passive_cycle")
+    robot = robots["hyq"]
+    auto = PassiveWBC(robot, planner=planner(robot))
+    python = PassiveWBC(robot, planner=planner(robot), engine="python")
+    assert auto.engine == "native" and isinstance(auto._native, module.PassiveCycle)
+    q = robot.q_ref.copy()
+    q[7:] += rng.normal(scale=0.02, size=robot.na)
+    v = rng.normal(scale=0.05, size=robot.nv)
+    robot.update(q, v)
+    plan = plan_for(robot, rng, (True, False, True, True))
+    a, b = auto.cycle(q, v, plan), python.cycle(q, v, plan)
+    assert a.ok and b.ok
+    np.testing.assert_allclose(a.tau, b.tau, atol=1e-6)
+
+
+def test_unsupported_slack_falls_back_with_one_warning(robots, caplog):
+    robot = robots["hyq"]
+    warn_python_fallback.cache_clear()
+    with caplog.at_level(logging.WARNING, logger="wholebody.cycle"):
+        first = PassiveWBC(robot, planner=planner(robot), swing_slack="single")
+        second = PassiveWBC(robot, planner=planner(robot), swing_slack="single")
+    assert first.engine == second.engine == "python" and first._native is None
+    warnings = [r for r in caplog.records if "engine 'auto' runs the Python engine" in r.message]
+    assert len(warnings) == 1 and "single" in warnings[0].message
+
+
+def test_explicit_native_refuses_what_it_cannot_run(robots):
+    robot = robots["hyq"]
+    with pytest.raises(ValueError, match="'native' supports swing_slack"):
+        PassiveWBC(robot, planner=planner(robot), swing_slack="single", engine="native")
+
+
+def test_momentum_balance_defaults_to_the_compiled_cycle(robots):
+    native_cycle_or_skip("_hierarchy_cycle")
+    ctrl = MomentumBalance(robots["talos14"], gains="pd")
+    assert ctrl.cycle is not None and ctrl.cycle.engine_name == "native"
