@@ -15,17 +15,11 @@ pytestmark = pytest.mark.slow
 DURATION = 5.0  # s: 1 s standing, then the gait
 
 
-START_TILT = pytest.mark.xfail(strict=True, reason=(
-    "the first trot steps from the standing posture tilt the trunk by more than 20 deg on Go1 and A1, "
-    "whose CoM stands 3 cm behind their feet's centroid (the footholds are centred on the CoM, the "
-    "first stance is not); the trot then settles"))
 CASES = [(name, gait) for name in ("go1", "go2", "a1", "solo12", "anymal_c")
          for gait in ("crawl", "trot")]
 
 
-@pytest.mark.parametrize("name, gait", [
-    pytest.param(n, g, marks=START_TILT) if (n, g) in (("go1", "trot"), ("a1", "trot")) else (n, g)
-    for n, g in CASES])
+@pytest.mark.parametrize("name, gait", CASES)
 def test_passive_wbc_walks_every_quadruped_preset(name, gait):
     robot = wb.load_robot(name)
     speed = 0.1 * froude_ratio(robot)  # the paper's 0.1 m/s on HyQ, Froude-scaled

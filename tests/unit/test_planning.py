@@ -560,3 +560,81 @@ def test_planner_rejects_a_time_that_is_not_finite(hyq, t):
     planner = GaitPlanner.for_robot(hyq, trot(start=0.2), VelocityCommand.constant(0.3))
     with pytest.raises(ValueError, match="t: expected a finite time"):
         planner.update(t)
+
+
+def polygon_margin(poly, p):
+    """Signed distance from p to the nearest edge of the convex polygon poly (k x 2); > 0 inside."""
+    centre = poly.mean(axis=0)
+    out = math.inf
+    for k in range(len(poly)):
+        a, b = poly[k], poly[(k + 1) % len(poly)]
+        n = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a)
+        out = min(out, (n if n @ (centre - a) > 0 else -n) @ (p - a))
+    return out
+
+
+def _line_offset(p, a, b):
+    """Signed distance of p from the line through a and b, and where along a -> b p projects
+    (0 at a, 1 at b)."""
+    d = b - a
+    n = np.array([-d[1], d[0]]) / np.linalg.norm(d)
+    return float(n @ (p - a)), float(d @ (p - a) / (d @ d))
+
+
+@pytest.mark.parametrize("name", ["go1", "hyq"])
+def test_trot_start_puts_the_com_reference_on_the_first_support_line(name):
+    """Go1's CoM stands 3 cm behind its feet's centroid, HyQ's 4 cm ahead: the nominal CoM is off
+    the line of the first two stance feet, about which two point feet can make no moment. With
+    the start shift the CoM reference stands on that line for the whole first stance (feet from
+    Pinocchio's forward kinematics of the standing posture), reaches it inside the four feet, and
+    rejoins the unshifted reference after the second hand-over; the footholds are unchanged."""
+    robot = wb.load_robot(name)
+    h = float(robot.q_ref[2])
+    sch = trot(0.8 * math.sqrt(h / 0.599), start=1.0, legs=robot.contact_names)
+    cmd = VelocityCommand.speed_ramp(0.05, 0.1, 1.0, 3.0)
+    shifted = GaitPlanner.for_robot(robot, sch, cmd)
+    plain = GaitPlanner.for_robot(robot, sch, cmd, start_shift=False)
+    assert shifted.trunk.start_shift is not None and plain.trunk.start_shift is None
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    feet = np.array([data.oMf[robot.contact(n).frame_id].translation[:2]
+                     for n in robot.contact_names])
+    hull = feet[[0, 1, 3, 2]]  # LF, RF, RH, LH around the body
+    first = [i for i in range(4) if sch.in_stance(i, 1.0)]  # RF and LH: the first support
+    t1, t_td, t_h2 = 1.0, 1.0 + 0.5 * sch.period, 1.0 + 1.25 * sch.period
+    with_shift, without = [], []
+    for t in np.arange(0.0, 1.0 + 4 * sch.period, 2e-3):
+        a, b = shifted.update(t).copy(), plain.update(t).copy()
+        np.testing.assert_allclose(a.touchdown_position, b.touchdown_position, atol=1e-12)
+        np.testing.assert_array_equal(a.contact, b.contact)
+        p = a.trunk.position[:2]
+        if t < t1:  # four feet: the reference inside their quadrilateral
+            assert polygon_margin(hull, p) > 0.05 * h
+        elif t < t_td:  # the first two-foot stance
+            off, along = _line_offset(p, feet[first[0]], feet[first[1]])
+            with_shift.append(abs(off))
+            without.append(abs(_line_offset(b.trunk.position[:2], *feet[first])[0]))
+            assert 0.2 < along < 0.8
+        elif t > t_h2 + 1e-9:
+            np.testing.assert_allclose(a.trunk.position, b.trunk.position, atol=1e-12)
+            np.testing.assert_allclose(a.trunk.velocity, b.trunk.velocity, atol=1e-12)
+    assert without[0] > 0.04 * h  # the problem: at lift-off the nominal CoM is off the support line
+    assert max(with_shift) < 0.008 * h  # the fix: on it, within a few mm
+
+
+def test_start_shift_is_smooth_and_only_for_two_foot_supports(hyq):
+    sch = trot(start=1.0)
+    planner = GaitPlanner.for_robot(hyq, sch, VelocityCommand.constant(0.1))
+    shift = planner.trunk.start_shift
+    ts = np.linspace(shift.times[0] - 0.05, shift.end + 0.05, 400)
+    d = 1e-5
+    for t in ts:  # derivatives by central differences; C1 offsets (C2: the acceleration too)
+        o, do, ddo = shift(t)
+        np.testing.assert_allclose((shift(t + d)[0] - shift(t - d)[0]) / (2 * d), do, atol=1e-6)
+        np.testing.assert_allclose((shift(t + d)[1] - shift(t - d)[1]) / (2 * d), ddo, atol=1e-4)
+    np.testing.assert_allclose(shift(shift.times[0] - 1.0)[0], 0.0)
+    np.testing.assert_allclose(shift(shift.end + 1.0)[0], 0.0)
+    # a crawl has its sway and no start shift; a crawl never stands on two feet
+    assert GaitPlanner.for_robot(hyq, crawl(start=1.0)).trunk.start_shift is None
+    assert GaitPlanner.for_robot(hyq, crawl(start=1.0), sway=None).start_shift() is None
+    assert GaitPlanner.for_robot(hyq, stand()).trunk.start_shift is None

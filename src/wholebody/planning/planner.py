@@ -28,7 +28,7 @@ from .footholds import Foothold, Footprint, raibert_foothold
 from .gait import GaitSchedule
 from .swing import SwingTrajectory
 from .terrain import Terrain
-from .trunk import CrawlSway, TrunkReference, TrunkState, VelocityCommand
+from .trunk import CrawlSway, StartShift, TrunkReference, TrunkState, VelocityCommand
 
 log = logging.getLogger(__name__)
 
@@ -134,14 +134,16 @@ class GaitPlanner:
                   clearance: float = 0.1, sway: str | CrawlSway | None = "auto",
                   sway_gain=(0.0, 1.0), sway_blend: float | None = None,
                   feedback_gain: float = 0.0, max_step: float | None = None,
-                  align_to_terrain: bool = True, center_on_com: bool = True) -> "GaitPlanner":
+                  align_to_terrain: bool = True, center_on_com: bool = True,
+                  start_shift: bool = True) -> "GaitPlanner":
         """A planner for ``robot`` starting at time ``t0`` from configuration ``q`` (default: the
         standing posture ``robot.q_ref``), the trunk at its current CoM height above ``terrain``.
 
         ``sway="auto"`` adds a :class:`CrawlSway` when the schedule never swings two legs at once
         (a crawl); ``None`` disables it; a :class:`CrawlSway` instance is used as given.
         ``center_on_com``: place the feet around the CoM rather than around the standing posture's
-        feet (see :meth:`Footprint.centered_on_com`).
+        feet (see :meth:`Footprint.centered_on_com`). ``start_shift``: when the gait starts on two
+        feet (a trot) and no sway is used, add the :meth:`start_shift` to the trunk reference.
         """
         q = robot.q_ref if q is None else np.asarray(q, dtype=float)
         roles = contact_roles(robot)
@@ -170,7 +172,11 @@ class GaitPlanner:
         # and a reference walking away from them tilts the robot when the first legs lift off
         start = max(t0, schedule.start)
         trunk = TrunkReference(command, com0, yaw0, None, terrain, start, sway, align_to_terrain)
-        return cls(schedule, trunk, footprint, terrain, clearance, feedback_gain, max_step, feet, t0)
+        planner = cls(schedule, trunk, footprint, terrain, clearance, feedback_gain, max_step, feet,
+                      t0)
+        if start_shift and sway is None:
+            trunk.start_shift = planner.start_shift(t0)
+        return planner
 
     # ------------------------------------------------------------------ footholds
     def hip(self, leg: str | int, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -197,6 +203,77 @@ class GaitPlanner:
         return raibert_foothold(hip, v_hip, self.schedule.stance_duration(i), self.terrain,
                                 velocity, self.feedback_gain, float(self._radius[i]),
                                 self.max_step)
+
+    # ------------------------------------------------------------------ gait start
+    def start_shift(self, t_begin: float | None = None) -> StartShift | None:
+        """The CoM offset that starts a gait on two feet from the current stance anchors (the
+        standing feet), or None if the gait does not start on two feet.
+
+        The footholds are planned around the nominal CoM path, but the first support is two of the
+        standing feet, and a robot's CoM need not stand over its feet's centroid (Go1's and A1's
+        stand ~3 cm behind it, HyQ's ~4 cm ahead): the nominal CoM is then off the first support
+        line, and no force on two point feet has a moment about that line, so gravity tips the
+        trunk about it for the whole first stance. The offset, a :class:`StartShift`, moves the
+        CoM reference
+
+        * during the four-foot stance before the first lift-off ``t1`` (over one gait period,
+          starting no earlier than ``t_begin``; None if that leaves less than a quarter period):
+          onto the first support line (its nearest point);
+        * during the first two-foot stance: along that line, to where it crosses the second support
+          line (the feet of the first swing at their planned footholds) at the first hand-over;
+        * during the second two-foot stance: back to the nominal path at the second hand-over.
+        """
+        sch = self.schedule
+        n = len(self.legs)
+        if all(d >= 1.0 for d in sch.duty):
+            return None
+        tol = 1e-6 * sch.period
+        lifts = sorted(sch.liftoff_time(i, k) for i in range(n) for k in range(3)
+                       if sch.duty[i] < 1.0)
+        t1 = lifts[0]
+        first = [i for i in range(n) if sch.in_stance(i, t1)]
+        if len(first) != 2:
+            return None
+
+        def handover(t_lift):
+            """(legs swinging at t_lift, end of their swings, the next lift-off after that)."""
+            swung = [i for i in range(n) if sch.in_swing(i, t_lift)]
+            t_td = max(sch.next_touchdown(i, t_lift) for i in swung)
+            return swung, t_td, min(t for t in lifts if t > t_td - tol)
+
+        swung, t_td, t2 = handover(t1)
+        second = [i for i in range(n) if sch.in_stance(i, t2)]
+        if len(second) != 2 or not set(swung) >= set(second):
+            return None
+        _, t_td2, t3 = handover(t2)
+        t_h, t_h2 = 0.5 * (t_td + t2), 0.5 * (t_td2 + t3)
+        a, b = self._anchor[first[0], :2], self._anchor[first[1], :2]
+        c, d = (GaitPlanner.touchdown_target(self, i, sch.touchdown_time(i, 0)).position[:2]
+                for i in second)
+        p1 = self.trunk.nominal(t1)[0]
+        u = (b - a) / np.linalg.norm(b - a)
+        on_first = a + ((p1 - a) @ u) * u  # the nearest point of the first support line
+        p_h = self.trunk.nominal(t_h)[0]
+        A = np.column_stack([b - a, c - d])
+        if abs(np.linalg.det(A)) < 1e-6 * np.linalg.norm(b - a) * np.linalg.norm(d - c):
+            crossing = a + ((p_h - a) @ u) * u  # parallel lines: the nearest point of the first
+        else:
+            crossing = a + np.linalg.solve(A, c - a)[0] * (b - a)
+        w = sch.period if t_begin is None else min(sch.period, t1 - t_begin)
+        if w < 0.25 * sch.period:
+            log.warning("start shift: only %.3f s before the first lift-off, too little to move the "
+                        "CoM onto the first support line; not shifted (give the schedule a start "
+                        "delay)", w)
+            return None
+
+        def heading_frame(t, offset):
+            psi = self.trunk.heading(t)
+            cs, sn = math.cos(psi), math.sin(psi)
+            return np.array([cs * offset[0] + sn * offset[1], -sn * offset[0] + cs * offset[1]])
+
+        return StartShift([t1 - w, t1, t_h, t_h2],
+                          [np.zeros(2), heading_frame(t1, on_first - p1),
+                           heading_frame(t_h, crossing - p_h), np.zeros(2)])
 
     # ------------------------------------------------------------------ per-cycle
     def reset(self, t: float, feet=None) -> None:

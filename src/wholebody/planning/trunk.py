@@ -13,7 +13,9 @@ generates a reference motion online") into those signals:
 * orientation: heading = integrated yaw, and, on inclined terrain, roll/pitch aligned with the
   terrain normal under the CoM (the ramps of Figs. 4, 7, 8);
 * for a crawl, which is quasi-static, an optional sway (:class:`CrawlSway`) that moves the CoM
-  toward the support triangle of the next swing.
+  toward the support triangle of the next swing;
+* for a gait that starts on two feet (a trot), an optional :class:`StartShift` that puts the CoM
+  on the line of the first two stance feet and brings it back to the nominal path.
 """
 
 from __future__ import annotations
@@ -216,19 +218,60 @@ class CrawlSway:
         return oa + s * delta, (ds / w) * delta, (dds / (w * w)) * delta
 
 
+class StartShift:
+    """A transient horizontal CoM offset through keyframes: ``offsets[k]`` (heading frame) at
+    ``times[k]``, joined by quintic (C2) blends, zero before the first keyframe and after the last
+    (whose offset should be zero). Same call protocol as :class:`CrawlSway`.
+
+    :meth:`GaitPlanner.for_robot <wholebody.planning.planner.GaitPlanner.for_robot>` builds one for
+    gaits whose first supports are two feet (a trot): the standing feet are not where the footholds
+    planned around the CoM will be, and a CoM off the line between two point feet tips the trunk
+    about that line (no force on the two feet has a moment about it). The offset brings the CoM
+    onto the first stance's line before the first lift-off and back to the nominal path through
+    the next hand-overs (see :meth:`GaitPlanner.start_shift
+    <wholebody.planning.planner.GaitPlanner.start_shift>`).
+    """
+
+    def __init__(self, times, offsets):
+        self.times = np.asarray(times, dtype=float).reshape(-1)
+        self.offsets = np.asarray(offsets, dtype=float).reshape(len(self.times), 2)
+        if len(self.times) < 2 or not np.all(np.isfinite(self.times)) \
+                or np.any(np.diff(self.times) <= 0.0):
+            raise ValueError(f"times: expected >= 2 finite increasing times, got {times}")
+        if not np.all(np.isfinite(self.offsets)):
+            raise ValueError("offsets: must be finite")
+
+    @property
+    def end(self) -> float:
+        return float(self.times[-1])
+
+    def __call__(self, t: float):
+        """(offset, d offset/dt, d2 offset/dt2) at ``t``, each (2,) in the heading frame."""
+        ts, os_ = self.times, self.offsets
+        zero = np.zeros(2)
+        if t <= ts[0] or t >= ts[-1]:
+            return (os_[0] if t <= ts[0] else os_[-1]).copy(), zero, zero.copy()
+        k = int(np.searchsorted(ts, t, side="right")) - 1
+        w = ts[k + 1] - ts[k]
+        s, ds, dds = _blend_scalar((t - ts[k]) / w)
+        delta = os_[k + 1] - os_[k]
+        return os_[k] + s * delta, (ds / w) * delta, (dds / (w * w)) * delta
+
+
 class TrunkReference:
     """Trunk reference from a :class:`VelocityCommand`, starting at time ``t0`` from CoM ``com0``
     with heading ``yaw0``; held still before ``t0``.
 
     ``height``: CoM height kept above the terrain under the CoM (default: ``com0``'s);
     ``align_to_terrain``: roll/pitch follow the terrain normal under the CoM (else the trunk stays
-    level); ``sway``: optional :class:`CrawlSway` added to the horizontal CoM.
+    level); ``sway``: optional :class:`CrawlSway` added to the horizontal CoM; ``start_shift``:
+    optional :class:`StartShift` added to it too.
     """
 
     def __init__(self, command: VelocityCommand | None, com0, yaw0: float = 0.0,
                  height: float | None = None, terrain: Terrain | None = None, t0: float = 0.0,
                  sway: CrawlSway | None = None, align_to_terrain: bool = True,
-                 fd_step: float = 1e-3):
+                 fd_step: float = 1e-3, start_shift: StartShift | None = None):
         self.command = VelocityCommand() if command is None else command
         self.com0 = np.array(com0, dtype=float).reshape(3)
         self.yaw0 = float(yaw0)
@@ -237,6 +280,7 @@ class TrunkReference:
                        if height is None else float(height))
         self.t0 = float(t0)
         self.sway = sway
+        self.start_shift = start_shift
         self.align_to_terrain = bool(align_to_terrain)
         self.fd_step = float(fd_step)
 
@@ -276,8 +320,10 @@ class TrunkReference:
     def _horizontal(self, t: float):
         """Horizontal CoM reference with sway: (xy, v, a, yaw, yaw_rate)."""
         xy, v, a, psi, om = self.nominal(t)
-        if self.sway is not None:
-            o, do, ddo = self.sway(t)
+        for offset in (self.sway, self.start_shift):
+            if offset is None:
+                continue
+            o, do, ddo = offset(t)
             # heading-frame offset o rotated by R(psi):  d/dt (R o) = R (o' + om J o),
             # d2/dt2 (R o) = R (o'' + 2 om J o' - om^2 o)   (J = 90 deg rotation, yaw rate constant)
             Jo = np.array([-o[1], o[0]])
