@@ -26,7 +26,7 @@ import numpy as np
 
 from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
-from ..robot import FREE_FLYER_NQ
+from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..tasks import ForceRegularizer
 from ..tasks.motion import JointTrajectoryTask
 from ..variables import Variables
@@ -35,6 +35,16 @@ from .lqr import MomentumLQR
 from .stacks import table2_stack, table4_stack
 
 GAINS = ("pd", "lqr")
+
+#: Weight of the posture's three base-orientation rows in every stack of :class:`ContactSwitch`
+#: (the other posture rows: 1e-1). The angular-momentum rows weigh 1e-4 (Table 2's angular
+#: treatment), so the posture alone holds the trunk; at the posture's uniform 1e-1 a rad/s^2 of
+#: trunk rotation costs what a rad/s^2 of one joint costs, and the cascade lifts the swing foot by
+#: rolling the pelvis over the stance leg (a hip hike: it moves the foot up with the hip width as
+#: lever, while the swing leg, its knee nearly straight after the CoG shift, moves it up slowly).
+#: The trunk then leans and the stance knee bends. 1, the paper's next weight (Sect. 5.2.1), keeps
+#: the trunk upright and leaves the lift to the swing leg.
+BASE_ORIENTATION_WEIGHT = 1.0
 
 
 @dataclass(frozen=True)
@@ -121,23 +131,36 @@ class ContactSwitch:
         self.formulation = Formulation(robot)
         lqr = gains == "lqr"
         self.double_contacts = tuple(robot.contact_names)
-        self.double, self.double_vars = table2_stack(robot, lqr=lqr), Variables(robot)
+        bw = BASE_ORIENTATION_WEIGHT
+        self.double = table2_stack(robot, lqr=lqr, base_orientation_weight=bw)
+        self.double_vars = Variables(robot)
         self.unload = self.double.insert(
             2, ForceRegularizer(name="unload", contacts=[swing_contact], weight=0.0))
-        self.single = table4_stack(robot, [stance], [self.swing_frame], lqr=lqr)
+        self.single = table4_stack(robot, [stance], [self.swing_frame], lqr=lqr,
+                                   base_orientation_weight=bw)
         self.single_vars = Variables(robot, [stance])
         self.swing = self.single.find(f"swing {self.swing_frame}")
         # Sect. 5.4: the Cartesian swing-foot task swapped for a joint-space task
         self.joints = tuple(config.sine_joints)
         self.joint_task = JointTrajectoryTask(self.joints, kp=config.sine_kp, kd=config.sine_kd,
                                               name="swing joints")
-        self.swinging = table4_stack(robot, [stance], [], lqr=lqr)
+        self.swinging = table4_stack(robot, [stance], [], lqr=lqr, base_orientation_weight=bw)
         self.swinging.insert(2, self.joint_task, before="posture")
         self.swinging.insert(2, self.swing, before="posture")  # the foot task fades out (handover)
         self.swing_posture = self.swinging.find("posture")
         self._sine_idx = FREE_FLYER_NQ + np.array([robot.joint_names.index(j) for j in self.joints])
         self._held_idx = FREE_FLYER_NQ + np.array([robot.joint_names.index(j)
                                                    for j in config.held_joints], dtype=int)
+        # single support: the swing leg's joints are the foot task's (6 rows on its 6 joints); the
+        # posture keeps their damping but no stiffness toward the standing posture, which the
+        # lifted foot contradicts (the leg's posture stiffness comes back over the handover to the
+        # leg swinging, toward the lifted leg)
+        self._leg_mask = np.isin(robot.joint_names, config.held_joints).astype(float)
+        single_posture = self.single.find("posture")
+        self._posture_kp = single_posture.kp
+        single_posture.kp = self._posture_kp * (1.0 - self._leg_mask)
+        self._leg_cols = FREE_FLYER_NV + np.flatnonzero(self._leg_mask)
+        self.com_lift = 0.0  # rise of the CoG reference over the lift (m), set at the switch
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_start = robot.com.copy()
         stance_pos = robot.frame_placement(robot.contact(stance).frame)[0]
@@ -158,11 +181,31 @@ class ContactSwitch:
         return self.timeline.switch
 
     def com_reference(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """CoG reference, velocity and acceleration (quintic shift, then constant)."""
+        """CoG reference, velocity and acceleration: quintic shift, then constant, then during the
+        lift rising by :attr:`com_lift` with the lift's blend (the CoG rise that lifting the swing
+        leg makes with the rest of the robot still; holding the CoG at its standing height instead
+        would make the stance leg bend by as much)."""
         T = self.config.shift_time
         s, ds, dds = quintic_blend(t / T, T)
         delta = self.com_target - self.com_start
-        return self.com_start + s * delta, ds * delta, dds * delta
+        c, dc, ddc = self.com_start + s * delta, ds * delta, dds * delta
+        if self.com_lift and t > self.timeline.switch:
+            L = self.config.lift_time
+            u = min((t - self.timeline.switch) / L, 1.0)
+            lift = np.array([0.0, 0.0, self.com_lift])
+            c = c + smoothstep(u) * lift
+            if u < 1.0:
+                dc, ddc = dc + 6.0 * u * (1.0 - u) / L * lift, ddc + (6.0 - 12.0 * u) / L ** 2 * lift
+        return c, dc, ddc
+
+    def _lift_com_rise(self) -> float:
+        """The CoG rise per metre of swing-foot lift made by the swing leg's joints alone (the
+        least-norm joint rates that move the sole straight up, keeping its orientation, through
+        the CoG Jacobian), at the current state, times the lift."""
+        robot, cols = self.robot, self._leg_cols
+        J = robot.frame_jacobian(self.swing_frame)[:, cols]
+        dq = np.linalg.lstsq(J, np.r_[0.0, 0.0, 1.0, 0.0, 0.0, 0.0], rcond=None)[0]
+        return float(robot.J_com[2, cols] @ dq) * self.config.lift
 
     def com_ref(self, t: float) -> np.ndarray:
         return self.com_reference(t)[0]
@@ -217,6 +260,7 @@ class ContactSwitch:
                 if self.lift_start is None:
                     self.lift_start, rotation = robot.frame_placement(self.swing_frame)
                     self.swing.rotation = rotation
+                    self.com_lift = self._lift_com_rise()
                 s = smoothstep((t - tl.switch) / c.lift_time)
                 self.swing.position = self.lift_start + np.array([0.0, 0.0, c.lift * s])
                 stack = self.single
@@ -239,6 +283,7 @@ class ContactSwitch:
                 q_post[leg] = (1.0 - e) * robot.q_ref[leg] + e * self.held_q
                 q_post[idx] = (1.0 - e) * robot.q_ref[idx] + e * qd
                 self.swing_posture.q_ref = q_post
+                self.swing_posture.kp = self._posture_kp * (1.0 - (1.0 - e) * self._leg_mask)
                 stack = self.swinging
         self._set_momentum(stack, t, gains)
         sol = self.formulation.solve(stack, variables, diagnostics=False)

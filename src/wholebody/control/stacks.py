@@ -68,9 +68,25 @@ def momentum_task(lqr: bool, angular_weight: float = 1e4):
     return MomentumPD(name="momentum", weight=weight)
 
 
+#: Weight of the posture task's rows (Sect. 5.2.1's 1e-1).
+POSTURE_WEIGHT = 1e-1
+
+
+def posture_weight(robot: Robot, base_orientation_weight: float | None):
+    """The posture task's row weights: :data:`POSTURE_WEIGHT` on every row, or with
+    ``base_orientation_weight`` (finite, >= 0) that weight on the three rows of the base
+    orientation (its rows are [base linear; base angular; joints], the velocity's layout)."""
+    if base_orientation_weight is None:
+        return POSTURE_WEIGHT
+    w = np.full(robot.nv, POSTURE_WEIGHT)
+    w[3:6] = nonnegative(base_orientation_weight, "base_orientation_weight")
+    return w
+
+
 def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool = False,
                  full: bool = False, mu: float | None = None,
-                 angular_weight: float = ANGULAR_MOMENTUM_WEIGHT) -> Stack:
+                 angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
+                 base_orientation_weight: float | None = None) -> Stack:
     """Table 2, double support: (1) Newton-Euler + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) momentum control, posture (joints + base), GRF
     regulariser.
@@ -93,20 +109,24 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     tasks (contact constraints, friction, GRF regulariser) then have no rows and there is no CoP
     task — a stack for a robot with no support, to be solved with ``Variables(robot, [])``
     (:class:`~wholebody.control.balance.MomentumBalance` refuses it: balancing needs a contact).
-    ``mu``: None = the robot's friction coefficient, else finite and > 0 (0 used to mean None)."""
+    ``mu``: None = the robot's friction coefficient, else finite and > 0 (0 used to mean None).
+    ``base_orientation_weight``: None = the posture's 1e-1 on all its rows, else the weight of its
+    three base-orientation rows (:func:`posture_weight`)."""
     contacts = _contacts(robot, contacts, "contacts", default_all=True)
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=contacts)] + _contact_conditions(robot, contacts, mu),
         [momentum_task(lqr, angular_weight),
-         PostureTask(name="posture", weight=1e-1, kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0),
+         PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
+                     kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0),
          ForceRegularizer(name="force regularizer", weight=1e-4, contacts=contacts)],
     ])
 
 
 def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
                  lqr: bool = False, full: bool = False, mu: float | None = None,
-                 angular_weight: float = ANGULAR_MOMENTUM_WEIGHT) -> Stack:
+                 angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
+                 base_orientation_weight: float | None = None) -> Stack:
     """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
     acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
     regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks have no
@@ -114,7 +134,8 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
 
     The angular-momentum rows weigh ``angular_weight`` (default 1e-4; the paper: 1e4) and the
     posture holds the base, as in :func:`table2_stack`, whose docstring gives the reason:
-    neither eq. 22 nor the LQR state has the trunk orientation."""
+    neither eq. 22 nor the LQR state has the trunk orientation. ``base_orientation_weight``: as
+    in :func:`table2_stack`."""
     stance = _contacts(robot, stance, "stance", default_all=False)
     swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
     return Stack([
@@ -122,8 +143,8 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
         _contact_conditions(robot, stance, mu),
         [momentum_task(lqr, angular_weight),
          ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
-        + swing + [PostureTask(name="posture", weight=1e-1, kp=50.0, kd=14.0, base_kp=50.0,
-                               base_kd=14.0)],
+        + swing + [PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
+                               kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0)],
         [ForceRegularizer(name="force regularizer", weight=1e-4, contacts=stance)],
     ])
 
