@@ -141,7 +141,8 @@ def test_configure_hands_over_changed_settings(robots, trot_states):
     a = python.cycle(q, v, plan)
     assert np.abs(native.cycle(q, v, plan).tau - a.tau).max() > 1e-3
     native.configure()
-    assert_same_solution(a, native.cycle(q, v, plan))
+    # both engines now have one cycle of stance history (the stance task integrates slip)
+    assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan))
 
 
 def test_infeasible_is_a_flagged_value(robots, rng):

@@ -230,7 +230,8 @@ class PassiveWBC(PlannedController):
         self._R_diagonal[robot.nv:robot.nv + self.nf] = self.R_force
         self._G = np.zeros((6, self.nf))  # contact wrench map of eq. 8
         self._swing_targets = np.zeros((c, 3))
-        self._anchors = np.zeros((c, 3))  # stance task (eq. 32): contact points at touchdown
+        self._anchors = np.zeros((c, 3))  # stance task (eq. 32): x̂_st of the last cycle
+        self._slip = np.zeros((c, 3))  # material contact point's displacement since touchdown
         self._was_stance = np.zeros(c, dtype=bool)
         self._swing_names = [f"swing {name}" for name in self.contacts]
         self._override_key = None
@@ -272,16 +273,14 @@ class PassiveWBC(PlannedController):
         tau_lo, tau_hi = self._tau_bounds = self._torque_bounds()
         qp.set_dynamics(robot.M, J, robot.h, tau_lo, tau_hi)
         qp.set_joint_bounds(*self.joint_limits.bounds(robot))
-        # stance feet, eq. 10 / 32 (x̂_st: the bottoms of the foot spheres at touchdown)
+        # stance feet, eq. 10 / 32
         points = robot.contact_points[self._contact_order]
-        touchdown = stance & ~self._was_stance
-        if touchdown.any():
-            self._anchors[touchdown] = points[touchdown]
-        self._was_stance[:] = stance
+        velocity = J @ robot.v
+        self._anchors = self._stance_anchors(stance, points, velocity.reshape(-1, 3))
         target = -robot.stacked_contact_drift(self.contacts)
         if self.K_st or self.D_st:
             target += self.K_st * (self._anchors - points).ravel()
-            target -= self.D_st * (J @ robot.v)
+            target -= self.D_st * velocity
         qp.set_feet(J, target, pat)
         qp.set_forces(pat)
         # cost: ‖u‖²_R, the trunk wrench (eqs. 7a, 8), the force regulariser (Sect. V-D)
@@ -306,6 +305,18 @@ class PassiveWBC(PlannedController):
         result = self._solve_qp()
         t2 = time.perf_counter()
         return self._solution(result, J, W_d, G, pat, {"assemble": t1 - t0, "solve": t2 - t1})
+
+    def _stance_anchors(self, stance, points, velocity) -> np.ndarray:
+        """x̂_st of eq. 32 consistent with a rolling foot: the contact point minus the slip, the
+        material contact point's velocity J v integrated since touchdown (one control period per
+        cycle). The sphere's lowest point moves as the foot rolls without slipping; anchoring it at
+        touchdown would demand foot acceleration from rolling alone (Fahmi et al. 2019 make the
+        task active only when the foot slips)."""
+        held = stance & self._was_stance
+        self._slip[held] += self.control_period * velocity[held]
+        self._slip[~held] = 0.0
+        self._was_stance[:] = stance
+        return points - self._slip
 
     def _swing_rows(self, plan, pat: StancePattern) -> None:
         """Swing feet: eq. 6 (desired foot acceleration) and eq. 12 rows J q̈ = v̇_d − J̇ v, all
@@ -462,7 +473,8 @@ class PassiveWBC(PlannedController):
             "linkage_params": linkage_params.ravel(),
             "torque_scale": limits.scale * self.torque_limits.scale, "torque_cap": cap,
             "swing_slack": self.swing_slack, "slack_weight": self.slack_weight,
-            "K_st": float(self.K_st), "D_st": float(self.D_st), "Q": self.Q,
+            "K_st": float(self.K_st), "D_st": float(self.D_st),
+            "control_period": float(self.control_period), "Q": self.Q,
             "R_qdd": float(self.R_qdd), "R_force": float(self.R_force),
             "regularization": self.regularization,
             "tangential_weight": float(self.tangential_weight),

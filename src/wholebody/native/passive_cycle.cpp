@@ -44,6 +44,7 @@ public:
     slack_weight_ = get<double>(spec, "slack_weight");
     K_st_ = get<double>(spec, "K_st");
     D_st_ = get<double>(spec, "D_st");
+    control_period_ = get<double>(spec, "control_period");
     Q_ = get_vector(spec, "Q", 6);
     R_qdd_ = get<double>(spec, "R_qdd");
     R_force_ = get<double>(spec, "R_force");
@@ -170,12 +171,17 @@ public:
     lo.segment(n + 6, na_) += Map<VectorXd>(tau_lo_, na_);
     joint_acceleration_bounds(lo, up);
 
-    // stance feet, eq. 10 / 32 (rows of swing feet freed or overwritten below)
+    // stance feet, eq. 10 / 32 (rows of swing feet freed or overwritten below); x̂_st is the
+    // contact point minus the slip, J v integrated since touchdown (PassiveWBC._stance_anchors)
+    contact_velocity_.noalias() = J_ * v_;
     for (Index i = 0; i < nc_; ++i)
     {
-      if (stance_[i] && !was_stance_[i])
-        anchors_.row(i) = points_.row(i); // x̂_st of eq. 32
+      if (stance_[i] && was_stance_[i])
+        slip_.row(i) += control_period_ * contact_velocity_.segment<3>(3 * i).transpose();
+      else
+        slip_.row(i).setZero();
       was_stance_[i] = stance_[i];
+      anchors_.row(i) = points_.row(i) - slip_.row(i);
     }
     A.block(rf, 0, 3 * nc_, nv) = J_;
     VectorXd & target = feet_target_;
@@ -184,7 +190,7 @@ public:
     {
       for (Index i = 0; i < nc_; ++i)
         target.segment<3>(3 * i) += K_st_ * (anchors_.row(i) - points_.row(i)).transpose();
-      target.noalias() -= D_st_ * (J_ * v_);
+      target.noalias() -= D_st_ * contact_velocity_;
     }
     for (Index k = 0; k < 3 * nc_; ++k)
     {
@@ -363,6 +369,7 @@ public:
     d["J"] = MatrixXd(J_);
     d["drift"] = VectorXd(drift_);
     d["points"] = MatrixXd(points_);
+    d["anchors"] = MatrixXd(anchors_);
     return d;
   }
 
@@ -409,6 +416,8 @@ private:
     origins_.setZero(nc_, 3);
     points_.setZero(nc_, 3);
     anchors_.setZero(nc_, 3);
+    slip_.setZero(nc_, 3);
+    contact_velocity_.setZero(3 * nc_);
     swing_targets_.setZero(nc_, 3);
     J_.setZero(3 * nc_, nv_);
     drift_.setZero(3 * nc_);
@@ -506,20 +515,21 @@ private:
   // settings
   bool slack_none_ = false, torque_regularization_ = false, swing_feedforward_ = true;
   bool trunk_feedforward_ = true, limits_tanh_ = false;
-  double slack_weight_ = 0, K_st_ = 0, D_st_ = 0, R_qdd_ = 0, R_force_ = 0, tangential_weight_ = 0;
+  double slack_weight_ = 0, K_st_ = 0, D_st_ = 0, control_period_ = 0, R_qdd_ = 0, R_force_ = 0, tangential_weight_ = 0;
   double mu_ = 0, f_min_ = 0, f_max_ = 0, swing_K_ = 0, swing_D_ = 0, mass_ = 0;
   double horizon_ = 0, a_max_ = 0, steepness_ = 0, torque_scale_ = 1;
   VectorXd Q_, torque_weights_, K_x_, D_x_, K_theta_, D_theta_, torque_cap_;
   TorqueProfile torque_;
   // per-cycle state
   std::vector<Matrix6x> frame_jacobians_;
-  Eigen::Matrix<double, Eigen::Dynamic, 3> frame_drifts_, origins_, points_, anchors_, swing_targets_;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> frame_drifts_, origins_, points_, anchors_, slip_,
+    swing_targets_;
   MatrixXd J_, G_, GQ_, HF_, tangential_;
   RowMatrix H_full_, A_full_;
   VectorXd g_full_, upper_full_, lower_full_, x_full_;
   std::vector<int32_t> sense_full_;
   std::vector<Index> kept_vars_, kept_rows_;
-  VectorXd drift_, feet_target_;
+  VectorXd drift_, feet_target_, contact_velocity_;
   std::vector<bool> stance_, was_stance_;
   bool bound_ = false, updated_ = false, assembled_ = false;
   // Python-owned buffers
