@@ -203,6 +203,54 @@ def test_torques_within_limits_under_an_impossible_wrench(robots, rng, plan_for,
             assert sol.outcome is Outcome.HELD and sol.status
 
 
+def _stance_motion(robot, q, base_velocity, slip=None):
+    """The generalized velocity with the base at ``base_velocity`` (6,) and the joint rates under
+    which every foot's material contact point moves at ``slip`` (n, 3; default: all still, the
+    feet roll without slipping)."""
+    robot.update(q, np.zeros(robot.nv))
+    J = robot.stacked_contact_jacobian()
+    target = np.zeros(J.shape[0]) if slip is None else np.asarray(slip, dtype=float).ravel()
+    joints = np.linalg.solve(J[:, 6:], target - J[:, :6] @ base_velocity)  # one 3-DoF leg a foot
+    return np.concatenate([base_velocity, joints])
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_stance_task_ignores_rolling_and_opposes_slip(robots, rng, plan_for, engine):
+    """Eq. 32 is active only when a foot slips (Fahmi et al. 2019, Sect. IV): the trunk moves over
+    four feet that roll without slipping, so the bottoms of the foot spheres travel (checked), and
+    the QP's stance rows demand no foot acceleration; then one foot slides at u and the demand on
+    it is the stance task's K_st (-slip) - D_st u, with the slip integrated from the motion fed in."""
+    robot = robots["hyq"]
+    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), engine=engine)
+    dt, q = wbc.control_period, robot.q_ref.copy()
+    robot.update(q, np.zeros(robot.nv))
+    plan = plan_for(robot, rng, (True,) * 4, swing_noise=(0.0, 0.0, 0.0))
+    bottoms0 = robot.contact_points.copy()
+    forward = np.array([0.15, 0.0, 0.0, 0.0, 0.0, 0.0])  # trunk forward, m/s
+
+    def step(q, v):
+        sol = wbc.cycle(q, v, plan)
+        robot.update(q, v)
+        acc = robot.stacked_contact_jacobian() @ sol.qdd + robot.stacked_contact_drift()
+        assert sol.ok, sol.status
+        return pin.integrate(robot.model, q, v * dt), acc.reshape(-1, 3)
+
+    for _ in range(150):  # 0.6 s, the trunk 9 cm ahead
+        q, acc = step(q, _stance_motion(robot, q, forward))
+        np.testing.assert_allclose(acc, 0.0, atol=1e-6)
+    robot.update(q, np.zeros(robot.nv))
+    rolled = np.linalg.norm(robot.contact_points - bottoms0, axis=1)
+    assert np.all(rolled > 2e-3), rolled  # a touchdown anchor would demand K_st * rolled
+
+    u = np.zeros((4, 3))
+    u[0] = (0.05, -0.02, 0.0)  # the first foot slides (m/s)
+    for k in range(1, 26):
+        q, acc = step(q, _stance_motion(robot, q, np.zeros(6), u))
+        expected = -wbc.K_st * k * dt * u - wbc.D_st * u
+        np.testing.assert_allclose(acc, expected, atol=1e-6)
+        assert acc[0] @ u[0] < 0.0  # against the slip
+
+
 def test_point_feet_required(robots):
     with pytest.raises(ValueError, match="point contacts"):
         PassiveWBC(robots["talos14"])

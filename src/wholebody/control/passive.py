@@ -11,7 +11,8 @@ One QP per control cycle over u = [q̈, F_grf] (eq. 7), written into the preallo
   per-joint weights (Sect. V-D, footnote 16: R_F = J_st,j R_τ J_st,jᵀ);
 * floating-base dynamics (eq. 9), here in Pinocchio's base coordinates (a linear change of rows of
   the paper's CoM coordinates: the constraint set is the same);
-* stance feet: eq. 10, or the stance task of eq. 32 (``K_st``, ``D_st`` > 0, anchors at touchdown);
+* stance feet: eq. 10, or the stance task of eq. 32 (``K_st``, ``D_st`` > 0; the anchor follows a
+  rolling foot: the contact point minus the slip integrated since touchdown);
 * swing feet: eq. 6/11-12 at the acceleration level; ``swing_slack`` = "per-direction" (eq. 33 with
   one slack per direction: at the optimum ε = |A u − b| so α‖ε‖² is exactly the weighted
   least-squares term α‖A_sw u − b_sw‖², no variables added), "single" (one slack per foot, its own
