@@ -19,6 +19,7 @@ import numpy as np
 
 from ..control.passive import ENGINES
 from ..planning.trunk import VelocityCommand
+from ..tasks.wrench import TrunkImpedance
 from ..report.locomotion_figures import crawl_tracking_figure
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
@@ -35,6 +36,9 @@ PARAMETERS = (
     GAIT,
     Parameter("engine", "auto", "passive WBC engine: native (the compiled cycle), python (the "
                                 "reference) or auto (native when built)", choices=ENGINES),
+    Parameter("baseline_feedforward", True, "quasi-static baseline: add the trunk impedance's "
+              "feed-forward W_ff = M_com v̇_com,d (as the passive WBC does); false: feedback and "
+              "gravity compensation only"),
 )
 
 CONTROLLER_CHOICES = ("passive+quasi-static", "passive", "quasi-static")
@@ -58,9 +62,12 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     names = controller.split("+")
     command = VelocityCommand.speed_ramp(params["speed_start"], params["speed_end"], 1.0,
                                          1.0 + params["ramp_time"])
+    options = {"passive": {"engine": params["engine"]},
+               "quasi-static": {"impedance": TrunkImpedance.for_robot(
+                   robot, feedforward=params["baseline_feedforward"])}}
     runs = {name: run_gait(robot, name, params["gait"], command, params["duration"],
-                           progress=progress, observers=observers, controller_options=(
-                               {"engine": params["engine"]} if name == "passive" else None))
+                           progress=progress, observers=observers,
+                           controller_options=options[name])
             for name in names}
     expected = commanded_distance(params)
     metrics, success, notes = {}, True, []
