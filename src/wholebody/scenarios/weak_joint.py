@@ -24,10 +24,15 @@ weak joint's sent and applied torques stay within the limit and nothing is clipp
 the leg's HFE and HAA carry more load than nominally; the trunk RMS errors grow by at most
 ``trunk_tolerance`` (m, rad). The same claims are reported for every ``sweep`` limit.
 
-On the HyQ preset the nominal LF-KFE torque of this crawl is well above 26 Nm, so at the paper's
-limit the limit itself holds and HFE/HAA do take more load, but the front-left leg folds and the
-robot falls (docs/results.md). The paper does not give its nominal knee torque; see the summary
-notes.
+The stance (``knee_flexion``): every knee angle of the standing posture times this factor, the hip
+flexion re-solved to keep each foot under the base (:func:`stance_posture`); every run starts from
+it. How much the weak knee must carry is set by the posture: :func:`static_knee_torque` (a linear
+program, independent of the controller) gives the smallest |τ| on the knee that any static force
+distribution allows on each of the crawl's three-foot supports (friction pyramid, other joints
+within their limits); the summary reports its worst support for the stance and for the standing
+posture. On HyQ the standing posture (knee_flexion 1, shank 44° from vertical, steeper than the
+friction pyramid allows a GRF to follow) needs 43 Nm: at 26 Nm the limit holds but the leg folds and
+the robot falls. The default 0.8 (shank 36°) needs 14 Nm and walks at 26 Nm (docs/results.md).
 """
 
 from __future__ import annotations
