@@ -303,6 +303,10 @@ class Robot:
             raise ValueError(f"robot '{self.name}': {field} = '{frame}' is not a frame of the model")
         return int(self.model.getFrameId(frame))
 
+    def rest_on_ground(self, q: np.ndarray) -> np.ndarray:
+        """``q`` with the base shifted vertically so that the lowest contact touches z = 0."""
+        return self._rest_on_ground(np.asarray(q, dtype=float))
+
     def _rest_on_ground(self, q: np.ndarray) -> np.ndarray:
         """Shift the base vertically so that the lowest contact touches the ground z = 0."""
         pin.framesForwardKinematics(self.model, self.data, q)

@@ -9,7 +9,7 @@ full experiments are the CLI scenarios.
 import numpy as np
 import pytest
 
-from wholebody.control.passive import PassiveWBC
+from wholebody.control.passive import PassiveWBC, relative_slack_weight
 from wholebody.planning.gait import crawl
 from wholebody.planning.planner import GaitPlanner
 from wholebody.robot import FREE_FLYER_NQ
@@ -18,7 +18,7 @@ from wholebody.scenarios.gait_measures import (intervals, outcome, settled_stanc
                                                stance_phases)
 from wholebody.scenarios.joint_limit import controller_joint_limits, limit_run, swing_tracking
 from wholebody.scenarios.regularization import grf_measures, regularization_run
-from wholebody.scenarios.weak_joint import leg_load, weak_joint_runs
+from wholebody.scenarios.weak_joint import leg_load, stance_posture, weak_joint_runs
 
 LH_HFE = "lh_hfe_joint"
 
@@ -136,12 +136,39 @@ def test_weak_knee_limit_holds_and_the_hip_takes_the_load(hyq):
     assert tw["angular_rms_rad"] < tn["angular_rms_rad"] + 0.002
 
 
+def test_weak_knee_at_26_nm_walks_in_the_taller_stance_and_falls_in_the_standing_posture(hyq):
+    """The paper's 26 Nm: from the knee_flexion 0.8 stance the crawl walks with the knee at the
+    limit and the hip taking the load; from the standing posture (static LP: 43 Nm needed) the
+    limit still holds but the robot falls."""
+    k = hyq.joint_names.index("lf_kfe_joint")
+    joints = ["lf_haa_joint", "lf_hfe_joint", "lf_kfe_joint"]
+    tall = weak_joint_runs(hyq, "lf_kfe_joint", [26.0], 0.11, 5.0, q0=stance_posture(hyq, 0.8))
+    nom, weak = tall["nominal"], tall["limit 26 Nm"]
+    for r in (nom, weak):
+        assert not r.fell and r.failures == 0 and r.distance > 0.3
+    assert np.abs(np.asarray(weak.sim.log.tau_applied)[:, k]).max() <= 26.0 + 1e-6
+    assert np.abs(np.asarray(nom.sim.log.tau_applied)[:, k]).max() > 52.0
+    assert weak.post_solve_clips == 0 and weak.sim_saturation_max == 0.0
+    load_n = leg_load(nom, hyq, joints, "lf_foot")["mean_abs_tau_Nm"]
+    load_w = leg_load(weak, hyq, joints, "lf_foot")["mean_abs_tau_Nm"]
+    assert load_w["lf_hfe_joint"] > load_n["lf_hfe_joint"] + 10.0
+    assert load_w["lf_haa_joint"] > load_n["lf_haa_joint"]
+    tn, tw = nom.tracking(1.0), weak.tracking(1.0)
+    assert tw["linear_rms_m"] < tn["linear_rms_m"] + 0.005
+    assert tw["angular_rms_rad"] < tn["angular_rms_rad"] + 0.005
+    srdf = weak_joint_runs(hyq, "lf_kfe_joint", [26.0], 0.11, 5.0)["limit 26 Nm"]
+    assert np.abs(np.asarray(srdf.sim.log.tau_applied)[:, k]).max() <= 26.0 + 1e-6
+    assert srdf.fell
+
+
 # ---------------------------------------------------------------------- Sect. V-A joint limit
 @pytest.fixture(scope="module")
 def joint_limit_runs(hyq):
-    """LH-HFE lower limit raised to -0.85 rad in the WBC (the crawl's swing reaches -0.96), slack
-    weight 10; 4.2 s covers two LH swings."""
-    return {name: limit_run(hyq, LH_HFE, lim, None, mode, 0.11, 4.2, slack_weight=10.0)
+    """LH-HFE lower limit raised to -0.85 rad in the WBC (the crawl's swing reaches -0.96), the
+    joint-limit scenario's default slack ratio 1e-4 to the trunk task; 4.2 s covers two LH
+    swings."""
+    alpha = relative_slack_weight(hyq, 1e-4)
+    return {name: limit_run(hyq, LH_HFE, lim, None, mode, 0.11, 4.2, slack_weight=alpha)
             for name, lim, mode in (("nominal", None, "per-direction"),
                                     ("per-direction", -0.85, "per-direction"))}
 
@@ -166,6 +193,14 @@ def test_per_direction_slack_keeps_the_lateral_foot_error_small(joint_limit_runs
     inc = pd - nom
     assert inc[0] > 2e-3 and inc[2] > 2e-3  # X and Z suffer (HFE acts in the sagittal plane)
     assert inc[1] < 0.6 * min(inc[0], inc[2])  # Y much less
+
+
+def test_the_foot_not_the_trunk_absorbs_the_joint_limit(joint_limit_runs):
+    """At the default slack ratio the trunk's orientation error barely changes (Fig. 2)."""
+    nom = joint_limit_runs["nominal"].tracking(1.0)
+    pd = joint_limit_runs["per-direction"].tracking(1.0)
+    assert pd["angular_rms_rad"] < nom["angular_rms_rad"] + 0.005
+    assert pd["angular_max_rad"] < 0.03
 
 
 # ---------------------------------------------------------------------- Sect. V-D regularisation

@@ -145,6 +145,19 @@ class SwingGains:
         self.K, self.D = nonnegative(self.K, "swing.K"), nonnegative(self.D, "swing.D")
 
 
+def relative_slack_weight(robot: Robot, ratio: float, Q=PassiveConfig.Q) -> float:
+    """The slack weight α of eq. 33 for a ``ratio`` to the trunk wrench task: α = ratio · max(Q) · m²
+    (m the robot's mass). The slack ε is a foot acceleration (m/s²), the trunk task a wrench error
+    (N, Nm) weighed by Q; a CoM acceleration error a costs max(Q) (m a)², so ``ratio`` 1 weighs a
+    swing foot's acceleration error as much as the same acceleration error of the whole robot's
+    CoM, on any robot. The paper only asks for "a high weight α"; the default α = 1e4 is a ratio of
+    1.3 on HyQ (86.8 kg, Q = 1)."""
+    q_max = float(np.max(np.asarray(Q, dtype=float)))
+    if not q_max > 0.0:
+        raise ValueError(f"Q: the trunk weights must not all be zero, got {Q!r}")
+    return positive(ratio, "slack ratio") * q_max * robot.mass ** 2
+
+
 def default_planner(robot: Robot):
     """A planner that keeps every foot in stance under the standing posture."""
     from ..planning.gait import stand

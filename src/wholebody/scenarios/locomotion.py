@@ -262,7 +262,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              environment: Environment | None = None, terrain: Terrain | None = None,
              control_period: float = 0.004, controller_options: dict | None = None,
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
-             on_cycle=None, planner=None, observers=()) -> GaitRun:
+             on_cycle=None, planner=None, observers=(), q0=None) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
@@ -270,15 +270,23 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     ``planner``: a ready-made planner (e.g. with foothold adjustment or its own trunk terrain) used
     instead of building one; ``gait``, ``command``, ``terrain``, ``planner_options`` and ``start``
     are then ignored. ``observers`` watch the simulation (labelled with the controller's name).
+    ``q0``: the initial configuration (default: the standing posture ``robot.q_ref``), resting on
+    the support surface; the planner starts from it.
     """
+    if q0 is not None:
+        q0 = np.asarray(q0, dtype=float).copy()
     if planner is None:
         planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start), command, terrain,
-                                        t0=0.0, **{**gait_options(robot), **(planner_options or {})})
+                                        q=q0, t0=0.0,
+                                        **{**gait_options(robot), **(planner_options or {})})
     options = dict(controller_options or {})
     if controller == "passive":
         options.setdefault("control_period", control_period)
     ctrl = make_controller(robot, controller, planner, **options)
     sim = Simulator(robot, environment, observers=observers, label=controller)
+    if q0 is not None:
+        q0[2] += sim.environment.support_height()
+        sim.reset(q0)
     log = GaitLog()
     base0 = sim.state()[0][:3].copy()
     # fallen: the base below FALL_HEIGHT_FRACTION of its standing height above the terrain under it

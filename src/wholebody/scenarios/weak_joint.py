@@ -24,10 +24,15 @@ weak joint's sent and applied torques stay within the limit and nothing is clipp
 the leg's HFE and HAA carry more load than nominally; the trunk RMS errors grow by at most
 ``trunk_tolerance`` (m, rad). The same claims are reported for every ``sweep`` limit.
 
-On the HyQ preset the nominal LF-KFE torque of this crawl is well above 26 Nm, so at the paper's
-limit the limit itself holds and HFE/HAA do take more load, but the front-left leg folds and the
-robot falls (docs/results.md). The paper does not give its nominal knee torque; see the summary
-notes.
+The stance (``knee_flexion``): every knee angle of the standing posture times this factor, the hip
+flexion re-solved to keep each foot under the base (:func:`stance_posture`); every run starts from
+it. How much the weak knee must carry is set by the posture: :func:`static_knee_torque` (a linear
+program, independent of the controller) gives the smallest |τ| on the knee that any static force
+distribution allows on each of the crawl's three-foot supports (friction pyramid, other joints
+within their limits); the summary reports its worst support for the stance and for the standing
+posture. On HyQ the standing posture (knee_flexion 1, shank 44° from vertical, steeper than the
+friction pyramid allows a GRF to follow) needs 43 Nm: at 26 Nm the limit holds but the leg folds and
+the robot falls. The default 0.8 (shank 36°) needs 14 Nm and walks at 26 Nm (docs/results.md).
 """
 
 from __future__ import annotations
@@ -37,13 +42,18 @@ from pathlib import Path
 
 import numpy as np
 
+import pinocchio as pin
+
 from ..guard import Outcome
+from ..planning.planner import GaitPlanner
+from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..report.locomotion_figures import weak_joint_figure
-from ..robots.roles import contact_roles, foot_of_joint, leg_joints
+from ..robots.roles import contact_roles, foot_of_joint, leg_joints, pitch_joints
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
 from .locomotion import (CRAWL_SPEED, RUN_DURATION, check_joint, check_positive, check_quadruped,
-                         parse_positive_floats, run_gait, steady_command)
+                         gait_options, make_schedule, parse_positive_floats, run_gait,
+                         steady_command)
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +61,10 @@ PARAMETERS = (
     Parameter("joint", "", "the weakened joint (its leg's HAA/HFE are compared; empty: the "
                            "left-front knee)"),
     Parameter("limit", 26.0, "its torque limit in the WBC (Nm), symmetric", low=0.0, low_open=True),
+    Parameter("knee_flexion", 0.8, "the stance: every knee angle of the standing posture times "
+                                   "this, hips re-solved to keep the feet under the base (1: the "
+                                   "robot's standing posture; below 1: a taller stance)",
+              low=0.0, low_open=True, high=1.0),
     CRAWL_SPEED,
     RUN_DURATION,
     Parameter("sweep", "40,60", "further limits (Nm) run for comparison, comma-separated",
@@ -81,21 +95,157 @@ def weak_leg(robot, joint: str) -> tuple[tuple[str, ...], str]:
                      f"{', '.join(robot.joint_names)}")
 
 
+def stance_posture(robot, knee_flexion: float) -> np.ndarray:
+    """The standing posture ``robot.q_ref`` with every leg's knee angle times ``knee_flexion``
+    (1: the posture itself; below 1: straighter legs, a taller stance) and its hip flexion re-solved
+    so that the foot stays at the same fore-aft position under the base; resting on the ground.
+    Knee and hip flexion are a leg's last and first sagittal joints
+    (:func:`~wholebody.robots.roles.pitch_joints`)."""
+    q = robot.q_ref.copy()
+    if knee_flexion == 1.0:
+        return q
+    model, data = robot.model, robot.model.createData()
+
+    def foot_x(q, frame):
+        pin.framesForwardKinematics(model, data, q)
+        base = data.oMi[1]
+        return float(base.actInv(data.oMf[frame]).translation[0])
+
+    for contact in robot.contacts:
+        sagittal = pitch_joints(robot, contact.name)
+        if len(sagittal) < 2:
+            raise ValueError(f"knee_flexion: the leg of '{contact.name}' has no hip and knee "
+                             "flexion joints")
+        hip, knee = (FREE_FLYER_NQ + robot.joint_names.index(j) for j, _ in
+                     (sagittal[0], sagittal[-1]))
+        x0 = foot_x(q, contact.frame_id)
+        q[knee] *= knee_flexion
+        for _ in range(20):  # Newton on the hip angle, numerical derivative
+            r = foot_x(q, contact.frame_id) - x0
+            if abs(r) < 1e-9:
+                break
+            q[hip] += 1e-6
+            d = (foot_x(q, contact.frame_id) - x0 - r) / 1e-6
+            q[hip] -= 1e-6 + r / d
+    return robot.rest_on_ground(q)
+
+
+def shank_angle_deg(robot, q, contact: str) -> float:
+    """Angle of the knee-to-foot segment of ``contact``'s leg from the vertical (deg) at ``q``."""
+    model, data = robot.model, robot.model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    knee = model.getJointId(leg_joints(robot, contact)[-1])
+    d = data.oMf[robot.contact(contact).frame_id].translation - data.oMi[knee].translation
+    return float(np.degrees(np.arctan2(np.linalg.norm(d[:2]), -d[2])))
+
+
+def static_knee_torque(robot, q, joint: str, supports, mu: float | None = None) -> list[dict]:
+    """The smallest |τ| of ``joint`` that any static contact force distribution allows, by linear
+    programming (scipy ``linprog``; independent of the controller).
+
+    At the posture ``q`` (leg Jacobians and gravity torques), for each support in ``supports``
+    (``(contacts in stance, CoM horizontal offset from its position at q)``): the stance forces F
+    balance gravity about the shifted CoM (Σ F = m g, Σ (p_i − c) × F_i = 0), lie in the friction
+    pyramid μ (``mu`` None: the robot's) with F_z ≥ 0, every other joint's torque
+    τ = g(q) − J_jᵀ F within its limit; minimise t with −t ≤ τ_joint ≤ t. Returns one
+    ``{"stance", "min_abs_tau_Nm"}`` per support (``None``: infeasible)."""
+    from scipy.optimize import linprog
+
+    robot.update(q, np.zeros(robot.nv))
+    mu = robot.friction if mu is None else float(mu)
+    gravity = robot.h[FREE_FLYER_NV:].copy()
+    limits = robot.torque_limits.upper(q[FREE_FLYER_NQ:])
+    j = robot.joint_names.index(joint)
+    weight = robot.mass * float(np.linalg.norm(robot.model.gravity.linear))
+    out = []
+    for stance, offset in supports:
+        stance = list(stance)
+        n = 3 * len(stance)
+        Jt = np.vstack([robot.contact_jacobians[c][:3, FREE_FLYER_NV:] for c in stance]).T
+        c = robot.com.copy()
+        c[:2] += offset
+        rel = np.array([robot.contact_points[robot.contact_names.index(s)] - c for s in stance])
+        A_eq = np.zeros((6, n + 1))
+        for i, r in enumerate(rel):
+            A_eq[:3, 3 * i:3 * i + 3] = np.eye(3)
+            A_eq[3:, 3 * i:3 * i + 3] = pin.skew(r)
+        b_eq = np.array([0.0, 0.0, weight, 0.0, 0.0, 0.0])
+        rows, bounds = [], []
+        for i in range(len(stance)):
+            for axis in (0, 1):
+                for sign in (1.0, -1.0):
+                    row = np.zeros(n + 1)
+                    row[3 * i + axis], row[3 * i + 2] = sign, -mu
+                    rows.append((row, 0.0))
+        for k in range(robot.na):
+            if k == j:
+                continue
+            rows.append((np.append(-Jt[k], 0.0), limits[k] - gravity[k]))  # τ_k ≤ limit
+            rows.append((np.append(Jt[k], 0.0), limits[k] + gravity[k]))  # −τ_k ≤ limit
+        rows.append((np.append(-Jt[j], -1.0), -gravity[j]))  # τ_j ≤ t
+        rows.append((np.append(Jt[j], -1.0), gravity[j]))  # −τ_j ≤ t
+        A_ub = np.array([r for r, _ in rows])
+        b_ub = np.array([b for _, b in rows])
+        cost = np.zeros(n + 1)
+        cost[-1] = 1.0
+        res = linprog(cost, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq,
+                      bounds=[(None, None), (None, None), (0.0, None)] * len(stance) + [(0.0, None)])
+        out.append({"stance": stance, "min_abs_tau_Nm": float(res.fun) if res.status == 0 else None})
+    return out
+
+
+def crawl_supports(robot, q, contact: str, speed: float, period_from: float = 2.0,
+                   step: float = 0.02) -> list[tuple[tuple[str, ...], np.ndarray]]:
+    """The three-foot supports of the crawl planned from ``q`` that include ``contact``, sampled
+    every ``step`` s over one gait period from ``period_from`` s: (stance contacts, the planned
+    CoM's horizontal offset from the stance feet's centroid minus that offset at ``q``), for
+    :func:`static_knee_torque`."""
+    planner = GaitPlanner.for_robot(robot, make_schedule(robot, "crawl", 1.0),
+                                    steady_command(speed), q=q, t0=0.0, **gait_options(robot))
+    legs = list(planner.legs)
+    robot.update(q, np.zeros(robot.nv))
+    at_q = {name: robot.contact_points[robot.contact_names.index(name)][:2] for name in legs}
+    com_q = robot.com[:2].copy()
+    out = []
+    for t in np.arange(0.0, period_from + planner.schedule.period, step):
+        plan = planner.update(t)
+        if t < period_from:
+            continue
+        stance = [leg for leg, on in zip(legs, plan.contact) if on]
+        if len(stance) != 3 or contact not in stance:
+            continue
+        feet = np.asarray(plan.foot_position, float).reshape(len(legs), 3)[:, :2]
+        planned = np.asarray(plan.trunk.position, float)[:2] - feet[[legs.index(s) for s in stance]].mean(0)
+        posture = com_q - np.mean([at_q[s] for s in stance], axis=0)
+        out.append((tuple(stance), planned - posture))
+    return out
+
+
 def validate(robot, params: dict) -> None:
     check_quadruped(robot, "weak-joint")
     joint = weakened_joint(robot, params["joint"])
     check_joint(robot, joint)
     weak_leg(robot, joint)
     parse_positive_floats(params["sweep"], "sweep", allow_empty=True)
-    check_positive(params, ("limit", "speed", "duration", "trunk_tolerance"))
+    check_positive(params, ("limit", "speed", "duration", "trunk_tolerance", "knee_flexion"))
+
+
+def post_solve_clipped(solution) -> bool:
+    """True for a cycle whose QP was solved but whose eq. 19 torque left the controller's limits by
+    more than the solver's tolerance and was clipped by the output guard
+    (:func:`~wholebody.guard.guard_torque` reports it as ``Outcome.CLIPPED``, reason
+    "torque … Nm outside limits after solve; clipped"). Failed cycles (``HELD``: the previous torque,
+    clipped as well) are counted as failed cycles, not here."""
+    return solution.outcome is Outcome.CLIPPED
 
 
 def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
-                    progress: bool = False) -> dict:
-    """The nominal crawl and one crawl per torque limit of ``joint`` (see module docstring):
-    name -> :class:`GaitRun`, each with ``post_solve_clips`` (cycles whose eq. 19 torque left the
-    limits and was clipped after the solve) and ``sim_saturation_max`` (largest torque the simulator
-    had to cut to the real actuator limits)."""
+                    progress: bool = False, q0=None, controller_options: dict | None = None) -> dict:
+    """The nominal crawl and one crawl per torque limit of ``joint`` (see module docstring), from
+    the configuration ``q0`` (default: the standing posture): name -> :class:`GaitRun`, each with
+    ``post_solve_clips`` (cycles counted by :func:`post_solve_clipped`) and ``sim_saturation_max``
+    (largest torque the simulator had to cut to the real actuator limits). ``controller_options``
+    are passed to every run's controller."""
     command = steady_command(speed)
     setups = [("nominal", {})] + [(f"limit {lim:g} Nm", {"torque_limit_override": {joint: lim}})
                                   for lim in limits]
@@ -103,10 +253,10 @@ def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
     for name, options in setups:
         seen = []
         runs[name] = run_gait(robot, "passive", "crawl", command, duration,
-                              controller_options=options, progress=progress,
+                              controller_options={**(controller_options or {}), **options},
+                              progress=progress, q0=q0,
                               on_cycle=lambda t, res, ctrl, sim, c=seen: c.append(
-                                  (res.outcome is Outcome.CLIPPED,
-                                   float(np.abs(sim.last_clipped).max()))))
+                                  (post_solve_clipped(res), float(np.abs(sim.last_clipped).max()))))
         runs[name].post_solve_clips = int(sum(c for c, _ in seen))
         runs[name].sim_saturation_max = float(max((s for _, s in seen), default=0.0))
     return runs
@@ -140,9 +290,19 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     joints, contact = weak_leg(robot, joint)
     sweep = parse_positive_floats(p["sweep"], "sweep", allow_empty=True)
     limits = [limit] + [x for x in sweep if x != limit]
-    runs = weak_joint_runs(robot, joint, limits, p["speed"], p["duration"], progress)
+    q0 = stance_posture(robot, p["knee_flexion"])
+    statics = {}
+    for label, q in (("stance", q0), ("standing posture", robot.q_ref)):
+        lp = [r["min_abs_tau_Nm"] for r in static_knee_torque(
+            robot, q, joint, crawl_supports(robot, q, contact, p["speed"]))]
+        statics[label] = {"shank_from_vertical_deg": shank_angle_deg(robot, q, contact),
+                          "base_height_m": float(q[2]),
+                          "static_min_abs_tau_Nm": max((x for x in lp if x is not None),
+                                                       default=None),
+                          "infeasible_supports": sum(x is None for x in lp)}
+    runs = weak_joint_runs(robot, joint, limits, p["speed"], p["duration"], progress, q0=q0)
     j = robot.joint_names.index(joint)
-    metrics = {}
+    metrics = {"static_lp": statics}
     for name, r in runs.items():
         sim = r.sim.log.arrays()
         failed = np.flatnonzero(~r.log["ok"].astype(bool))
@@ -186,9 +346,16 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     head = claims_by_limit[f"{limit:g} Nm"]
     success = (not nom["fell"] and nom["failed_cycles"] == 0
                and all(v for k, v in head.items()))
-    notes = [f"{joint} nominal: peak {nom[f'{joint}_max_abs_applied_Nm']:.1f} Nm, mean over the "
-             f"{contact} stance {load_n['mean_abs_tau_Nm'][joint]:.1f} Nm (the paper's nominal "
-             "value is not given; its limit is 26 Nm)"]
+    notes = [f"{label} (knee_flexion {1.0 if label != 'stance' else p['knee_flexion']:g}): "
+             f"shank {st['shank_from_vertical_deg']:.1f} deg from vertical, base "
+             f"{st['base_height_m']:.3f} m; static LP: the crawl's worst three-foot support "
+             f"needs |tau| >= "
+             + (f"{st['static_min_abs_tau_Nm']:.1f} Nm" if st["static_min_abs_tau_Nm"] is not None
+                else "(infeasible)") + f" on {joint} (friction {robot.friction:g})"
+             for label, st in statics.items()]
+    notes += [f"{joint} nominal: peak {nom[f'{joint}_max_abs_applied_Nm']:.1f} Nm, mean over the "
+              f"{contact} stance {load_n['mean_abs_tau_Nm'][joint]:.1f} Nm (the paper's nominal "
+              "value is not given; its limit is 26 Nm)"]
     for lim in limits:
         m = metrics[f"limit {lim:g} Nm"]
         lw = m["leg_load_in_stance"]
