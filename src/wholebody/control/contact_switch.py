@@ -32,7 +32,7 @@ from ..tasks.motion import JointTrajectoryTask
 from ..variables import Variables
 from .balance import lqr_q
 from .lqr import MomentumLQR
-from .stacks import table2_stack, table4_stack
+from .stacks import TORSION, table2_stack, table4_stack
 
 GAINS = ("pd", "lqr")
 
@@ -116,9 +116,12 @@ class Timeline:
 class ContactSwitch:
     """Double support -> unloading -> single support (Table 4) -> joint-space leg swinging, as a
     ``compute(q, v, t)`` controller. ``gains`` is "pd" (eq. 22) or "lqr" (eqs. 23-24, one gain set
-    per contact configuration, blended during the unloading as in the Remark of Sect. 3.2)."""
+    per contact configuration, blended during the unloading as in the Remark of Sect. 3.2).
+    ``torsion`` (default True): the soles' yaw-moment rows in the Table 2/4 stacks
+    (:func:`~wholebody.control.stacks.table2_stack`)."""
 
-    def __init__(self, robot, stance: str, config: ContactSwitchConfig, gains: str = "pd"):
+    def __init__(self, robot, stance: str, config: ContactSwitchConfig, gains: str = "pd",
+                 torsion: bool = TORSION):
         if gains not in GAINS:
             raise ValueError(f"gains: expected 'pd' or 'lqr', got '{gains}'")
         if len(config.sine_joints) != 2:
@@ -132,19 +135,20 @@ class ContactSwitch:
         lqr = gains == "lqr"
         self.double_contacts = tuple(robot.contact_names)
         bw = BASE_ORIENTATION_WEIGHT
-        self.double = table2_stack(robot, lqr=lqr, base_orientation_weight=bw)
+        self.double = table2_stack(robot, lqr=lqr, base_orientation_weight=bw, torsion=torsion)
         self.double_vars = Variables(robot)
         self.unload = self.double.insert(
             2, ForceRegularizer(name="unload", contacts=[swing_contact], weight=0.0))
         self.single = table4_stack(robot, [stance], [self.swing_frame], lqr=lqr,
-                                   base_orientation_weight=bw)
+                                   base_orientation_weight=bw, torsion=torsion)
         self.single_vars = Variables(robot, [stance])
         self.swing = self.single.find(f"swing {self.swing_frame}")
         # Sect. 5.4: the Cartesian swing-foot task swapped for a joint-space task
         self.joints = tuple(config.sine_joints)
         self.joint_task = JointTrajectoryTask(self.joints, kp=config.sine_kp, kd=config.sine_kd,
                                               name="swing joints")
-        self.swinging = table4_stack(robot, [stance], [], lqr=lqr, base_orientation_weight=bw)
+        self.swinging = table4_stack(robot, [stance], [], lqr=lqr, base_orientation_weight=bw,
+                                     torsion=torsion)
         self.swinging.insert(2, self.joint_task, before="posture")
         self.swinging.insert(2, self.swing, before="posture")  # the foot task fades out (handover)
         self.swing_posture = self.swinging.find("posture")

@@ -43,15 +43,28 @@ def _mu(robot: Robot, mu: float | None) -> float:
     return robot.friction if mu is None else number(mu, "mu", low=0.0, low_open=True)
 
 
-def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None):
-    """CoP (weight 1e4, as the paper favours CoPs), friction pyramid, joint acceleration limits."""
+def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None, torsion: bool):
+    """CoP (weight 1e4, as the paper favours CoPs), friction pyramid (with the torsional rows on
+    rectangle contacts if ``torsion``), joint acceleration limits."""
+    if not isinstance(torsion, (bool, np.bool_)):
+        raise TypeError(f"torsion: expected a bool, got {torsion!r}")
     rows = []
     if any(robot.contact(c).spec.type == "rectangle" for c in contacts):
         rows.append(CenterOfPressure(name="center of pressure", weight=1e4, contacts=contacts))
-    rows.append(FrictionCone(_mu(robot, mu), name="friction", contacts=contacts))
+    rows.append(FrictionCone(_mu(robot, mu), name="friction", contacts=contacts,
+                             torsion=bool(torsion)))
     rows.append(JointAccelerationLimits(name="joint acceleration limits"))
     return rows
 
+
+#: Whether the stacks bound the soles' yaw moments (:class:`~wholebody.tasks.FrictionCone`'s
+#: ``torsion``: |tau.n| <= (2/3) min(half-size) mu f.n, 2 rows per rectangle contact). Not in the
+#: paper's tables, on by default here: without the bound nothing in Tables 1/2/4 limits the yaw
+#: moments, and when the CoP rows bind (they are written in the measured sole axes, so a fraction
+#: of a degree of tilt couples them to yaw) the cascade puts large opposite yaw moments on the two
+#: soles (~100 Nm, up to 2500 Nm on talos14) and the robot falls (docs/results.md, Fig. 10 rows).
+#: ``torsion=False`` gives the papers' 4 rows per contact.
+TORSION = True
 
 #: Weight of the angular rows of Table 2's momentum task (see :func:`table2_stack`). The paper's
 #: single weight for the whole task is ``1e4`` (``angular_weight=1e4`` restores it).
@@ -86,7 +99,7 @@ def posture_weight(robot: Robot, base_orientation_weight: float | None):
 def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool = False,
                  full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
-                 base_orientation_weight: float | None = None) -> Stack:
+                 base_orientation_weight: float | None = None, torsion: bool = TORSION) -> Stack:
     """Table 2, double support: (1) Newton-Euler + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) momentum control, posture (joints + base), GRF
     regulariser.
@@ -111,11 +124,14 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     (:class:`~wholebody.control.balance.MomentumBalance` refuses it: balancing needs a contact).
     ``mu``: None = the robot's friction coefficient, else finite and > 0 (0 used to mean None).
     ``base_orientation_weight``: None = the posture's 1e-1 on all its rows, else the weight of its
-    three base-orientation rows (:func:`posture_weight`)."""
+    three base-orientation rows (:func:`posture_weight`). ``torsion`` (default :data:`TORSION`,
+    True): the friction task's torsional rows on the rectangle contacts (the soles' yaw-moment
+    bound, not in the paper); False gives the paper's friction pyramid only."""
     contacts = _contacts(robot, contacts, "contacts", default_all=True)
     return Stack([
         _dynamics(full),
-        [ContactConstraint(name="contacts", contacts=contacts)] + _contact_conditions(robot, contacts, mu),
+        [ContactConstraint(name="contacts", contacts=contacts)]
+        + _contact_conditions(robot, contacts, mu, torsion),
         [momentum_task(lqr, angular_weight),
          PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
                      kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0),
@@ -126,7 +142,7 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
 def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
                  lqr: bool = False, full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
-                 base_orientation_weight: float | None = None) -> Stack:
+                 base_orientation_weight: float | None = None, torsion: bool = TORSION) -> Stack:
     """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
     acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
     regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks have no
@@ -135,12 +151,12 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
     The angular-momentum rows weigh ``angular_weight`` (default 1e-4; the paper: 1e4) and the
     posture holds the base, as in :func:`table2_stack`, whose docstring gives the reason:
     neither eq. 22 nor the LQR state has the trunk orientation. ``base_orientation_weight``: as
-    in :func:`table2_stack`."""
+    in :func:`table2_stack`; ``torsion``: as in :func:`table2_stack`."""
     stance = _contacts(robot, stance, "stance", default_all=False)
     swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
     return Stack([
         _dynamics(full),
-        _contact_conditions(robot, stance, mu),
+        _contact_conditions(robot, stance, mu, torsion),
         [momentum_task(lqr, angular_weight),
          ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
         + swing + [PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
@@ -150,16 +166,17 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
 
 
 def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
-                 full: bool = False, mu: float | None = None) -> Stack:
+                 full: bool = False, mu: float | None = None, torsion: bool = TORSION) -> Stack:
     """Table 1, the stepping benchmark: (1) dynamics + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) CoG PD + swing-foot PD; (4) posture (joints + base);
     (5) GRF regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks
-    have no rows)."""
+    have no rows). ``torsion``: as in :func:`table2_stack`."""
     stance = _contacts(robot, stance, "stance", default_all=False)
     swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
     return Stack([
         _dynamics(full),
-        [ContactConstraint(name="contacts", contacts=stance)] + _contact_conditions(robot, stance, mu),
+        [ContactConstraint(name="contacts", contacts=stance)]
+        + _contact_conditions(robot, stance, mu, torsion),
         [CoMTask(name="com", kp=100.0, kd=20.0)] + swing,
         [PostureTask(name="posture", kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0)],
         [ForceRegularizer(name="force regularizer", contacts=stance)],

@@ -27,7 +27,7 @@ from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
 from ..tasks import ForceRegularizer
 from ..variables import Variables
-from .stacks import table1_stack
+from .stacks import TORSION, table1_stack
 
 
 @dataclass(frozen=True)
@@ -89,16 +89,18 @@ class Stepping:
     a :class:`~wholebody.cycle.HierarchyCycle` (its own compiled rigid-body pass and rows); the Python ``robot.update`` then runs only when a
     phase begins (the swing foot's lift-off placement), so ``robot``'s cached terms are those
     of that cycle — the scenario's records update it themselves, outside the cycle time.
+    ``torsion`` (default True): the soles' yaw-moment rows in the Table 1 stacks
+    (:func:`~wholebody.control.stacks.table1_stack`).
     """
 
     def __init__(self, robot, config: SteppingConfig, reduced: bool = True,
-                 engine: str = "auto"):
+                 engine: str = "auto", torsion: bool = TORSION):
         self.robot, self.config, self.reduced = robot, config, reduced
         self.phases = timeline(config)
         self.formulation = Formulation(robot, reduced=reduced)
         full = not reduced
         contacts = tuple(robot.contact_names)
-        self.double = table1_stack(robot, contacts, full=full)
+        self.double = table1_stack(robot, contacts, full=full, torsion=torsion)
         self.double_vars = Variables(robot, contacts)
         # eq. 2 keeps whatever velocity a sole has at touch-down (J qdd + Jdot v = 0): with both
         # soles on the ground a residual landing velocity made the whole robot roll over in closed
@@ -114,7 +116,8 @@ class Stepping:
         for stance in contacts:
             swing = next(c for c in contacts if c != stance)
             frame = robot.contact(swing).frame
-            self.single[stance] = table1_stack(robot, [stance], [frame], full=full)
+            self.single[stance] = table1_stack(robot, [stance], [frame], full=full,
+                                               torsion=torsion)
             self.single[stance].find("contacts").kd = config.contact_kd
             self.single_vars[stance] = Variables(robot, [stance])
             self.swing_task[stance] = self.single[stance].find(f"swing {frame}")

@@ -10,15 +10,22 @@ Variants:
 
 - ``tracking``: the whole sole is admissible; the CoP constraints should stay inactive.
 - ``cop-active`` (Fig. 10): the admissible CoP rectangle of each sole is shrunk by ``active_margin``
-  so that the CoP constraints (level 2) become active during the motion and the CoG task (level 3)
-  is sacrificed. How the paper made its constraints active is not said; its Sarcos feet have a
-  flexible toe that makes "the effectively used part of the sole rather small" (Sect. 4.1), which a
-  shrunk region imitates. The default 0.7 (+-3.15 cm x +-1.95 cm on talos14's 21 x 13 cm soles) is
-  chosen from the ``tracking`` variant, not from the outcome: the CoG at rest is 0.6 cm ahead of
-  the sole centres, so the reference reaches 2.6 cm ahead (a bound below that, e.g. 0.8 = +-2.1
-  cm, makes the reference statically infeasible), and the 0.5 Hz motion needs the CoP further
-  forward than +3.15 cm, so that bound saturates it. With PD and LQR gains alike the robot falls
-  soon after the first activation (docs/results.md, Fig. 10 row; see the summary notes).
+  so that the CoP constraints (level 2) become active during the motion and level 3 gives way.
+  How the paper made its constraints active is not said; its Sarcos feet have a flexible toe that
+  makes "the effectively used part of the sole rather small" (Sect. 4.1), which a shrunk region
+  imitates. The default (``active_margin`` 0: derived, :func:`active_margin`) puts the bound,
+  along the soles' forward axis, midway between the peaks of two quantities of the reference
+  (linear inverted pendulum of the standing CoG height z, from the sole centres): its capture
+  point xi = c + c'/omega0 (omega0 = sqrt(g/z)) and the CoP it needs, p = c - z c''_x/(g + c''_z).
+  Below the capture point's peak the reference leaves the capturable region (no CoP inside the
+  bound brings it back); below the required CoP's peak the CoG cannot follow the reference with
+  the CoP alone, so the rows bind at every forward peak. On talos14 (21 x 13 cm soles, the CoG
+  0.6 cm ahead of the sole centres, z 0.87 m, 0.5 Hz) the peaks are 3.31 and 4.39 cm: margin
+  0.63, a bound of +-3.85 cm. The cascade's own CoP goes further than the LIP's (up to 6.7 cm in
+  the ``tracking`` variant: the posture's motions add angular-momentum rates), so the rows bind
+  for most of each period; level 3 then keeps the CoG on its reference by pitching the trunk
+  (the angular-momentum rows weigh 1e-4) and the posture is what gives way. The former default
+  0.7 (+-3.15 cm) is below the capture point's peak and falls (docs/results.md).
 
 Metrics: those of :mod:`wholebody.scenarios.platform` (measured by
 :class:`~wholebody.scenarios.measures.BalanceMonitor`: CoG error, momentum deviation from h_ref,
@@ -59,13 +66,63 @@ PARAMETERS = (
     Parameter("periods", 3.0, "number of sine periods after the ramp",
               low=0.0, low_open=True, high=60.0),
     Parameter("ramp", 1.0, "amplitude ramp-in time (s)", low=0.0, high=Parameter.MAX_TIME),
-    Parameter("active_margin", 0.7, "cop-active: fraction by which the admissible CoP half-sizes "
-                                    "shrink", low=0.0, high=1.0, high_open=True),
+    Parameter("active_margin", 0.0, "cop-active: fraction by which the admissible CoP half-sizes "
+                                    "shrink; 0 = derived from the reference (the bound midway "
+                                    "between the peaks of its capture point and of the CoP it "
+                                    "needs)", low=0.0, high=1.0, high_open=True),
+    Parameter("torsion", 1, "1: the soles' yaw moments bounded (FrictionCone torsion rows, the "
+                            "stacks' default); 0: the paper's friction pyramid only",
+              low=0, high=1),
     Q_ANGULAR,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
                                     "cop-active", low=0.0, high=Parameter.H),
     ENGINE,
 )
+
+
+def reference_peaks(robot, amplitude_x: float, amplitude_z: float, frequency: float,
+                    g: float = 9.81) -> tuple[float, float]:
+    """Peaks (m, largest over a period of |value|, along the soles' mean forward axis from the
+    mean of the sole centres) of the steady squat reference's capture point xi = c + c'/omega0 and
+    of the CoP it needs, p = c - z c''_x / (g + c''_z) (linear inverted pendulum; z: the standing
+    CoG height above the sole centres, omega0 = sqrt(g/z))."""
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    poses = [robot.data.oMf[robot.contact(n).frame_id] for n in robot.contact_names]
+    centre = np.mean([P.translation for P in poses], axis=0)
+    forward = np.mean([P.rotation[:, 0] for P in poses], axis=0)
+    forward[2] = 0.0
+    forward /= np.linalg.norm(forward)
+    c0 = robot.com.copy()
+    z = c0[2] - centre[2]
+    x0 = float(np.dot(c0 - centre, forward))
+    w = 2 * np.pi * frequency
+    phase = np.linspace(0.0, 2 * np.pi, 3601)
+    s, c = np.sin(phase), np.cos(phase)
+    # the reference moves along world x; its forward component along the soles' axis
+    ax = amplitude_x * forward[0]
+    xi = x0 + ax * (s + w * c / np.sqrt(g / z))
+    p = x0 + ax * s + z * ax * w ** 2 * s / (g - amplitude_z * w ** 2 * s)
+    return float(np.abs(xi).max()), float(np.abs(p).max())
+
+
+def active_margin(robot, params: dict) -> float:
+    """The cop-active variant's margin: ``params["active_margin"]`` if > 0, else derived from the
+    reference (:func:`reference_peaks`): the bound along the soles' forward axis midway between
+    the capture point's and the required CoP's peaks, as a fraction of the smallest sole
+    half-length, margin = 1 - bound / hx."""
+    if params["active_margin"] > 0:
+        return float(params["active_margin"])
+    xi, p = reference_peaks(robot, params["amplitude_x"], params["amplitude_z"],
+                            params["frequency"])
+    hx = min(robot.contact(n).spec.half_size[0] for n in robot.contact_names
+             if robot.contact(n).spec.type == "rectangle")
+    margin = 1.0 - 0.5 * (xi + p) / hx
+    if not 0.0 < margin < 1.0:
+        raise ValueError(f"--set variant=cop-active: the derived active_margin {margin:.3f} is "
+                         f"outside (0, 1) (capture point peak {100 * xi:.2f} cm, required CoP "
+                         f"peak {100 * p:.2f} cm, sole half-length {100 * hx:.2f} cm); give "
+                         f"--set active_margin")
+    return float(margin)
 
 
 def validate(robot, params: dict) -> None:
@@ -82,13 +139,13 @@ def validate(robot, params: dict) -> None:
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
         observers=()) -> ScenarioResult:
     f = params["frequency"]
-    margin = params["active_margin"] if params["variant"] == "cop-active" else 0.0
+    margin = active_margin(robot, params) if params["variant"] == "cop-active" else 0.0
     bound = params["max_cog_error"] or (0.02 if margin else 0.01)
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
                            Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
-                           engine=params["engine"])
+                           engine=params["engine"], torsion=bool(params["torsion"]))
     sim = Simulator(robot, observers=observers, label=controller)
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=margin)
     vel = []

@@ -104,9 +104,10 @@ class FrictionCone(_PerContact):
     |tau.n| <= c mu f.n (2 rows), c = 2/3 of the sole's smaller half-size: the largest friction
     moment of the inscribed disc under uniform pressure, inside the rectangle's exact bound
     (Caron et al. 2015, "Stability of surface contacts for humanoid robots": mu (X + Y) f.n when
-    the tangential force and the tilting moments vanish). Off by default, as in the papers'
-    tables (4 rows per contact). Without it nothing in Tables 1/2/4 bounds the yaw moments, and
-    once the CoP rows are active (they are written in the measured sole axes, so a fraction of a
+    the tangential force and the tilting moments vanish). Off by default on this task (the
+    papers' 4 rows per contact); the builders of Tables 1/2/4
+    (:mod:`wholebody.control.stacks`) turn it on unless given ``torsion=False``. Without it
+    nothing in those tables bounds the yaw moments, and once the CoP rows are active (they are written in the measured sole axes, so a fraction of a
     degree of tilt couples them to yaw moments) the cascade may put large opposite yaw moments on
     the two soles; with the bound they stay within it.
 
