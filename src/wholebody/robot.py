@@ -186,7 +186,7 @@ class Robot:
         self.torque_limits = TorqueProfile(self.joint_names, model.effortLimit[FREE_FLYER_NV:],
                                           description.torque_limits, where)
         self._warn_placeholder_limits(description.torque_limits)
-        self.q_ref = self._rest_on_ground(self._reduce_posture(full, model, q_posture))
+        self.q_ref = self.rest_on_ground(self._reduce_posture(full, model, q_posture))
 
         selection = np.zeros((self.na, self.nv))
         selection[:, FREE_FLYER_NV:] = np.eye(self.na)
@@ -304,10 +304,6 @@ class Robot:
         return int(self.model.getFrameId(frame))
 
     def rest_on_ground(self, q: np.ndarray) -> np.ndarray:
-        """``q`` with the base shifted vertically so that the lowest contact touches z = 0."""
-        return self._rest_on_ground(np.asarray(q, dtype=float))
-
-    def _rest_on_ground(self, q: np.ndarray) -> np.ndarray:
         """Shift the base vertically so that the lowest contact touches the ground z = 0."""
         pin.framesForwardKinematics(self.model, self.data, q)
         heights = [self.contact_lowest_point(c, self.data.oMf[c.frame_id])[2] for c in self.contacts]

@@ -290,7 +290,7 @@ class PassiveWBC(PlannedController):
         # stance feet, eq. 10 / 32
         points = robot.contact_points[self._contact_order]
         velocity = J @ robot.v
-        self._anchors = self._stance_anchors(stance, points, velocity.reshape(-1, 3))
+        self._stance_anchors(stance, points, velocity.reshape(-1, 3))
         target = -robot.stacked_contact_drift(self.contacts)
         if self.K_st or self.D_st:
             target += self.K_st * (self._anchors - points).ravel()
@@ -320,17 +320,17 @@ class PassiveWBC(PlannedController):
         t2 = time.perf_counter()
         return self._solution(result, J, W_d, G, pat, {"assemble": t1 - t0, "solve": t2 - t1})
 
-    def _stance_anchors(self, stance, points, velocity) -> np.ndarray:
-        """x̂_st of eq. 32 consistent with a rolling foot: the contact point minus the slip, the
-        material contact point's velocity J v integrated since touchdown (one control period per
-        cycle). The sphere's lowest point moves as the foot rolls without slipping; anchoring it at
+    def _stance_anchors(self, stance, points, velocity) -> None:
+        """Writes x̂_st of eq. 32 into ``_anchors``, consistent with a rolling foot: the contact
+        point minus the slip, the material contact point's velocity J v integrated since touchdown
+        (one control period per cycle). The sphere's lowest point moves as the foot rolls without slipping; anchoring it at
         touchdown would demand foot acceleration from rolling alone (Fahmi et al. 2019 make the
         task active only when the foot slips)."""
         held = stance & self._was_stance
         self._slip[held] += self.control_period * velocity[held]
         self._slip[~held] = 0.0
         self._was_stance[:] = stance
-        return points - self._slip
+        np.subtract(points, self._slip, out=self._anchors)
 
     def _swing_rows(self, plan, pat: StancePattern) -> None:
         """Swing feet: eq. 6 (desired foot acceleration) and eq. 12 rows J q̈ = v̇_d − J̇ v, all

@@ -70,9 +70,8 @@ PARAMETERS = (
                                     "shrink; 0 = derived from the reference (the bound midway "
                                     "between the peaks of its capture point and of the CoP it "
                                     "needs)", low=0.0, high=1.0, high_open=True),
-    Parameter("torsion", 1, "1: the soles' yaw moments bounded (FrictionCone torsion rows, the "
-                            "stacks' default); 0: the paper's friction pyramid only",
-              low=0, high=1),
+    Parameter("torsion", True, "the soles' yaw moments bounded (FrictionCone torsion rows, the "
+                               "stacks' default); false: the paper's friction pyramid only"),
     Q_ANGULAR,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
                                     "cop-active", low=0.0, high=Parameter.H),
@@ -145,7 +144,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
                            Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
-                           engine=params["engine"], torsion=bool(params["torsion"]))
+                           engine=params["engine"], torsion=params["torsion"])
     sim = Simulator(robot, observers=observers, label=controller)
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=margin)
     vel = []
