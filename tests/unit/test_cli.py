@@ -1,6 +1,7 @@
 """The command line behaves like a good CLI: listings, a run writing summary.json and plots, clear
 one-line errors with exit code 2 for bad input."""
 
+import fcntl
 import json
 import subprocess
 import sys
@@ -98,6 +99,19 @@ def test_console_script_entry_point():
     proc = subprocess.run([sys.executable, "-m", "wholebody", "run", "nothing"],
                           capture_output=True, text=True)
     assert proc.returncode == 2 and "unknown scenario" in proc.stderr
+
+
+def test_output_cut_short_by_its_reader_is_not_an_error():
+    """`wholebody scenarios | head -1`: the pipe closes after one line; no traceback, exit 0."""
+    proc = subprocess.Popen([sys.executable, "-m", "wholebody", "scenarios"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    if hasattr(fcntl, "F_SETPIPE_SZ"):  # a pipe smaller than the listing: the writer must wait
+        fcntl.fcntl(proc.stdout.fileno(), fcntl.F_SETPIPE_SZ, 4096)
+    first = proc.stdout.readline()
+    proc.stdout.close()  # the reader goes away with most of the listing unread
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0, stderr
+    assert first and "Traceback" not in stderr and "BrokenPipe" not in stderr
 
 
 # ---------------------------------------------------------------- checked before simulating

@@ -50,3 +50,23 @@ def test_no_link_joint_or_robot_names_in_code(folder, model_names):
             if text in model_names or text in robots:
                 found.append(f"{path.name}:{line}: {text!r}")
     assert not found, "robot-specific names in code:\n" + "\n".join(found)
+
+
+def test_figures_and_notes_name_the_robot_in_use():
+    """Figure titles and labels (report/) carry no preset name (HyQ, talos14 …) as a word: the
+    scenario passes the robot's name; the LQR note of the balance scenarios names the robot run."""
+    import re
+    from types import SimpleNamespace
+
+    from wholebody.scenarios.base import paper_q_notes
+
+    word = re.compile(r"\b(%s)\b" % "|".join(preset_names()), re.IGNORECASE)
+    found = [f"{path.name}:{line}: {text!r}"
+             for path in sorted((SOURCE / "report").glob("*.py"))
+             for line, text in string_constants(path) if word.search(text)]
+    assert not found, "robot names in figure code:\n" + "\n".join(found)
+    robot = SimpleNamespace(name="my_biped")
+    (note,) = paper_q_notes(robot, "lqr", {"q_angular": 0.1})
+    assert "my_biped" in note and not word.search(note)
+    assert paper_q_notes(robot, "pd", {"q_angular": 0.1}) == []
+    assert paper_q_notes(robot, "lqr", {"q_angular": 10.0}) == []

@@ -26,8 +26,8 @@ def crawl_tracking_figure(path: Path, runs: dict, title: str) -> Path:
     return time_series_figure(path, t[:n], panels, title)
 
 
-def friction_mismatch_figure(path: Path, runs: dict, stance_speed: dict, floor_mu: float,
-                             controller_mu: float) -> Path:
+def friction_mismatch_figure(path: Path, robot_name: str, runs: dict, stance_speed: dict,
+                             floor_mu: float, controller_mu: float) -> Path:
     """Sect. V-B: the largest stance contact-point speed (``stance_speed``: name -> per-cycle
     series, impact excluded) and the CoM error of every run (name -> GaitRun)."""
     n = min(len(r.log["t"]) for r in runs.values())
@@ -43,11 +43,11 @@ def friction_mismatch_figure(path: Path, runs: dict, stance_speed: dict, floor_m
          {k: np.minimum(np.linalg.norm(r.log["com_error"][:n], axis=1), 0.1)
           for k, r in runs.items()}),
     ]
-    return time_series_figure(path, t, panels, "HyQ crawl on a slippery floor (Sect. V-B): largest "
-                                               "contact-point speed of the stance feet")
+    return time_series_figure(path, t, panels, f"{robot_name} crawl on a slippery floor (Sect. V-B): "
+                                               "largest contact-point speed of the stance feet")
 
 
-def weak_joint_figure(path: Path, runs: dict, joint_index: dict, joints: list[str],
+def weak_joint_figure(path: Path, robot_name: str, runs: dict, joint_index: dict, joints: list[str],
                       limit: float, contact: str, speed: float, swing) -> Path:
     """Fig. 3 style: the weak joint's applied torque with its limit, then HFE and HAA, every run
     (name -> GaitRun; ``joints`` = HAA, HFE, KFE names, ``joint_index`` name -> torque index);
@@ -62,12 +62,12 @@ def weak_joint_figure(path: Path, runs: dict, joint_index: dict, joints: list[st
     for jn in (joints[1], joints[0]):
         panels.append((f"{jn} torque", "tau (Nm)",
                        {k: s["tau_applied"][:n, joint_index[jn]] for k, s in sims.items()}))
-    return time_series_figure(path, t, panels, f"HyQ crawl {speed} m/s, {kfe} torque limited "
+    return time_series_figure(path, t, panels, f"{robot_name} crawl {speed} m/s, {kfe} torque limited "
                               f"in the WBC (Fig. 3; shaded: {contact} swing)", shaded=swing)
 
 
-def joint_limit_figure(path: Path, reference, shown: dict, leg: int, q_index: int, limit: float,
-                       joint: str, contact: str, low_alpha: float, shaded) -> Path:
+def joint_limit_figure(path: Path, robot_name: str, reference, shown: dict, leg: int, q_index: int,
+                       limit: float, joint: str, contact: str, low_alpha: float, shaded) -> Path:
     """Fig. 2 style: the foot's X, Y, Z (the planner's reference of ``reference``, the simulator's of
     every ``shown`` run), the joint (configuration index ``q_index``) against the controller's
     ``limit``, the trunk orientation error; ``shaded`` intervals (slack active)."""
@@ -86,7 +86,7 @@ def joint_limit_figure(path: Path, reference, shown: dict, leg: int, q_index: in
     panels.append(("trunk orientation error", "||e_theta|| (rad)",
                    {name: np.linalg.norm(x.log["orientation_error"][:n], axis=1)
                     for name, x in shown.items()}))
-    return time_series_figure(path, t, panels, f"HyQ crawl, {joint} limit changed in the WBC "
+    return time_series_figure(path, t, panels, f"{robot_name} crawl, {joint} limit changed in the WBC "
                               f"(Fig. 2; shaded: slack active, alpha={low_alpha:g})",
                               shaded=shaded)
 
@@ -122,7 +122,7 @@ def _smooth(x: np.ndarray, n: int = 5) -> np.ndarray:
     return np.convolve(x, np.ones(n) / n, mode="same")
 
 
-def regularization_figure(path: Path, weights, force_normal: dict, sweep: dict, gait: str,
+def regularization_figure(path: Path, robot_name: str, weights, force_normal: dict, sweep: dict, gait: str,
                           other_weight: float) -> Path:
     """Sect. V-D: GRF angle (from the vertical and from the knee direction) and mean joint torques
     against the KFE weight (log axis); the force-normal scheme as horizontal lines."""
@@ -142,12 +142,13 @@ def regularization_figure(path: Path, weights, force_normal: dict, sweep: dict, 
     for ax in (ax1, ax2):
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
-    fig.suptitle(f"HyQ {gait}: torque regularisation (Sect. V-D, footnote 16)", fontsize=10)
+    fig.suptitle(f"{robot_name} {gait}: torque regularisation (Sect. V-D, footnote 16)", fontsize=10)
     return save_figure(fig, path)
 
 
-def unstable_foothold_figure(path: Path, disturbed, reference, sim: dict, leg: int, gait: str,
-                             depth: float, release: float, window: float) -> Path:
+def unstable_foothold_figure(path: Path, robot_name: str, contact: str, disturbed, reference,
+                             sim: dict, leg: int, gait: str, depth: float, release: float,
+                             window: float) -> Path:
     """Fig. 6 style: CoM x, y, z (reference and simulator, stone rolling and still), the disturbed
     foot's height and normal force (``sim``: the disturbed run's simulator log, ``leg`` its contact
     index); the window [release, release + window] shaded."""
@@ -163,23 +164,23 @@ def unstable_foothold_figure(path: Path, disturbed, reference, sim: dict, leg: i
                 label="actual (stone still)")
         ax.set_ylabel(f"CoM {name} (m)", fontsize=8)
     ax = axes[3]
-    ax.plot(t, disturbed.log["feet"][:, leg, 2], color="tab:orange", label="RF foot height")
-    ax.set_ylabel("RF z (m)", fontsize=8)
+    ax.plot(t, disturbed.log["feet"][:, leg, 2], color="tab:orange", label=f"{contact} height")
+    ax.set_ylabel(f"{contact} z (m)", fontsize=8)
     ax = axes[4]
     ax.plot(sim["t"], sim["contact_wrenches"][:, leg, 2], color="tab:red", linewidth=0.8,
-            label="RF normal force (simulator)")
-    ax.set_ylabel("RF f_z (N)", fontsize=8)
+            label=f"{contact} normal force (simulator)")
+    ax.set_ylabel(f"{contact} f_z (N)", fontsize=8)
     ax.set_xlabel("time (s)")
     for ax in axes:
         ax.axvspan(release, release + window, color="tab:red", alpha=0.12, zorder=0)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"HyQ {gait}: a {100 * depth:.0f} cm stone rolls away under the "
-                 f"RF foot at {release} s (cf. Fig. 6; red: disturbance window)", fontsize=10)
+    fig.suptitle(f"{robot_name} {gait}: a {100 * depth:.0f} cm stone rolls away under "
+                 f"{contact} at {release} s (cf. Fig. 6; red: disturbance window)", fontsize=10)
     return save_figure(fig, path)
 
 
-def ramp_figure(path: Path, t, desired, actual, com, course, gait: str, speed: float,
+def ramp_figure(path: Path, robot_name: str, t, desired, actual, com, course, gait: str, speed: float,
                 angle_deg: float, band: float) -> Path:
     """Fig. 8 style: roll and pitch, desired vs actual (± ``band`` around the desired), and the
     course height under the CoM with the CoM height."""
@@ -199,7 +200,7 @@ def ramp_figure(path: Path, t, desired, actual, com, course, gait: str, speed: f
     axes[2].set_xlabel("time (s)")
     axes[2].grid(True, alpha=0.3)
     axes[2].legend(fontsize=7)
-    fig.suptitle(f"HyQ {gait} {speed} m/s over a {angle_deg:.0f} deg ramp: roll and "
+    fig.suptitle(f"{robot_name} {gait} {speed} m/s over a {angle_deg:.0f} deg ramp: roll and "
                  "pitch tracking (Fig. 8)", fontsize=10)
     return save_figure(fig, path)
 

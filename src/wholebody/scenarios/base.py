@@ -305,6 +305,17 @@ Q_ANGULAR = Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 
                       low=0.0, low_open=True)
 
 
+def paper_q_notes(robot, controller: str, params: dict) -> list[str]:
+    """The note a momentum-balance run with eq. 26's literal Q gets: the LQR model (eq. 21) has no
+    trunk orientation, so 0.1 on angular momentum lets the gains trade CoG error for trunk
+    rotation. Empty for PD gains or another ``q_angular``."""
+    if controller != "lqr" or params.get("q_angular") != Q_ANGULAR.default:
+        return []
+    return [f"eq. 26's Q weighs angular momentum by {Q_ANGULAR.default} and eq. 21's state has no "
+            f"trunk orientation: on {robot.name} the LQR gains trade CoG error for trunk rotation "
+            f"— compare --set q_angular=10"]
+
+
 #: the range of a phase duration or a time span: ``Parameter(name, 1.0, help, **TIME_SPAN)``
 TIME_SPAN = {"low": 0.0, "low_open": True, "high": Parameter.MAX_TIME}
 
@@ -323,7 +334,7 @@ def check_biped(robot, params: dict) -> None:
     check_engine(params)
     if len(robot.contact_names) != 2 or any(c.spec.type != "rectangle" for c in robot.contacts):
         raise ValueError(f"robot '{robot.name}': momentum balance on a board needs a biped with "
-                         f"two rectangular soles (talos14, talos)")
+                         f"two rectangular soles (e.g. talos14, romeo)")
 
 
 def format_mm(value) -> str:

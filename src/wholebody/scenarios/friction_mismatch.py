@@ -162,9 +162,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         stance_speed = {k: np.where(settled_stance(r.log["t"][:n], r.log["stance"][:n]),
                                     r.log["contact_speed"][:n], 0.0).max(axis=1)
                         for k, r in runs.items()}
-        figures.append(str(friction_mismatch_figure(Path(out_dir) / "friction_mismatch.png", runs,
-                                                    stance_speed, p["floor_mu"],
-                                                    p["controller_mu"])))
+        figures.append(str(friction_mismatch_figure(Path(out_dir) / "friction_mismatch.png",
+                                                    robot.name, runs, stance_speed,
+                                                    p["floor_mu"], p["controller_mu"])))
     return ScenarioResult("friction-mismatch", robot.name, controller, success, metrics, params,
                           notes, figures=figures)
 

@@ -292,7 +292,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         n = min(len(x.log["t"]) for x in runs.values())
         active = low.log["swing_residual"][:n, leg] > p["slack_active"]
         figures.append(str(joint_limit_figure(
-            Path(out_dir) / "joint_limit.png", low, shown, leg, FREE_FLYER_NQ + i,
+            Path(out_dir) / "joint_limit.png", robot.name, low, shown, leg, FREE_FLYER_NQ + i,
             lim_lo if np.isfinite(lim_lo) else lim_hi, joint, contact, alphas["low"],
             intervals(low.log["t"][:n], active))))
     return ScenarioResult("joint-limit", robot.name, controller, success, metrics, params, notes,

@@ -61,7 +61,7 @@ from ..report.balance_figures import balance_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_biped,
-                   format_mm)
+                   format_mm, paper_q_notes)
 from .loop import run_closed_loop
 from .measures import BalanceMonitor, limit_notes, sole_midpoint
 
@@ -142,12 +142,15 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     notes = ["CoG reference attached to the soles (midpoint + yaw), h_ref from the soles' measured "
              "velocity; the contact constraint still assumes stationary feet (eq. 2), as the paper's "
              "controller did"]
-    if controller == "lqr" and params["q_angular"] == 0.1:
-        notes.append("eq. 26's Q (0.1 on angular momentum) leaves talos14's trunk poorly damped; "
-                     "compare --set q_angular=10")
-    notes.append("physical limit: keeping the feet flat under a board acceleration a needs the CoP "
-                 "a z_cog / g ahead of the CoG: a <= g h_x / z_cog ~ 1.2 m/s^2 for talos14's 10.5 cm "
-                 "half-sole and ~0.87 m CoG height (no angular momentum used)")
+    notes += paper_q_notes(robot, controller, params)
+    half_sole = min(c.spec.half_size[0] for c in robot.contacts)
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    cog_height = robot.com[2]
+    notes.append(f"physical limit: keeping the feet flat under a board acceleration a needs the CoP "
+                 f"a z_cog / g ahead of the CoG: a <= g h_x / z_cog ~ "
+                 f"{9.81 * half_sole / cog_height:.2f} m/s^2 for {robot.name}'s "
+                 f"{100 * half_sole:.1f} cm half-sole and {cog_height:.2f} m CoG height (no angular "
+                 f"momentum used)")
     m = metrics
     notes.append(f"paper (Fig. 8): CoG error bounded, momentum damped, feet stationary, predicted "
                  f"CoPs approximately correct; measured: max CoG error {100 * m['max_cog_error_m']:.2f}"

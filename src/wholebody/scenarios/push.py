@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..report.balance_figures import push_figure
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
-                   duration_parameter)
+                   duration_parameter, paper_q_notes)
 from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, check_push,
                      push_trial)
 
@@ -59,9 +59,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     notes = []
     if controller != "lqr" and params.get("q_integral", 0.0) > 0:
         notes.append("q_integral is an LQR option; ignored with the PD gains")
-    if controller == "lqr" and params["q_angular"] == 0.1:
-        notes.append("eq. 26's Q weighs angular momentum by 0.1; on talos14 (heavy upper body) "
-                     "this leaves the trunk rotation nearly undamped — try --set q_angular=10")
+    notes += paper_q_notes(robot, controller, params)
     result = ScenarioResult("push", robot.name, controller, trial.success, trial.metrics, params,
                             notes, log=trial.log)
     if out_dir is not None:

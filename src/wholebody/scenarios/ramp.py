@@ -194,8 +194,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     if out_dir is not None:
         out_dir = Path(out_dir)
         if p["course"] == "ramp":
-            figures.append(str(ramp_figure(out_dir / "ramp_roll_pitch.png", t, desired, actual,
-                                           com, course, p["gait"], p["speed"], p["angle"],
+            figures.append(str(ramp_figure(out_dir / "ramp_roll_pitch.png", robot.name, t, desired,
+                                           actual, com, course, p["gait"], p["speed"], p["angle"],
                                            ERROR_LIMIT)))
         what = (f"{p['angle']:.0f} deg ramp" if p["course"] == "ramp" else
                 f"{p['gap'] * 100:.0f} cm gap + {p['step'] * 100:.0f} cm step")

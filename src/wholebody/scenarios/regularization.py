@@ -162,7 +162,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     figures = []
     if out_dir is not None:
         figures.append(str(regularization_figure(
-            Path(out_dir) / "regularization.png", kfe_weights, metrics["force-normal"],
+            Path(out_dir) / "regularization.png", robot.name, kfe_weights, metrics["force-normal"],
             metrics["sweep"], p["gait"], p["other_weight"])))
     return ScenarioResult("regularization", robot.name, controller, success, metrics, params,
                           notes, figures=figures)

@@ -27,7 +27,8 @@ from ..report.balance_figures import fig11, single_support_figure
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..robots.roles import BIPED_ROLES, biped_soles, leg_joints, pitch_joints
 from ..sim.simulator import Simulator
-from .base import Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter
+from .base import (Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter,
+                   paper_q_notes)
 from .loop import run_closed_loop
 from .measures import (COG_TOLERANCE_M, RECOVERY_WINDOW_S, cog_recovery, cop_in_sole,
                        feet_in_place, sole_slip, tilt_deg)
@@ -304,9 +305,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                and all(r["recovered"] for r in push_rows)
                and metrics["max_torque_jump_outside_pushes_Nm"] < params["max_torque_jump"])
     notes = []
-    if controller == "lqr" and params["q_angular"] == 0.1:
-        notes.append("eq. 26's Q weighs angular momentum by 0.1; on talos14 (heavy upper body) "
-                     "the trunk rotation is poorly damped — compare --set q_angular=10")
+    notes += paper_q_notes(robot, controller, params)
     result = ScenarioResult("single-support", robot.name, controller, success, metrics, params,
                             notes, log=sim.log)
     if out_dir is not None:

@@ -48,7 +48,8 @@ import numpy as np
 from ..control.balance import CoMSineReference, MomentumBalance, lqr_q
 from ..report.balance_figures import squat_figure
 from ..sim.simulator import Simulator
-from .base import ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, check_biped, format_mm
+from .base import (ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, check_biped, format_mm,
+                   paper_q_notes)
 from .loop import run_closed_loop
 from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
 
@@ -195,9 +196,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                      "(video only); measured: " + measured)
     if m["max_cog_error_m"] > FALL_COG_ERROR_M:
         notes.append("the robot fell (CoG error > 10 cm)")
-    if controller == "lqr" and params["q_angular"] == 0.1:
-        notes.append("eq. 26's Q (0.1 on angular momentum) leaves talos14's trunk poorly damped; "
-                     "compare --set q_angular=10")
+    notes += paper_q_notes(robot, controller, params)
     notes += limit_notes(metrics)
     result = ScenarioResult("squat", robot.name, controller, success, metrics, params, notes,
                             log=sim.log)

@@ -43,7 +43,7 @@ from ..robot import GRAVITY
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_biped,
-                   format_mm)
+                   format_mm, paper_q_notes)
 from .loop import run_closed_loop
 from .measures import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, MAX_TILT_DEG,
                        BalanceMonitor, limit_notes, sole_midpoint)
@@ -187,9 +187,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         notes.append(f"drop: tilt < {MAX_TILT_DEG} deg not required within "
                      f"{params['impact_window']} s of the impact (paper: the feet bounced and "
                      f"tilted for a moment); impact_max_foot_tilt_deg reports it")
-    if controller == "lqr" and params["q_angular"] == 0.1:
-        notes.append("eq. 26's Q (0.1 on angular momentum) leaves talos14's trunk poorly damped; "
-                     "compare --set q_angular=10")
+    notes += paper_q_notes(robot, controller, params)
     m = metrics
     measured = (f"max CoG error {100 * m['max_cog_error_m']:.2f} cm, foot tilt "
                 f"{m['max_foot_tilt_deg']:.2f} deg, slip {1000 * m['max_foot_slip_m']:.1f} mm, "

@@ -206,8 +206,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     figures = []
     if out_dir is not None:
         figures.append(str(unstable_foothold_figure(
-            Path(out_dir) / "unstable_foothold.png", disturbed, reference, sim, leg,
-            params["gait"], params["depth"], t_r, WINDOW)))
+            Path(out_dir) / "unstable_foothold.png", robot.name, robot.contact_names[leg],
+            disturbed, reference, sim, leg, params["gait"], params["depth"], t_r, WINDOW)))
     return ScenarioResult("unstable-foothold", robot.name, controller, success, metrics, params,
                           notes, figures=figures)
 

@@ -383,7 +383,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         swing = intervals(nominal.log["t"], ~nominal.log["stance"][:, leg].astype(bool)
                           & (nominal.log["t"] >= 1.0))
         figures.append(str(weak_joint_figure(
-            Path(out_dir) / "weak_joint.png", runs,
+            Path(out_dir) / "weak_joint.png", robot.name, runs,
             {jn: robot.joint_names.index(jn) for jn in joints}, joints, limits[0], contact,
             p["speed"], swing)))
     return ScenarioResult("weak-joint", robot.name, controller, success, metrics, params, notes,
