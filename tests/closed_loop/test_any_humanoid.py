@@ -1,7 +1,8 @@
-"""The humanoid scenarios on a second humanoid, romeo (40 kg, 13 DoF, soles off-centre on their
-frames), on its defaults: pushes given as a velocity change from the four sides with both
-momentum gains, and single support with the pushes scaled to its mass. Judged by the simulator:
-the impulse it applied, the feet in place, the CoG back."""
+"""The humanoid scenarios on the humanoid presets besides talos14 — romeo (40 kg, 13 DoF, soles
+off-centre on their frames) and the full 32-DoF talos — on their defaults: pushes given as a
+velocity change from the four sides with both momentum gains, and single support with the pushes
+scaled to the robot's mass. Judged by the simulator: the impulse it applied, the feet in place,
+the CoG back."""
 
 import numpy as np
 import pytest
@@ -12,10 +13,14 @@ from wholebody.scenarios import get_scenario
 pytestmark = pytest.mark.slow
 
 
+HUMANOIDS = ("romeo", "talos")
+
+
 @pytest.mark.parametrize("location", ["front", "back", "left", "right"])
 @pytest.mark.parametrize("controller", ["pd", "lqr"])
-def test_romeo_recovers_a_push_of_dv_0_1(robots, location, controller):
-    robot = robots["romeo"]
+@pytest.mark.parametrize("name", HUMANOIDS)
+def test_recovers_a_push_of_dv_0_1(robots, name, location, controller):
+    robot = robots[name]
     result = get_scenario("push").run(robot, controller, {"dv": "0.1", "location": location})
     assert result.success, result.metrics
     arrays = result.log.arrays()
@@ -24,12 +29,14 @@ def test_romeo_recovers_a_push_of_dv_0_1(robots, location, controller):
 
 
 @pytest.mark.parametrize("controller", ["pd", "lqr"])
-def test_romeo_single_support_on_its_defaults(robots, controller):
-    """At the URDF's torque limits (25.8 Nm ankles, 38.2 Nm knees, 46.6 Nm hips): the foot lifted
-    and never touching the floor again (the simulator's contact forces), the paper's 150 N on
-    talos14 as 67 N on romeo (the same velocity change) recovered on one foot, the stance sole
-    flat and in place, the torques continuous across the contact switch."""
-    robot = robots["romeo"]
+@pytest.mark.parametrize("name", HUMANOIDS)
+def test_single_support_on_its_defaults(robots, name, controller):
+    """At the URDF's torque limits (on romeo 25.8 Nm ankles, 38.2 Nm knees, 46.6 Nm hips): the
+    foot lifted and never touching the floor again (the simulator's contact forces), the paper's
+    150 N on talos14 as the same velocity change on the robot recovered on one foot, the stance
+    sole flat and in place, the torques within their limits and continuous across the contact
+    switch (part of the scenario's success)."""
+    robot = robots[name]
     result = get_scenario("single-support").run(robot, controller, {"sine_time": "0"})
     m = result.metrics
     assert result.success, m

@@ -8,6 +8,7 @@ import pytest
 import wholebody as wb
 from wholebody.planning.trunk import VelocityCommand
 from wholebody.robots.reference import froude_ratio
+from wholebody.scenarios import get_scenario
 from wholebody.scenarios.locomotion import run_gait
 
 pytestmark = pytest.mark.slow
@@ -34,3 +35,18 @@ def test_passive_wbc_walks_every_quadruped_preset(name, gait):
     # trunk errors small against the robot's size: mm-level CoM, a few degrees of tilt
     assert tracking["linear_max_m"] < 0.1 * robot.q_ref[2], tracking
     assert tracking["angular_max_rad"] < 0.35, tracking
+
+
+@pytest.mark.parametrize("name", [name for name, gait in CASES if gait == "trot"])
+def test_every_quadruped_preset_trots_over_the_ramp(name):
+    """Fig. 8's course in proportion to the robot (15° up, a plateau, 15° down; lengths times
+    h / h_HyQ, speed Froude-scaled), on the robot's defaults: across it without a fall or a failed
+    cycle, the simulator's roll and pitch within the paper's 0.2 rad of the reference, every foot
+    past the course's end."""
+    robot = wb.load_robot(name)
+    result = get_scenario("ramp").run(robot, "passive", {})
+    m = result.metrics
+    assert result.success and not m["fell"] and m["failed_cycles"] == 0, m
+    assert m["roll_error_max_rad"] < 0.2 and m["pitch_error_max_rad"] < 0.2, m
+    assert min(m["final_feet_x_m"]) > m["course_end_x_m"], m
+    assert -m["desired_pitch_range_rad"][0] > 0.15  # the reference did pitch with the slopes

@@ -1,11 +1,13 @@
-"""The stand scenario on robots of very different size with the default, robot-derived joint gains:
-a 13 kg Go1 and a 2.5 kg Solo12 stand like the 90 kg Talos and HyQ do; the absolute gains made
-for Talos (kp = 1000, kd = 30) saturate the Solo12's 2.7 Nm joints on nearly every cycle."""
+"""The stand scenario on every preset, robots of very different size, with the default,
+robot-derived joint gains: a 2.5 kg Solo12 and a 13 kg Go1 stand like the 90 kg Talos and HyQ do;
+the absolute gains made for Talos (kp = 1000, kd = 30) saturate the Solo12's 2.7 Nm joints on
+nearly every cycle."""
 
 import numpy as np
 import pytest
 
 import wholebody as wb
+from wholebody.robots import preset_names
 from wholebody.scenarios import get_scenario
 
 pytestmark = pytest.mark.slow
@@ -17,8 +19,8 @@ def stand(robot, **overrides):
     return get_scenario("stand").run(robot, overrides={"duration": str(DURATION), **overrides})
 
 
-@pytest.mark.parametrize("name", ["go1", "solo12"])
-def test_small_quadruped_stands_on_default_gains(name):
+@pytest.mark.parametrize("name", preset_names())
+def test_every_preset_stands_on_default_gains(name):
     robot = wb.load_robot(name)
     result = stand(robot)
     m = result.metrics

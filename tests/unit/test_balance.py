@@ -163,3 +163,25 @@ def test_quintic_blend_scalar_and_array_agree():
     for i, x in enumerate(u):
         assert quintic_blend(float(x), 2.0) == (s[i], ds[i], dds[i])
     assert quintic_blend(0.5) == (0.5, 1.875, 0.0)
+
+
+def test_pd_gains_from_the_scenario_parameters(robots):
+    """``--set pd_stiffness/pd_damping/pd_angular_damping`` reach eq. 22: the momentum task's rate
+    is P m (x_ref - x) + D (h_ref - h), recomputed here from the robot's CoM and momentum; with
+    LQR gains they are ignored and say so."""
+    from wholebody.scenarios.pushes import controller_options, ignored_option_notes
+    robot = robots["talos14"]
+    params = {"pd_stiffness": 14.0, "pd_damping": 7.5, "pd_angular_damping": 2.0}
+    ctrl = MomentumBalance(robot, gains="pd", **controller_options("pd", params))
+    q, v = robot.smooth_motion(3, 0.05)[2]
+    robot.update(q, v)
+    task = ctrl.stack.find("momentum")
+    task.com_ref = robot.com + np.array([0.01, -0.02, 0.005])
+    expected = np.r_[14.0 * robot.mass * (task.com_ref - robot.com), np.zeros(3)]
+    expected += np.r_[np.full(3, 7.5), np.full(3, 2.0)] * (0.0 - robot.h_G)
+    np.testing.assert_allclose(task.desired_rate(robot), expected, rtol=1e-12, atol=1e-9)
+    assert ignored_option_notes("pd", params) == []
+    notes = ignored_option_notes("lqr", params)
+    assert len(notes) == 3 and all("ignored with the LQR gains" in n for n in notes)
+    assert ignored_option_notes("pd", {"q_integral": 1.0}) == [
+        "q_integral is an LQR option; ignored with the PD gains"]

@@ -16,8 +16,8 @@ from pathlib import Path
 from ..report.balance_figures import push_figure
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
                    duration_parameter, paper_q_notes)
-from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, check_push,
-                     push_trial)
+from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, PD_PARAMETERS, Q_INTEGRAL,
+                     check_push, ignored_option_notes, push_trial)
 
 PARAMETERS = (
     Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')",
@@ -38,6 +38,7 @@ PARAMETERS = (
     ANGULAR_WEIGHT,
     Q_INTEGRAL,
     INTEGRAL_LIMIT,
+    *PD_PARAMETERS,
     ENGINE,
 )
 
@@ -56,9 +57,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     params = with_peak_force(robot, params)
     trial = push_trial(robot, controller, params, progress, observers)
     push = trial.push
-    notes = []
-    if controller != "lqr" and params.get("q_integral", 0.0) > 0:
-        notes.append("q_integral is an LQR option; ignored with the PD gains")
+    notes = ignored_option_notes(controller, params)
     notes += paper_q_notes(robot, controller, params)
     result = ScenarioResult("push", robot.name, controller, trial.success, trial.metrics, params,
                             notes, log=trial.log)

@@ -20,8 +20,8 @@ from ..robots import load_robot
 from ..sweep.executors import ordered, scenario_executor
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
                    duration_parameter, parse_list)
-from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
-                     check_locations, check_push, push_trial)
+from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, PD_PARAMETERS,
+                     Q_INTEGRAL, check_locations, check_push, push_trial)
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points",
@@ -35,6 +35,7 @@ PARAMETERS = (
     ANGULAR_WEIGHT,
     Q_INTEGRAL,
     INTEGRAL_LIMIT,
+    *PD_PARAMETERS,
     Parameter("bisection", False, "also find the largest survivable peak force per point"),
     Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)",
               low=1, high=30),

@@ -15,6 +15,7 @@ import numpy as np
 from ..control.balance import MomentumBalance, lqr_q
 from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
+from ..tasks.momentum import MOMENTUM_D_ANGULAR, MOMENTUM_D_LINEAR, MOMENTUM_P
 from ..robots import reference
 from ..robots.roles import biped_soles
 from ..sim.disturbance import Push
@@ -87,7 +88,18 @@ Q_INTEGRAL = Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error int
 INTEGRAL_LIMIT = Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
                            "LQR integral action: anti-windup clamp of each integral component "
                            "(m s)", low=0.0, low_open=True)
-CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, ENGINE)
+#: eq. 22's momentum PD gains (Table 2's defaults: P = 50, D = 15 on the linear rows, 5 on the
+#: angular rows): mass-normalised, so the same CoG stiffness omega^2 on any robot
+PD_STIFFNESS = Parameter("pd_stiffness", MOMENTUM_P, "PD only: eq. 22's P on m (x_ref - x_cog), "
+                                                     "the CoG stiffness omega^2 (1/s^2)",
+                         low=0.0, low_open=True)
+PD_DAMPING = Parameter("pd_damping", MOMENTUM_D_LINEAR, "PD only: eq. 22's D on the linear "
+                                                        "momentum error (1/s)", low=0.0)
+PD_ANGULAR_DAMPING = Parameter("pd_angular_damping", MOMENTUM_D_ANGULAR,
+                               "PD only: eq. 22's D on the angular momentum error (1/s)", low=0.0)
+PD_PARAMETERS = (PD_STIFFNESS, PD_DAMPING, PD_ANGULAR_DAMPING)
+CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, *PD_PARAMETERS,
+                         ENGINE)
 
 #: the push parameters of one trial that push-series and robust-push do not vary
 FIXED_PUSH = {"angle": 0.0, "height": 0.1}
@@ -95,8 +107,9 @@ FIXED_PUSH = {"angle": 0.0, "height": 0.1}
 
 def controller_options(controller: str, params: dict) -> dict:
     """Keyword arguments of :class:`MomentumBalance` from the scenario parameters (``q_angular``,
-    ``angular_weight``, ``engine``, and for LQR the integral action ``q_integral``/``integral_limit``;
-    missing keys take the defaults of :data:`CONTROLLER_PARAMETERS`)."""
+    ``angular_weight``, ``engine``, for LQR the integral action ``q_integral``/``integral_limit``,
+    for PD eq. 22's gains ``pd_stiffness``/``pd_damping``/``pd_angular_damping``; missing keys
+    take the defaults of :data:`CONTROLLER_PARAMETERS`)."""
     defaults = {p.name: p.default for p in CONTROLLER_PARAMETERS}
     get = lambda key: params.get(key, defaults[key])  # noqa: E731
     opts = {"angular_weight": get("angular_weight"), "engine": get("engine")}
@@ -105,7 +118,20 @@ def controller_options(controller: str, params: dict) -> dict:
         if get("q_integral") > 0:
             opts["q_integral"] = get("q_integral")
             opts["integral_limit"] = get("integral_limit")
+    else:
+        opts["P"] = np.r_[np.full(3, get("pd_stiffness")), np.zeros(3)]
+        opts["D"] = np.r_[np.full(3, get("pd_damping")), np.full(3, get("pd_angular_damping"))]
     return opts
+
+
+def ignored_option_notes(controller: str, params: dict) -> list[str]:
+    """Notes for options of the other gains' law given a non-default value (LQR's integral action
+    with PD, eq. 22's gains with LQR): they are ignored, not errors, so that one parameter set
+    runs both controllers."""
+    options = (Q_INTEGRAL, INTEGRAL_LIMIT) if controller != "lqr" else PD_PARAMETERS
+    law = "an LQR" if controller != "lqr" else "a PD"
+    return [f"{p.name} is {law} option; ignored with the {controller.upper()} gains"
+            for p in options if p.name in params and params[p.name] != p.default]
 
 
 def make_push(params: dict, robot) -> Push:

@@ -40,8 +40,8 @@ from .base import (ENGINE, TIME_SPAN, Parameter, Scenario, ScenarioResult, durat
                    parse_list)
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
-from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
-                     check_locations, check_push, controller_options, make_push)
+from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, PD_PARAMETERS,
+                     Q_INTEGRAL, check_locations, check_push, controller_options, make_push)
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +93,7 @@ PARAMETERS = (
     ANGULAR_WEIGHT,
     replace(Q_INTEGRAL, help=Q_INTEGRAL.help + ". NOMINAL was measured without it"),
     INTEGRAL_LIMIT,
+    *PD_PARAMETERS,
     ENGINE,
     Parameter("workers", 1, "processes for the independent runs: 1 this process, N a local pool "
                             "of N, 0 one per core; same metrics", low=0, high=1024),

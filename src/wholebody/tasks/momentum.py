@@ -45,6 +45,11 @@ def momentum_gain(value, field, obj=None) -> np.ndarray:
     return np.diag(out) if out.ndim == 1 else out
 
 
+#: eq. 22's default gains: P on m (x_ref - x_cog) (1/s^2, omega^2 of the CoG), D on the linear and
+#: on the angular momentum error (1/s)
+MOMENTUM_P, MOMENTUM_D_LINEAR, MOMENTUM_D_ANGULAR = 50.0, 15.0, 5.0
+
+
 class MomentumPD(Task):
     """Eq. 22: A_G qdd + Adot_G v = P [m (x_ref - x_cog); 0] + D (h_ref - h) + hdot_ref.
 
@@ -56,8 +61,9 @@ class MomentumPD(Task):
 
     def __init__(self, P=None, D=None, name=None, weight=1.0):
         super().__init__(name, weight)
-        self.P = np.diag([50.0] * 3 + [0.0] * 3) if P is None else P
-        self.D = np.diag([15.0] * 3 + [5.0] * 3) if D is None else D
+        self.P = np.diag([MOMENTUM_P] * 3 + [0.0] * 3) if P is None else P
+        self.D = (np.diag([MOMENTUM_D_LINEAR] * 3 + [MOMENTUM_D_ANGULAR] * 3) if D is None
+                  else D)
         self.com_ref: np.ndarray | None = None  # None: hold the CoM first seen
         self.h_ref = np.zeros(6)
         self.hdot_ref = np.zeros(6)
