@@ -55,8 +55,10 @@ def _cmd_check_robot(args) -> int:
         print(f"{f['name']}: {f['actuated_dof']} actuated DoF, {f['mass_kg']:.2f} kg, base "
               f"{f['standing_base_height_m']:.3f} m above the floor standing, friction "
               f"{f['friction']:g}")
-        print(f"  CoM {1000 * f.get('com_support_margin_m', float('nan')):.0f} mm inside the "
-              f"support polygon; holding the posture takes "
+        margin = f.get("com_support_margin_m")  # none when the contacts span no support area
+        support = ("no support polygon" if margin is None
+                   else f"CoM {1000 * margin:.0f} mm inside the support polygon")
+        print(f"  {support}; holding the posture takes "
               f"{100 * f['holding_torque_max_fraction_of_limit']:.0f} % of the nearest torque limit")
     for c in report.contacts:
         size = (f"radius {c['radius_m']:g} m" if c["type"] == "point"

@@ -71,6 +71,10 @@ def _resolve_contact(model: pin.Model, spec: ContactSpec, index: int, where: str
         raise DescriptionError(f"{where}: contacts[{index}].frame = '{spec.frame}' (contact "
                                f"'{spec.name}') is not a frame of the model")
     frame_id = int(model.getFrameId(spec.frame))
+    if model.frames[frame_id].parentJoint <= 1:  # the universe or the floating base itself
+        raise DescriptionError(f"{where}: contacts[{index}].frame = '{spec.frame}' (contact "
+                               f"'{spec.name}') is on the floating base, not at the end of a leg: "
+                               f"a contact is a foot or a sole, a frame that joints move")
     if not any(spec.offset):
         return Contact(spec, frame_id, spec.frame)
     name = f"{spec.name}_contact"
@@ -91,10 +95,11 @@ def _model_joint_names(model: pin.Model) -> list[str]:
 
 
 def check_inertias(model: pin.Model, where: str = "robot") -> None:
-    """Every body of ``model`` (``model.inertias``: links merged by fixed joints) has a finite
-    mass >= 0, a finite centre of mass, and, when it has mass, a positive-definite rotational
-    inertia; DescriptionError naming the body (its URDF link) and the joint moving it otherwise.
-    Massless bodies (e.g. frames merged by fixed joints) are accepted."""
+    """Every body of ``model`` (``model.inertias``: each joint's link with the links and frames
+    merged into it by fixed joints) has a finite mass > 0, a finite centre of mass and a
+    positive-definite rotational inertia; DescriptionError naming the body (its URDF link) and the
+    joint moving it otherwise. A massless moving body (e.g. the intermediate link of a ball joint
+    split into three revolutes) is refused: the MuJoCo twin cannot compile it."""
     for jid in range(1, model.njoints):
         inertia = model.inertias[jid]
         mass, lever = float(inertia.mass), np.asarray(inertia.lever)
@@ -108,13 +113,17 @@ def check_inertias(model: pin.Model, where: str = "robot") -> None:
         if not (np.all(np.isfinite(lever)) and np.all(np.isfinite(rot))):
             raise DescriptionError(f"{where}: {body} has a non-finite centre of mass or inertia; "
                                    f"fix the <inertial> of the link in the URDF")
-        if mass > 0:
-            eig = np.linalg.eigvalsh(0.5 * (rot + rot.T))
-            if eig[0] <= 1e-12 * mass:  # radius of gyration below 1 micrometre
-                raise DescriptionError(
-                    f"{where}: {body} has mass {mass:g} kg but its rotational inertia is not "
-                    f"positive definite (eigenvalues {[float(f'{e:.3g}') for e in eig]} kg m^2); "
-                    f"fix the <inertia> of the link in the URDF")
+        if mass == 0:
+            raise DescriptionError(
+                f"{where}: {body} has no mass: the MuJoCo twin needs a positive mass and inertia "
+                f"on every moving body; give the link an <inertial> in the URDF, or lock the joint "
+                f"(locked_joints)")
+        eig = np.linalg.eigvalsh(0.5 * (rot + rot.T))
+        if eig[0] <= 1e-12 * mass:  # radius of gyration below 1 micrometre
+            raise DescriptionError(
+                f"{where}: {body} has mass {mass:g} kg but its rotational inertia is not "
+                f"positive definite (eigenvalues {[float(f'{e:.3g}') for e in eig]} kg m^2); "
+                f"fix the <inertia> of the link in the URDF")
 
 
 class Robot:
@@ -132,7 +141,11 @@ class Robot:
         self.name = description.name
         where = f"robot '{self.name}'"
         urdf = resolve_model_path(description.urdf, description.base_dir)
-        full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+        try:
+            full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+        except ValueError as exc:  # not a URDF (e.g. an SDF or MJCF file), or a malformed one
+            raise DescriptionError(f"{where}: field 'urdf' = '{description.urdf}': {exc} (only URDF "
+                                   f"files are read)") from None
         q_posture = self.full_posture(full, description)
         if description.locked_joints:
             joints = _model_joint_names(full)
@@ -149,6 +162,9 @@ class Robot:
         self.na = model.nv - FREE_FLYER_NV
         self.joint_names: tuple[str, ...] = tuple(model.names[2:])
         self._check_joint_types()
+        if self.na == 0:
+            raise DescriptionError(f"{where}: the model has no joints besides the floating base "
+                                   f"(urdf = '{description.urdf}'): not a legged robot")
         check_inertias(model, where)
         self._set_armature(description.armature)
         self.contacts: tuple[Contact, ...] = tuple(

@@ -99,6 +99,26 @@ def test_placeholder_effort_limits_are_a_warning(tmp_path, capsys):
     assert any("placeholder" in f["message"] and "FL_KFE" in f["message"] for f in warnings)
 
 
+def test_two_point_feet_report_no_support_polygon(tmp_path, capsys):
+    """Bolt (a biped on two point feet) has no support area: the summary line says so instead of
+    printing a 'nan mm' margin, and the support error is reported."""
+    text = '''name = "bolt"
+urdf = "erd:bolt_description/robots/bolt.urdf"
+srdf = "erd:bolt_description/srdf/bolt.srdf"
+posture = "standing"
+contacts = [
+  { name = "l", frame = "FL_FOOT", type = "point", radius = 0.0 },
+  { name = "r", frame = "FR_FOOT", type = "point", radius = 0.0 },
+]
+[torque_limits]
+scale = 0.0027
+'''
+    code, out = check(capsys, write(tmp_path, text))
+    assert code == 2
+    assert "no support polygon" in out and "nan" not in out
+    assert "span no support area" in out
+
+
 def test_unknown_robot_exits_2(capsys):
     code, out = check(capsys, "no-such-robot")
     assert code == 2 and "unknown robot" in out

@@ -289,11 +289,48 @@ def test_bad_body_inertia_is_named(hyq_model, mass, lever, inertia, needle):
                   needle)
 
 
-def test_massless_body_is_accepted(hyq_model):
-    """A body with neither mass nor inertia (links merged by fixed joints, frames) is fine."""
+def test_massless_moving_body_is_named(hyq_model):
+    """A joint's body with neither mass nor inertia cannot move in the MuJoCo twin (MuJoCo refuses
+    it at compile time): refused at load, naming the link and the joint."""
     model = pin.Model(hyq_model)
     model.inertias[model.getJointId("lf_kfe_joint")] = pin.Inertia.Zero()
-    check_inertias(model, "robot 'x'")
+    raises_naming(lambda: check_inertias(model, "robot 'x'"), "'lf_lowerleg'", "'lf_kfe_joint'",
+                  "no mass", "locked_joints")
+
+
+def test_human_massless_ball_joint_links_are_named():
+    """human_description splits each ball joint into three revolutes whose first two links have
+    no mass: the load names the first one instead of the twin failing with a MuJoCo traceback."""
+    data = {"name": "human", "urdf": "erd:human_description/robots/human.urdf", "posture": {},
+            "contacts": [{"name": side, "frame": f"{side}_foot", "type": "rectangle",
+                          "half_size": [0.1, 0.04]} for side in ("left", "right")]}
+    raises_naming(lambda: wb.load_robot(data), "'left_hip_Z'", "no mass")
+
+
+def test_robot_without_joints_is_refused():
+    """A drone (hector's quadrotor: a floating base and nothing else) is not a legged robot."""
+    data = {"name": "drone", "urdf": "erd:hector_description/robots/quadrotor_base.urdf",
+            "posture": {}, "contacts": [{"name": "c", "frame": "base_link", "type": "point",
+                                         "radius": 0.0}]}
+    raises_naming(lambda: wb.load_robot(data), "robot 'drone'", "no joints besides the floating "
+                  "base", "not a legged robot")
+
+
+def test_contact_on_the_floating_base_is_refused():
+    """A contact must be a foot or a sole: a frame of the base body cannot be lifted or placed."""
+    data = copy.deepcopy(preset("hyq"))
+    data["contacts"][3]["frame"] = "base_link"
+    raises_naming(lambda: wb.load_robot(data), "contacts[3].frame = 'base_link'",
+                  "on the floating base")
+
+
+def test_a_file_that_is_not_urdf_names_the_field():
+    """Cassie ships as SDF only: the error names the field 'urdf' and the file, no traceback."""
+    data = {"name": "cassie", "urdf": "erd:cassie_description/robots/cassie_v2.sdf",
+            "posture": {}, "contacts": [{"name": "l", "frame": "left_toe", "type": "point",
+                                         "radius": 0.0}]}
+    raises_naming(lambda: wb.load_robot(data), "field 'urdf'", "cassie_v2.sdf",
+                  "only URDF files")
 
 
 @pytest.mark.parametrize("name", ["talos14", "talos", "hyq", "go1", "go2", "a1", "solo12"])
