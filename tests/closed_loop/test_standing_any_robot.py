@@ -39,3 +39,18 @@ def test_absolute_talos_gains_saturate_solo12():
     robot = wb.load_robot("solo12")
     m = stand(robot, kp="1000", kd="30").metrics
     assert m["torque_saturated_cycles"] > 0.5 * round(DURATION / 1e-3), m
+
+
+def test_rotor_inertia_lets_light_links_stand():
+    """G1 (no preset; soles on its ankle links, docs/robots.md) with the default stand PD: without
+    rotor inertia its light links chatter (check-robot warns), with ``armature = 0.02`` it stands
+    like the presets."""
+    from conftest import g1_description
+
+    bare = stand(wb.load_robot(g1_description())).metrics
+    assert bare["torque_saturated_cycles"] > 0.5 * round(DURATION / 1e-3), bare
+    geared = stand(wb.load_robot(g1_description(armature=0.02)))
+    m = geared.metrics
+    assert geared.success and not m["fell"], m
+    assert m["torque_saturated_cycles"] <= 0.03 * round(DURATION / 1e-3), m
+    assert m["base_drift_max_m"] < 0.01, m
