@@ -158,3 +158,20 @@ def test_holding_torques_balance_the_robot(robots):
     J = robot.stacked_contact_jacobian()
     residual = robot.h - robot.joint_selection.T @ tau - J.T @ lam
     assert np.abs(residual).max() < 1e-8 * robot.mass * 9.81
+
+
+def test_the_g1_walk_through_of_the_docs_loads_and_passes(tmp_path):
+    """docs/robots.md's G1 file, as printed there: it loads, its soles get their roles and lie flat
+    on the floor, and check-robot has nothing to warn about (armature given)."""
+    import re
+    from pathlib import Path
+
+    from wholebody.robots.check import check_robot
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "robots.md").read_text()
+    section = text.split("## A robot without a preset", 1)[1]
+    block = re.search(r"```toml\n(.*?)```", section, re.DOTALL).group(1)
+    report = check_robot(write(tmp_path, block, "g1.toml"))
+    assert report.ok and not [f for f in report.findings if f.level == "warning"], report.findings
+    assert {c["role"] for c in report.contacts} == {"left", "right"}
+    assert all(c["touches_floor"] for c in report.contacts)
