@@ -185,3 +185,23 @@ def test_pd_gains_from_the_scenario_parameters(robots):
     assert len(notes) == 3 and all("ignored with the LQR gains" in n for n in notes)
     assert ignored_option_notes("pd", {"q_integral": 1.0}) == [
         "q_integral is an LQR option; ignored with the PD gains"]
+
+
+def test_push_series_hands_every_controller_option_to_its_trials(monkeypatch):
+    """push-series and its bisection build each trial from the scenario's parameters: the
+    momentum-balance options (PD gains among them) reach every push."""
+    from types import SimpleNamespace
+
+    from wholebody.scenarios import push_series
+    from wholebody.scenarios.pushes import CONTROLLER_PARAMETERS
+
+    seen = []
+    monkeypatch.setattr(push_series, "push_trial", lambda robot, controller, p: (
+        seen.append(p) or SimpleNamespace(success=True, metrics={})))
+    params = {"push_duration": 0.1, "duration": 3.5, "q_angular": 2.0, "angular_weight": 1e-3,
+              "q_integral": 0.0, "integral_limit": 0.01, "pd_stiffness": 14.0,
+              "pd_damping": 7.5, "pd_angular_damping": 2.0, "engine": "python"}
+    push_series._one(None, "pd", "front", 100.0, params)
+    (p,) = seen
+    assert {o.name: p[o.name] for o in CONTROLLER_PARAMETERS} == {
+        o.name: params[o.name] for o in CONTROLLER_PARAMETERS}

@@ -20,8 +20,9 @@ from ..robots import load_robot
 from ..sweep.executors import ordered, scenario_executor
 from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
                    duration_parameter, parse_list)
-from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, PD_PARAMETERS,
-                     Q_INTEGRAL, check_locations, check_push, push_trial)
+from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT,
+                     LOCATIONS, PD_PARAMETERS, Q_INTEGRAL, check_locations, check_push,
+                     push_trial)
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points",
@@ -60,9 +61,7 @@ def _one(robot, controller, location, force, params):
     """One push trial: (survived, metrics)."""
     p = {**FIXED_PUSH, "location": location, "peak_force": force,
          "push_duration": params["push_duration"], "start": 0.5, "duration": params["duration"],
-         "q_angular": params["q_angular"], "angular_weight": params["angular_weight"],
-         "q_integral": params["q_integral"], "integral_limit": params["integral_limit"],
-         "engine": params["engine"]}
+         **{option.name: params[option.name] for option in CONTROLLER_PARAMETERS}}
     trial = push_trial(robot, controller, p)
     return trial.success, trial.metrics
 
