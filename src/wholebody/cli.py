@@ -159,7 +159,7 @@ def _report_cut_short(result, out_dir: Path, what: str, mark: str = "") -> None:
 
 
 def _cmd_run(args) -> int:
-    from .robots import load_robot
+    from .robots.check import load_fit_robot
     from .scenarios import get_scenario
     from .scenarios.base import ScenarioResult, parse_sets
     from .sim.simulator import SimulationDiverged
@@ -171,14 +171,7 @@ def _cmd_run(args) -> int:
         if args.controller and args.controller not in scenario.controllers:
             raise ValueError(f"scenario '{scenario.name}' has no controller '{args.controller}'; "
                              f"controllers: {', '.join(scenario.controllers)}")
-        robot_name = args.robot or scenario.default_robot
-        try:
-            robot = load_robot(robot_name)
-        except UnicodeDecodeError as exc:
-            raise ValueError(f"robot file {robot_name}: not UTF-8 text ({exc.reason})") from None
-        except OSError as exc:
-            raise ValueError(f"robot {robot_name}: {exc.strerror or exc}"
-                             f"{f' ({exc.filename})' if exc.filename else ''}") from None
+        robot = load_fit_robot(args.robot or scenario.default_robot)
         params = scenario.validate(robot, overrides)
         _check_observed(args, scenario, params)
     except (ValueError, OSError) as exc:

@@ -175,3 +175,17 @@ def test_the_g1_walk_through_of_the_docs_loads_and_passes(tmp_path):
     assert report.ok and not [f for f in report.findings if f.level == "warning"], report.findings
     assert {c["role"] for c in report.contacts} == {"left", "right"}
     assert all(c["touches_floor"] for c in report.contacts)
+
+
+@pytest.mark.parametrize("command", [["run", "stand"], ["sweep", "stand", "--grid", "duration=1,2"]])
+def test_run_and_sweep_refuse_what_check_robot_rejects(tmp_path, capsys, monkeypatch, command):
+    """A robot that cannot stand (limits at 1 % of HyQ's) is refused by `run` and `sweep` with
+    check-robot's error and exit 2, before anything is simulated."""
+    from wholebody.scenarios.base import Scenario
+
+    monkeypatch.setattr(Scenario, "run", lambda *a, **k: pytest.fail("simulated an unfit robot"))
+    path = write(tmp_path, HYQ.format(last="rh_foot") + "[torque_limits]\nscale = 0.01\n")
+    code = main([*command, "--robot", path, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "holding the posture needs" in err and "check-robot" in err
+    assert not (tmp_path / "out").exists()

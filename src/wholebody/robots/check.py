@@ -101,6 +101,13 @@ def check_robot(name_or_path) -> RobotCheck:
         robot_log.propagate = propagate
     for message in collect.messages:
         report.add("warning", "torque limits", message)
+    return inspect_robot(robot, report)
+
+
+def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
+    """The checks of :func:`check_robot` on a loaded robot (its findings added to ``report``, a new
+    one by default): what ``wholebody run`` and ``sweep`` refuse to simulate when it has errors."""
+    report = RobotCheck(robot.name) if report is None else report
     _facts(robot, report)
     _roles(robot, report)
     data = robot.model.createData()  # the posture's kinematics, for the two checks below
@@ -242,3 +249,24 @@ def _light_links(robot, report: RobotCheck) -> None:
                    f"inertia chatter",
                    "give the motors' rotor inertia as `armature` (reflected through the gearbox, "
                    "typically 0.01-0.1 kg m^2), or lower `stand --set frequency_hz`")
+
+
+def load_fit_robot(name_or_path: str):
+    """Load a preset or description file for a simulation: ValueError (naming the file) for a file
+    that cannot be read, DescriptionError for a bad description, and ValueError with the first
+    error of :func:`inspect_robot` (a contact off the floor, the CoM outside the support, holding
+    torques beyond the limits: such a robot falls whatever the scenario)."""
+    from . import load_robot
+
+    try:
+        robot = load_robot(name_or_path)
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"robot file {name_or_path}: not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise ValueError(f"robot {name_or_path}: {exc.strerror or exc}"
+                         f"{f' ({exc.filename})' if exc.filename else ''}") from None
+    errors = [f for f in inspect_robot(robot).findings if f.level == "error"]
+    if errors:
+        raise ValueError(f"robot '{robot.name}': {errors[0].topic}: {errors[0].message} (see "
+                         f"`wholebody check-robot {name_or_path}`)")
+    return robot

@@ -55,18 +55,6 @@ def _usage_error(message) -> int:
     return EXIT_USAGE
 
 
-def _load_robot(name: str):
-    from ..robots import load_robot
-
-    try:
-        return load_robot(name)
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"robot file {name}: not UTF-8 text ({exc.reason})") from None
-    except OSError as exc:
-        raise ValueError(f"robot {name}: {exc.strerror or exc}"
-                         f"{f' ({exc.filename})' if exc.filename else ''}") from None
-
-
 def _prepare_output(out_dir: Path) -> None:
     """Make ``out_dir``, check that a file can be written in it and remove the table of an
     earlier sweep (a sweep cut short leaves none of its predecessor's); OSError otherwise."""
@@ -119,6 +107,7 @@ def _write(out_dir: Path, header: dict, rows: list[dict], grid_keys: list[str],
 
 def command(args) -> int:
     """``wholebody sweep``: validate everything, run, write the table."""
+    from ..robots.check import load_fit_robot
     from ..scenarios import get_scenario
     from .executors import make_executor
     from ..scenarios.base import parse_sets
@@ -135,7 +124,7 @@ def command(args) -> int:
         controller = args.controller or scenario.controllers[0]
         robot_name = args.robot or scenario.default_robot
         scenario.resolve(sets)
-        robot = _load_robot(robot_name)
+        robot = load_fit_robot(robot_name)
         runs = expand(scenario, robot, robot_reference(robot_name), controller, grid, sets,
                       args.repeat)
     except (ValueError, OSError) as exc:
