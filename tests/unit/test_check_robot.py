@@ -189,3 +189,29 @@ def test_run_and_sweep_refuse_what_check_robot_rejects(tmp_path, capsys, monkeyp
     err = capsys.readouterr().err
     assert code == 2 and "holding the posture needs" in err and "check-robot" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_two_joint_legs_are_a_warning():
+    """ODRI's 8-DoF Solo (hip and knee flexion only): each stance foot's lateral row depends on the
+    base alone, so four feet give four lateral rows of rank 3 (checked here on the stacked contact
+    Jacobian from Pinocchio); check-robot warns that the walking scenarios do not apply."""
+    from wholebody.robots.check import check_robot
+
+    description = {"name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",
+                   "srdf": "erd:solo_description/srdf/solo.srdf", "posture": "standing",
+                   "torque_limits": {"overrides": {j: 2.7 for j in (
+                       "FL_HFE", "FL_KFE", "FR_HFE", "FR_KFE", "HL_HFE", "HL_KFE", "HR_HFE",
+                       "HR_KFE")}},
+                   "contacts": [{"name": n, "frame": n, "type": "point", "radius": 0.016}
+                                for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]}
+    robot = wb.load_robot(description)
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, robot.q_ref)
+    pin.updateFramePlacements(robot.model, data)
+    J = np.vstack([pin.getFrameJacobian(robot.model, data, c.frame_id,
+                                        pin.LOCAL_WORLD_ALIGNED)[:3] for c in robot.contacts])
+    assert np.linalg.matrix_rank(J, tol=1e-9) < 12
+    report = check_robot(description)
+    (finding,) = [f for f in report.findings if "fewer than 3 joints" in f.message]
+    assert finding.level == "warning" and report.ok
+    assert not [f for f in check_robot("solo12").findings if "fewer than 3" in f.message]

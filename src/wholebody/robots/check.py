@@ -135,8 +135,21 @@ def _roles(robot, report: RobotCheck) -> None:
         ambiguous = False
     kinds = sorted({c.spec.type for c in robot.contacts})
     if len(roles) == 4:
-        report.add("note", "class", "a quadruped (four point feet): the quadruped scenarios "
-                   "(crawl, ramp, ...) and stand apply")
+        short = {name: len(leg_joints(robot, name)) for name in roles
+                 if len(leg_joints(robot, name)) < 3}
+        if not short:
+            report.add("note", "class", "a quadruped (four point feet): the quadruped scenarios "
+                       "(crawl, ramp, ...) and stand apply")
+        else:
+            listed = ", ".join(f"{name}: {n}" for name, n in short.items())
+            report.add("warning", "class",
+                       f"legs with fewer than 3 joints ({listed}): a stance foot's three position "
+                       f"rows (the contact constraint, eq. 32's stance task) are then linearly "
+                       f"dependent across the feet, and the passive WBC's QP is refused by its "
+                       f"solver; the walking scenarios fail on this robot (stand and the "
+                       f"quasi-static baseline do not need them)",
+                       "give each leg three joints (e.g. a hip abduction), or walk it with the "
+                       "quasi-static controller")
     elif len(roles) == 2:
         report.add("note", "class", "a biped (two soles): the humanoid scenarios (push, squat, "
                    "...) and stand apply")
