@@ -13,6 +13,7 @@ from typing import Any, Callable, ClassVar, Sequence
 import numpy as np
 
 from ..cycle import ENGINES
+from ..tasks.momentum import MOMENTUM_D_ANGULAR, MOMENTUM_D_LINEAR, MOMENTUM_P
 
 log = logging.getLogger(__name__)
 
@@ -303,6 +304,31 @@ def check_engine(params: dict) -> None:
 #: eq. 26's angular-momentum weight of the LQR cost, for the momentum-balance scenarios
 Q_ANGULAR = Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)",
                       low=0.0, low_open=True)
+
+
+#: eq. 22's momentum PD gains (Table 2's defaults: P = 50, D = 15 on the linear rows, 5 on the
+#: angular rows): mass-normalised, so the same CoG stiffness omega^2 on any robot
+PD_STIFFNESS = Parameter("pd_stiffness", MOMENTUM_P, "PD only: eq. 22's P on m (x_ref - x_cog), "
+                                                     "the CoG stiffness omega^2 (1/s^2)",
+                         low=0.0, low_open=True)
+PD_DAMPING = Parameter("pd_damping", MOMENTUM_D_LINEAR, "PD only: eq. 22's D on the linear "
+                                                        "momentum error (1/s)", low=0.0)
+PD_ANGULAR_DAMPING = Parameter("pd_angular_damping", MOMENTUM_D_ANGULAR,
+                               "PD only: eq. 22's D on the angular momentum error (1/s)", low=0.0)
+PD_PARAMETERS = (PD_STIFFNESS, PD_DAMPING, PD_ANGULAR_DAMPING)
+
+
+def momentum_gains(controller: str, params: dict) -> dict:
+    """:class:`~wholebody.control.balance.MomentumBalance`'s gains from the parameters (missing
+    ones at their defaults): eq. 26's Q with ``q_angular`` for LQR, eq. 22's P and D from
+    :data:`PD_PARAMETERS` for PD."""
+    from ..control.balance import lqr_q
+
+    get = {p.name: params.get(p.name, p.default) for p in (Q_ANGULAR, *PD_PARAMETERS)}
+    if controller == "lqr":
+        return {"Q": lqr_q(get["q_angular"])}
+    return {"P": np.r_[np.full(3, get["pd_stiffness"]), np.zeros(3)],
+            "D": np.r_[np.full(3, get["pd_damping"]), np.full(3, get["pd_angular_damping"])]}
 
 
 def paper_q_notes(robot, controller: str, params: dict) -> list[str]:

@@ -43,8 +43,8 @@ from ..report.locomotion_figures import friction_mismatch_figure
 from ..sim.environment import Environment
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import IMPACT_SKIP, outcome, settled_stance, slip_events
-from .locomotion import (CRAWL_SPEED, RUN_DURATION, PaperSpeed, check_positive, check_quadruped,
-                         paper_length, run_gait, steady_command)
+from .locomotion import (CRAWL_SPEED, RUN_DURATION, TRUNK_GAINS, PaperSpeed, check_positive,
+                         check_quadruped, paper_length, run_gait, steady_command, trunk_gains)
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +66,7 @@ PARAMETERS = (
               **TIME_SPAN),
     Parameter("slip_bound", paper_length(0.25), "largest per-stance slip (m) accepted as 'bounded'",
               low=0.0, low_open=True, high=Parameter.H),
+    *TRUNK_GAINS,
 )
 
 
@@ -98,12 +99,13 @@ def validate(robot, params: dict) -> None:
 
 
 def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, duration: float,
-              K_st: float, D_st: float, progress: bool = False):
-    """One passive-WBC crawl at constant ``speed`` on a floor of ``floor_mu`` (see module doc)."""
+              K_st: float, D_st: float, progress: bool = False, trunk: dict | None = None):
+    """One passive-WBC crawl at constant ``speed`` on a floor of ``floor_mu`` (see module doc);
+    ``trunk``: the trunk impedance's gains (:func:`~wholebody.scenarios.locomotion.trunk_gains`)."""
     return run_gait(robot, "passive", "crawl", steady_command(speed), duration,
                     environment=Environment(floor_friction=floor_mu),
                     controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st},
-                    progress=progress)
+                    progress=progress, trunk=trunk)
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
@@ -122,7 +124,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         log.info("friction-mismatch: run '%s' (controller mu %.3f, %.2f m/s, K_st %.0f)",
                  name, mu, speed, K)
         floor = p["controller_mu"] if name.startswith("reference") else p["floor_mu"]
-        runs[name] = crawl_run(robot, floor, mu, speed, p["duration"], K, D, progress)
+        runs[name] = crawl_run(robot, floor, mu, speed, p["duration"], K, D, progress,
+                               trunk_gains(p))
         metrics[name] = {"floor_mu": floor, "controller_mu": mu, "speed_m_s": speed, "K_st": K, "D_st": D,
                          **slip_metrics(runs[name], p, _commanded(speed, p["duration"]))}
     m, free = metrics["mismatch"], metrics["mismatch, no stance task"]

@@ -59,8 +59,8 @@ from ..robot import FREE_FLYER_NQ
 from ..robots.roles import contact_roles, foot_of_joint, leg_joints
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
-from .locomotion import (CRAWL_SPEED, check_joint, check_positive, check_quadruped, run_gait,
-                         steady_command)
+from .locomotion import (CRAWL_SPEED, TRUNK_GAINS, check_joint, check_positive, check_quadruped,
+                         run_gait, steady_command, trunk_gains)
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +86,7 @@ PARAMETERS = (
               low=0.0, low_open=True, high=np.pi),
     Parameter("slack_active", 0.5, "swing residual (m/s^2) above which the slack is 'active' "
                                    "(figure shading, time counts)", low=0.0, low_open=True),
+    *TRUNK_GAINS,
 )
 
 
@@ -135,8 +136,9 @@ def validate(robot, params: dict) -> None:
 
 
 def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duration: float,
-              slack_weight: float = 1e4, progress: bool = False):
-    """One crawl with ``joint``'s limits replaced in the controller (None: real limits).
+              slack_weight: float = 1e4, progress: bool = False, trunk: dict | None = None):
+    """One crawl with ``joint``'s limits replaced in the controller (None: real limits);
+    ``trunk``: the trunk impedance's gains (:func:`~wholebody.scenarios.locomotion.trunk_gains`).
 
     Returns the :class:`GaitRun` with two extra per-cycle arrays in its log: ``foot_ref`` (legs, 3)
     the planner's foot references and ``swing_residual`` (legs,) the swing-task residuals."""
@@ -159,7 +161,7 @@ def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duratio
     with ctx:
         r = run_gait(robot, "passive", "crawl", command, duration,
                      controller_options={"swing_slack": slack, "slack_weight": slack_weight},
-                     on_cycle=record, progress=progress)
+                     on_cycle=record, progress=progress, trunk=trunk)
     r.log["foot_ref"] = np.array(refs)
     r.log["swing_residual"] = np.array(residuals)
     return r
@@ -209,13 +211,14 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     runs = {}
     for key, alpha in alphas.items():
         runs[(key, "nominal")] = limit_run(robot, joint, None, None, "per-direction", p["speed"],
-                                           p["duration"], alpha, progress)
+                                           p["duration"], alpha, progress, trunk_gains(p))
         for mode in ("per-direction", "single"):
             log.info("joint-limit: %s limit changed, swing_slack=%s, alpha=%g", joint, mode, alpha)
             runs[(key, mode)] = limit_run(robot, joint, lower, upper, mode, p["speed"],
-                                          p["duration"], alpha, progress)
+                                          p["duration"], alpha, progress, trunk_gains(p))
     runs[("hard", "none")] = limit_run(robot, joint, lower, upper, "none", p["speed"],
-                                       p["duration"], alphas["high"], progress)
+                                       p["duration"], alphas["high"], progress,
+                                       trunk_gains(p))
     some = runs[("high", "per-direction")]
     leg = list(some.controller.planner.legs).index(contact)
     sim_model = some.sim.model

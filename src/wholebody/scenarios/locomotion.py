@@ -32,11 +32,38 @@ from ..robots.reference import froude_ratio
 from ..robots.roles import quadruped_legs
 from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
+from ..tasks.wrench import DAMPING_RATIO_THETA, DAMPING_RATIO_X, TrunkImpedance
 from .base import TIME_SPAN, BaseHeight, Parameter, RobotRelative
 from .loop import run_closed_loop
 from .measures import FALL_HEIGHT_FRACTION
 
 CONTROLLERS = ("passive", "quasi-static")
+
+#: the trunk impedance of eq. 4 (both controllers) as scenario parameters: loop frequencies and
+#: damping ratios on the robot's mass and trunk inertia (:meth:`TrunkImpedance.for_robot`)
+TRUNK_GAINS = (
+    Parameter("trunk_frequency", 0.0, "trunk impedance (eq. 4): CoM loop frequency (Hz) on the "
+              "robot's mass (0: the paper's K_x on HyQ, Froude-scaled)", low=0.0, high=100.0),
+    Parameter("trunk_damping_ratio", round(DAMPING_RATIO_X, 6), "trunk impedance: damping ratio "
+              "of the CoM loop (the paper's D_x on HyQ)", low=0.0, high=100.0),
+    Parameter("trunk_angular_frequency", 0.0, "trunk impedance: orientation loop frequency (Hz) "
+              "on the trunk inertia (0: the paper's K_theta on HyQ, Froude-scaled)", low=0.0,
+              high=100.0),
+    Parameter("trunk_angular_damping_ratio", round(DAMPING_RATIO_THETA, 6), "trunk impedance: "
+              "damping ratio of the orientation loop (the paper's D_theta on HyQ)", low=0.0,
+              high=100.0),
+)
+
+
+def trunk_gains(params: dict) -> dict:
+    """Keyword arguments of :meth:`TrunkImpedance.for_robot` from the :data:`TRUNK_GAINS`
+    parameters (missing ones at their defaults; a frequency of 0 keeps the robot-relative
+    default)."""
+    get = {p.name: params.get(p.name, p.default) for p in TRUNK_GAINS}
+    return {"frequency_x_hz": get["trunk_frequency"] or None,
+            "damping_ratio_x": get["trunk_damping_ratio"],
+            "frequency_theta_hz": get["trunk_angular_frequency"] or None,
+            "damping_ratio_theta": get["trunk_angular_damping_ratio"]}
 GAITS = ("crawl", "trot", "stand")
 FALL_TILT = np.radians(45.0)
 #: the set-ups of Fahmi et al. 2019 are HyQ's, whose standing base height this is:
@@ -262,7 +289,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              environment: Environment | None = None, terrain: Terrain | None = None,
              control_period: float = 0.004, controller_options: dict | None = None,
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
-             on_cycle=None, planner=None, observers=(), q0=None) -> GaitRun:
+             on_cycle=None, planner=None, observers=(), q0=None,
+             trunk: dict | None = None) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
@@ -271,7 +299,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     instead of building one; ``gait``, ``command``, ``terrain``, ``planner_options`` and ``start``
     are then ignored. ``observers`` watch the simulation (labelled with the controller's name).
     ``q0``: the initial configuration (default: the standing posture ``robot.q_ref``), resting on
-    the support surface; the planner starts from it.
+    the support surface; the planner starts from it. ``trunk``: the trunk impedance's gains
+    (:func:`trunk_gains`), unless ``controller_options`` gives an ``impedance``.
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()
@@ -280,6 +309,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
                                         q=q0, t0=0.0,
                                         **{**gait_options(robot), **(planner_options or {})})
     options = dict(controller_options or {})
+    if trunk is not None and "impedance" not in options:
+        options["impedance"] = TrunkImpedance.for_robot(robot, **trunk)
     if controller == "passive":
         options.setdefault("control_period", control_period)
     ctrl = make_controller(robot, controller, planner, **options)

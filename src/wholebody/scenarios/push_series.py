@@ -18,11 +18,10 @@ from ..report.balance_figures import push_series_figure
 from ..robot import Robot
 from ..robots import load_robot
 from ..sweep.executors import ordered, scenario_executor
-from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
-                   duration_parameter, parse_list)
-from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT,
-                     LOCATIONS, PD_PARAMETERS, Q_INTEGRAL, check_locations, check_push,
-                     push_trial)
+from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter, Scenario,
+                   ScenarioResult, duration_parameter, parse_list)
+from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS,
+                     Q_INTEGRAL, check_locations, check_push, push_trial)
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points",

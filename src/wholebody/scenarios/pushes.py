@@ -12,15 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..control.balance import MomentumBalance, lqr_q
+from ..control.balance import MomentumBalance
 from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
-from ..tasks.momentum import MOMENTUM_D_ANGULAR, MOMENTUM_D_LINEAR, MOMENTUM_P
 from ..robots import reference
 from ..robots.roles import biped_soles
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
-from .base import ENGINE, Q_ANGULAR, Parameter, RobotRelative, check_engine
+from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, Parameter, RobotRelative, check_engine,
+                   momentum_gains)
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
 
@@ -88,16 +88,6 @@ Q_INTEGRAL = Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error int
 INTEGRAL_LIMIT = Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
                            "LQR integral action: anti-windup clamp of each integral component "
                            "(m s)", low=0.0, low_open=True)
-#: eq. 22's momentum PD gains (Table 2's defaults: P = 50, D = 15 on the linear rows, 5 on the
-#: angular rows): mass-normalised, so the same CoG stiffness omega^2 on any robot
-PD_STIFFNESS = Parameter("pd_stiffness", MOMENTUM_P, "PD only: eq. 22's P on m (x_ref - x_cog), "
-                                                     "the CoG stiffness omega^2 (1/s^2)",
-                         low=0.0, low_open=True)
-PD_DAMPING = Parameter("pd_damping", MOMENTUM_D_LINEAR, "PD only: eq. 22's D on the linear "
-                                                        "momentum error (1/s)", low=0.0)
-PD_ANGULAR_DAMPING = Parameter("pd_angular_damping", MOMENTUM_D_ANGULAR,
-                               "PD only: eq. 22's D on the angular momentum error (1/s)", low=0.0)
-PD_PARAMETERS = (PD_STIFFNESS, PD_DAMPING, PD_ANGULAR_DAMPING)
 CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, *PD_PARAMETERS,
                          ENGINE)
 
@@ -112,15 +102,11 @@ def controller_options(controller: str, params: dict) -> dict:
     take the defaults of :data:`CONTROLLER_PARAMETERS`)."""
     defaults = {p.name: p.default for p in CONTROLLER_PARAMETERS}
     get = lambda key: params.get(key, defaults[key])  # noqa: E731
-    opts = {"angular_weight": get("angular_weight"), "engine": get("engine")}
-    if controller == "lqr":
-        opts["Q"] = lqr_q(get("q_angular"))
-        if get("q_integral") > 0:
-            opts["q_integral"] = get("q_integral")
-            opts["integral_limit"] = get("integral_limit")
-    else:
-        opts["P"] = np.r_[np.full(3, get("pd_stiffness")), np.zeros(3)]
-        opts["D"] = np.r_[np.full(3, get("pd_damping")), np.full(3, get("pd_angular_damping"))]
+    opts = {"angular_weight": get("angular_weight"), "engine": get("engine"),
+            **momentum_gains(controller, params)}
+    if controller == "lqr" and get("q_integral") > 0:
+        opts["q_integral"] = get("q_integral")
+        opts["integral_limit"] = get("integral_limit")
     return opts
 
 

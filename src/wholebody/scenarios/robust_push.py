@@ -36,12 +36,12 @@ from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
 from ..sweep.executors import ordered, scenario_executor
-from .base import (ENGINE, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter,
-                   parse_list)
+from .base import (ENGINE, PD_PARAMETERS, TIME_SPAN, Parameter, Scenario, ScenarioResult,
+                   duration_parameter, parse_list)
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
-from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, PD_PARAMETERS,
-                     Q_INTEGRAL, check_locations, check_push, controller_options, make_push)
+from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
+                     check_locations, check_push, controller_options, make_push)
 
 log = logging.getLogger(__name__)
 

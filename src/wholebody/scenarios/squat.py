@@ -45,11 +45,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..control.balance import CoMSineReference, MomentumBalance, lqr_q
+from ..control.balance import CoMSineReference, MomentumBalance
 from ..report.balance_figures import squat_figure
 from ..sim.simulator import Simulator
-from .base import (ENGINE, Q_ANGULAR, Parameter, Scenario, ScenarioResult, check_biped, format_mm,
-                   paper_q_notes)
+from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, Parameter, Scenario, ScenarioResult,
+                   check_biped, format_mm, momentum_gains, paper_q_notes)
 from .loop import run_closed_loop
 from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
 
@@ -74,6 +74,7 @@ PARAMETERS = (
     Parameter("torsion", True, "the soles' yaw moments bounded (FrictionCone torsion rows, the "
                                "stacks' default); false: the paper's friction pyramid only"),
     Q_ANGULAR,
+    *PD_PARAMETERS,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
                                     "cop-active", low=0.0, high=Parameter.H),
     ENGINE,
@@ -144,7 +145,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
-                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
+                           **momentum_gains(controller, params),
                            engine=params["engine"], torsion=params["torsion"])
     sim = Simulator(robot, observers=observers, label=controller)
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=margin)

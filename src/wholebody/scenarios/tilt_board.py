@@ -36,14 +36,14 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..control.balance import MomentumBalance, SoleFrameReference, lqr_q
+from ..control.balance import MomentumBalance, SoleFrameReference
 from ..planning.blend import WaypointMotion
 from ..report.balance_figures import balance_figure
 from ..robot import GRAVITY
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import (ENGINE, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_biped,
-                   format_mm, paper_q_notes)
+from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter, Scenario,
+                   ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes)
 from .loop import run_closed_loop
 from .measures import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, MAX_TILT_DEG,
                        BalanceMonitor, limit_notes, sole_midpoint)
@@ -74,6 +74,7 @@ PARAMETERS = (
     Parameter("settle", 2.0, "simulated time after the last move or the impact (s)",
               low=0.0, high=Parameter.MAX_TIME),
     Q_ANGULAR,
+    *PD_PARAMETERS,
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)",
               low=0.0, low_open=True, high=Parameter.H),
     ENGINE,
@@ -148,7 +149,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                                         motion=board))
     sim = Simulator(robot, env, observers=observers, label=controller)
     ctrl = MomentumBalance(robot, gains=controller, reference=SoleFrameReference(robot),
-                           Q=lqr_q(params["q_angular"]) if controller == "lqr" else None,
+                           **momentum_gains(controller, params),
                            engine=params["engine"])
     monitor = BalanceMonitor(robot, sim, ctrl)
     failures = run_closed_loop(sim, ctrl, board.end + params["settle"], progress=progress,
