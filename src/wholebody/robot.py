@@ -94,12 +94,40 @@ def _model_joint_names(model: pin.Model) -> list[str]:
     return list(model.names[2:])
 
 
+def urdf_with_inertias(path, overrides: dict, where: str = "robot") -> str:
+    """The URDF at ``path`` as text with the ``<inertia>`` of each link of ``overrides`` (link ->
+    principal moments, the description's ``inertia_overrides``) replaced by that diagonal;
+    DescriptionError naming ``inertia_overrides.<link>`` for a link the URDF lacks or one without
+    an ``<inertial>``."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        tree = ET.parse(path)
+    except ET.ParseError as exc:
+        raise ValueError(f"not XML: {exc}") from None
+    links = {link.get("name"): link for link in tree.getroot().iter("link")}
+    for name, (ixx, iyy, izz) in overrides.items():
+        if name not in links:
+            raise DescriptionError(f"{where}: inertia_overrides.{name}: not a link of the URDF")
+        inertia = links[name].find("inertial/inertia")
+        if inertia is None:
+            raise DescriptionError(f"{where}: inertia_overrides.{name}: the link has no "
+                                   f"<inertial> (no mass) in the URDF")
+        values = {"ixx": ixx, "iyy": iyy, "izz": izz, "ixy": 0.0, "ixz": 0.0, "iyz": 0.0}
+        for key, value in values.items():
+            inertia.set(key, repr(float(value)))
+    return ET.tostring(tree.getroot(), encoding="unicode")
+
+
 def check_inertias(model: pin.Model, where: str = "robot") -> None:
     """Every body of ``model`` (``model.inertias``: each joint's link with the links and frames
     merged into it by fixed joints) has a finite mass > 0, a finite centre of mass and a
     positive-definite rotational inertia; DescriptionError naming the body (its URDF link) and the
     joint moving it otherwise. A massless moving body (e.g. the intermediate link of a ball joint
-    split into three revolutes) is refused: the MuJoCo twin cannot compile it."""
+    split into three revolutes) is refused: the MuJoCo twin cannot compile it. Bodies whose only
+    fault is their rotational inertia are listed together, with the ``inertia_overrides`` that
+    would replace it."""
+    singular = []
     for jid in range(1, model.njoints):
         inertia = model.inertias[jid]
         mass, lever = float(inertia.mass), np.asarray(inertia.lever)
@@ -120,10 +148,18 @@ def check_inertias(model: pin.Model, where: str = "robot") -> None:
                 f"(locked_joints)")
         eig = np.linalg.eigvalsh(0.5 * (rot + rot.T))
         if eig[0] <= 1e-12 * mass:  # radius of gyration below 1 micrometre
-            raise DescriptionError(
-                f"{where}: {body} has mass {mass:g} kg but its rotational inertia is not "
-                f"positive definite (eigenvalues {[float(f'{e:.3g}') for e in eig]} kg m^2); "
-                f"fix the <inertia> of the link in the URDF")
+            singular.append((links[0] if links else model.names[jid], body, mass, eig))
+    if singular:
+        _, body, mass, eig = singular[0]
+        more = (f" (and {len(singular) - 1} more: "
+                f"{', '.join(repr(link) for link, *_ in singular[1:])})" if len(singular) > 1
+                else "")
+        example = ", ".join(f"{link} = [ixx, iyy, izz]" for link, *_ in singular)
+        raise DescriptionError(
+            f"{where}: {body} has mass {mass:g} kg but its rotational inertia is not positive "
+            f"definite (eigenvalues {[float(f'{e:.3g}') for e in eig]} kg m^2){more}; fix the "
+            f"<inertia> of the link in the URDF, or give its principal moments in the "
+            f"description: inertia_overrides = {{ {example} }}")
 
 
 class Robot:
@@ -142,7 +178,12 @@ class Robot:
         where = f"robot '{self.name}'"
         urdf = resolve_model_path(description.urdf, description.base_dir)
         try:
-            full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+            if description.inertia_overrides:
+                full = pin.buildModelFromXML(
+                    urdf_with_inertias(urdf, description.inertia_overrides, where),
+                    pin.JointModelFreeFlyer())
+            else:
+                full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
         except ValueError as exc:  # not a URDF (e.g. an SDF or MJCF file), or a malformed one
             raise DescriptionError(f"{where}: field 'urdf' = '{description.urdf}': {exc} (only URDF "
                                    f"files are read)") from None

@@ -369,3 +369,65 @@ def test_posture_overrides_change_only_their_joints():
         wb.load_robot({**data, "posture_overrides": {"lf_kfe_joint": 1.0}})
     with pytest.raises(DescriptionError, match="posture_overrides.lf_kfe_joint"):
         wb.load_robot({**data, "posture_overrides": {"lf_kfe_joint": float("nan")}})
+
+
+# ------------------------------------------------------------------ inertia_overrides
+ICUB_LEFT_LEG = {"r_hip_1": [0.000471, 0.000346, 0.00051], "r_hip_2": [0.000562, 0.000738, 0.000294],
+                 "r_upper_leg": [0.007591, 0.001423, 0.007554],
+                 "r_lower_leg": [0.000999, 0.004451, 0.004208],
+                 "r_ankle_1": [0.000633, 0.000688, 0.000314]}
+
+
+def icub(**extra):
+    """iCub from example-robot-data, arms locked (their wrists have zero inertia too)."""
+    arms = [f"{s}_{j}" for s in "lr" for j in ("shoulder_pitch", "shoulder_roll", "shoulder_yaw",
+                                                "elbow", "wrist_prosup", "wrist_pitch",
+                                                "wrist_yaw")]
+    return {"name": "icub", "urdf": "erd:icub_description/robots/icub_reduced.urdf",
+            "srdf": "erd:icub_description/srdf/icub.srdf", "posture": "half_sitting",
+            "locked_joints": arms,
+            "contacts": [{"name": f"{s}_sole", "frame": f"{s[0]}_sole", "type": "rectangle",
+                          "half_size": [0.06, 0.03], "role": s} for s in ("left", "right")],
+            **extra}
+
+
+def test_zero_inertias_are_listed_together_with_the_field_that_fixes_them():
+    with pytest.raises(DescriptionError) as err:
+        wb.load_robot(icub())
+    message = str(err.value)
+    assert all(f"'{link}'" in message or f"{link} = [" in message for link in ICUB_LEFT_LEG)
+    assert "inertia_overrides = {" in message
+
+
+def test_inertia_overrides_replace_the_links_inertia():
+    """iCub's right leg gets the left leg's moments: the Pinocchio body of each joint has those
+    principal moments (rotation-invariant eigenvalues), its mass and centre of mass are the URDF's,
+    and the MuJoCo twin built from it has the same total mass."""
+    from wholebody.sim.simulator import Simulator
+
+    robot = wb.load_robot(icub(inertia_overrides=ICUB_LEFT_LEG))
+    reference = pin.buildModelFromUrdf(str(resolve_model_path(
+        "erd:icub_description/robots/icub_reduced.urdf")), pin.JointModelFreeFlyer())
+    for link, moments in ICUB_LEFT_LEG.items():
+        fid = robot.model.getFrameId(link)
+        jid = robot.model.frames[fid].parentJoint
+        body = robot.model.inertias[jid]
+        np.testing.assert_allclose(np.linalg.eigvalsh(body.inertia), sorted(moments), rtol=1e-9)
+        ref = reference.inertias[reference.getJointId(robot.model.names[jid])]
+        assert body.mass == pytest.approx(ref.mass)
+        np.testing.assert_allclose(body.lever, ref.lever, atol=1e-12)
+    sim = Simulator(robot)
+    assert sum(sim.model.body_mass) == pytest.approx(robot.mass, rel=1e-9)
+
+
+@pytest.mark.parametrize("value,shown", [
+    ({"r_hip_1": [0.001, -0.001, 0.001]}, "inertia_overrides.r_hip_1[1]"),
+    ({"r_hip_1": [0.001, float("nan"), 0.001]}, "inertia_overrides.r_hip_1[1]"),
+    ({"r_hip_1": [0.001, 0.001]}, "inertia_overrides.r_hip_1: expected three principal moments"),
+    ({"r_hip_1": 0.001}, "inertia_overrides.r_hip_1: expected three principal moments"),
+    ({"r_hip_1": [0.001, 0.001, 0.01]}, "is no rigid body's inertia"),
+    ({"no_such_link": [0.001, 0.001, 0.001]}, "inertia_overrides.no_such_link: not a link"),
+])
+def test_bad_inertia_overrides_are_named(value, shown):
+    with pytest.raises(DescriptionError, match=re.escape(shown)):
+        wb.load_robot(icub(inertia_overrides={**ICUB_LEFT_LEG, **value}))

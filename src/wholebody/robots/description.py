@@ -11,6 +11,9 @@ Fields (``*`` = required)::
     locked_joints  joints frozen at the posture (Pinocchio ``buildReducedModel``), default none
     armature       rotor inertia added to the joint-space inertia of every actuated joint (scalar or
                    {joint = value}); the MuJoCo twin uses the same value, default 0
+    inertia_overrides  {link = [ixx, iyy, izz]}: principal moments (kg m^2, about the link's centre
+                   of mass, in its <inertial> frame) replacing the URDF's <inertia> of these links
+                   (a URDF with zero or broken inertias), default none
     contacts*      list of {name, frame, type = "point", radius} or
                    {name, frame, type = "rectangle", half_size = [hx, hy]} (sole half-lengths along
                    the frame's x and y axes); ``offset = [x, y, z]`` (m, in the frame's axes,
@@ -67,6 +70,20 @@ def _checked(check, value, path: str, where: str, **kwargs) -> float:
         return check(value, path, **kwargs)
     except ValueError as exc:
         raise DescriptionError(f"{where}: {exc}") from None
+
+
+def _principal_moments(value: Any, path: str, where: str) -> tuple[float, float, float]:
+    """Three principal moments of inertia: each finite and > 0, and each at most the sum of the
+    other two (the triangle inequality every rigid body satisfies)."""
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise DescriptionError(f"{where}: {path}: expected three principal moments [ixx, iyy, "
+                               f"izz] (kg m^2), got {value!r}")
+    moments = tuple(_checked(validation.positive, v, f"{path}[{i}]", where)
+                    for i, v in enumerate(value))
+    if any(2 * m > sum(moments) * (1 + 1e-9) for m in moments):
+        raise DescriptionError(f"{where}: {path}: {list(moments)} is no rigid body's inertia (each "
+                               f"principal moment must be at most the sum of the other two)")
+    return moments
 
 
 def _table(value: Any, path: str, where: str) -> Mapping[str, Any]:
@@ -177,6 +194,7 @@ class RobotDescription:
     srdf: str | None = None
     locked_joints: tuple[str, ...] = ()
     armature: float | dict[str, float] = 0.0
+    inertia_overrides: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     torque_limits: dict[str, Any] = field(default_factory=dict)
     friction: float = 0.8
     trunk_frame: str | None = None
@@ -197,8 +215,8 @@ class RobotDescription:
             return data[key]
 
         known = {"name", "urdf", "srdf", "posture", "posture_overrides", "locked_joints",
-                 "armature", "contacts", "torque_limits", "friction", "trunk_frame",
-                 "description"}
+                 "armature", "inertia_overrides", "contacts", "torque_limits", "friction",
+                 "trunk_frame", "description"}
         unknown = sorted(str(k) for k in set(data) - known)
         if unknown:
             raise DescriptionError(f"{where}: unknown field(s) {unknown}; known: {sorted(known)}")
@@ -237,13 +255,16 @@ class RobotDescription:
                         for k, v in armature.items()}
         else:
             armature = _checked(validation.nonnegative, armature, "armature", where)
+        inertias = {str(k): _principal_moments(v, f"inertia_overrides.{k}", where)
+                    for k, v in _table(data.get("inertia_overrides", {}), "inertia_overrides",
+                                       where).items()}
         friction = _checked(validation.positive, data.get("friction", 0.8), "friction", where)
         trunk = data.get("trunk_frame")
         trunk = None if trunk is None else _name(trunk, "trunk_frame", where)
         return cls(
             name=name, urdf=urdf, srdf=srdf or None, posture=posture, contacts=contacts,
             posture_overrides=overrides,
-            locked_joints=locked, armature=armature,
+            locked_joints=locked, armature=armature, inertia_overrides=inertias,
             torque_limits=check_torque_limits(data.get("torque_limits"), where),
             friction=friction, trunk_frame=trunk, base_dir=base_dir,
         )
