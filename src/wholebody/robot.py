@@ -275,9 +275,29 @@ class Robot:
                                        f"a group state of {srdf.name}; have "
                                        f"{list(full.referenceConfigurations)}")
             q = np.array(full.referenceConfigurations[d.posture], dtype=float)
+            Robot._check_group_state(full, q, d)
         else:
             q = Robot._set_joint_angles(full, pin.neutral(full), d.posture, "posture", d.name)
         return Robot._set_joint_angles(full, q, d.posture_overrides, "posture_overrides", d.name)
+
+    @staticmethod
+    def _check_group_state(full: pin.Model, q: np.ndarray, d: RobotDescription) -> None:
+        """The SRDF group state puts every joint that stays in the model (not locked, not set again
+        by ``posture_overrides``) within its URDF limits; DescriptionError naming each joint
+        outside and the way out otherwise."""
+        outside = []
+        for joint in _model_joint_names(full):
+            j = full.joints[full.getJointId(joint)]
+            if joint in d.locked_joints or joint in d.posture_overrides or j.nq != 1:
+                continue
+            lo, hi = full.lowerPositionLimit[j.idx_q], full.upperPositionLimit[j.idx_q]
+            if not lo - 1e-9 <= q[j.idx_q] <= hi + 1e-9:
+                outside.append(f"'{joint}' at {float(q[j.idx_q]):g} (limits [{float(lo):g}, "
+                               f"{float(hi):g}])")
+        if outside:
+            raise DescriptionError(
+                f"robot '{d.name}': field 'posture' = '{d.posture}' puts joints outside their URDF "
+                f"limits: {', '.join(outside)}; set posture_overrides for them to angles inside")
 
     @staticmethod
     def _set_joint_angles(full: pin.Model, q: np.ndarray, table, field: str,

@@ -431,3 +431,30 @@ def test_inertia_overrides_replace_the_links_inertia():
 def test_bad_inertia_overrides_are_named(value, shown):
     with pytest.raises(DescriptionError, match=re.escape(shown)):
         wb.load_robot(icub(inertia_overrides={**ICUB_LEFT_LEG, **value}))
+
+
+def test_a_group_state_outside_the_joint_limits_is_named():
+    """example-robot-data's simple_humanoid: its SRDF half_sitting puts several joints outside the
+    URDF's limits (found here from the files with Pinocchio alone); the error names each of them
+    and posture_overrides, which makes it load."""
+    description = {"name": "simple",
+                   "urdf": "erd:simple_humanoid_description/urdf/simple_humanoid.urdf",
+                   "srdf": "erd:simple_humanoid_description/srdf/simple_humanoid.srdf",
+                   "posture": "half_sitting",
+                   "contacts": [{"name": f"{s}_sole", "frame": f"{s[0]}_ankle", "type": "rectangle",
+                                 "half_size": [0.12, 0.07]} for s in ("left", "right")]}
+    model = pin.buildModelFromUrdf(str(resolve_model_path(description["urdf"])))
+    pin.loadReferenceConfigurations(model, str(resolve_model_path(description["srdf"])), False)
+    q = model.referenceConfigurations["half_sitting"]
+    outside = {name: float(np.clip(q[j.idx_q], model.lowerPositionLimit[j.idx_q],
+                                   model.upperPositionLimit[j.idx_q]))
+               for name, j in zip(model.names[1:], model.joints[1:])
+               if not model.lowerPositionLimit[j.idx_q] <= q[j.idx_q]
+               <= model.upperPositionLimit[j.idx_q]}
+    assert outside
+    with pytest.raises(DescriptionError) as err:
+        wb.load_robot(description)
+    assert "posture_overrides" in str(err.value)
+    assert all(f"'{name}' at" in str(err.value) for name in outside)
+    robot = wb.load_robot({**description, "posture_overrides": outside})
+    assert robot.na == model.nv
