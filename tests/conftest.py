@@ -40,6 +40,29 @@ def g1_description(armature: float = 0.0) -> dict:
                           "offset": [0.035, 0.0, -0.035]} for side in ("left", "right")]}
 
 
+#: iCub's right leg has masses but zero inertias in example-robot-data: the left leg's moments
+ICUB_RIGHT_LEG_INERTIAS = {
+    "r_hip_1": [0.000471, 0.000346, 0.00051], "r_hip_2": [0.000562, 0.000738, 0.000294],
+    "r_upper_leg": [0.007591, 0.001423, 0.007554], "r_lower_leg": [0.000999, 0.004451, 0.004208],
+    "r_ankle_1": [0.000633, 0.000688, 0.000314]}
+
+
+def icub_description(**extra) -> dict:
+    """iCub from example-robot-data as docs/robots.md describes it: legs and torso, arms locked
+    (their wrists have zero inertia too), soles with declared roles (its base frame faces
+    backwards); ``extra`` fields on top (``inertia_overrides``, ``armature``, ...)."""
+    arms = [f"{s}_{j}" for s in "lr" for j in ("shoulder_pitch", "shoulder_roll", "shoulder_yaw",
+                                                "elbow", "wrist_prosup", "wrist_pitch",
+                                                "wrist_yaw")]
+    return {"name": "icub", "urdf": "erd:icub_description/robots/icub_reduced.urdf",
+            "srdf": "erd:icub_description/srdf/icub.srdf", "posture": "half_sitting",
+            "posture_overrides": {"l_ankle_pitch": 0.035, "r_ankle_pitch": 0.035},
+            "locked_joints": arms,
+            "contacts": [{"name": f"{s}_sole", "frame": f"{s[0]}_sole", "type": "rectangle",
+                          "half_size": [0.06, 0.03], "role": s} for s in ("left", "right")],
+            **extra}
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

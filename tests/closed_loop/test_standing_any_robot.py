@@ -54,3 +54,17 @@ def test_rotor_inertia_lets_light_links_stand():
     assert geared.success and not m["fell"], m
     assert m["torque_saturated_cycles"] <= 0.03 * round(DURATION / 1e-3), m
     assert m["base_drift_max_m"] < 0.01, m
+
+
+def test_icub_from_one_file_stands():
+    """iCub from example-robot-data, its zero inertias given in the description
+    (``inertia_overrides``) and rotor inertia added: it stands on the default gains."""
+    from conftest import ICUB_RIGHT_LEG_INERTIAS, icub_description
+
+    robot = wb.load_robot(icub_description(inertia_overrides=ICUB_RIGHT_LEG_INERTIAS,
+                                           armature=0.02))
+    result = stand(robot)
+    m = result.metrics
+    assert result.success and not m["fell"], m
+    assert m["torque_saturated_cycles"] <= 0.03 * round(DURATION / 1e-3), m
+    assert m["base_drift_max_m"] < 0.01, m

@@ -20,6 +20,9 @@ from wholebody.robots.description import DescriptionError, RobotDescription
 from wholebody.robots.locate import resolve_model_path
 from wholebody.robots.torque_limits import TorqueProfile
 
+from conftest import ICUB_RIGHT_LEG_INERTIAS as ICUB_LEFT_LEG
+from conftest import icub_description as icub
+
 NAN, INF = math.nan, math.inf
 
 
@@ -372,25 +375,6 @@ def test_posture_overrides_change_only_their_joints():
 
 
 # ------------------------------------------------------------------ inertia_overrides
-ICUB_LEFT_LEG = {"r_hip_1": [0.000471, 0.000346, 0.00051], "r_hip_2": [0.000562, 0.000738, 0.000294],
-                 "r_upper_leg": [0.007591, 0.001423, 0.007554],
-                 "r_lower_leg": [0.000999, 0.004451, 0.004208],
-                 "r_ankle_1": [0.000633, 0.000688, 0.000314]}
-
-
-def icub(**extra):
-    """iCub from example-robot-data, arms locked (their wrists have zero inertia too)."""
-    arms = [f"{s}_{j}" for s in "lr" for j in ("shoulder_pitch", "shoulder_roll", "shoulder_yaw",
-                                                "elbow", "wrist_prosup", "wrist_pitch",
-                                                "wrist_yaw")]
-    return {"name": "icub", "urdf": "erd:icub_description/robots/icub_reduced.urdf",
-            "srdf": "erd:icub_description/srdf/icub.srdf", "posture": "half_sitting",
-            "locked_joints": arms,
-            "contacts": [{"name": f"{s}_sole", "frame": f"{s[0]}_sole", "type": "rectangle",
-                          "half_size": [0.06, 0.03], "role": s} for s in ("left", "right")],
-            **extra}
-
-
 def test_zero_inertias_are_listed_together_with_the_field_that_fixes_them():
     with pytest.raises(DescriptionError) as err:
         wb.load_robot(icub())
