@@ -20,7 +20,7 @@ from wholebody.robots.description import DescriptionError, RobotDescription
 from wholebody.robots.locate import resolve_model_path
 from wholebody.robots.torque_limits import TorqueProfile
 
-from conftest import ICUB_RIGHT_LEG_INERTIAS as ICUB_LEFT_LEG
+from conftest import ICUB_RIGHT_LEG_INERTIAS
 from conftest import icub_description as icub
 
 NAN, INF = math.nan, math.inf
@@ -379,7 +379,7 @@ def test_zero_inertias_are_listed_together_with_the_field_that_fixes_them():
     with pytest.raises(DescriptionError) as err:
         wb.load_robot(icub())
     message = str(err.value)
-    assert all(f"'{link}'" in message or f"{link} = [" in message for link in ICUB_LEFT_LEG)
+    assert all(f"'{link}'" in message or f"{link} = [" in message for link in ICUB_RIGHT_LEG_INERTIAS)
     assert "inertia_overrides = {" in message
 
 
@@ -389,10 +389,10 @@ def test_inertia_overrides_replace_the_links_inertia():
     and the MuJoCo twin built from it has the same total mass."""
     from wholebody.sim.simulator import Simulator
 
-    robot = wb.load_robot(icub(inertia_overrides=ICUB_LEFT_LEG))
+    robot = wb.load_robot(icub(inertia_overrides=ICUB_RIGHT_LEG_INERTIAS))
     reference = pin.buildModelFromUrdf(str(resolve_model_path(
         "erd:icub_description/robots/icub_reduced.urdf")), pin.JointModelFreeFlyer())
-    for link, moments in ICUB_LEFT_LEG.items():
+    for link, moments in ICUB_RIGHT_LEG_INERTIAS.items():
         fid = robot.model.getFrameId(link)
         jid = robot.model.frames[fid].parentJoint
         body = robot.model.inertias[jid]
@@ -414,7 +414,7 @@ def test_inertia_overrides_replace_the_links_inertia():
 ])
 def test_bad_inertia_overrides_are_named(value, shown):
     with pytest.raises(DescriptionError, match=re.escape(shown)):
-        wb.load_robot(icub(inertia_overrides={**ICUB_LEFT_LEG, **value}))
+        wb.load_robot(icub(inertia_overrides={**ICUB_RIGHT_LEG_INERTIAS, **value}))
 
 
 def test_a_group_state_outside_the_joint_limits_is_named():
