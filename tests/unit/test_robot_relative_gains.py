@@ -37,17 +37,18 @@ def planner(robot):
     return SimpleNamespace(legs=robot.contact_names)
 
 
-def rnea_joint_inertia(robot):
-    """M_ii by Newton-Euler: the torque of joint i for a unit acceleration of joint i alone, at
-    rest (gravity removed by subtracting the zero-acceleration torque)."""
-    model, data, q = robot.model, robot.model.createData(), robot.q_ref
+def free_joint_inertia(robot):
+    """Each joint's inertia with the rest of the robot free, by the articulated-body algorithm: a
+    unit torque on joint i alone, at rest, accelerates it by (M^-1)_ii (gravity removed by
+    subtracting the zero-torque acceleration); the inertia is its inverse."""
+    model, q = robot.model, robot.q_ref
     zero = np.zeros(robot.nv)
-    bias = pin.rnea(model, data, q, zero, zero)
+    drift = pin.aba(model, model.createData(), q, zero, zero)
     out = np.empty(robot.na)
     for i in range(robot.na):
-        a = zero.copy()
-        a[6 + i] = 1.0
-        out[i] = (pin.rnea(model, data, q, zero, a) - bias)[6 + i]
+        tau = zero.copy()
+        tau[6 + i] = 1.0
+        out[i] = 1.0 / (pin.aba(model, model.createData(), q, zero, tau) - drift)[6 + i]
     return out
 
 
@@ -75,7 +76,9 @@ def centroidal_inertia_by_bodies(robot):
 @pytest.mark.parametrize("name", ["talos14", "hyq", "go1", "solo12"])
 def test_standing_gains_are_frequency_and_damping_on_the_joint_inertia(name, robots, quadrupeds):
     robot = robots[name] if name in robots else quadrupeds[name]
-    inertia = rnea_joint_inertia(robot)  # includes the armature (talos14: 0.1 kg m²)
+    inertia = free_joint_inertia(robot)  # includes the armature (talos14: 0.1 kg m²)
+    held = np.diag(pin.crba(robot.model, robot.model.createData(), robot.q_ref))[6:]
+    assert np.all(inertia <= held * (1 + 1e-9))  # never more than with the other joints held
     ctrl = StandingController(robot, frequency_hz=4.0, damping_ratio=0.7)
     omega = 2 * math.pi * 4.0
     np.testing.assert_allclose(ctrl.kp, omega ** 2 * inertia, rtol=1e-9)
@@ -86,13 +89,15 @@ def test_standing_gains_are_frequency_and_damping_on_the_joint_inertia(name, rob
 
 
 def test_armature_enters_the_joint_inertia(robots):
-    """talos14's 0.1 kg m² reflected rotor inertia is part of the inertia the gains scale."""
+    """talos14's 0.1 kg m² reflected rotor inertia is part of the inertia the gains scale: with it
+    removed from the model, every joint's free inertia (and so its kp) is smaller by about that."""
     robot = robots["talos14"]
     model = pin.Model(robot.model)
     model.armature[:] = 0.0
-    bare = np.diag(pin.crba(model, model.createData(), robot.q_ref))[6:]
-    ctrl = StandingController(robot, frequency_hz=1.0 / (2 * math.pi))  # ω = 1: kp = M_ii
-    np.testing.assert_allclose(ctrl.kp - bare, 0.1, rtol=1e-9)
+    bare = 1.0 / np.diag(pin.computeMinverse(model, model.createData(), robot.q_ref))[6:]
+    ctrl = StandingController(robot, frequency_hz=1.0 / (2 * math.pi))  # ω = 1: kp = m_i
+    np.testing.assert_allclose(ctrl.kp, free_joint_inertia(robot), rtol=1e-9)
+    assert np.all(ctrl.kp - bare > 0.09)  # every joint's own 0.1, and its neighbours' through M
 
 
 def _scaled_robot(tmp_path, name: str, k: float):

@@ -31,31 +31,37 @@ DEFAULT_DAMPING_RATIO = 0.7
 
 
 def joint_inertia(robot: Robot, q: np.ndarray | None = None) -> np.ndarray:
-    """Effective inertia of each actuated joint at ``q`` (default the reference posture): the
-    diagonal M_ii of the joint-space inertia matrix (Pinocchio's ``crba``, which adds the model's
-    armature, the reflected rotor inertia), in kg m² (revolute) or kg (prismatic). It is the
-    inertia the joint drives with every other coordinate held. Computed on a separate
+    """Inertia of each actuated joint at ``q`` (default the reference posture) with the rest of the
+    robot free, base included: ``1 / (M^-1)_ii`` (Pinocchio's ``computeMinverse``; the joint's
+    acceleration per unit torque is ``(M^-1)_ii``), with the model's armature, the reflected rotor
+    inertia, in M. In kg m² (revolute) or kg (prismatic). It is at most M_ii, the inertia with
+    every other coordinate held, and far below it for a joint that carries much more than the
+    links it moves (a hip under a heavy trunk on light legs). Computed on a separate
     ``pinocchio.Data``: the robot's per-cycle cache is left untouched."""
     q = robot.q_ref if q is None else finite_array(q, "q", shape=(robot.nq,))
-    M = pin.crba(robot.model, robot.model.createData(), np.asarray(q, float))
-    return np.diag(M)[FREE_FLYER_NV:].copy()
+    inverse = pin.computeMinverse(robot.model, robot.model.createData(), np.asarray(q, float))
+    return 1.0 / np.diag(inverse)[FREE_FLYER_NV:]
 
 
 def relative_joint_gains(robot: Robot, frequency_hz: float = DEFAULT_FREQUENCY_HZ,
                          damping_ratio: float = DEFAULT_DAMPING_RATIO,
                          q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(kp, kd) per actuated joint: kp_i = ω² M_ii, kd_i = 2 ζ ω M_ii (ω = 2π ``frequency_hz``,
-    ζ = ``damping_ratio``, M_ii from :func:`joint_inertia` at ``q``).
+    """(kp, kd) per actuated joint: kp_i = ω² m_i, kd_i = 2 ζ ω m_i (ω = 2π ``frequency_hz``,
+    ζ = ``damping_ratio``, m_i from :func:`joint_inertia` at ``q``: the joint's inertia with the
+    rest of the robot free).
 
-    Each joint alone (the others held) is then a loop of natural frequency ω and damping ratio ζ
-    whatever the robot's size, and the explicit discrete PD's kd dt / M_ii is 2 ζ ω dt on every
+    The explicit discrete PD's damping step kd dt / m_i is then 2 ζ ω dt on every joint of every
     robot (0.088 with the defaults at the twin's 1 ms; it must stay well below 2) — the absolute
-    kp = 1000, kd = 30 made for Talos give 55 on a Solo12 knee. With the feet on the ground the
-    distal joints move more than M_ii (a Solo12 knee ~13 x, a Talos ankle up to 150 x), so their
-    stance frequency is lower; gains on that stance inertia were tried and chatter on hyq and
-    talos14. The defaults were chosen in the twin under a model mismatch (masses x 1.1 ± 10 %,
-    CoM offsets 5 mm, one-step torque delay): 1-5 Hz let the quadrupeds sag by 5-50 %, 10 Hz
-    holds the six presets within 1.6 cm, 15 Hz or ζ = 1.5 make talos14 chatter."""
+    kp = 1000, kd = 30 made for Talos give 55 on a Solo12 knee. Gains on M_ii (the inertia with
+    the other joints held, the former default) reach 1.6-4.3 on robots whose light distal links
+    carry a heavy body without rotor inertia (G1, iCub, Alexander from example-robot-data), and
+    those chatter; on the presets the two differ by at most 2.2 × at the worst joint and stand
+    alike (base drift within 0.6 mm). With the feet on the ground the distal joints move more
+    than either (a Solo12 knee ~13 ×, a Talos ankle up to 150 ×), so their stance frequency is
+    lower; gains on that stance inertia were tried and chatter on hyq and talos14. The frequency
+    and damping ratio were chosen in the twin under a model mismatch (masses × 1.1 ± 10 %, CoM
+    offsets 5 mm, one-step torque delay) with gains on M_ii: 1-5 Hz let the quadrupeds sag by
+    5-50 %, 10 Hz holds the six presets within 1.6 cm, 15 Hz or ζ = 1.5 make talos14 chatter."""
     positive(frequency_hz, "frequency_hz")
     nonnegative(damping_ratio, "damping_ratio")
     omega = 2.0 * math.pi * float(frequency_hz)

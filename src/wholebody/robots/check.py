@@ -28,10 +28,6 @@ log = logging.getLogger(__name__)
 FLOATING_CONTACT_FRACTION = 0.01
 #: a sole tilted by more than this (deg) in the posture does not stand flat
 SOLE_TILT_DEG = 1.0
-#: the default joint PD's kd dt / m_free above which a joint is warned about: an explicit discrete
-#: damper overshoots from kd dt / m = 1 and diverges from 2 (m_free = 1 / (M^-1)_ii, the inertia
-#: the joint drives when the rest of the robot is free)
-PD_DAMPING_STEP_LIMIT = 1.0
 
 
 @dataclass
@@ -115,7 +111,6 @@ def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
     _contacts_on_the_floor(robot, data, report)
     _support(robot, data, report)
     _gravity_torques(robot, report)
-    _light_links(robot, report)
     return report
 
 
@@ -236,32 +231,6 @@ def _gravity_torques(robot, report: RobotCheck) -> None:
                    f"'{robot.joint_names[worst]}', beyond its limit "
                    f"[{lo[worst]:.1f}, {hi[worst]:.1f}] Nm",
                    "check torque_limits (scale, overrides) or choose a less crouched posture")
-
-
-def _light_links(robot, report: RobotCheck) -> None:
-    """The default joint PD (``stand``: gains on M_ii, :func:`~wholebody.control.standing.
-    relative_joint_gains`) is stable at the twin's time step on every joint: links much lighter
-    than what they carry (no rotor inertia) make the inertia a joint drives with the rest free,
-    1 / (M^-1)_ii, far smaller than M_ii, and the explicit damper's ``kd dt / m`` approaches 2."""
-    from ..control.standing import joint_inertia, relative_joint_gains
-    from ..sim.twin import SimOptions
-
-    dt = SimOptions().timestep
-    _, kd = relative_joint_gains(robot)
-    M = pin.crba(robot.model, robot.model.createData(), robot.q_ref)
-    free = 1.0 / np.diag(np.linalg.inv(np.triu(M) + np.triu(M, 1).T))[robot.nv - robot.na:]
-    step = kd * dt / free
-    worst = int(np.argmax(step))
-    report.facts["pd_damping_step_max"] = float(step[worst])
-    if step[worst] > PD_DAMPING_STEP_LIMIT:
-        held = joint_inertia(robot)[worst]
-        report.add("warning", "inertia", f"joint '{robot.joint_names[worst]}' drives an inertia "
-                   f"of {free[worst]:.3g} with the rest of the robot free, {held:.3g} with it "
-                   f"held: the default joint PD (stand) has kd dt / m = {step[worst]:.2f} there at "
-                   f"the twin's {1000 * dt:g} ms step (unstable from 2); light links without rotor "
-                   f"inertia chatter",
-                   "give the motors' rotor inertia as `armature` (reflected through the gearbox, "
-                   "typically 0.01-0.1 kg m^2), or lower `stand --set frequency_hz`")
 
 
 def load_fit_robot(name_or_path: str):
