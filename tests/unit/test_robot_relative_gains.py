@@ -312,3 +312,18 @@ def test_trunk_gains_reach_the_controller_in_closed_loop(quadrupeds):
     default = run_gait(robot, "passive", "stand", duration=0.02, trunk=scenario_trunk_gains({}))
     np.testing.assert_allclose(default.controller.impedance.K_x,
                                TrunkImpedance.for_robot(robot).K_x, rtol=1e-12)
+
+
+def test_sway_gain_reaches_the_crawl_planner(quadrupeds):
+    """``crawl``/``friction-mismatch --set sway_gain=g``: the planner's crawl sway targets (the CoM
+    offsets toward each support triangle's centroid) are g times the full sway's, lateral only."""
+    from wholebody.scenarios.locomotion import run_gait, sway_options
+    robot = quadrupeds["hyq"]
+    for name in ("crawl", "friction-mismatch"):
+        params = {p.name: p for p in get_scenario(name).parameters}
+        assert params["sway_gain"].default == 1.0
+    full = run_gait(robot, "passive", "crawl", duration=0.02).controller.planner.trunk.sway
+    half = run_gait(robot, "passive", "crawl", duration=0.02,
+                    planner_options=sway_options({"sway_gain": 0.5})).controller.planner.trunk.sway
+    np.testing.assert_allclose(half.targets, 0.5 * full.targets, atol=1e-12)
+    assert np.all(full.targets[:, 0] == 0.0) and np.abs(full.targets[:, 1]).min() > 0.01

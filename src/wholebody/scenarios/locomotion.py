@@ -55,6 +55,17 @@ TRUNK_GAINS = (
 )
 
 
+#: the crawl's lateral sway (:class:`~wholebody.planning.trunk.CrawlSway`) as a parameter
+SWAY_GAIN = Parameter("sway_gain", 1.0, "crawl: lateral CoM sway toward the centroid of the "
+                      "three stance feet (1: onto its lateral coordinate, 0: no sway); a gentler "
+                      "sway asks less lateral acceleration of the trunk", low=0.0, high=1.0)
+
+
+def sway_options(params: dict) -> dict:
+    """The planner options of :data:`SWAY_GAIN` (missing: the default)."""
+    return {"sway_gain": (0.0, params.get(SWAY_GAIN.name, SWAY_GAIN.default))}
+
+
 def trunk_gains(params: dict) -> dict:
     """Keyword arguments of :meth:`TrunkImpedance.for_robot` from the :data:`TRUNK_GAINS`
     parameters (missing ones at their defaults; a frequency of 0 keeps the robot-relative
