@@ -1,7 +1,7 @@
-"""The humanoid scenarios on the humanoid presets besides talos14 — romeo (40 kg, 13 DoF, soles
+"""The humanoid scenarios on every humanoid preset — talos14, romeo (40 kg, 13 DoF, soles
 off-centre on their frames) and the full 32-DoF talos — on their defaults: pushes given as a
 velocity change from the four sides with both momentum gains, and single support with the pushes
-scaled to the robot's mass. Judged by the simulator: the impulse it applied, the feet in place,
+scaled to the robot's mass (talos14's in tests/closed_loop/test_single_support.py). Judged by the simulator: the impulse it applied, the feet in place,
 the CoG back."""
 
 import numpy as np
@@ -18,7 +18,7 @@ HUMANOIDS = ("romeo", "talos")
 
 @pytest.mark.parametrize("location", ["front", "back", "left", "right"])
 @pytest.mark.parametrize("controller", ["pd", "lqr"])
-@pytest.mark.parametrize("name", HUMANOIDS)
+@pytest.mark.parametrize("name", ("talos14", *HUMANOIDS))
 def test_recovers_a_push_of_dv_0_1(robots, name, location, controller):
     robot = robots[name]
     result = get_scenario("push").run(robot, controller, {"dv": "0.1", "location": location})
