@@ -73,7 +73,7 @@ def test_crawl_verdicts_follow_the_scenario_claim():
     assert crawl.evaluate(summary(0.45, 0.42, True))[1] == "reproduced"
     assert crawl.evaluate(summary(0.3, 0.2, False))[1] == "partly"
     ours, verdict = crawl.evaluate(summary(-0.03, -0.04, False))
-    assert verdict == "not reproduced" and "-3 % lower" in ours
+    assert verdict == "not reproduced" and "3 % higher" in ours
 
 
 def test_table3_verdict_compares_with_the_paper_per_point():
