@@ -1,4 +1,5 @@
-"""Command line: ``wholebody robots | check-robot ROBOT | scenarios | run SCENARIO | sweep``.
+"""Command line: ``wholebody robots | check-robot ROBOT | scenarios | run SCENARIO | sweep |
+report``.
 
 Exit codes: 0 success; 1 the scenario ran but did not meet its success criterion; 2 bad usage
 (unknown robot, scenario, controller or parameter; a parameter value outside its declared range;
@@ -305,6 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .sweep.command import add_parser as add_sweep_parser  # exit codes: sweep/command.py
     add_sweep_parser(sub)
+    from .report.command import add_parser as add_report_parser  # exit codes: report/command.py
+    add_report_parser(sub)
     return parser
 
 

@@ -22,6 +22,8 @@ class SweepRun:
     overrides: dict[str, str] = field(default_factory=dict)  # --set and this point's --grid
     grid: dict[str, str] = field(default_factory=dict)  # this point's --grid values (text)
     repeat: int = 0
+    #: where the run writes its summary.json and figures (``wholebody report``); None: nowhere
+    out_dir: str | None = None
 
     def label(self) -> str:
         """``peak_force=100 location=front repeat=0``: the run, for messages."""

@@ -6,6 +6,7 @@ import logging
 import math
 import time
 import traceback
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,10 +45,13 @@ def _plain(value: Any) -> Any:
 
 
 def run_one(run: SweepRun) -> dict[str, Any]:
-    """Run ``run`` (robot loaded by name or path, no output directory) and return its row:
+    """Run ``run`` (robot loaded by name or path; into ``run.out_dir`` if it has one, else no
+    output directory) and return its row:
     the run's identity and ``grid`` values, ``parameters`` (all, resolved), ``success``,
     ``metrics`` (:func:`flatten_metrics`), ``wall_time_s`` and ``error`` (the exception's text if
-    it raised, else None). A simulation that diverges is a completed run that failed, with
+    it raised, else None); with an ``out_dir`` also ``summary``, the whole summary written to
+    ``out_dir/summary.json`` (nested metrics, notes, figures; None if the run raised or
+    diverged). A simulation that diverges is a completed run that failed, with
     ``metrics["diverged_at_s"]``. Never raises (but for Ctrl-C)."""
     from ..robots import load_robot
     from ..scenarios import get_scenario
@@ -58,6 +62,8 @@ def run_one(run: SweepRun) -> dict[str, Any]:
                            "controller": run.controller, "repeat": run.repeat,
                            "grid": dict(run.grid), "parameters": {}, "success": False,
                            "metrics": {}, "error": None}
+    if run.out_dir is not None:
+        row["summary"] = None
     try:
         scenario = get_scenario(run.scenario)
         robot = load_robot(run.robot)
@@ -66,12 +72,15 @@ def run_one(run: SweepRun) -> dict[str, Any]:
         row["parameters"] = {k: _plain(v) for k, v in params.items()}
         row["grid"] = {k: _plain(params[k]) for k in run.grid}
         try:
-            result = scenario.run(robot, run.controller, run.overrides, out_dir=None)
+            result = scenario.run(robot, run.controller, run.overrides,
+                                  out_dir=None if run.out_dir is None else Path(run.out_dir))
         except SimulationDiverged as exc:
             row["metrics"] = {"diverged_at_s": float(exc.t)}
         else:
             row["success"] = bool(result.success)
             row["metrics"] = flatten_metrics(result.metrics)
+            if run.out_dir is not None:
+                row["summary"] = result.summary()
     except Exception as exc:  # noqa: BLE001 - a run's error is a result of the sweep
         row["error"] = f"{type(exc).__name__}: {exc}"
         log.debug("sweep run %d (%s) raised:\n%s", run.index, run.label(), traceback.format_exc())
