@@ -37,14 +37,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from ..scenarios.measures import MAX_SLIP_M, MAX_TILT_DEG
+
 REPRODUCED, PARTLY, NOT_REPRODUCED, OURS, ERROR = (
     "reproduced", "partly", "not reproduced", "ours", "error")
 VERDICTS = (REPRODUCED, PARTLY, NOT_REPRODUCED, OURS, ERROR)
 
 PAPERS = {"herzog2016": "Herzog et al. 2016", "fahmi2019": "Fahmi et al. 2019"}
-
-#: the survival thresholds of the humanoid scenarios (wholebody.scenarios.measures)
-MAX_TILT_DEG, MAX_SLIP_M = 2.0, 0.01
 
 Summary = dict[str, Any]
 VerdictFunction = Callable[[Summary], tuple[str, str]]
