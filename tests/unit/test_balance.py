@@ -205,3 +205,27 @@ def test_push_series_hands_every_controller_option_to_its_trials(monkeypatch):
     (p,) = seen
     assert {o.name: p[o.name] for o in CONTROLLER_PARAMETERS} == {
         o.name: params[o.name] for o in CONTROLLER_PARAMETERS}
+
+
+def test_single_support_takes_the_pd_gains(robots):
+    """``single-support --set pd_stiffness/pd_damping``: every stack of the contact switch (double
+    support, single support, leg swinging) has eq. 22's gains from the parameters; LQR gains
+    refuse them."""
+    from wholebody.control.contact_switch import ContactSwitch
+    from wholebody.scenarios import get_scenario
+    from wholebody.scenarios import single_support
+    from wholebody.scenarios.base import momentum_gains
+
+    robot = robots["talos14"]
+    params = get_scenario("single-support").validate(robot, {"pd_stiffness": "14",
+                                                               "pd_damping": "7.5"})
+    stance, _ = single_support.stance_and_swing(robot, params)
+    ctrl = ContactSwitch(robot, stance, single_support.config(robot, params), gains="pd",
+                         **momentum_gains("pd", params))
+    for stack in (ctrl.double, ctrl.single, ctrl.swinging):
+        task = stack.find("momentum")
+        np.testing.assert_array_equal(np.diag(task.P), [14.0] * 3 + [0.0] * 3)
+        np.testing.assert_array_equal(np.diag(task.D), [7.5] * 3 + [5.0] * 3)
+    with pytest.raises(ValueError, match="only used with gains='pd'"):
+        ContactSwitch(robot, stance, single_support.config(robot, params), gains="lqr",
+                      P=np.full(6, 14.0))

@@ -28,6 +28,7 @@ from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..tasks import ForceRegularizer
+from ..tasks.momentum import momentum_gain
 from ..tasks.motion import JointTrajectoryTask
 from ..variables import Variables
 from .balance import lqr_q
@@ -121,9 +122,14 @@ class ContactSwitch:
     (:func:`~wholebody.control.stacks.table2_stack`)."""
 
     def __init__(self, robot, stance: str, config: ContactSwitchConfig, gains: str = "pd",
-                 torsion: bool = TORSION):
+                 torsion: bool = TORSION, P=None, D=None):
         if gains not in GAINS:
             raise ValueError(f"gains: expected 'pd' or 'lqr', got '{gains}'")
+        if gains != "pd" and (P is not None or D is not None):
+            raise ValueError(f"P, D: eq. 22's gains are only used with gains='pd', got "
+                             f"gains='{gains}'")
+        P = None if P is None else momentum_gain(P, "P")
+        D = None if D is None else momentum_gain(D, "D")
         if len(config.sine_joints) != 2:
             raise ValueError(f"sine_joints: expected two joints, got {list(config.sine_joints)}")
         swing_contact = next(n for n in robot.contact_names if n != stance)
@@ -152,6 +158,12 @@ class ContactSwitch:
         self.swinging.insert(2, self.joint_task, before="posture")
         self.swinging.insert(2, self.swing, before="posture")  # the foot task fades out (handover)
         self.swing_posture = self.swinging.find("posture")
+        for stack in (self.double, self.single, self.swinging):  # eq. 22's gains, PD only
+            momentum = stack.find("momentum")
+            if P is not None:
+                momentum.P = P
+            if D is not None:
+                momentum.D = D
         self._sine_idx = FREE_FLYER_NQ + np.array([robot.joint_names.index(j) for j in self.joints])
         self._held_idx = FREE_FLYER_NQ + np.array([robot.joint_names.index(j)
                                                    for j in config.held_joints], dtype=int)
