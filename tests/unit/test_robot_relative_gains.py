@@ -284,11 +284,11 @@ QUADRUPED_SCENARIOS = ("crawl", "ramp", "friction-mismatch", "joint-limit", "wea
 
 @pytest.mark.parametrize("name", QUADRUPED_SCENARIOS)
 def test_quadruped_scenarios_take_the_trunk_gains(name):
-    """Every quadruped scenario declares the trunk impedance's frequencies and damping ratios;
-    their defaults (0 Hz) keep the robot-relative gains."""
+    """Every quadruped scenario declares the trunk impedance's frequencies and damping ratios
+    (their defaults, 0 Hz, keep the robot-relative gains) and the swing impedance's gains."""
     params = {p.name: p for p in get_scenario(name).parameters}
     for key in ("trunk_frequency", "trunk_damping_ratio", "trunk_angular_frequency",
-                "trunk_angular_damping_ratio"):
+                "trunk_angular_damping_ratio", "swing_stiffness", "swing_damping"):
         assert key in params, (name, key)
     assert params["trunk_frequency"].default == 0.0
     with pytest.raises(ValueError, match="--set trunk_frequency"):
@@ -296,20 +296,22 @@ def test_quadruped_scenarios_take_the_trunk_gains(name):
 
 
 def test_trunk_gains_reach_the_controller_in_closed_loop(quadrupeds):
-    """``--set trunk_frequency=2 --set trunk_angular_frequency=3``: the passive WBC that
-    run_gait builds has K_x = m (2 pi 2)^2 and K_theta = I (2 pi 3)^2 (I summed body by body here);
-    without them, the robot-relative defaults."""
-    from wholebody.scenarios.locomotion import run_gait, trunk_gains as scenario_trunk_gains
+    """``--set trunk_frequency=2 --set trunk_angular_frequency=3 --set swing_stiffness=900``:
+    the passive WBC that run_gait builds has K_x = m (2 pi 2)^2 and K_theta = I (2 pi 3)^2 (I
+    summed body by body here) and K_sw = 900; without them, the robot-relative defaults."""
+    from wholebody.scenarios.locomotion import run_gait, wbc_gains
     robot = quadrupeds["go1"]
     params = {"trunk_frequency": 2.0, "trunk_damping_ratio": 0.7,
-              "trunk_angular_frequency": 3.0, "trunk_angular_damping_ratio": 1.0}
-    run = run_gait(robot, "passive", "stand", duration=0.02, trunk=scenario_trunk_gains(params))
+              "trunk_angular_frequency": 3.0, "trunk_angular_damping_ratio": 1.0,
+              "swing_stiffness": 900.0, "swing_damping": 15.0}
+    run = run_gait(robot, "passive", "stand", duration=0.02, gains=wbc_gains(params))
+    assert (run.controller.swing.K, run.controller.swing.D) == (900.0, 15.0)
     imp = run.controller.impedance
     m, inertia = robot.mass, np.trace(centroidal_inertia_by_bodies(robot)) / 3
     np.testing.assert_allclose(imp.K_x, m * (2 * math.pi * 2.0) ** 2, rtol=1e-9)
     np.testing.assert_allclose(imp.D_x, 2 * 0.7 * m * 2 * math.pi * 2.0, rtol=1e-9)
     np.testing.assert_allclose(imp.K_theta, inertia * (2 * math.pi * 3.0) ** 2, rtol=1e-9)
-    default = run_gait(robot, "passive", "stand", duration=0.02, trunk=scenario_trunk_gains({}))
+    default = run_gait(robot, "passive", "stand", duration=0.02, gains=wbc_gains({}))
     np.testing.assert_allclose(default.controller.impedance.K_x,
                                TrunkImpedance.for_robot(robot).K_x, rtol=1e-12)
 

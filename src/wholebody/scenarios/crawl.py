@@ -23,8 +23,8 @@ from ..tasks.wrench import TrunkImpedance
 from ..report.locomotion_figures import crawl_tracking_figure
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (GAIT, SWAY_GAIN, TRUNK_GAINS, PaperSpeed, check_gait, check_quadruped,
-                         run_gait, sway_options, trunk_gains)
+from .locomotion import (GAIT, SWAY_GAIN, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
+                         run_gait, sway_options, trunk_gains, wbc_gains)
 
 PARAMETERS = (
     Parameter("speed_start", PaperSpeed(0.04), "forward speed at the start of the ramp (m/s)",
@@ -41,7 +41,7 @@ PARAMETERS = (
               "feed-forward W_ff = M_com v̇_com,d (as the passive WBC does); false: feedback and "
               "gravity compensation only"),
     SWAY_GAIN,
-    *TRUNK_GAINS,
+    *WBC_GAINS,
 )
 
 CONTROLLER_CHOICES = ("passive+quasi-static", "passive", "quasi-static")
@@ -70,7 +70,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                    robot, feedforward=params["baseline_feedforward"], **trunk_gains(params))}}
     runs = {name: run_gait(robot, name, params["gait"], command, params["duration"],
                            progress=progress, observers=observers,
-                           controller_options=options[name], trunk=trunk_gains(params),
+                           controller_options=options[name], gains=wbc_gains(params),
                            planner_options=sway_options(params))
             for name in names}
     expected = commanded_distance(params)

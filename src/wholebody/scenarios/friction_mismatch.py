@@ -43,9 +43,9 @@ from ..report.locomotion_figures import friction_mismatch_figure
 from ..sim.environment import Environment
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import IMPACT_SKIP, outcome, settled_stance, slip_events
-from .locomotion import (CRAWL_SPEED, RUN_DURATION, SWAY_GAIN, TRUNK_GAINS, PaperSpeed,
+from .locomotion import (CRAWL_SPEED, RUN_DURATION, SWAY_GAIN, WBC_GAINS, PaperSpeed,
                          check_positive, check_quadruped, paper_length, run_gait, steady_command,
-                         sway_options, trunk_gains)
+                         sway_options, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ PARAMETERS = (
     Parameter("slip_bound", paper_length(0.25), "largest per-stance slip (m) accepted as 'bounded'",
               low=0.0, low_open=True, high=Parameter.H),
     SWAY_GAIN,
-    *TRUNK_GAINS,
+    *WBC_GAINS,
 )
 
 
@@ -101,15 +101,16 @@ def validate(robot, params: dict) -> None:
 
 
 def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, duration: float,
-              K_st: float, D_st: float, progress: bool = False, trunk: dict | None = None,
+              K_st: float, D_st: float, progress: bool = False, gains: dict | None = None,
               sway_gain: float = 1.0):
     """One passive-WBC crawl at constant ``speed`` on a floor of ``floor_mu`` (see module doc);
-    ``trunk``: the trunk impedance's gains (:func:`~wholebody.scenarios.locomotion.trunk_gains`),
+    ``gains``: the trunk and swing impedances' gains
+    (:func:`~wholebody.scenarios.locomotion.wbc_gains`),
     ``sway_gain`` the crawl's lateral sway (:data:`~wholebody.scenarios.locomotion.SWAY_GAIN`)."""
     return run_gait(robot, "passive", "crawl", steady_command(speed), duration,
                     environment=Environment(floor_friction=floor_mu),
                     controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st},
-                    progress=progress, trunk=trunk,
+                    progress=progress, gains=gains,
                     planner_options=sway_options({SWAY_GAIN.name: sway_gain}))
 
 
@@ -130,7 +131,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                  name, mu, speed, K)
         floor = p["controller_mu"] if name.startswith("reference") else p["floor_mu"]
         runs[name] = crawl_run(robot, floor, mu, speed, p["duration"], K, D, progress,
-                               trunk_gains(p), p["sway_gain"])
+                               wbc_gains(p), p["sway_gain"])
         metrics[name] = {"floor_mu": floor, "controller_mu": mu, "speed_m_s": speed, "K_st": K, "D_st": D,
                          **slip_metrics(runs[name], p, _commanded(speed, p["duration"]))}
     m, free = metrics["mismatch"], metrics["mismatch, no stance task"]

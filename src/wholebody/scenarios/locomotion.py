@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ..control.passive import PassiveWBC
+from ..control.passive import PassiveWBC, SwingGains
 from ..control.quasi_static import QuasiStaticController
 from ..planning.gait import CRAWL_PERIOD, TROT_PERIOD, crawl, stand, trot
 from ..planning.planner import GaitPlanner
@@ -53,6 +53,17 @@ TRUNK_GAINS = (
               "damping ratio of the orientation loop (the paper's D_theta on HyQ)", low=0.0,
               high=100.0),
 )
+
+
+#: the swing impedance of eq. 6 (the passive WBC; accelerations, the same on every robot)
+SWING_GAINS = (
+    Parameter("swing_stiffness", SwingGains.K, "passive WBC swing impedance (eq. 6): K_sw, foot "
+              "acceleration per metre of error (1/s^2; the paper's 2000)", low=0.0, high=1e6),
+    Parameter("swing_damping", SwingGains.D, "passive WBC swing impedance: D_sw (1/s; the "
+              "paper's 20)", low=0.0, high=1e4),
+)
+#: every gain of the quadruped controllers a scenario takes (:func:`wbc_gains`)
+WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS)
 
 
 #: the crawl's lateral sway (:class:`~wholebody.planning.trunk.CrawlSway`) as a parameter
@@ -295,13 +306,21 @@ class GaitRun:
         return worst
 
 
+def wbc_gains(params: dict) -> dict:
+    """The :data:`WBC_GAINS` parameters (missing ones at their defaults) as ``run_gait``'s
+    ``gains``: ``{"impedance": trunk_gains(params), "swing": (K_sw, D_sw)}``."""
+    get = {p.name: params.get(p.name, p.default) for p in SWING_GAINS}
+    return {"impedance": trunk_gains(params),
+            "swing": (get["swing_stiffness"], get["swing_damping"])}
+
+
 def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              command: VelocityCommand | None = None, duration: float = 10.0,
              environment: Environment | None = None, terrain: Terrain | None = None,
              control_period: float = 0.004, controller_options: dict | None = None,
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
              on_cycle=None, planner=None, observers=(), q0=None,
-             trunk: dict | None = None) -> GaitRun:
+             gains: dict | None = None) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
@@ -310,8 +329,9 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     instead of building one; ``gait``, ``command``, ``terrain``, ``planner_options`` and ``start``
     are then ignored. ``observers`` watch the simulation (labelled with the controller's name).
     ``q0``: the initial configuration (default: the standing posture ``robot.q_ref``), resting on
-    the support surface; the planner starts from it. ``trunk``: the trunk impedance's gains
-    (:func:`trunk_gains`), unless ``controller_options`` gives an ``impedance``.
+    the support surface; the planner starts from it. ``gains``: the trunk and swing impedances'
+    gains (:func:`wbc_gains`), unless ``controller_options`` gives an ``impedance`` or a
+    ``swing``.
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()
@@ -320,8 +340,10 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
                                         q=q0, t0=0.0,
                                         **{**gait_options(robot), **(planner_options or {})})
     options = dict(controller_options or {})
-    if trunk is not None and "impedance" not in options:
-        options["impedance"] = TrunkImpedance.for_robot(robot, **trunk)
+    if gains is not None and "impedance" not in options:
+        options["impedance"] = TrunkImpedance.for_robot(robot, **gains["impedance"])
+    if gains is not None and controller == "passive" and "swing" not in options:
+        options["swing"] = SwingGains(*gains["swing"])
     if controller == "passive":
         options.setdefault("control_period", control_period)
     ctrl = make_controller(robot, controller, planner, **options)

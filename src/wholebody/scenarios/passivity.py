@@ -52,8 +52,8 @@ from ..report.locomotion_figures import passivity_figure
 from ..tasks.wrench import TrunkImpedance
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
-from .locomotion import (DURATION, GAIT, TRUNK_GAINS, PaperSpeed, check_gait, check_quadruped,
-                         gait_options, make_schedule, ramped_command, run_gait, trunk_gains)
+from .locomotion import (DURATION, GAIT, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
+                         gait_options, make_schedule, ramped_command, run_gait, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -65,7 +65,7 @@ PARAMETERS = (
     Parameter("speed", PaperSpeed(0.1), "forward speed after the ramp-up (m/s)", low=0.0, high=5.0),
     DURATION,
     Parameter("feedforward", False, "keep the feed-forward terms on (Assumption 2 needs them off)"),
-    *TRUNK_GAINS,
+    *WBC_GAINS,
 )
 
 
@@ -162,15 +162,17 @@ def validate(robot, params: dict) -> None:
 
 
 def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10.0,
-            feedforward: bool = False, progress: bool = False, trunk: dict | None = None):
-    """Run the gait and return (run, storage arrays, energy balance); ``trunk``: the trunk
-    impedance's gains (:func:`~wholebody.scenarios.locomotion.trunk_gains`)."""
+            feedforward: bool = False, progress: bool = False, gains: dict | None = None):
+    """Run the gait and return (run, storage arrays, energy balance); ``gains``: the trunk and
+    swing impedances' gains (:func:`~wholebody.scenarios.locomotion.wbc_gains`)."""
     planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, 1.0), ramped_command(speed),
                                     **gait_options(robot))
     if not feedforward:
         planner = SwingFeedForwardOff(planner)
-    impedance = TrunkImpedance.for_robot(robot, feedforward=feedforward, **(trunk or {}))
-    swing = SwingGains()
+    gains = gains or {}
+    impedance = TrunkImpedance.for_robot(robot, feedforward=feedforward,
+                                         **gains.get("impedance", {}))
+    swing = SwingGains(*gains["swing"]) if "swing" in gains else SwingGains()
     meter = StorageMeter(robot, impedance, swing.K, swing.D)
     run = run_gait(robot, "passive", duration=duration, planner=planner, progress=progress,
                    controller_options={"impedance": impedance, "swing": swing},
@@ -183,7 +185,7 @@ def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     gait_run, storage, balance = measure(robot, params["gait"], params["speed"],
                                          params["duration"], params["feedforward"], progress,
-                                         trunk_gains(params))
+                                         wbc_gains(params))
     stats = summarize(balance, t_from=0.5)
     we = storage["wrench_error"]
     metrics = {

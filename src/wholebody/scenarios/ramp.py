@@ -32,9 +32,8 @@ from ..planning.courses import Course, CoursePlanner, gap_course, ramp_course
 from ..report.locomotion_figures import course_side_view, ramp_figure
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (TRUNK_GAINS, PaperSpeed, check_quadruped, course_environment,
-                         gait_options, make_schedule, paper_length, ramped_command, run_gait,
-                         trunk_gains)
+from .locomotion import (WBC_GAINS, PaperSpeed, check_quadruped, course_environment, gait_options,
+                         make_schedule, paper_length, ramped_command, run_gait, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +57,7 @@ PARAMETERS = (
               low=0.01, high=5.0, special=(0.0,)),
     Parameter("duration", 0.0, "simulated time (s) (0: long enough to cross the course)",
               low=0.0, high=Parameter.MAX_TIME),
-    *TRUNK_GAINS,
+    *WBC_GAINS,
 )
 
 
@@ -123,7 +122,7 @@ def crossing(robot, params: dict, progress: bool = False, observers=()):
     rec = _Recorder()
     run = run_gait(robot, "passive", duration=duration, environment=course_environment(course),
                    planner=planner, on_cycle=rec, progress=progress, observers=observers,
-                   trunk=trunk_gains(p))
+                   gains=wbc_gains(p))
     return run, course, rec, planner, p, duration
 
 

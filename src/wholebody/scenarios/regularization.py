@@ -34,8 +34,8 @@ import pinocchio as pin
 from ..report.locomotion_figures import regularization_figure
 from ..robots.roles import joint_axis, leg_joints
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
-from .locomotion import (TRUNK_GAINS, PaperSpeed, check_gait, check_quadruped,
-                         parse_positive_floats, run_gait, steady_command, trunk_gains)
+from .locomotion import (WBC_GAINS, PaperSpeed, check_gait, check_quadruped, parse_positive_floats,
+                         run_gait, steady_command, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +50,7 @@ PARAMETERS = (
               **TIME_SPAN),
     Parameter("window", 0.5, "averaging window at the end of each run (s)",
               **TIME_SPAN),
-    *TRUNK_GAINS,
+    *WBC_GAINS,
 )
 
 
@@ -113,7 +113,7 @@ def regularization_run(robot, scheme: str, weights: np.ndarray | None, params: d
         options["torque_weights"] = weights
     command = steady_command(params["speed"]) if params["gait"] == "crawl" else None
     return run_gait(robot, "passive", params["gait"], command, params["duration"],
-                    controller_options=options, progress=progress, trunk=trunk_gains(params))
+                    controller_options=options, progress=progress, gains=wbc_gains(params))
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:

@@ -40,9 +40,9 @@ from ..report.locomotion_figures import unstable_foothold_figure
 from ..sim.environment import Box, Environment, Platform
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (DURATION, GAIT, TRUNK_GAINS, PaperSpeed, check_gait, check_quadruped,
+from .locomotion import (DURATION, GAIT, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
                          gait_options, make_schedule, paper_length, ramped_command, run_gait,
-                         trunk_gains)
+                         wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ PARAMETERS = (
     Parameter("speed", PaperSpeed(0.1), "crawl speed after a 2 s ramp-up (m/s)", low=0.0, high=5.0),
     DURATION,
     GAIT,
-    *TRUNK_GAINS,
+    *WBC_GAINS,
 )
 
 
@@ -139,7 +139,7 @@ def walk(robot, params: dict, moving: bool = True, progress: bool = False):
     env = environment(point, params, moving)
     run = run_gait(robot, "passive", duration=params["duration"], environment=env,
                    planner=_planner(robot, params), progress=progress,
-                   trunk=trunk_gains(params))
+                   gains=wbc_gains(params))
     return run, point, t_td
 
 

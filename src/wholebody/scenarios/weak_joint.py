@@ -51,9 +51,9 @@ from ..report.locomotion_figures import weak_joint_figure
 from ..robots.roles import contact_roles, foot_of_joint, leg_joints, pitch_joints
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
-from .locomotion import (CRAWL_SPEED, RUN_DURATION, TRUNK_GAINS, check_joint, check_positive,
+from .locomotion import (CRAWL_SPEED, RUN_DURATION, WBC_GAINS, check_joint, check_positive,
                          check_quadruped, gait_options, make_schedule, parse_positive_floats,
-                         run_gait, steady_command, trunk_gains)
+                         run_gait, steady_command, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +71,7 @@ PARAMETERS = (
               low=0.0, low_open=True, items=float),
     Parameter("trunk_tolerance", 0.005, "allowed increase of the trunk RMS errors (m, rad)",
               low=0.0, low_open=True, high=1.0),
-    *TRUNK_GAINS,
+    *WBC_GAINS,
 )
 
 
@@ -242,7 +242,7 @@ def post_solve_clipped(solution) -> bool:
 
 def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
                     progress: bool = False, q0=None, controller_options: dict | None = None,
-                    trunk: dict | None = None) -> dict:
+                    gains: dict | None = None) -> dict:
     """The nominal crawl and one crawl per torque limit of ``joint`` (see module docstring), from
     the configuration ``q0`` (default: the standing posture): name -> :class:`GaitRun`, each with
     ``post_solve_clips`` (cycles counted by :func:`post_solve_clipped`) and ``sim_saturation_max``
@@ -256,7 +256,7 @@ def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
         seen = []
         runs[name] = run_gait(robot, "passive", "crawl", command, duration,
                               controller_options={**(controller_options or {}), **options},
-                              progress=progress, q0=q0, trunk=trunk,
+                              progress=progress, q0=q0, gains=gains,
                               on_cycle=lambda t, res, ctrl, sim, c=seen: c.append(
                                   (post_solve_clipped(res), float(np.abs(sim.last_clipped).max()))))
         runs[name].post_solve_clips = int(sum(c for c, _ in seen))
@@ -303,7 +303,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                                                        default=None),
                           "infeasible_supports": sum(x is None for x in lp)}
     runs = weak_joint_runs(robot, joint, limits, p["speed"], p["duration"], progress, q0=q0,
-                           trunk=trunk_gains(p))
+                           gains=wbc_gains(p))
     j = robot.joint_names.index(joint)
     metrics = {"static_lp": statics}
     for name, r in runs.items():
