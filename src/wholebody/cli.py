@@ -16,7 +16,6 @@ import json
 import logging
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -136,18 +135,6 @@ def _print_metrics(metrics: dict, indent: int) -> None:
         print(f"{pad}{key}: {value}")
 
 
-def _prepare_output(out_dir: Path) -> Path:
-    """Make ``out_dir``, check that a file can be written in it and remove a summary.json left by
-    an earlier run (so that a run cut short leaves none of its predecessor's); OSError otherwise."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=out_dir, prefix=".wholebody-write-test-"):
-        pass
-    summary = out_dir / "summary.json"
-    if summary.exists() or summary.is_symlink():
-        summary.unlink()
-    return summary
-
-
 def _report_cut_short(result, out_dir: Path, what: str, mark: str = "") -> None:
     """Write the summary of a run that ended early and say so on stderr (also if it cannot be
     written)."""
@@ -160,6 +147,7 @@ def _report_cut_short(result, out_dir: Path, what: str, mark: str = "") -> None:
 
 
 def _cmd_run(args) -> int:
+    from .outputs import prepare_output
     from .robots.check import load_fit_robot
     from .scenarios import get_scenario
     from .scenarios.base import ScenarioResult, parse_sets
@@ -179,9 +167,7 @@ def _cmd_run(args) -> int:
         return _usage_error(exc)
     out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"
     try:
-        if out_dir.exists() and not out_dir.is_dir():
-            raise NotADirectoryError(0, "not a directory")
-        _prepare_output(out_dir)
+        prepare_output(out_dir, stale=("summary.json",))
     except OSError as exc:
         return _usage_error(f"--out {out_dir}: cannot write there ({exc.strerror or exc})")
     controller = args.controller or scenario.controllers[0]

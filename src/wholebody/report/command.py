@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 from pathlib import Path
+
+from ..sweep.executors import add_executor_options
 
 EXIT_OK, EXIT_RUN_RAISED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 DEFAULT_DOCS = Path("docs") / "results.md"
@@ -29,12 +30,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--only", metavar="ID[,ID...]", help="only these claims (ids as in the table)")
     p.add_argument("--out", default="results/report",
                    help="output directory (default: results/report)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N",
-                       help="processes of the local pool (default: one per core)")
-    where.add_argument("--ray", metavar="ADDRESS", help="run on the Ray cluster at ADDRESS, or "
-                                                         "'local' for a new local instance")
-    where.add_argument("--serial", action="store_true", help="every run in this process")
+    add_executor_options(p)
     p.add_argument("--update-docs", action="store_true",
                    help="also rewrite the generated table of each paper in the docs file "
                         "(between its <!-- report:PAPER:begin/end --> markers)")
@@ -49,15 +45,8 @@ def _usage_error(message) -> int:
     return EXIT_USAGE
 
 
-def _check_out(out_dir: Path) -> None:
-    if out_dir.exists() and not out_dir.is_dir():
-        raise NotADirectoryError(0, "not a directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=out_dir, prefix=".wholebody-write-test-"):
-        pass
-
-
 def command(args) -> int:
+    from ..outputs import prepare_output
     from ..sweep.executors import make_executor
     from . import runner
     from .claims import PAPERS, claims_for, select
@@ -67,8 +56,6 @@ def command(args) -> int:
         if args.only is not None and not only:
             raise ValueError("--only: no claim id given")
         claims = select(args.paper, only)
-        if args.workers is not None and args.workers < 1:
-            raise ValueError(f"--workers: expected a whole number >= 1, got {args.workers}")
         docs = Path(args.docs)
         if args.update_docs:
             text = docs.read_text(encoding="utf-8")
@@ -78,7 +65,7 @@ def command(args) -> int:
         return _usage_error(exc)
     out_dir = Path(args.out)
     try:
-        _check_out(out_dir)
+        prepare_output(out_dir)
     except OSError as exc:
         return _usage_error(f"--out {out_dir}: cannot write there ({exc.strerror or exc})")
     try:

@@ -130,8 +130,8 @@ def _roles(robot, report: RobotCheck) -> None:
         ambiguous = False
     kinds = sorted({c.spec.type for c in robot.contacts})
     if len(roles) == 4:
-        short = {name: len(leg_joints(robot, name)) for name in roles
-                 if len(leg_joints(robot, name)) < 3}
+        joints = {name: len(leg_joints(robot, name)) for name in roles}
+        short = {name: n for name, n in joints.items() if n < 3}
         if not short:
             report.add("note", "class", "a quadruped (four point feet): the quadruped scenarios "
                        "(crawl, ramp, ...) and stand apply")

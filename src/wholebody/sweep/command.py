@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 import time
 from pathlib import Path
+
+from .executors import add_executor_options
 
 EXIT_OK, EXIT_RUN_RAISED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -35,13 +36,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="a parameter fixed for every run (repeatable)")
     p.add_argument("--repeat", type=int, default=1, metavar="N",
                    help="run every grid point N times (default 1)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N",
-                       help="processes of the local pool (default: one per core)")
-    where.add_argument("--ray", metavar="ADDRESS",
-                       help="run on the Ray cluster at ADDRESS (`ray start --head` prints it; "
-                            "'auto'), or 'local' for a new local instance")
-    where.add_argument("--serial", action="store_true", help="every run in this process")
+    add_executor_options(p)
     p.add_argument("--metric", help="also plot this metric's mean (a column of sweep.csv)")
     p.add_argument("--out", help="output directory, checked to be writable before the runs "
                                  "(default: results/sweep-SCENARIO-ROBOT)")
@@ -53,22 +48,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def _usage_error(message) -> int:
     print(f"wholebody: error: {message}", file=sys.stderr)
     return EXIT_USAGE
-
-
-def _prepare_output(out_dir: Path) -> None:
-    """Make ``out_dir``, check that a file can be written in it and remove the table of an
-    earlier sweep (a sweep cut short leaves none of its predecessor's); OSError otherwise."""
-    from .table import FILES
-
-    if out_dir.exists() and not out_dir.is_dir():
-        raise NotADirectoryError(0, "not a directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=out_dir, prefix=".wholebody-write-test-"):
-        pass
-    for name in FILES:
-        path = out_dir / name
-        if path.exists() or path.is_symlink():
-            path.unlink()
 
 
 class _Progress:
@@ -107,20 +86,19 @@ def _write(out_dir: Path, header: dict, rows: list[dict], grid_keys: list[str],
 
 def command(args) -> int:
     """``wholebody sweep``: validate everything, run, write the table."""
+    from ..outputs import prepare_output
     from ..robots.check import load_fit_robot
     from ..scenarios import get_scenario
     from .executors import make_executor
     from ..scenarios.base import parse_sets
     from .grid import expand, parse_grid, robot_reference
-    from .table import metric_names
+    from .table import FILES, metric_names
     from .worker import run_one
 
     try:  # every usage error surfaces here, before anything runs
         scenario = get_scenario(args.scenario)
         sets = parse_sets(args.set)
         grid = parse_grid(args.grid)
-        if args.workers is not None and args.workers < 1:
-            raise ValueError(f"--workers: expected a whole number >= 1, got {args.workers}")
         controller = args.controller or scenario.controllers[0]
         robot_name = args.robot or scenario.default_robot
         scenario.resolve(sets)
@@ -136,7 +114,7 @@ def command(args) -> int:
     out_dir = (Path(args.out) if args.out else
                Path("results") / f"sweep-{scenario.name}-{robot.name}")
     try:
-        _prepare_output(out_dir)
+        prepare_output(out_dir, stale=FILES)
     except OSError as exc:
         executor.close()
         return _usage_error(f"--out {out_dir}: cannot write there ({exc.strerror or exc})")

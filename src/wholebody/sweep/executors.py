@@ -219,10 +219,24 @@ class RayExecutor(Executor):
         self._owned = False
 
 
+def add_executor_options(parser) -> None:
+    """``--workers N | --ray ADDRESS | --serial`` on an argparse parser (``sweep``, ``report``),
+    read back by :func:`make_executor`."""
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="processes of the local pool (default: one per core)")
+    where.add_argument("--ray", metavar="ADDRESS",
+                       help="run on the Ray cluster at ADDRESS (`ray start --head` prints it; "
+                            "'auto'), or 'local' for a new local instance")
+    where.add_argument("--serial", action="store_true", help="every run in this process")
+
+
 def make_executor(serial: bool = False, workers: int | None = None,
                   ray: str | None = None) -> Executor:
     """The executor of the CLI options: ``--serial``, ``--ray ADDRESS``, else a local pool of
-    ``--workers`` (default one per core)."""
+    ``--workers`` (default one per core; ValueError below 1)."""
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers: expected a whole number >= 1, got {workers}")
     if serial:
         return SerialExecutor()
     if ray is not None:

@@ -49,9 +49,9 @@ def run_one(run: SweepRun) -> dict[str, Any]:
     output directory) and return its row:
     the run's identity and ``grid`` values, ``parameters`` (all, resolved), ``success``,
     ``metrics`` (:func:`flatten_metrics`), ``wall_time_s`` and ``error`` (the exception's text if
-    it raised, else None); with an ``out_dir`` also ``summary``, the whole summary written to
-    ``out_dir/summary.json`` (nested metrics, notes, figures; None if the run raised or
-    diverged). A simulation that diverges is a completed run that failed, with
+    it raised, else None); with an ``out_dir`` (where the scenario writes its figures) also
+    ``summary``, the whole summary for the caller to write (nested metrics, notes, figures; None
+    if the run raised or diverged). A simulation that diverges is a completed run that failed, with
     ``metrics["diverged_at_s"]``. Never raises (but for Ctrl-C)."""
     from ..robots import load_robot
     from ..scenarios import get_scenario
