@@ -366,7 +366,7 @@ class _Program:
             "torque_limits": lambda: robot.na, "joint_acceleration_limits": lambda: robot.na,
             "contact_constraint": lambda: sum(dims), "force_regularizer": lambda: sum(dims),
             "center_of_pressure": lambda: 4 * rect,
-            "friction_cone": lambda: 4 * len(names) + (2 * rect if task.torsion else 0),
+            "friction_cone": lambda: 4 * len(names) + (8 * rect if task.torsion else 0),
             "normal_force_bounds": lambda: len(names), "momentum_pd": lambda: 6,
             "momentum_force": lambda: 6, "com": lambda: len(task.rows_idx),
             "frame": lambda: len(range(6)[FrameTask.MASKS[task.mask]]),

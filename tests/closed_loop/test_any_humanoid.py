@@ -49,3 +49,23 @@ def test_single_support_on_its_defaults(robots, name, controller):
     assert np.all(log["contact_wrenches"][log["t"] > 3.5, swing, 2] == 0.0)
     lo, hi = robot.torque_bounds(robot.q_ref)
     assert np.all(np.abs(log["tau_command"]) <= hi + 1e-9)
+
+
+@pytest.mark.parametrize("which", ["g1", "icub"])
+def test_robots_without_a_preset_recover_a_front_push_with_pd_gains(which):
+    """G1 and iCub of example-robot-data, each described in one dict as docs/robots.md describes
+    it, pushed from the front with dv = 0.1 under eq. 22's PD gains. The demand brings the CoPs
+    to the heels, where a yaw-moment bound alone let the last level squeeze the feet sideways at
+    their friction limit with yaw moments at the bound (soles twisted, the robot fell); with each
+    sole's contact wrench cone the twin carries what is asked and the robot recovers."""
+    import wholebody as wb
+    from conftest import ICUB_RIGHT_LEG_INERTIAS, g1_description, icub_description
+    robot = wb.load_robot(g1_description(armature=0.02) if which == "g1" else
+                          icub_description(inertia_overrides=ICUB_RIGHT_LEG_INERTIAS))
+    result = get_scenario("push").run(robot, "pd", {"dv": "0.1", "location": "front"})
+    m = result.metrics
+    assert result.success and m["failed_cycles"] == 0, m
+    assert m["max_foot_tilt_deg"] < 2.0 and m["max_foot_slip_m"] < 0.005, m
+    arrays = result.log.arrays()
+    impulse = np.trapezoid(np.linalg.norm(arrays["push_force"], axis=1), arrays["t"])
+    assert impulse / robot.mass == pytest.approx(0.1, rel=0.02)

@@ -636,7 +636,8 @@ def test_matrix_gain_names_the_field(robots):
 @pytest.mark.parametrize("backend", ["quadprog", "daqp"])
 def test_tiny_torque_limits_return_a_value(robots, backend):
     """Torque limits scaled to 1e-3 (the robot cannot hold itself): no exception; both engines
-    report the same ok/status; the torque is finite. Quadprog solves the cascade (tasks are
+    report the same ok and, when failing, the same level (DAQP's flag on such a degenerate QP,
+    "infeasible" or "cycling", depends on rounding); the torque is finite. Quadprog solves the cascade (tasks are
     sacrificed, ok): tau within the scaled limits up to the solver's feasibility tolerance (1e-6
     on rows whose values are ~|h_u| ~ 1e2 Nm, plus its relative margins). DAQP without fallback
     fails some level QPs: not ok, and tau clipped into the robot's limits."""
@@ -654,7 +655,7 @@ def test_tiny_torque_limits_return_a_value(robots, backend):
     for i, (q, v) in enumerate(moving_states(robot, 4)):
         a = c_native.solve(q, v)
         b = c_python.solve(q, v)
-        assert (a.ok, a.status) == (b.ok, b.status), i
+        assert (a.ok, a.status.split(":")[0]) == (b.ok, b.status.split(":")[0]), i
         oks.append(a.ok)
         assert np.isfinite(a.tau).all() and np.isfinite(a.qdd).all() and np.isfinite(a.lam).all()
         robot.update(q, v)

@@ -134,22 +134,25 @@ def test_friction_cone_rows_match_geometry(robots):
     assert np.any(rows.lam @ outside > rows.upper)
 
 
-def test_friction_cone_torsion_bounds_the_disc_friction_moment(robots):
-    """torsion=True: a sole may carry a yaw moment about its normal up to the friction moment of
-    its inscribed disc under uniform pressure — computed here by integrating mu p r over the disc —
-    and not beyond; without torsion the yaw moment is free (the papers' 4 rows)."""
+def test_friction_cone_torsion_bounds_the_yaw_moment_by_the_corner_friction(robots):
+    """torsion=True: with the CoP at the centre of a flat sole and no tangential force, the yaw
+    moment may reach what friction at the corners under equal loads gives — mu f_n/4 times the
+    corners' distances summed over the directions of a rigid rotation, here mu f_n (X + Y) for
+    a square pyramid (each corner's tangential force mu f_n/4 along both sole axes) — and not
+    beyond; without torsion the yaw moment is free (the papers' 4 rows)."""
     robot = robots["talos14"]
     robot.update(robot.q_ref, np.zeros(robot.nv))
     variables = Variables(robot, ["left_sole"])
     mu, fn = 0.6, 400.0
-    normal = np.array([0.1, 0.2, 1.0]) / np.linalg.norm([0.1, 0.2, 1.0])
-    rho = min(robot.contact("left_sole").spec.half_size)
-    r = np.linspace(0.0, rho, 20001)  # uniform pressure p = fn / (pi rho^2) on the disc
-    moment = np.trapezoid(mu * fn / (np.pi * rho ** 2) * r * 2 * np.pi * r, r)
-    assert moment == pytest.approx(2.0 / 3.0 * mu * rho * fn, rel=1e-6)
+    R = robot.data.oMf[robot.contact("left_sole").frame_id].rotation
+    hx, hy = robot.contact("left_sole").spec.half_size
+    # corners at (±hx, ±hy): the square pyramid's corner force (±mu, ±mu) fn/4 that turns about
+    # the normal gives x fy - y fx = mu fn/4 (hx + hy) per corner
+    moment = 4 * (mu * fn / 4) * (hx + hy)
+    normal = R[:, 2]
     with_torsion = FrictionCone(mu, normals={"left_sole": normal}, torsion=True).rows(robot, variables)
     plain = FrictionCone(mu, normals={"left_sole": normal}).rows(robot, variables)
-    assert with_torsion.lam.shape[0] == 6 and plain.lam.shape[0] == 4
+    assert with_torsion.lam.shape[0] == 12 and plain.lam.shape[0] == 4
     for scale, holds in ((0.99, True), (1.01, False), (-0.99, True), (-1.01, False)):
         wrench = np.concatenate([fn * normal, scale * moment * normal])
         assert bool(np.all(with_torsion.lam @ wrench <= with_torsion.upper)) == holds

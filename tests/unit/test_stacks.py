@@ -35,10 +35,10 @@ def test_table2_on_talos14(robots):
     stack = table2_stack(robot)
     rows = _rows_of(stack.table(robot, variables))
     # Table 2: 6 eq Newton-Euler, 2x14 ineq torque limits (two-sided rows), 2x6 eq contacts,
-    # 2x4 ineq CoP, 2x(4+2) ineq friction (pyramid + torsion), 14 two-sided joint acceleration
+    # 2x4 ineq CoP, 2x(4+8) ineq friction (pyramid + the wrench cone's yaw-moment rows), 14 two-sided joint acceleration
     # limits, 6 eq momentum, 14+6 eq posture, 2x6 eq force regulariser
     expected = [("6 eq", "newton-euler"), ("14 ineq", "torque limits"), ("12 eq", "contacts"),
-                ("8 ineq", "center of pressure"), ("12 ineq", "friction"),
+                ("8 ineq", "center of pressure"), ("24 ineq", "friction"),
                 ("14 ineq", "joint acceleration limits"), ("6 eq", "momentum"),
                 ("20 eq", "posture"), ("12 eq", "force regularizer")]
     assert rows == expected
@@ -79,7 +79,7 @@ def test_table4_single_support_with_lqr_placeholder(robots):
     variables = Variables(robot, ["left_sole"])
     stack = table4_stack(robot, ["left_sole"], ["right_sole_link"])
     rows = _rows_of(stack.table(robot, variables))
-    assert rows[2:5] == [("4 ineq", "center of pressure"), ("6 ineq", "friction"),
+    assert rows[2:5] == [("4 ineq", "center of pressure"), ("12 ineq", "friction"),
                          ("14 ineq", "joint acceleration limits")]
     plain = _rows_of(table4_stack(robot, ["left_sole"], ["right_sole_link"], torsion=False)
                      .table(robot, variables))

@@ -44,8 +44,8 @@ def _mu(robot: Robot, mu: float | None) -> float:
 
 
 def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None, torsion: bool):
-    """CoP (weight 1e4, as the paper favours CoPs), friction pyramid (with the torsional rows on
-    rectangle contacts if ``torsion``), joint acceleration limits."""
+    """CoP (weight 1e4, as the paper favours CoPs), friction pyramid (with the wrench cone's
+    yaw-moment rows on rectangle contacts if ``torsion``), joint acceleration limits."""
     if not isinstance(torsion, (bool, np.bool_)):
         raise TypeError(f"torsion: expected a bool, got {torsion!r}")
     rows = []
@@ -58,12 +58,15 @@ def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None,
 
 
 #: Whether the stacks bound the soles' yaw moments (:class:`~wholebody.tasks.FrictionCone`'s
-#: ``torsion``: |tau.n| <= (2/3) min(half-size) mu f.n, 2 rows per rectangle contact). Not in the
-#: paper's tables, on by default here: without the bound nothing in Tables 1/2/4 limits the yaw
-#: moments, and when the CoP rows bind (they are written in the measured sole axes, so a fraction
-#: of a degree of tilt couples them to yaw) the cascade puts large opposite yaw moments on the two
-#: soles (~100 Nm, up to 2500 Nm on talos14) and the robot falls (docs/results.md, Fig. 10 rows).
-#: ``torsion=False`` gives the papers' 4 rows per contact.
+#: ``torsion``: the yaw-moment rows of each sole's contact wrench cone, Caron et al. 2015, 8 rows
+#: per rectangle contact; with the pyramid and the CoP rows the wrenches that friction at the
+#: sole's corners can carry). Not in the paper's tables, on by default here: without them nothing
+#: in Tables 1/2/4 limits the yaw moments, and when the CoP rows bind (they are written in the
+#: measured sole axes, so a fraction of a degree of tilt couples them to yaw) the cascade puts
+#: large opposite yaw moments on the two soles (~100 Nm, up to 2500 Nm on talos14) and the robot
+#: falls (docs/results.md, Fig. 10 rows); a bound on the yaw moment alone still lets a level
+#: squeeze the feet sideways at their friction limit with the CoPs in the corners, which no sole
+#: carries (docs/results.md, other robots). ``torsion=False`` gives the papers' 4 rows per contact.
 TORSION = True
 
 #: Weight of the angular rows of Table 2's momentum task (see :func:`table2_stack`). The paper's

@@ -454,9 +454,9 @@ namespace daqp_c
 } // namespace daqp_c
 
 // backends.solve_daqp on a level QP (Hessian I), in C++: the rows scaled as scale_rows does, the
-// settings daqp.solve would use, one retry with proximal iterations after an "infeasible" verdict
-// (solve_daqp_unit_rows) and the check of the unscaled rows (daqp_verdict). The caller (Python)
-// gives the settings it would have passed, the exit-flag names and raw_tol.
+// settings daqp.solve would use, one retry with proximal iterations after an "infeasible" or
+// "cycling" verdict (solve_daqp_unit_rows) and the check of the unscaled rows (daqp_verdict). The
+// caller (Python) gives the settings it would have passed, the exit-flag names and raw_tol.
 class DaqpSolver
 {
 public:
@@ -525,7 +525,8 @@ public:
     daqp_c::Settings settings = settings_;
     quadprog_(&result, &problem, &settings);
     ++calls_;
-    if (result.exitflag == -1 && prox_retry_) // see backends.solve_daqp_unit_rows
+    // see backends.solve_daqp_unit_rows
+    if ((result.exitflag == -1 || result.exitflag == -2) && prox_retry_)
     {
       settings = settings_; // fresh, as daqp.solve's (DAQP gets a pointer to it)
       settings.eps_prox = 1e-6;
@@ -1028,7 +1029,7 @@ private:
     return request_qp();
   }
 
-  // _level_qp's rows in w = R u: own rows with a slack each (V C Z u ± s against V (bound − C x*)),
+  // _level_qp's rows in w = R u: own rows with a slack each (C Z u ± s / V against bound − C x*),
   // the relaxed higher rows; A[:, :z] = Au R⁻¹.
   bool request_qp()
   {
@@ -1055,18 +1056,18 @@ private:
     for (Index j = 0; j < nlo; ++j)
     {
       const Index i = il[std::size_t(j)];
-      Au.row(j) = own_.V[i] * own_CZ_.row(i);
-      qp_A_(j, z + i) = 1.0;
-      qp_lower_[j] = own_.V[i] * (own_.lower[i] - c0[i]);
+      Au.row(j) = own_CZ_.row(i);
+      qp_A_(j, z + i) = 1.0 / own_.V[i];
+      qp_lower_[j] = own_.lower[i] - c0[i];
       qp_upper_[j] = kInf;
     }
     for (Index j = 0; j < nup; ++j)
     {
       const Index i = iu[std::size_t(j)];
-      Au.row(nlo + j) = own_.V[i] * own_CZ_.row(i);
-      qp_A_(nlo + j, z + i) = -1.0;
+      Au.row(nlo + j) = own_CZ_.row(i);
+      qp_A_(nlo + j, z + i) = -1.0 / own_.V[i];
       qp_lower_[nlo + j] = -kInf;
-      qp_upper_[nlo + j] = own_.V[i] * (own_.upper[i] - c0[i]);
+      qp_upper_[nlo + j] = own_.upper[i] - c0[i];
     }
     if (nh)
     {

@@ -318,7 +318,7 @@ private:
       case Kind::TorqueLimits: case Kind::JointAccelerationLimits: return na_;
       case Kind::ContactConstraint: case Kind::ForceRegularizer: return dims;
       case Kind::CenterOfPressure: return 4 * rect;
-      case Kind::FrictionCone: return 4 * Index(s.contacts.size()) + (s.torsion ? 2 * rect : 0);
+      case Kind::FrictionCone: return 4 * Index(s.contacts.size()) + (s.torsion ? 8 * rect : 0);
       case Kind::NormalForceBounds: return Index(s.contacts.size());
       case Kind::MomentumPD: case Kind::MomentumForce: return 6;
       case Kind::CoM: case Kind::Frame: case Kind::JointTrajectory: return Index(s.rows.size());
@@ -457,12 +457,20 @@ private:
           A.block(r + 3, col, 1, 3) = (-t2 - mu * n).transpose();
           r += 4;
           if (s.torsion && contact_dims_[c] == 6)
-          { // +-tau.n - c mu f.n <= 0, c = 2/3 of the smaller half-size
-            const double cc = 2.0 / 3.0 * half_sizes_.row(c).minCoeff();
-            A.block(r, col, 1, 3) = A.block(r + 1, col, 1, 3) = -cc * mu * n.transpose();
-            A.block(r, col + 3, 1, 3) = n.transpose();
-            A.block(r + 1, col + 3, 1, 3) = -n.transpose();
-            r += 2;
+          { // the yaw-moment facets of the sole's contact wrench cone in its measured axes
+            // (FrictionCone.wrench_cone_block; Caron et al. 2015)
+            const Matrix3d R = data_.oMf[frames_[contact_frames_[c]]].rotation();
+            const double hx = half_sizes_(c, 0), hy = half_sizes_(c, 1);
+            for (double sx : {1.0, -1.0})
+              for (double sy : {1.0, -1.0})
+              {
+                const Vector3d force = -mu * (hx + hy) * R.col(2) + sx * hy * R.col(0) + sy * hx * R.col(1);
+                const Vector3d moment = R.col(2) + mu * (sx * R.col(0) + sy * R.col(1));
+                A.block(r, col, 1, 3) = A.block(r + 1, col, 1, 3) = force.transpose();
+                A.block(r, col + 3, 1, 3) = moment.transpose();
+                A.block(r + 1, col + 3, 1, 3) = -moment.transpose();
+                r += 2;
+              }
           }
         }
         lo.setConstant(-kInf);

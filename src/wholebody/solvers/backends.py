@@ -14,9 +14,9 @@ memory on failure, so a failed x is never passed on).
 * ``daqp`` — dual active set on the LDP (Arnström et al. 2022): native two-sided rows,
   equalities flagged with ``sense = 5``; infinite bounds are passed as ±1e30 (DAQP_INF); rows are
   scaled to unit norm and the solution is checked on the unscaled rows (see the adapter). For
-  ill-conditioned H (cond ≳ 1e9, tiny ε) its infeasibility test misfires on feasible QPs; an
-  "infeasible" verdict is retried once with proximal iterations (``eps_prox = 1e-6``), which
-  converge to the same solution.
+  ill-conditioned H (cond ≳ 1e9, tiny ε) its infeasibility test misfires on feasible QPs, and
+  at degenerate vertices it may cycle; an "infeasible" or "cycling" verdict is retried once
+  with proximal iterations (``eps_prox = 1e-6``), which converge to the same solution.
 * ``proxsuite`` — ProxQP dense (augmented Lagrangian); equalities as its ``A x = b`` block.
   Its accuracy is a tolerance, not active-set exactness: ``eps_abs`` defaults to 1e-9 here.
   Its infeasibility certificates misfire on small feasible problems; see the adapter.
@@ -85,7 +85,12 @@ def _check_x(x, name: str):
 
 
 def solve_quadprog(H, g, A, lower, upper, **_):
-    """Goldfarb–Idnani via ``quadprog.solve_qp`` (min ½xᵀGx − aᵀx s.t. Cᵀx ≥ b, first meq equal)."""
+    """Goldfarb–Idnani via ``quadprog.solve_qp`` (min ½xᵀGx − aᵀx s.t. Cᵀx ≥ b, first meq equal).
+
+    quadprog has no iteration limit and no anti-cycling rule: on a degenerate vertex it can loop
+    forever (tests/solvers/test_quadprog_adapter.py keeps such a QP). Rows of unit norm avoid
+    that one case but cost accuracy elsewhere (2.5e-4 from DAQP's and ProxQP's solution on
+    another degenerate QP, "inconsistent" on feasible ones), so the rows are passed as given."""
     import quadprog
 
     n = H.shape[0]
@@ -145,14 +150,17 @@ def solve_daqp(H, g, A, lower, upper, raw_tol=DAQP_RAW_TOL, **opts):
 
 def solve_daqp_unit_rows(H, g, unit_A, bupper, blower, sense, **opts):
     """DAQP on rows already scaled as :func:`solve_daqp` scales them (``_daqp_rows``) → (x, status),
-    x None on failure; an "infeasible" verdict is retried once with proximal iterations."""
+    x None on failure; an "infeasible" or "cycling" verdict is retried once with proximal
+    iterations."""
     opts = {**DAQP_DEFAULTS, **opts}
     H, g = np.ascontiguousarray(H), np.ascontiguousarray(g)
     x, _, flag, _ = _daqp().solve(H, g, unit_A, bupper, blower, sense, **opts)
-    if flag == -1 and "eps_prox" not in opts:
+    if flag in (-1, -2) and "eps_prox" not in opts:
         # DAQP works on the LDP with R⁻¹ (H = RᵀR); for cond(H) ≳ 1e9 (tiny ε in the cascade)
-        # its infeasibility test misfires on feasible problems. Proximal-point iterations
-        # (eps_prox > 0) converge to the same strictly convex QP's solution: retry once.
+        # its infeasibility test misfires on feasible problems, and at a degenerate vertex (more
+        # active rows than the dimension, as at an edge of a sole's contact wrench cone, where 8-9
+        # of its 16 facets meet) it may cycle. Proximal-point iterations (eps_prox > 0) converge
+        # to the same strictly convex QP's solution: retry once.
         x, _, flag, _ = _daqp().solve(H, g, unit_A, bupper, blower, sense, eps_prox=1e-6, **opts)
     if flag not in (1, 2):
         return None, f"daqp: {DAQP_EXIT.get(flag, 'exitflag')} ({flag})"

@@ -445,6 +445,9 @@ def _unconstrained(M, r0, zx, eps):
 
 def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, solve):
     """QP of eqs. 10-11 over [u, s]: own rows lower − s/V ≤ C x ≤ upper + s/V, higher rows relaxed;
+    every row in the caller's units (the slack carries the weight V, not the row: a row weighted
+    1e4 would otherwise have its violation, and the backends' feasibility tolerances, counted in
+    units 1e4 times smaller — DAQP solutions exact to rounding on such rows were refused);
     ``solve(H, g, A, lower, upper) → (y, ok, status)`` solves it (:func:`.common._backend_solve`).
 
     The level's cost ½‖M u + r0‖² + ε/2 ‖Zᵀx* + u‖² is ½‖R u − c‖² + const with R, c from the QR
@@ -484,17 +487,16 @@ def _level_qp(Rc, CZ, c0, lo, up, vw, HZ, h0, hlo, hup, solve):
     upper = np.empty(nr)
     Au = np.empty((nr, z))  # the rows in u, then mapped to w: Au R⁻¹ = (R⁻ᵀ Auᵀ)ᵀ
     if m:
-        VCZ = vw[:, None] * CZ
-        # V C Z u + s ≥ V (lower − C x*)
-        Au[:nl_] = VCZ[il]
-        A[np.arange(nl_), z + il] = 1.0
-        lower[:nl_] = vw[il] * (lo[il] - c0[il])
+        # C Z u + s / V ≥ lower − C x* (the slack's cost is s², V its weight: s = V · violation)
+        Au[:nl_] = CZ[il]
+        A[np.arange(nl_), z + il] = 1.0 / vw[il]
+        lower[:nl_] = lo[il] - c0[il]
         upper[:nl_] = np.inf
-        # V C Z u − s ≤ V (upper − C x*)
-        Au[nl_ : nl_ + nu_] = VCZ[iu]
-        A[nl_ + np.arange(nu_), z + iu] = -1.0
+        # C Z u − s / V ≤ upper − C x*
+        Au[nl_ : nl_ + nu_] = CZ[iu]
+        A[nl_ + np.arange(nu_), z + iu] = -1.0 / vw[iu]
         lower[nl_ : nl_ + nu_] = -np.inf
-        upper[nl_ : nl_ + nu_] = vw[iu] * (up[iu] - c0[iu])
+        upper[nl_ : nl_ + nu_] = up[iu] - c0[iu]
     if nh:
         Au[nl_ + nu_ :] = HZ
         lower[nl_ + nu_ :] = hlo - h0

@@ -100,16 +100,23 @@ class FrictionCone(_PerContact):
     """Linearised friction cone: |f.t1| <= mu f.n and |f.t2| <= mu f.n, 4 rows per contact
     (Herzog et al. 2016 Sect. 2.1; Fahmi et al. 2019 eqs. 13-14), about each contact's normal.
 
-    ``torsion=True`` adds, for rectangle contacts (6D wrenches), the torsional friction bound
-    |tau.n| <= c mu f.n (2 rows), c = 2/3 of the sole's smaller half-size: the largest friction
-    moment of the inscribed disc under uniform pressure, inside the rectangle's exact bound
-    (Caron et al. 2015, "Stability of surface contacts for humanoid robots": mu (X + Y) f.n when
-    the tangential force and the tilting moments vanish). Off by default on this task (the
-    papers' 4 rows per contact); the builders of Tables 1/2/4
-    (:mod:`wholebody.control.stacks`) turn it on unless given ``torsion=False``. Without it
-    nothing in those tables bounds the yaw moments, and once the CoP rows are active (they are written in the measured sole axes, so a fraction of a
-    degree of tilt couples them to yaw moments) the cascade may put large opposite yaw moments on
-    the two soles; with the bound they stay within it.
+    ``torsion=True`` adds, for rectangle contacts (6D wrenches), the yaw-moment facets of the
+    rectangle's contact wrench cone (Caron, Pham, Nakamura 2015, "Stability of surface contacts
+    for humanoid robots"): with the wrench in the sole's measured axes (x along the
+    half-size X, y along Y, z the sole normal),
+
+        tau_z <=  mu (X + Y) f_z - |Y f_x + mu tau_x| - |X f_y + mu tau_y|
+        tau_z >= -mu (X + Y) f_z + |Y f_x - mu tau_x| + |X f_y - mu tau_y|,
+
+    8 rows per sole (:meth:`wrench_cone_block`). Together with the pyramid and the centre of
+    pressure rows (:class:`CenterOfPressure`) they are exactly the wrenches that friction
+    pyramids at the sole's four corners can produce (tests/unit/tasks/test_contact.py checks
+    this against a linear program over the corner forces) when the pyramid's tangents are the
+    sole's axes. A bound on the yaw moment alone (the friction moment of the inscribed disc)
+    still admits a tangential force at its limit with the CoP in a corner and a yaw moment at its
+    limit, which no sole carries: the corner's friction then fixes the yaw moment. Off by default
+    on this task (the papers' 4 rows per contact); the builders of Tables 1/2/4
+    (:mod:`wholebody.control.stacks`) turn it on unless given ``torsion=False``.
 
     ``mu`` (finite, > 0) and ``torsion`` (a bool) are checked on every assignment: a negative mu
     would turn the pyramid inside out (only zero forces satisfy it).
@@ -117,7 +124,7 @@ class FrictionCone(_PerContact):
 
     kind = "ineq"
     mu = checked_attribute(scalar_rule(low=0.0, low_open=True), "Friction coefficient, > 0.")
-    torsion = checked_attribute(flag, "Add the torsional friction rows (6D contacts).")
+    torsion = checked_attribute(flag, "Add the rectangle contacts' yaw-moment rows (6D contacts).")
 
     def __init__(self, mu: float, name=None, weight=1.0, contacts=None, normals=None,
                  torsion: bool = False):
@@ -126,29 +133,54 @@ class FrictionCone(_PerContact):
         self.torsion = torsion
         self._cache_key = None
         self._cache: TaskRows | None = None
+        self._maps: list = []
+
+    @staticmethod
+    def wrench_cone_block(R: np.ndarray, hx: float, hy: float, mu: float) -> np.ndarray:
+        """The 8 x 6 yaw-moment rows (``rows @ [f; tau] <= 0``) of the contact wrench cone of a
+        hx x hy half-size sole with axes R (columns, in world) (Caron et al. 2015)."""
+        ex, ey, ez = R[:, 0], R[:, 1], R[:, 2]
+        rows = np.zeros((8, 6))
+        k = 0
+        for sx in (1.0, -1.0):
+            for sy in (1.0, -1.0):
+                force = -mu * (hx + hy) * ez + sx * hy * ex + sy * hx * ey
+                moment = ez + mu * (sx * ex + sy * ey)
+                rows[k, :3], rows[k, 3:] = force, moment  # upper bound of tau_z
+                rows[k + 1, :3], rows[k + 1, 3:] = force, -moment  # lower bound of tau_z
+                k += 2
+        return rows
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
         key = (names, tuple(variables.lambda_slices[n].start for n in names), variables.n_lambda,
                self.mu, self.torsion, tuple(tuple(self.normal(n)) for n in names))
-        if self._cache_key != key:  # the rows only change with mu, normals or the contact set
-            blocks = {}
+        if self._cache_key != key:  # the pyramid only changes with mu, normals or the contacts
+            blocks, self._maps, r = {}, [], 0
             for n in names:
-                spec = robot.contact(n).spec
-                twist = self.torsion and spec.dim == 6
-                block = np.zeros((6 if twist else 4, spec.dim))
-                normal = self.normal(n)
-                block[:4, :3] = friction_faces(normal, self.mu)
-                if twist:  # +-tau.n - c mu f.n <= 0
-                    nn = tangent_basis(normal)[2]
-                    c = 2.0 / 3.0 * min(spec.half_size)
-                    block[4:, :3] = -c * self.mu * nn
-                    block[4, 3:], block[5, 3:] = nn, -nn
+                c = robot.contact(n)
+                twist = self.torsion and c.spec.dim == 6
+                block = np.zeros((12 if twist else 4, c.spec.dim))
+                block[:4, :3] = friction_faces(self.normal(n), self.mu)
+                if twist:  # the cone rows are linear in the sole rotation R: K (48 x 9) vec(R)
+                    hx, hy = c.spec.half_size
+                    K = np.column_stack([
+                        self.wrench_cone_block(np.eye(9)[j].reshape(3, 3), hx, hy, self.mu).ravel()
+                        for j in range(9)])
+                    self._maps.append((c.frame_id, r + 4, variables.lambda_slices[n].start, K))
                 blocks[n] = block
+                r += block.shape[0]
             A = self._lambda_rows(variables, blocks)
             self._cache = TaskRows(qdd=None, lam=A, tau=None, lower=np.full(A.shape[0], -np.inf),
                                    upper=np.zeros(A.shape[0]))
             self._cache_key = key
+        if self._maps:  # the sole axes are measured: the cone rows change every cycle
+            A = self._cache.lam.copy()
+            oMf = robot.data.oMf
+            for frame_id, r, f, K in self._maps:
+                A[r:r + 8, f:f + 6] = (K @ oMf[frame_id].rotation.ravel()).reshape(8, 6)
+            return TaskRows(qdd=None, lam=A, tau=None, lower=self._cache.lower,
+                            upper=self._cache.upper)
         return self._cache
 
 

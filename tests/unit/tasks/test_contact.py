@@ -4,7 +4,9 @@ point); friction pyramid, normal-force bounds and centre of pressure accept a fo
 constructed inside and reject one just outside; the force regulariser's minimiser is its target."""
 
 import numpy as np
+import pinocchio as pin
 import pytest
+from scipy.optimize import linprog
 
 from wholebody.tasks import (CenterOfPressure, ContactConstraint, ForceRegularizer, FrictionCone,
                              NormalForceBounds, tangent_basis)
@@ -132,19 +134,70 @@ def test_friction_pyramid_accepts_forces_inside_and_rejects_forces_outside(robot
         assert not _fd.satisfies(rows, lam=pull)
 
 
-def test_friction_torsion_bounds_the_yaw_moment_of_a_sole(robots):
-    """torsion=True adds |tau.n| <= (2/3) min(half sizes) mu f_n for soles."""
+def _corner_pyramids_carry(R, origin_to_corners, mu, wrench) -> bool:
+    """Whether square friction pyramids (axes R) at the corners can produce ``wrench`` = [f; tau]
+    (world axes, about the sole origin): a feasibility LP over the corners' edge forces."""
+    edges = [R @ np.array([sx * mu, sy * mu, 1.0]) for sx in (1, -1) for sy in (1, -1)]
+    generators = np.array([np.r_[e, np.cross(p, e)] for p in origin_to_corners for e in edges]).T
+    lp = linprog(np.zeros(generators.shape[1]), A_eq=generators, b_eq=wrench,
+                 bounds=[(0.0, None)] * generators.shape[1], method="highs")
+    return lp.status == 0
+
+
+def _sample_sole_wrenches(R, hx, hy, mu, count, seed):
+    """Wrenches [f; tau] (world axes) around a 300 N load, spread across the cone's boundary."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        local = np.array([0.0, 0.0, 300.0]) + rng.normal(size=3) * [100.0, 100.0, 40.0]
+        moment = rng.normal(size=3) * [0.6 * hy, 0.6 * hx, 0.5 * mu * (hx + hy)] * 300.0
+        yield np.r_[R @ local, R @ moment]
+
+
+def test_wrench_cone_block_is_the_contact_wrench_cone():
+    """The pyramid about the sole's axes, the CoP rows and the yaw-moment rows hold exactly for
+    the wrenches that friction pyramids at the sole's four corners can produce (an LP over the
+    corner forces decides), for a tilted and yawed sole."""
+    R = pin.rpy.rpyToMatrix(0.3, -0.2, 0.9)
+    hx, hy, mu = 0.1, 0.05, 0.6
+    corners = [R @ np.array([sx * hx, sy * hy, 0.0]) for sx in (1, -1) for sy in (1, -1)]
+    pyramid = np.zeros((4, 6))
+    pyramid[:, :3] = [R[:, 0] - mu * R[:, 2], -R[:, 0] - mu * R[:, 2], R[:, 1] - mu * R[:, 2],
+                      -R[:, 1] - mu * R[:, 2]]
+    rows = np.vstack([pyramid, CenterOfPressure.block(R, hx, hy),
+                      FrictionCone.wrench_cone_block(R, hx, hy, mu)])
+    verdicts = []
+    for wrench in _sample_sole_wrenches(R, hx, hy, mu, 400, seed=3):
+        truth = _corner_pyramids_carry(R, corners, mu, wrench)
+        assert bool(np.all(rows @ wrench <= 1e-9)) == truth, wrench
+        verdicts.append(truth)
+    assert 50 < sum(verdicts) < 350  # both sides of the boundary were sampled
+    # the yaw moment alone: up to mu (X + Y) f_n with the CoP at the centre, nothing beyond
+    for ratio, ok in ((0.99, True), (1.01, False)):
+        wrench = np.r_[300.0 * R[:, 2], ratio * mu * (hx + hy) * 300.0 * R[:, 2]]
+        assert bool(np.all(rows @ wrench <= 0.0)) is ok
+
+
+def test_friction_torsion_rows_are_the_measured_soles_wrench_cones(robots):
+    """torsion=True on talos14 turned by 90 deg (the soles' x along world y, so the pyramid about
+    world z is the soles' own): FrictionCone + CenterOfPressure hold exactly for the wrenches the
+    corner pyramids of the measured sole can produce; 4 + 8 rows per sole, 4 without torsion."""
     robot = robots["talos14"]
-    _at(robot, 5)
-    mu, variables = robot.friction, Variables(robot)
+    q = robot.q_ref.copy()
+    q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, 0.0, np.pi / 2)).coeffs()
+    robot.update(q, np.zeros(robot.nv))
+    mu, variables = 0.5, Variables(robot)
     rows = FrictionCone(mu, torsion=True).rows(robot, variables)
-    assert rows.m == 6 * 2
-    sole = robot.contact_names[0]
-    bound = 2.0 / 3.0 * min(robot.contact(sole).spec.half_size) * mu * 300.0
-    for sign in (1, -1):
-        for ratio, ok in ((0.99, True), (1.01, False)):
-            wrench = np.r_[0.0, 0.0, 300.0, 0.0, 0.0, sign * ratio * bound]
-            assert _fd.satisfies(rows, lam=_stacked(robot, variables, {sole: wrench})) is ok
+    cop = CenterOfPressure().rows(robot, variables)
+    assert rows.m == 12 * len(robot.contact_names)
+    for k, sole in enumerate(robot.contact_names):
+        placement = robot.data.oMf[robot.contact(sole).frame_id]
+        R, (hx, hy) = placement.rotation, robot.contact(sole).spec.half_size
+        assert abs(R[1, 0]) > 0.999  # the sole's x is along world y
+        corners = [R @ np.array([sx * hx, sy * hy, 0.0]) for sx in (1, -1) for sy in (1, -1)]
+        for wrench in _sample_sole_wrenches(R, hx, hy, mu, 150, seed=k):
+            lam = _stacked(robot, variables, {sole: wrench})
+            ours = _fd.satisfies(rows, lam=lam) and _fd.satisfies(cop, lam=lam)
+            assert ours == _corner_pyramids_carry(R, corners, mu, wrench), wrench
     assert FrictionCone(mu).rows(robot, variables).m == 4 * 2
     with pytest.raises(ValueError, match="mu"):
         FrictionCone(0.0)
