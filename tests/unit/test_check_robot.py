@@ -44,6 +44,7 @@ def test_every_preset_passes(capsys, name):
     roles = {c["role"] for c in report["contacts"]}
     assert roles in ({"left-front", "right-front", "left-hind", "right-hind"}, {"left", "right"})
     assert all(c["touches_floor"] for c in report["contacts"])
+    assert not [f for f in report["findings"] if f["topic"] == "roles"]  # names agree with roles
 
 
 def test_a_lifted_contact_is_an_error(tmp_path, capsys):
@@ -191,3 +192,49 @@ def test_two_joint_legs_are_a_warning():
     (finding,) = [f for f in report.findings if "fewer than 3 joints" in f.message]
     assert finding.level == "warning" and report.ok
     assert not [f for f in check_robot("solo12").findings if "fewer than 3" in f.message]
+
+
+SWAPPED = """name = "swapped"
+urdf = "erd:hyq_description/robots/hyq_no_sensors.urdf"
+srdf = "erd:hyq_description/srdf/hyq.srdf"
+posture = "standing"
+contacts = [
+  {{ name = "RF_FOOT", frame = "lf_foot", type = "point", radius = 0.02175{a} }},
+  {{ name = "LF_FOOT", frame = "rf_foot", type = "point", radius = 0.02175{b} }},
+  {{ name = "LH_FOOT", frame = "lh_foot", type = "point", radius = 0.02175{c} }},
+  {{ name = "RH_FOOT", frame = "rh_foot", type = "point", radius = 0.02175{d} }},
+]
+"""
+
+
+def test_a_name_that_contradicts_the_role_is_a_warning(tmp_path, capsys):
+    """HyQ's front feet given each other's names: found from the geometry, LF_FOOT (on HyQ's
+    right-front foot frame) is the right-front foot, so both front feet are flagged, with the
+    way out; declared roles that contradict the names are flagged too; a warning, not an error."""
+    path = write(tmp_path, SWAPPED.format(a="", b="", c="", d=""))
+    code, out = check(capsys, path, "--json")
+    report = json.loads(out)
+    flagged = [f for f in report["findings"] if f["topic"] == "roles"]
+    assert code == 0 and report["ok"]
+    assert {f["level"] for f in flagged} == {"warning"} and len(flagged) == 2
+    assert any("'LF_FOOT' is named like the left-front foot but is the right-front" in f["message"]
+               for f in flagged)
+    assert all("declare role" in f["fix"] for f in flagged)
+    roles = [', role = "left-front"', ', role = "right-front"', ', role = "left-hind"',
+             ', role = "right-hind"']
+    path = write(tmp_path, SWAPPED.format(a=roles[0], b=roles[1], c=roles[2], d=roles[3]),
+                 "declared.toml")
+    code, out = check(capsys, path, "--json")
+    flagged = [f for f in json.loads(out)["findings"] if f["topic"] == "roles"]
+    assert code == 0 and len(flagged) == 2 and "declared role" in flagged[0]["message"]
+
+
+@pytest.mark.parametrize("name, kind, role", [
+    ("LF_FOOT", "point", "left-front"), ("rh_foot", "point", "right-hind"),
+    ("FR_foot", "point", "right-front"), ("RL_calf", "point", "left-hind"),
+    ("BL", "point", "left-hind"), ("front_left_foot", "point", "left-front"),
+    ("foot_3", "point", None), ("l_sole", "rectangle", "left"),
+    ("leg_right_6_link", "rectangle", "right"), ("sole", "rectangle", None)])
+def test_role_in_name(name, kind, role):
+    from wholebody.robots.roles import role_in_name
+    assert role_in_name(name, kind) == role

@@ -19,7 +19,7 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull, QhullError
 
 from .description import DescriptionError
-from .roles import contact_roles, leg_joints
+from .roles import contact_roles, leg_joints, role_in_name
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +129,18 @@ def _roles(robot, report: RobotCheck) -> None:
     else:
         ambiguous = False
     kinds = sorted({c.spec.type for c in robot.contacts})
+    declared = all(c.spec.role is not None for c in robot.contacts)
+    for c in robot.contacts:
+        named = role_in_name(c.name, c.spec.type)
+        if c.name in roles and named is not None and named != roles[c.name]:
+            why = ("its declared role" if declared else
+                   "where it is in the posture, with the base frame's x forward and y left")
+            report.add("warning", "roles",
+                       f"contact '{c.name}' is named like the {named} {_part(c)} but is the "
+                       f"{roles[c.name]} one by {why}",
+                       "declare role = \"...\" on every contact (the robot's forward axis may not "
+                       "be its base frame's x)" if not declared else
+                       "check the contacts' roles and names")
     if len(roles) == 4:
         joints = {name: len(leg_joints(robot, name)) for name in roles}
         short = {name: n for name, n in joints.items() if n < 3}
@@ -159,6 +171,10 @@ def _roles(robot, report: RobotCheck) -> None:
         report.contacts.append({"name": c.name, "frame": c.spec.frame, "type": c.spec.type,
                                 **size, "offset_m": list(c.spec.offset), "role": roles.get(c.name),
                                 "leg_joints": list(leg_joints(robot, c.name))})
+
+
+def _part(contact) -> str:
+    return "foot" if contact.spec.type == "point" else "sole"
 
 
 def _contacts_on_the_floor(robot, data, report: RobotCheck) -> None:

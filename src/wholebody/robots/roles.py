@@ -10,6 +10,8 @@ sign of y (the base's sagittal plane); two rectangles are the soles of a biped, 
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pinocchio as pin
 
@@ -51,6 +53,33 @@ def contact_roles(robot) -> dict[str, str]:
         raise DescriptionError(f"{where}: the contacts' positions do not tell which is which "
                                f"({found}); declare role = one of {ROLES[kind]} on each contact")
     return {role: c.name for role, c in zip(roles, contacts)}
+
+
+_SIDES = {"l": "left", "r": "right"}
+_ENDS = {"f": "front", "h": "hind", "b": "hind", "r": "hind"}  # r: rear (FL, FR, RL, RR)
+
+
+def role_in_name(name: str, kind: str) -> str | None:
+    """The role a contact's name spells, or None: the words left/right (and front/fore,
+    hind/rear/back for a foot), or a foot's two-letter tag side-first (``LF``, ``RH``, ``LB``)
+    or end-first (``FL``, ``RR``, ``BL``). Only a hint for check-robot, never used to assign."""
+    low = name.lower()
+    words = [w for w in re.split(r"[^a-z]+", low) if w]
+    side = next((s for s in ("left", "right") if s in low), None)
+    if side is None and kind == "rectangle":
+        side = next((_SIDES[w] for w in words if w in _SIDES), None)
+    if kind == "rectangle":
+        return side
+    end = next((e for word, e in (("front", "front"), ("fore", "front"), ("hind", "hind"),
+                                  ("rear", "hind"), ("back", "hind")) if word in low), None)
+    for w in words:
+        if side is not None and end is not None:
+            break
+        if len(w) == 2 and w[0] in _SIDES and w[1] in "fhb":
+            side, end = side or _SIDES[w[0]], end or _ENDS[w[1]]
+        elif len(w) == 2 and w[0] in _ENDS and w[1] in _SIDES:
+            side, end = side or _SIDES[w[1]], end or _ENDS[w[0]]
+    return f"{side}-{end}" if side and end else None
 
 
 def quadruped_legs(robot) -> tuple[str, ...]:
