@@ -130,17 +130,17 @@ def _roles(robot, report: RobotCheck) -> None:
         ambiguous = False
     kinds = sorted({c.spec.type for c in robot.contacts})
     declared = all(c.spec.role is not None for c in robot.contacts)
+    if declared:
+        why, fix = "its declared role", "check the contacts' roles and names"
+    else:
+        why = "where it is in the posture, with the base frame's x forward and y left"
+        fix = ("declare role = \"...\" on every contact (the robot's forward axis may not be its "
+               "base frame's x)")
     for c in robot.contacts:
         named = role_in_name(c.name, c.spec.type)
         if c.name in roles and named is not None and named != roles[c.name]:
-            why = ("its declared role" if declared else
-                   "where it is in the posture, with the base frame's x forward and y left")
-            report.add("warning", "roles",
-                       f"contact '{c.name}' is named like the {named} {_part(c)} but is the "
-                       f"{roles[c.name]} one by {why}",
-                       "declare role = \"...\" on every contact (the robot's forward axis may not "
-                       "be its base frame's x)" if not declared else
-                       "check the contacts' roles and names")
+            report.add("warning", "roles", f"contact '{c.name}' is named like the {named} "
+                       f"{_part(c)} but is the {roles[c.name]} one by {why}", fix)
     if len(roles) == 4:
         joints = {name: len(leg_joints(robot, name)) for name in roles}
         short = {name: n for name, n in joints.items() if n < 3}

@@ -26,6 +26,13 @@ def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return t1, cross3(n, t1), n
 
 
+def _rotation_map(block_of) -> np.ndarray:
+    """K with ``block_of(R).ravel() == K @ R.ravel()`` for rows that are linear in a rotation R
+    (a sole's measured axes): built once from the nine unit matrices, so that a control cycle
+    fills the rows with one small product instead of rebuilding them."""
+    return np.column_stack([block_of(np.eye(9)[j].reshape(3, 3)).ravel() for j in range(9)])
+
+
 def friction_faces(normal: np.ndarray, mu: float) -> np.ndarray:
     """The 4 x 3 rows F with F f <= 0 <=> f in the friction pyramid about ``normal``."""
     t1, t2, n = tangent_basis(normal)
@@ -162,11 +169,9 @@ class FrictionCone(_PerContact):
                 twist = self.torsion and c.spec.dim == 6
                 block = np.zeros((12 if twist else 4, c.spec.dim))
                 block[:4, :3] = friction_faces(self.normal(n), self.mu)
-                if twist:  # the cone rows are linear in the sole rotation R: K (48 x 9) vec(R)
+                if twist:  # the cone rows are linear in the sole rotation R
                     hx, hy = c.spec.half_size
-                    K = np.column_stack([
-                        self.wrench_cone_block(np.eye(9)[j].reshape(3, 3), hx, hy, self.mu).ravel()
-                        for j in range(9)])
+                    K = _rotation_map(lambda R: self.wrench_cone_block(R, hx, hy, self.mu))
                     self._maps.append((c.frame_id, r + 4, variables.lambda_slices[n].start, K))
                 blocks[n] = block
                 r += block.shape[0]
@@ -260,16 +265,14 @@ class CenterOfPressure(_PerContact):
         names = contact_subset(variables, self.contacts)
         key = (names, variables.n_lambda, self.margin)
         if self._key != key:
-            # the rows are linear in the sole rotation R: block = K vec(R), K (24 x 9) built once
-            # from the unit matrices, so a cycle costs one small product per sole
+            # the rows are linear in the sole rotation R: block = K vec(R) (_rotation_map)
             self._maps = []
             for n in names:
                 c = robot.contact(n)
                 if c.spec.type != "rectangle":
                     continue
                 hx, hy = (1.0 - self.margin) * np.asarray(c.spec.half_size)
-                K = np.column_stack([self.block(np.eye(9)[j].reshape(3, 3), hx, hy).ravel()
-                                     for j in range(9)])
+                K = _rotation_map(lambda R: self.block(R, hx, hy))
                 self._maps.append((c.frame_id, variables.lambda_slices[n].start, K))
             self._key = key
         A = np.zeros((4 * len(self._maps), variables.n_lambda))
