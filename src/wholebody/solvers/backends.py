@@ -11,6 +11,9 @@ memory on failure, so a failed x is never passed on).
 
 * ``quadprog`` — Goldfarb–Idnani dual active set (the method used by Herzog et al. 2016, §5):
   two-sided rows are split into two one-sided rows ``Cᵀx ≥ b``, equalities go first (``meq``).
+  It has no iteration limit and can cycle forever on a degenerate vertex; as a fallback
+  (:data:`FALLBACK_OPTIONS`) its inequality rows are relaxed by ~1e-12 relative, which breaks the
+  ties (:func:`quadprog_tie_break`).
 * ``daqp`` — dual active set on the LDP (Arnström et al. 2022): native two-sided rows,
   equalities flagged with ``sense = 5``; infinite bounds are passed as ±1e30 (DAQP_INF); rows are
   scaled to unit norm and the solution is checked on the unscaled rows (see the adapter). For
@@ -84,20 +87,47 @@ def _check_x(x, name: str):
     return x, "optimal", True
 
 
-def solve_quadprog(H, g, A, lower, upper, **_):
+#: With ``tie_break``, quadprog's inequality rows are relaxed by this times (1 + a distinct
+#: fraction) times (‖a_i‖ + |b_i|).
+QUADPROG_TIE_BREAK = 1e-12
+_GOLDEN_FRACTION = 0.6180339887498949
+
+
+def quadprog_tie_break(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distinct relaxations of the inequality rows ``A x >= b`` handed to quadprog.
+
+    Goldfarb–Idnani (quadprog) has no iteration limit and no anti-cycling rule: at a vertex where
+    more rows are active than there are variables it can add and drop the same rows forever
+    (tests/solvers/test_quadprog_adapter.py keeps such QPs). Moving each row outwards by a
+    different amount makes the vertex non-degenerate (the perturbation method against
+    degeneracy); the fractions ``frac(i φ)`` are deterministic, so results are reproducible.
+    1e-15 relative is too little on those QPs, 1e-13 enough on 1e5 random ones. The price is
+    quadprog's exactness: on ill-conditioned hierarchies the higher levels' costs then move
+    beyond tests/solvers/test_hierarchy.py's tolerances, which is why only the fallback uses it."""
+    fractions = (np.arange(1, b.size + 1) * _GOLDEN_FRACTION) % 1.0
+    return QUADPROG_TIE_BREAK * (1.0 + fractions) * (np.linalg.norm(A, axis=1) + np.abs(b))
+
+
+def solve_quadprog(H, g, A, lower, upper, tie_break: bool = False, **_):
     """Goldfarb–Idnani via ``quadprog.solve_qp`` (min ½xᵀGx − aᵀx s.t. Cᵀx ≥ b, first meq equal).
 
-    quadprog has no iteration limit and no anti-cycling rule: on a degenerate vertex it can loop
-    forever (tests/solvers/test_quadprog_adapter.py keeps such a QP). Rows of unit norm avoid
-    that one case but cost accuracy elsewhere (2.5e-4 from DAQP's and ProxQP's solution on
-    another degenerate QP, "inconsistent" on feasible ones), so the rows are passed as given."""
+    Rows are passed as given; with ``tie_break`` the inequality rows are relaxed by
+    :func:`quadprog_tie_break` (≤ 2e-12 relative), which keeps quadprog from cycling forever on
+    degenerate vertices. Scaling the rows to unit norm instead also avoids the one QP kept in
+    the tests, but costs accuracy elsewhere (2.5e-4 on another degenerate QP, "inconsistent" on
+    feasible ones)."""
     import quadprog
 
     n = H.shape[0]
     if A.shape[0]:
         eq, lo, up = _split_rows(lower, upper)
-        Ct = np.concatenate((A[eq], A[lo], -A[up]), axis=0).T
-        bb = np.concatenate((lower[eq], lower[lo], -upper[up]))
+        inequality_rows = np.concatenate((A[lo], -A[up]), axis=0)
+        inequality_bounds = np.concatenate((lower[lo], -upper[up]))
+        if tie_break:
+            inequality_bounds = inequality_bounds - quadprog_tie_break(inequality_rows,
+                                                                       inequality_bounds)
+        Ct = np.concatenate((A[eq], inequality_rows), axis=0).T
+        bb = np.concatenate((lower[eq], inequality_bounds))
         meq = int(np.count_nonzero(eq))
     else:
         Ct, bb, meq = np.zeros((n, 0)), np.zeros(0), 0
@@ -307,6 +337,10 @@ def solve_proxsuite(H, g, A, lower, upper, eps_abs=1e-9, max_iter=10_000, **opts
 
 
 BACKENDS = {"quadprog": solve_quadprog, "daqp": solve_daqp, "proxsuite": solve_proxsuite}
+#: Options of a backend when it solves, as the fallback, a QP the first backend failed on: those
+#: QPs are the degenerate and ill-posed ones, where returning at all matters more than the last
+#: digits (quadprog's tie-break; see :func:`quadprog_tie_break`).
+FALLBACK_OPTIONS = {"quadprog": {"tie_break": True}}
 
 
 def solve_qp(H, g, A, lower, upper, backend: str = "quadprog", **options):

@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .backends import BACKENDS, solve_qp
+from .backends import BACKENDS, FALLBACK_OPTIONS, solve_qp
 from .level import Level
 
 # one logger for solve_hierarchy, whichever method's module writes to it
@@ -182,7 +182,7 @@ def _backend_solve(qp, backend, opts, fallback, r, levels, warns, first=None):
     the backend's (y, status, ok) already computed (then ``qp`` is called only for the fallback)."""
     y, status, ok = first if first is not None else solve_qp(*qp(), backend=backend, **opts)
     if not ok and fallback is not None:
-        y, status2, ok = solve_qp(*qp(), backend=fallback)
+        y, status2, ok = solve_qp(*qp(), backend=fallback, **FALLBACK_OPTIONS.get(fallback, {}))
         if ok:
             msg = f"level {r} ({levels[r].name!r}): {status}; solved with {fallback}"
             log.debug(msg)
