@@ -63,6 +63,18 @@ def icub_description(**extra) -> dict:
             **extra}
 
 
+def alexander_description() -> dict:
+    """Boardwalk Robotics' Alexander (lower body) from example-robot-data as docs/robots.md
+    describes it: no sole frame, so the soles are rectangles on the ankle roll links from the
+    foot mesh's extent, with an ``offset``."""
+    return {"name": "alexander",
+            "urdf": "erd:alexander_description/urdf/alexander_v1.lowerBodyOnly.urdf",
+            "srdf": "erd:alexander_description/srdf/alexander.srdf", "posture": "default",
+            "contacts": [{"name": f"{side.lower()}_sole", "frame": f"{side}_FOOT",
+                          "type": "rectangle", "half_size": [0.1, 0.045],
+                          "offset": [0.051, 0.0, -0.072]} for side in ("LEFT", "RIGHT")]}
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

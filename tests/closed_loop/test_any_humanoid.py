@@ -69,3 +69,24 @@ def test_robots_without_a_preset_recover_a_front_push_with_pd_gains(which):
     arrays = result.log.arrays()
     impulse = np.trapezoid(np.linalg.norm(arrays["push_force"], axis=1), arrays["t"])
     assert impulse / robot.mass == pytest.approx(0.1, rel=0.02)
+
+
+@pytest.mark.parametrize("swing_bend", [0.0, 1.0])
+def test_alexander_single_support_needs_the_swing_leg_bent(swing_bend):
+    """Alexander (legs 40 % of its 49 kg) shifting its CoG over one sole at its standing height:
+    the pelvis moves far, the swing knee straightens onto its limit and the joint-limit braking
+    with both feet held gives a torque step far above the scenario's continuity bound. With the
+    CoG lowered so that the swing leg keeps its standing bend (``swing_bend = 1``) the same run
+    succeeds: foot lifted, push recovered, torques continuous (the scenario's success)."""
+    import wholebody as wb
+    from conftest import alexander_description
+    robot = wb.load_robot(alexander_description())
+    result = get_scenario("single-support").run(robot, "pd", {"sine_time": "0",
+                                                             "swing_bend": str(swing_bend)})
+    m = result.metrics
+    bound = get_scenario("single-support").validate(robot)["max_torque_jump"]
+    if swing_bend == 0.0:
+        assert not result.success and m["max_torque_jump_outside_pushes_Nm"] > 5 * bound, m
+    else:
+        assert result.success and m["failed_cycles"] == 0, m
+        assert m["max_torque_jump_outside_pushes_Nm"] < bound, m

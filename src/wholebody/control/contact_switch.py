@@ -4,7 +4,8 @@
 Phases of :class:`ContactSwitch`:
 
 1. shift: the CoG reference moves (quintic, with its velocity and acceleration as the momentum
-   feedforward) over the stance sole, Table 2 hierarchy;
+   feedforward) over the stance sole and as low as the swing leg's bend needs
+   (:mod:`~wholebody.planning.support_shift`), Table 2 hierarchy;
 2. unload: a force regulariser drives the leaving sole's wrench from its value at the start of the
    phase to zero (a ramp of the target, not of the weight: ramping the weight over six decades gives
    large torque jumps per cycle). With LQR gains, the gains are blended over the same ramp from
@@ -26,6 +27,7 @@ import numpy as np
 
 from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
+from ..planning.support_shift import swing_leg_drop
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..tasks import ForceRegularizer
 from ..tasks.momentum import momentum_gain
@@ -60,7 +62,9 @@ class ContactSwitchConfig:
     posture reference of ``held_joints`` (the swing leg's joints) moves to their lifted positions;
     ``sine_push_force`` > 0 schedules a push ``sine_push_at`` into it. ``q_angular``: eq. 26's
     angular weight (LQR); ``lqr_blend``: blend the LQR gains during the unloading (else switch
-    them at the contact switch).
+    them at the contact switch). ``swing_bend`` in [0, 1]: the shift lowers the CoG by this
+    fraction of :func:`~wholebody.planning.support_shift.swing_leg_drop` (1: the swing leg keeps
+    its standing bend; 0: the CoG keeps its standing height).
     """
 
     shift_time: float
@@ -83,6 +87,7 @@ class ContactSwitchConfig:
     settle: float
     q_angular: float
     lqr_blend: bool
+    swing_bend: float = 0.0
 
 
 @dataclass
@@ -180,7 +185,9 @@ class ContactSwitch:
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_start = robot.com.copy()
         stance_pos = robot.frame_placement(robot.contact(stance).frame)[0]
-        self.com_target = np.array([stance_pos[0], stance_pos[1], self.com_start[2]])
+        drop = (config.swing_bend * swing_leg_drop(robot, stance, self.swing_contact)
+                if config.swing_bend > 0.0 else 0.0)
+        self.com_target = np.array([stance_pos[0], stance_pos[1], self.com_start[2] - drop])
         self.lqr = None
         if lqr:
             self.lqr = MomentumLQR(robot, self.double_contacts, Q=lqr_q(config.q_angular))

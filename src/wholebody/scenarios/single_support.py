@@ -41,6 +41,11 @@ PARAMETERS = (
               choices=BIPED_ROLES),
     Parameter("shift_time", 2.0, "duration of the CoG shift (s)",
               **TIME_SPAN),
+    Parameter("swing_bend", 0.0, "the shift lowers the CoG by this fraction of the drop that "
+                                 "keeps the swing leg's standing bend (0: the standing CoG height; "
+                                 "1 helps robots whose swing knee straightens onto its limit, "
+                                 "costs lift where the swing ankle limits it)",
+              low=0.0, high=1.0),
     Parameter("unload_time", 0.5, "duration of the unloading (s)",
               **TIME_SPAN),
     Parameter("lift_time", 1.0, "duration of the swing-foot lift (s)",
@@ -152,7 +157,8 @@ def config(robot, params: dict) -> ContactSwitchConfig:
         sine_ramp=params["sine_ramp"], sine_joints=joints, held_joints=leg_joints(robot, swing),
         sine_kp=params["sine_kp"], sine_kd=params["sine_kd"],
         sine_push_force=params["sine_push_force"], sine_push_at=params["sine_push_at"],
-        settle=params["settle"], q_angular=params["q_angular"], lqr_blend=params["lqr_blend"])
+        settle=params["settle"], q_angular=params["q_angular"], lqr_blend=params["lqr_blend"],
+        swing_bend=params["swing_bend"])
 
 
 def timeline(robot, params: dict) -> Timeline:
