@@ -40,7 +40,13 @@ State families (every state is a pure function of (seed, robot, family, index), 
   put Talos's knee at up to 2.4 rad — a deep crouch — in the "near upright" family); velocities
   normal, 0.3 rad/s on the joints, 0.2 m/s and 0.3 rad/s on the base;
 * ``wild``: roll/pitch ±45°, joints uniform over their whole range, base position ±10 cm,
-  velocities 3x larger.
+  velocities 3x larger;
+* ``in-contact``: the robot standing on its feet — base roll/pitch within ±5°, joints drawn
+  around the posture, then moved (Gauss-Newton on the contact frames' Jacobians, within the
+  limits) until every contact is where it stands in the posture (turned with the base's yaw),
+  and the velocity projected so that no contact moves (``J_c v = 0``). The other two families
+  put the soles wherever the joints take them (on talos14 near-upright, the worse sole tilted by
+  26° in the median, the soles 3.5 cm apart in height), which no standing robot meets.
 
 PassiveWBC is built afresh for every state (0.3-0.8 ms): its stance anchors (eq. 32) and warm
 start would otherwise carry one random state into the next. MomentumBalance (the LQR costs
@@ -48,7 +54,8 @@ start would otherwise carry one random state into the next. MomentumBalance (the
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/fuzz.py --states 2000 [--seed 0]
         [--robots talos14 hyq] [--controllers pd lqr passive quasi-static standing]
-        [--families near-upright wild] [--engines python native] [--jobs 1] [--json OUT]
+        [--families near-upright wild in-contact] [--engines python native] [--jobs 1]
+        [--json OUT]
 
 ``--states`` counts per robot and family; the exit code is 1 when any NaN, limit violation,
 unflagged failure or exception was counted. The disagreement table's "both S" column counts the
@@ -80,7 +87,7 @@ from wholebody.guard import LIMIT_TOLERANCE  # noqa: E402
 from wholebody.planning.trunk import TrunkState  # noqa: E402
 
 ROBOTS = ("talos14", "hyq")
-FAMILIES = ("near-upright", "wild")
+FAMILIES = ("near-upright", "wild", "in-contact")
 #: controllers per robot, each with its engines and whether its qdd/lam satisfy the dynamics
 CONTROLLERS = {
     "talos14": {"pd": (("python", "native"), True), "lqr": (("python", "native"), True),
@@ -104,7 +111,11 @@ ILL_POSED = 0.1 * DISAGREE_SMALL
 FAMILY_SPECS = {
     "near-upright": {"tilt": 10.0, "joints": "posture", "position": 0.02, "speed": 1.0},
     "wild": {"tilt": 45.0, "joints": "range", "position": 0.1, "speed": 3.0},
+    "in-contact": {"tilt": 5.0, "joints": "posture", "position": 0.02, "speed": 1.0},
 }
+#: in-contact states: Gauss-Newton iterations that put the contacts back on the floor, and the
+#: largest contact placement error (m, rad) accepted (else the state is drawn again)
+CONTACT_ITERATIONS, CONTACT_TOLERANCE, CONTACT_DRAWS = 50, 1e-9, 20
 JOINT_SPEED, BASE_SPEED, BASE_RATE = 0.3, 0.2, 0.3  # rad/s, m/s, rad/s (near-upright scale)
 POSTURE_SPAN = 0.3  # rad
 STANCES = {  # hyq plan stance patterns (legs lf, rf, lh, rh)
@@ -157,6 +168,61 @@ def sample_state(robot, family: str, rng: np.random.Generator) -> tuple[np.ndarr
     return q, v
 
 
+def contact_targets(robot, yaw: float) -> dict:
+    """{frame id: placement} of every contact in the posture, turned by ``yaw`` about the
+    vertical through the origin (the floor is z = 0 there)."""
+    model, data = robot.model, robot.model.createData()
+    pin.framesForwardKinematics(model, data, robot.q_ref)
+    turn = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.zeros(3))
+    return {c.frame_id: turn * data.oMf[c.frame_id] for c in robot.contacts}
+
+
+def put_contacts_on_floor(robot, q: np.ndarray, targets: dict) -> tuple[np.ndarray, float]:
+    """``q`` with its joints (the base stays) moved so that every contact frame reaches its
+    target placement (position and orientation for a sole, position for a point foot), by
+    Gauss-Newton on Pinocchio's frame Jacobians within the joint limits → (q, largest error)."""
+    model, data = robot.model, robot.model.createData()
+    dims = {c.frame_id: c.dim for c in robot.contacts}
+    error = np.inf
+    for _ in range(CONTACT_ITERATIONS):
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        rows, jacobians = [], []
+        for frame, target in targets.items():
+            e = pin.log6(target.actInv(data.oMf[frame])).vector
+            J = pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+            if dims[frame] == 3:  # a point foot: its position only (in the frame's axes)
+                e, J = e[:3], J[:3]
+            rows.append(e)
+            jacobians.append(J[:, 6:])
+        e, J = np.concatenate(rows), np.vstack(jacobians)
+        error = float(np.abs(e).max())
+        if error < CONTACT_TOLERANCE:
+            break
+        q = q.copy()
+        q[7:] = np.clip(q[7:] - np.linalg.lstsq(J, e, rcond=None)[0], robot.q_min, robot.q_max)
+    return q, error
+
+
+def sample_in_contact(robot, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(q, v) near the posture with every contact flat on the floor where it stands and the
+    velocity moving none of them (``J_c v = 0``): the states a controller meets while the robot
+    stands on its feet. The base is drawn as in the near-upright family (tilt ±5°), the joints
+    around the posture, then moved to put the contacts back (:func:`put_contacts_on_floor`)."""
+    for _ in range(CONTACT_DRAWS):
+        q, v = sample_state(robot, "in-contact", rng)
+        yaw = float(pin.rpy.matrixToRpy(pin.Quaternion(q[3:7]).toRotationMatrix())[2])
+        turn = pin.rpy.rpyToMatrix(0.0, 0.0, yaw)
+        q[:3] = turn @ robot.q_ref[:3] + (q[:3] - robot.q_ref[:3])  # the base turns with the feet
+        q, error = put_contacts_on_floor(robot, q, contact_targets(robot, yaw))
+        if error < CONTACT_TOLERANCE:
+            break
+    robot.update(q, np.zeros(robot.nv))
+    J = robot.stacked_contact_jacobian()
+    v = v - np.linalg.pinv(J) @ (J @ v)
+    return q, v
+
+
 def plan_near(robot, rng: np.random.Generator, stance, swing_noise=(0.02, 0.1, 0.5),
               normal=(0.0, 0.0, 1.0)):
     """A PassiveWBC/quasi-static plan at the robot's cached state for ``stance`` (one bool per
@@ -192,7 +258,8 @@ def sample_plan(robot, rng: np.random.Generator):
 def make_state(robot, family: str, seed: int, index: int):
     """(q, v, plan) of state ``index``: plan None for robots with rectangular soles."""
     rng = state_rng(seed, robot.name, family, index)
-    q, v = sample_state(robot, family, rng)
+    q, v = (sample_in_contact(robot, rng) if family == "in-contact"
+            else sample_state(robot, family, rng))
     plan = None
     if all(c.dim == 3 for c in robot.contacts):
         robot.update(q, v)
