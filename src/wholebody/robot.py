@@ -540,6 +540,15 @@ class Robot:
         return pin.getFrameVelocity(self.model, self.data, self.frame_id(frame, "frame"),
                                     pin.LOCAL_WORLD_ALIGNED).vector.copy()
 
+    def centroidal_inertia(self, q=None) -> np.ndarray:
+        """The locked (composite rigid body) centroidal inertia I_G (3x3, world axes, about the
+        CoM) at ``q`` (default: the last :meth:`update`'s), from Pinocchio's ``ccrba`` on its own
+        ``Data``."""
+        q = self.q if q is None else check_vector(q, self.nq, "q")
+        data = self.model.createData()
+        pin.ccrba(self.model, data, np.asarray(q, float), np.zeros(self.nv))
+        return data.Ig.inertia.copy()
+
     def contact(self, name: str) -> Contact:
         try:  # called by several tasks every cycle: a dict, not a search
             return self._contacts_by_name[name]

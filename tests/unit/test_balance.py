@@ -138,13 +138,42 @@ def test_native_engine_gives_the_python_engines_torques_through_a_push(robots, g
     assert max(com_error) > 5e-3 and com_error[-1] < 5e-3
 
 
+def test_orientation_state_measures_the_base_and_enters_k(robots):
+    """MomentumBalance(q_orientation=...) (ours; LQR only) feeds back the base's rotation from the
+    posture's base reference as a world-axes rotation vector (checked against scipy's), through
+    -K_orientation theta in the force law; without it the law is the paper's."""
+    from scipy.spatial.transform import Rotation
+
+    robot = robots["talos14"]
+    with pytest.raises(ValueError, match="^q_orientation"):
+        MomentumBalance(robot, gains="pd", q_orientation=10.0)
+    turn = Rotation.from_rotvec([0.02, -0.05, 0.01])
+    q = robot.q_ref.copy()
+    q[3:7] = (turn * Rotation.from_quat(robot.q_ref[3:7])).as_quat()  # world-frame turn, xyzw
+    v = np.zeros(robot.nv)
+    ctrl = MomentumBalance(robot, gains="lqr", q_orientation=10.0, engine="python")
+    ctrl.compute(q, v, 0.0)
+    np.testing.assert_allclose(ctrl.base_orientation_error(), turn.as_rotvec(), atol=1e-12)
+    plain = MomentumBalance(robot, gains="lqr", engine="python")
+    plain.compute(q, v, 0.0)
+    K_or = ctrl.lqr.gains(robot).K_orientation
+    assert plain.lqr.gains(robot).K_orientation is None
+    _, k_at_rest = ctrl.lqr.feedback(robot, ctrl.com_ref)
+    np.testing.assert_allclose(ctrl.momentum.k, k_at_rest - K_or @ turn.as_rotvec(), atol=1e-9)
+
+
 def test_measures_tilt_slip_and_recovery():
     """The shared measures: tilt of a rotation, horizontal slip, CoG recovery after a push."""
     import pinocchio as pin
 
     from wholebody.scenarios.measures import (COG_TOLERANCE_M, cog_recovered, feet_in_place,
-                                              sole_slip, tilt_deg)
+                                              rotation_angle_deg, sole_slip, tilt_deg)
+    from scipy.spatial.transform import Rotation
 
+    a, b = Rotation.from_rotvec([0.1, 0.2, -0.3]), Rotation.from_rotvec([0.0, 0.05, 0.02])
+    assert rotation_angle_deg(a.as_quat(), b.as_quat()) == pytest.approx(
+        np.degrees(np.linalg.norm((a * b.inv()).as_rotvec())))
+    assert rotation_angle_deg(a.as_quat(), -a.as_quat()) == pytest.approx(0.0, abs=1e-4)
     assert tilt_deg(pin.rpy.rpyToMatrix(0.0, np.radians(3.0), 0.0)) == pytest.approx(3.0)
     assert sole_slip(np.array([0.003, 0.004, 0.5]), np.zeros(3)) == pytest.approx(0.005)
     assert feet_in_place(1.9, 0.009) and not feet_in_place(2.0, 0.0)
@@ -199,7 +228,7 @@ def test_push_series_hands_every_controller_option_to_its_trials(monkeypatch):
     monkeypatch.setattr(push_series, "push_trial", lambda robot, controller, p: (
         seen.append(p) or SimpleNamespace(success=True, metrics={})))
     params = {"push_duration": 0.1, "duration": 3.5, "q_angular": 2.0, "angular_weight": 1e-3,
-              "q_integral": 0.0, "integral_limit": 0.01, "pd_stiffness": 14.0,
+              "q_integral": 0.0, "integral_limit": 0.01, "q_orientation": 5.0, "pd_stiffness": 14.0,
               "pd_damping": 7.5, "pd_angular_damping": 2.0, "engine": "python"}
     push_series._one(None, "pd", "front", 100.0, params)
     (p,) = seen

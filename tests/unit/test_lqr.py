@@ -505,3 +505,111 @@ def test_integral_gains_blend_and_feedback(talos):
     np.testing.assert_allclose(k1, k0 - g_ds.K_integral @ z)
     with pytest.raises(ValueError, match="^integral"):
         MomentumLQR(talos, TALOS_DS).feedback(talos, talos.com, integral=z)
+
+
+# ------------------------------------------------------------ orientation state (our extension)
+def locked_inertia(robot):
+    """I_G summed here from the links (parallel-axis theorem on Pinocchio's placements), not from
+    ccrba: sum_i R_i I_i R_i^T + m_i ([c_i - x_cog]x)^T [c_i - x_cog]x."""
+    model, data = robot.model, robot.model.createData()
+    import pinocchio as pin
+    pin.forwardKinematics(model, data, robot.q)
+    parts, total, mass = [], np.zeros(3), 0.0
+    for i in range(1, model.njoints):
+        inertia, placement = model.inertias[i], data.oMi[i]
+        c = placement.act(inertia.lever)
+        parts.append((inertia.mass, c, placement.rotation @ inertia.inertia @ placement.rotation.T))
+        total, mass = total + inertia.mass * c, mass + inertia.mass
+    com = total / mass
+    out = np.zeros((3, 3))
+    for m_i, c, I_rot in parts:
+        r = c - com
+        out += I_rot + m_i * (r @ r * np.eye(3) - np.outer(r, r))
+    return out
+
+
+def rotation_rhs(y, K, k, pos, dims, mass, inertia):
+    """[s; theta]' with s' of eq. 21 (this file's model) and theta' = I_G^-1 h_ang."""
+    s, theta = y[:9], y[9:12]
+    lam = k - K @ np.concatenate([s, theta])
+    return np.concatenate([centroidal_rhs(s, lam, pos, dims, mass),
+                           np.linalg.solve(inertia, s[6:9])])
+
+
+@pytest.mark.parametrize("which,names", CONFIGS)
+def test_orientation_augmented_riccati_and_stable(request, which, names):
+    robot = get_robot(request, which)
+    ctl = MomentumLQR(robot, names, q_orientation=100.0)
+    model = ctl.model(robot)
+    inertia = locked_inertia(robot)
+    np.testing.assert_allclose(robot.centroidal_inertia(), inertia, rtol=1e-9, atol=1e-9)
+    A, B = model.A, model.B
+    Aa = np.zeros((12, 12))
+    Aa[:9, :9] = A
+    Aa[9:, 6:9] = np.linalg.inv(inertia)
+    Ba = np.vstack([B, np.zeros((3, B.shape[1]))])
+    Q = np.diag([30, 30, 50, .5, .5, .5, .1, .1, .1, 100, 100, 100])
+    R = contact_cost(model.dims)
+    K, P = lqr_gains(model, Q[:9, :9], R, q_orientation=100.0, inertia=inertia, full_output=True)
+    assert K.shape == (model.n_lambda, 12)
+    residual = Aa.T @ P + P @ Aa - P @ Ba @ np.linalg.solve(R, Ba.T @ P) + Q
+    assert np.abs(residual).max() < 1e-7 * max(1.0, np.abs(P).max())
+    poles = np.linalg.eigvals(Aa - Ba @ K)
+    assert poles.real.max() < -1e-3
+    g = ctl.gains(robot)
+    np.testing.assert_allclose(np.hstack([g.K, g.K_orientation]), K, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(np.sort_complex(g.poles), np.sort_complex(poles), atol=1e-6)
+    assert g.K_integral is None and MomentumLQR(robot, names).gains(robot).K_orientation is None
+
+
+def test_orientation_state_returns_the_rotation(talos):
+    """An angular-momentum kick (2 N m s about y, 1 about x) on eq. 21 written in this file: the
+    paper's gains (q_angular=0.1) damp the momentum but leave the body turned by the rotation the
+    momentum integrated to (> 0.05 rad); with the orientation state the rotation returns to zero
+    (< 1 mrad after 30 s) and the CoG to its reference."""
+    pos, dims = contact_setup(talos, TALOS_DS)
+    inertia = locked_inertia(talos)
+    com_ref = talos.com.copy()
+    y0 = np.concatenate([com_ref, np.zeros(3), [1.0, 2.0, 0.0], np.zeros(3)])
+    ends = {}
+    for q in (None, 100.0):
+        ctl = MomentumLQR(talos, TALOS_DS, q_orientation=q)
+        K, k = ctl.feedback(talos, com_ref)
+        g = ctl.gains(talos)
+        K12 = np.hstack([K, np.zeros((K.shape[0], 3)) if g.K_orientation is None
+                         else g.K_orientation])
+        sol = solve_ivp(lambda _t, y: rotation_rhs(y, K12, k, pos, dims, talos.mass, inertia),
+                        (0.0, 30.0), y0, method="LSODA", rtol=1e-9, atol=1e-11)
+        assert sol.success
+        ends[q] = sol.y[:, -1]
+    assert np.abs(ends[None][6:9]).max() < 1e-3  # momentum damped either way
+    assert np.linalg.norm(ends[None][9:12]) > 0.05  # ... the body stays turned
+    assert np.linalg.norm(ends[100.0][9:12]) < 1e-3
+    assert np.abs(ends[100.0][:3] - com_ref).max() < 1e-4
+
+
+def test_orientation_feedback_folds_into_k_and_blends(talos):
+    ctl = MomentumLQR(talos, TALOS_DS, q_orientation=10.0, q_integral=1e5)
+    g = ctl.gains(talos)
+    model = ctl.model(talos)
+    K15 = lqr_gains(model, ctl.Q, contact_cost(model.dims), q_orientation=10.0,
+                    inertia=locked_inertia(talos), q_integral=1e5)
+    assert K15.shape == (model.n_lambda, 15)  # [K_s, K_theta, K_z]
+    np.testing.assert_allclose(np.hstack([g.K, g.K_orientation, g.K_integral]), K15,
+                               rtol=1e-8, atol=1e-8)
+    theta, z = np.array([0.01, -0.02, 0.03]), np.array([1e-3, 0.0, -1e-3])
+    s = np.concatenate([talos.com + 0.01, np.ones(6)])
+    K, k = ctl.feedback(talos, talos.com, orientation=theta, integral=z)
+    lam_ff = ctl.feedforward(talos, g, talos.com)
+    s_ref = np.concatenate([talos.com, np.zeros(6)])
+    np.testing.assert_allclose(k - K @ s, lam_ff - K15 @ np.concatenate([s - s_ref, theta, z]),
+                               atol=1e-8)
+    mid = blend_gains(g, ctl.gains(talos, TALOS_SS), 0.5)
+    np.testing.assert_allclose(mid.K_orientation[6:], 0.5 * g.K_orientation[6:])
+    with pytest.raises(ValueError, match="^orientation"):
+        MomentumLQR(talos, TALOS_DS).feedback(talos, talos.com, orientation=theta)
+    for bad in (-1.0, [1.0, 2.0], np.nan, "x"):
+        with pytest.raises(ValueError, match="^q_orientation"):
+            MomentumLQR(talos, TALOS_DS, q_orientation=bad)
+    with pytest.raises(ValueError, match="^inertia"):
+        lqr_gains(model, ctl.Q, contact_cost(model.dims), q_orientation=1.0)

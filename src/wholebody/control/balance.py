@@ -197,6 +197,12 @@ class MomentumBalance:
     our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
     accumulated here, one step per :meth:`compute` call with ``dt`` the time since the previous
     call, clamped to ``+-integral_limit`` (m s, anti-windup); :meth:`reset_integral` zeroes it.
+    ``q_orientation`` (LQR only; None/0 = off, the default and the paper's controller): weight of
+    the orientation error in the augmented LQR state (ours; see :mod:`wholebody.control.lqr`); the
+    error fed back is the floating base's, ``theta = log3(R_base R_ref^T)`` (world axes) against
+    the posture task's base reference. Eq. 21 turns the CoG error into angular momentum that
+    nothing returns; with this state the gains return the rotation it integrates to, so the
+    momentum task's angular rows can keep the paper's weight (``angular_weight=1e4``).
     ``engine``: ``"auto"`` (default: native when built), ``"native"`` — the stack solved by a
     :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and rows, the same
     solution; ``robot.update`` still runs every cycle for the references and the LQR) — or
@@ -217,11 +223,12 @@ class MomentumBalance:
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
                  cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT,
-                 engine: str = "auto", torsion: bool = TORSION):
+                 engine: str = "auto", torsion: bool = TORSION, q_orientation=None):
         if gains not in GAINS:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
-        if gains != "lqr" and q_integral is not None and np.any(np.asarray(q_integral) != 0):
-            raise ValueError("q_integral: integral action is only available with gains='lqr'")
+        for arg, value in (("q_integral", q_integral), ("q_orientation", q_orientation)):
+            if gains != "lqr" and value is not None and np.any(np.asarray(value) != 0):
+                raise ValueError(f"{arg}: an LQR extension, only available with gains='lqr'")
         for arg, value, law in (("P", P, "pd"), ("D", D, "pd"), ("Q", Q, "lqr"), ("R", R, "lqr")):
             if value is not None and gains != law:
                 raise ValueError(f"{arg}: only used with gains='{law}', got gains='{gains}'")
@@ -265,7 +272,8 @@ class MomentumBalance:
         if cop_margin:
             self.stack.find("center of pressure").margin = cop_margin
         self.lqr = (MomentumLQR(robot, self.contacts, Q=Q, R=R, q_integral=q_integral,
-                                integral_limit=integral_limit) if gains == "lqr" else None)
+                                integral_limit=integral_limit, q_orientation=q_orientation)
+                    if gains == "lqr" else None)
         self.cog_integral = np.zeros(3)
         self._t_last: float | None = None
         if self.lqr is not None:
@@ -276,6 +284,14 @@ class MomentumBalance:
         """Zero the CoG-error integral (integral action only) and forget the last call's time."""
         self.cog_integral = np.zeros(3)
         self._t_last = None
+
+    def base_orientation_error(self) -> np.ndarray:
+        """``log3(R_base R_ref^T)``: the floating base's rotation from the posture task's base
+        reference, world axes (the orientation state of the LQR extension)."""
+        q_ref = self.robot.q_ref if self.posture.q_ref is None else self.posture.q_ref
+        R = pin.Quaternion(self.robot.q[3:7]).toRotationMatrix()
+        R_ref = pin.Quaternion(q_ref[3:7]).toRotationMatrix()
+        return pin.log3(R @ R_ref.T)
 
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) in Pinocchio convention."""
@@ -299,8 +315,9 @@ class MomentumBalance:
                     self.cog_integral + dt * (robot.com - self.com_ref))
                 integral = self.cog_integral
             self._t_last = float(t)
+            theta = self.base_orientation_error() if self.lqr.orientation else None
             K, k = self.lqr.feedback(robot, self.com_ref, self.h_ref, contacts=self.contacts,
-                                     hdot_ref=hdot, integral=integral)
+                                     hdot_ref=hdot, integral=integral, orientation=theta)
             self.momentum.K, self.momentum.k = K, k
         else:
             self.momentum.com_ref = self.com_ref

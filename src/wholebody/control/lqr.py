@@ -24,6 +24,15 @@ paper's law a steady CoG offset ``bias / stiffness``, and with eq. 26's Q/R the 
 stiffness is only ~100 N/m on talos14; the integral removes the offset of the regulated (model)
 CoG. The integral is clamped elementwise to ``+-integral_limit`` (anti-windup).
 
+Orientation (OUR EXTENSION, not in the paper; off by default). Eq. 21's state has no orientation:
+with eq. 26's small weight on angular momentum the gains trade CoG error for angular momentum and
+nothing brings back the rotation it integrates to. With ``q_orientation`` the state is augmented
+with the orientation error ``theta`` (3, world axes, small angles), ``theta' = I_G^-1 h_ang`` with
+``I_G`` the centroidal composite inertia at the linearisation pose (the robot turning as one rigid
+body), ``Q_aug = blockdiag(Q, diag(q_orientation))``, and the law gains ``K_theta`` columns acting
+on the measured orientation error (:class:`~wholebody.control.balance.MomentumBalance` uses the
+floating base's). With both extensions the state is ``[x_cog; h; theta; z]``.
+
 Conventions (those of :mod:`wholebody.robot` and :func:`~wholebody.tasks.momentum.momentum_map`):
 a point contact has a 3D force ``f`` (world axes); a rectangle contact a 6D wrench ``[f; tau]`` about
 the contact frame origin ``x_i`` (world axes). Gravity is ``g = (0, 0, -gravity)``.
@@ -83,20 +92,28 @@ def _check_stabilizable(A: np.ndarray, B: np.ndarray) -> None:
                     f"(e.g. a single point contact)")
 
 
-def _integral_weight(q_integral) -> np.ndarray | None:
-    """``q_integral`` (None, 0, a number or a 3-vector, all >= 0) as a 3-vector, None if off."""
-    if q_integral is None:
+def _extension_weight(value, name: str) -> np.ndarray | None:
+    """An extension's weight (None, 0, a number or a 3-vector, all >= 0) as a 3-vector, None if
+    off (``name``: the argument, for the error)."""
+    if value is None:
         return None
     try:
-        arr = np.asarray(q_integral, dtype=float)
+        arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"q_integral: expected a number or a 3-vector >= 0, got {q_integral!r}") \
-            from exc
+        raise ValueError(f"{name}: expected a number or a 3-vector >= 0, got {value!r}") from exc
     if arr.ndim == 0:
         arr = np.full(3, float(arr))
     if arr.shape != (3,) or not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
-        raise ValueError(f"q_integral: expected a number or a 3-vector >= 0, got {q_integral!r}")
+        raise ValueError(f"{name}: expected a number or a 3-vector >= 0, got {value!r}")
     return arr if np.any(arr > 0.0) else None
+
+
+def _integral_weight(q_integral) -> np.ndarray | None:
+    return _extension_weight(q_integral, "q_integral")
+
+
+def _orientation_weight(q_orientation) -> np.ndarray | None:
+    return _extension_weight(q_orientation, "q_orientation")
 
 
 def integral_augmented(A: np.ndarray, B: np.ndarray, Q: np.ndarray, q_integral
@@ -122,8 +139,50 @@ def integral_augmented(A: np.ndarray, B: np.ndarray, Q: np.ndarray, q_integral
     return Aa, Ba, Qa, axes
 
 
+def orientation_augmented(A: np.ndarray, B: np.ndarray, Q: np.ndarray, inertia,
+                          q_orientation) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The model of eq. 21 augmented with the orientation ``theta' = I_G^-1 h_ang`` (ours).
+
+    State ``[s; theta]`` with ``s = [x_cog; h_lin; h_ang]``: ``A_aug = [[A, 0], [E, 0]]`` with
+    ``E = [0 0 I_G^-1]``, ``B_aug = [B; 0]``, ``Q_aug = blockdiag(Q, diag(q_orientation))``.
+    ``inertia``: the 3x3 centroidal composite inertia ``I_G`` (symmetric positive definite).
+    Returns ``(A_aug, B_aug, Q_aug)``.
+    """
+    qo = _orientation_weight(q_orientation)
+    if qo is None:
+        raise ValueError("q_orientation: orientation feedback needs a weight > 0")
+    I_G = weight_matrix(inertia, 3, "inertia", definite=True)
+    n, m = A.shape[0], B.shape[1]
+    Aa = np.zeros((n + 3, n + 3))
+    Aa[:n, :n] = A
+    Aa[n:, 6:9] = np.linalg.inv(I_G)
+    Ba = np.vstack([B, np.zeros((3, m))])
+    Qa = scipy.linalg.block_diag(Q, np.diag(qo))
+    return Aa, Ba, Qa
+
+
+def augmented_model(A: np.ndarray, B: np.ndarray, Q: np.ndarray, q_orientation=None,
+                    inertia=None, q_integral=None):
+    """``(A, B, Q, axes)`` of the design: eq. 21's model, augmented with the orientation
+    (:func:`orientation_augmented`) and then the CoG-error integral (:func:`integral_augmented`)
+    when their weights are on; ``axes`` are the integral's axes (None without integral)."""
+    if _orientation_weight(q_orientation) is not None:
+        if A.shape[0] != STATE_DIM:
+            raise ValueError(f"q_orientation: the state must be eq. 21's [x_cog; h] ({STATE_DIM}), "
+                             f"got {A.shape[0]}")
+        if inertia is None:
+            raise ValueError("inertia: the orientation state needs the centroidal inertia I_G")
+        A, B, Q = orientation_augmented(A, B, Q, inertia, q_orientation)
+    axes = None
+    if _integral_weight(q_integral) is not None:
+        if A.shape[0] < 3:
+            raise ValueError("q_integral: the state must start with x_cog (3)")
+        A, B, Q, axes = integral_augmented(A, B, Q, q_integral)
+    return A, B, Q, axes
+
+
 def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool = False,
-              q_integral=None):
+              q_integral=None, q_orientation=None, inertia=None):
     """Infinite-horizon LQR gain ``K`` for the linearised model: ``u = u0 - K (s - s_ref)``.
 
     Minimises the cost of eq. 26, ``sum/integral of s^T Q s + lambda^T R lambda`` (in deviation
@@ -149,8 +208,13 @@ def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool 
         :func:`integral_augmented` (LQI; our extension, not the paper's) and ``K`` has 3 more
         columns, ``[K_s, K_z]``, acting on ``z = integral of (x_cog - x_ref)`` (a column is zero
         for an axis of weight 0; ``P`` is then that of the augmented system without those axes).
+    q_orientation, inertia : None/0 (default: the paper's LQR) or the weight (number or 3-vector)
+        of the orientation error, with the 3x3 centroidal inertia ``I_G``: the design is done for
+        the model of :func:`orientation_augmented` (ours) and ``K`` has 3 more columns acting on
+        ``theta`` (before the integral's: ``[K_s, K_theta, K_z]``).
 
-    Returns ``K`` (n_lambda x 9, or x 12 with ``q_integral``), or ``(K, P)`` with ``full_output``.
+    Returns ``K`` (n_lambda x 9, + 3 with ``q_orientation``, + 3 with ``q_integral``), or
+    ``(K, P)`` with ``full_output``.
     """
     if isinstance(model, MomentumModel):
         A, B = model.A, model.B
@@ -176,13 +240,9 @@ def lqr_gains(model, Q=None, R=None, dt: float | None = None, full_output: bool 
             raise ValueError("R: no default without contact dims; pass R or a MomentumModel")
         R = contact_cost(model.dims)
     R = weight_matrix(R, m, "R", definite=True)
-    axes = None
-    if _integral_weight(q_integral) is not None:
-        if n < 3:
-            raise ValueError("q_integral: the state must start with x_cog (3)")
-        n_state = n
-        A, B, Q, axes = integral_augmented(A, B, Q, q_integral)
-        n = A.shape[0]
+    A, B, Q, axes = augmented_model(A, B, Q, q_orientation, inertia, q_integral)
+    n_state = A.shape[0] - (0 if axes is None else len(axes))
+    n = A.shape[0]
     _check_stabilizable(A, B)
     try:
         if dt is None:
@@ -218,7 +278,8 @@ class ContactGains:
     eigenvalues of ``A - B K``, of the augmented system with integral action) are None for blended
     gains. ``components`` lists ``(weight, ContactGains)`` of the configurations a blend is made of
     (empty for a plain configuration). ``K_integral`` (n_lambda x 3): the gain on the CoG-error
-    integral (our extension; None without integral action).
+    integral (our extension; None without integral action). ``K_orientation`` (n_lambda x 3): the
+    gain on the orientation error (our extension; None without it).
     """
 
     contacts: tuple[str, ...]
@@ -231,6 +292,7 @@ class ContactGains:
     poles: np.ndarray | None = None
     components: tuple = field(default=(), repr=False)
     K_integral: np.ndarray | None = None
+    K_orientation: np.ndarray | None = None
 
     @property
     def n_lambda(self) -> int:
@@ -302,14 +364,15 @@ def blend_gains(gains_a: ContactGains, gains_b: ContactGains, alpha: float,
     lam0 = (1.0 - alpha) * _embed(gains_a, order, dims, gains_a.lambda0) \
         + alpha * _embed(gains_b, order, dims, gains_b.lambda0)
     com0 = (1.0 - alpha) * gains_a.com0 + alpha * gains_b.com0
-    K_integral = None
-    if gains_a.K_integral is not None or gains_b.K_integral is not None:
-        K_integral = sum(w * _embed(g, order, dims, g.K_integral)
-                         for w, g in ((1.0 - alpha, gains_a), (alpha, gains_b))
-                         if g.K_integral is not None)
+    extensions = {}
+    for key in ("K_integral", "K_orientation"):
+        parts = [(w, g) for w, g in ((1.0 - alpha, gains_a), (alpha, gains_b))
+                 if getattr(g, key) is not None]
+        extensions[key] = (sum(w * _embed(g, order, dims, getattr(g, key)) for w, g in parts)
+                           if parts else None)
     components = tuple((w * cw, cg) for w, g in ((1.0 - alpha, gains_a), (alpha, gains_b))
                        for cw, cg in (g.components or ((1.0, g),)) if w * cw > 0.0)
-    return ContactGains(order, dims, K, lam0, com0, components=components, K_integral=K_integral)
+    return ContactGains(order, dims, K, lam0, com0, components=components, **extensions)
 
 
 # ----------------------------------------------------------------------------- the controller
@@ -332,11 +395,15 @@ class MomentumLQR:
         docstring). This integral action is our extension, not part of Herzog et al. 2016.
     integral_limit : anti-windup bound (m s), each component of the integral passed to
         :meth:`feedback` is clamped to ``+-integral_limit`` (:meth:`clamp_integral`).
+    q_orientation : None or 0 (default, the paper's controller) or the weight (number, or 3-vector
+        on the world axes) of the orientation error in the augmented LQR cost (see the module
+        docstring; ours, not Herzog et al. 2016). ``I_G`` is the robot's centroidal inertia at the
+        pose the gains are computed at.
     """
 
     def __init__(self, robot, contacts: Sequence[str], Q=None, R=None, dt: float | None = None,
                  gravity: float | None = None, q_integral=None,
-                 integral_limit: float = DEFAULT_INTEGRAL_LIMIT):
+                 integral_limit: float = DEFAULT_INTEGRAL_LIMIT, q_orientation=None):
         self.contacts = self._check_contacts(robot, contacts)
         self.Q = weight_matrix(DEFAULT_Q_DIAG if Q is None else Q, STATE_DIM, "Q", definite=False)
         self.R = weight_matrix(DEFAULT_R_DIAG if R is None else R, 6, "R", definite=True)
@@ -346,12 +413,18 @@ class MomentumLQR:
         self.gravity = positive(gravity, "gravity")
         self.q_integral = _integral_weight(q_integral)
         self.integral_limit = positive(integral_limit, "integral_limit")
+        self.q_orientation = _orientation_weight(q_orientation)
         self._cache: dict[tuple[str, ...], ContactGains] = {}
 
     @property
     def integral(self) -> bool:
         """True if the gains include integral action on the CoG error (our extension)."""
         return self.q_integral is not None
+
+    @property
+    def orientation(self) -> bool:
+        """True if the gains include feedback of the orientation error (our extension)."""
+        return self.q_orientation is not None
 
     def clamp_integral(self, z) -> np.ndarray:
         """The CoG-error integral clamped elementwise to ``+-integral_limit`` (anti-windup)."""
@@ -406,18 +479,22 @@ class MomentumLQR:
             return self._cache[names]
         model = self.model(robot, names)
         R = contact_cost(model.dims, self.R)
+        inertia = robot.centroidal_inertia() if self.orientation else None
         K, P = lqr_gains(model, self.Q, R, dt=self.dt, full_output=True,
-                         q_integral=self.q_integral)
-        # continuous-time closed-loop poles (for a discrete design: of the same K in continuous time)
-        if self.integral:
-            Aa, Ba, _, axes = integral_augmented(model.A, model.B, self.Q, self.q_integral)
-            poles = np.linalg.eigvals(Aa - Ba @ K[:, np.r_[0:STATE_DIM, STATE_DIM + axes]])
-            K, K_integral = K[:, :STATE_DIM], K[:, STATE_DIM:]
-        else:
-            poles = np.linalg.eigvals(model.A - model.B @ K)
-            K_integral = None
-        g = ContactGains(names, model.dims, K, model.lambda0, model.com0.copy(), weight=R, P=P,
-                         poles=poles, K_integral=K_integral)
+                         q_integral=self.q_integral, q_orientation=self.q_orientation,
+                         inertia=inertia)
+        # continuous-time closed-loop poles (for a discrete design: of the same K in continuous
+        # time), of the augmented system with the extensions
+        A, B, _, axes = augmented_model(model.A, model.B, self.Q, self.q_orientation, inertia,
+                                        self.q_integral)
+        n_state = A.shape[0] - (0 if axes is None else len(axes))
+        columns = np.r_[0:n_state] if axes is None else np.r_[0:n_state, n_state + axes]
+        poles = np.linalg.eigvals(A - B @ K[:, columns])
+        K_orientation = K[:, STATE_DIM:STATE_DIM + 3] if self.orientation else None
+        K_integral = K[:, n_state:] if self.integral else None
+        g = ContactGains(names, model.dims, K[:, :STATE_DIM], model.lambda0, model.com0.copy(),
+                         weight=R, P=P, poles=poles, K_integral=K_integral,
+                         K_orientation=K_orientation)
         log.debug("MomentumLQR: gains for %s, slowest closed-loop pole %.3f rad/s", list(names),
                   float(np.max(poles.real)))
         self._cache[names] = g
@@ -445,7 +522,7 @@ class MomentumLQR:
 
     def feedback(self, robot, com_ref, h_ref=None, *, contacts: Sequence[str] | None = None,
                  gains: ContactGains | None = None, hdot_ref=None, rebalance: bool = True,
-                 integral=None) -> tuple[np.ndarray, np.ndarray]:
+                 integral=None, orientation=None) -> tuple[np.ndarray, np.ndarray]:
         """``(K, k)`` of the force law eq. 23, ``lambda = -K [x_cog; h] + k``, for eq. 24.
 
         ``k = lambda_ff + K [com_ref; h_ref]``, i.e. ``lambda = lambda_ff - K (s - s_ref)``.
@@ -459,6 +536,10 @@ class MomentumLQR:
         ``gains`` (e.g. from :meth:`blend`) overrides ``contacts`` (default: the current
         configuration). Shapes ``(n_lambda, 9)`` and ``(n_lambda,)`` in the order of the gains'
         contacts, ready for ``MomentumForce(K, k, contacts=gains.contacts)``.
+
+        The extensions' states enter ``k``: ``integral`` (the CoG-error integral, clamped) with
+        ``K_integral``, ``orientation`` (the measured orientation error theta, world axes) with
+        ``K_orientation``; each is an error if the gains lack its columns.
         """
         com_ref = vector(com_ref, 3, "com_ref")
         h_ref = np.zeros(6) if h_ref is None else vector(h_ref, 6, "h_ref")
@@ -479,4 +560,9 @@ class MomentumLQR:
             if gains.K_integral is None:
                 raise ValueError("integral: these gains have no integral action (q_integral)")
             k = k - gains.K_integral @ self.clamp_integral(integral)
+        if orientation is not None:
+            if gains.K_orientation is None:
+                raise ValueError("orientation: these gains have no orientation feedback "
+                                 "(q_orientation)")
+            k = k - gains.K_orientation @ vector(orientation, 3, "orientation")
         return K, k

@@ -39,6 +39,13 @@ def tilt_deg(rotation: np.ndarray) -> float:
     return np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0)))
 
 
+def rotation_angle_deg(quat: np.ndarray, quat_ref: np.ndarray) -> float:
+    """Angle (deg) of the rotation between two unit quaternions (any component order, the same for
+    both): 2 arccos |<q, q_ref>|."""
+    dot = abs(float(np.dot(quat, quat_ref))) / (np.linalg.norm(quat) * np.linalg.norm(quat_ref))
+    return float(np.degrees(2.0 * np.arccos(min(dot, 1.0))))
+
+
 def sole_slip(position: np.ndarray, start: np.ndarray) -> float:
     """Horizontal displacement of a sole frame origin from its start (m)."""
     return np.linalg.norm((position - start)[:2])

@@ -16,8 +16,8 @@ from pathlib import Path
 from ..report.balance_figures import push_figure
 from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter, Scenario,
                    ScenarioResult, duration_parameter, paper_q_notes)
-from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, check_push,
-                     ignored_option_notes, push_trial)
+from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, Q_ORIENTATION,
+                     check_push, ignored_option_notes, push_trial)
 
 PARAMETERS = (
     Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')",
@@ -38,6 +38,7 @@ PARAMETERS = (
     ANGULAR_WEIGHT,
     Q_INTEGRAL,
     INTEGRAL_LIMIT,
+    Q_ORIENTATION,
     *PD_PARAMETERS,
     ENGINE,
 )

@@ -21,7 +21,7 @@ from ..sweep.executors import ordered, scenario_executor
 from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter, Scenario,
                    ScenarioResult, duration_parameter, parse_list)
 from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS,
-                     Q_INTEGRAL, check_locations, check_push, push_trial)
+                     Q_INTEGRAL, Q_ORIENTATION, check_locations, check_push, push_trial)
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points",
@@ -35,6 +35,7 @@ PARAMETERS = (
     ANGULAR_WEIGHT,
     Q_INTEGRAL,
     INTEGRAL_LIMIT,
+    Q_ORIENTATION,
     *PD_PARAMETERS,
     Parameter("bisection", False, "also find the largest survivable peak force per point"),
     Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)",

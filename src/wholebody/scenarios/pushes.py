@@ -22,7 +22,7 @@ from ..sim.simulator import Simulator
 from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, Parameter, RobotRelative, check_engine,
                    momentum_gains)
 from .loop import run_closed_loop
-from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
+from .measures import cog_recovered, feet_in_place, rotation_angle_deg, sole_slip, tilt_deg
 
 # location -> (the robot's frame, ``trunk_frame`` or ``base_frame``, direction of the force, point
 # of application in that frame, in m on talos14: scaled by the robot's standing height,
@@ -88,8 +88,11 @@ Q_INTEGRAL = Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error int
 INTEGRAL_LIMIT = Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
                            "LQR integral action: anti-windup clamp of each integral component "
                            "(m s)", low=0.0, low_open=True)
-CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, *PD_PARAMETERS,
-                         ENGINE)
+Q_ORIENTATION = Parameter("q_orientation", 0.0, "LQR only: weight of the base orientation error "
+                                                "in the LQR state (ours, not the paper's; 0 = "
+                                                "off, the paper's controller)", low=0.0)
+CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, Q_ORIENTATION,
+                         *PD_PARAMETERS, ENGINE)
 
 #: the push parameters of one trial that push-series and robust-push do not vary
 FIXED_PUSH = {"angle": 0.0, "height": 0.1}
@@ -97,7 +100,8 @@ FIXED_PUSH = {"angle": 0.0, "height": 0.1}
 
 def controller_options(controller: str, params: dict) -> dict:
     """Keyword arguments of :class:`MomentumBalance` from the scenario parameters (``q_angular``,
-    ``angular_weight``, ``engine``, for LQR the integral action ``q_integral``/``integral_limit``,
+    ``angular_weight``, ``engine``, for LQR the integral action ``q_integral``/``integral_limit``
+    and the orientation state ``q_orientation``,
     for PD eq. 22's gains ``pd_stiffness``/``pd_damping``/``pd_angular_damping``; missing keys
     take the defaults of :data:`CONTROLLER_PARAMETERS`)."""
     defaults = {p.name: p.default for p in CONTROLLER_PARAMETERS}
@@ -107,6 +111,8 @@ def controller_options(controller: str, params: dict) -> dict:
     if controller == "lqr" and get("q_integral") > 0:
         opts["q_integral"] = get("q_integral")
         opts["integral_limit"] = get("integral_limit")
+    if controller == "lqr" and get("q_orientation") > 0:
+        opts["q_orientation"] = get("q_orientation")
     return opts
 
 
@@ -114,7 +120,7 @@ def ignored_option_notes(controller: str, params: dict) -> list[str]:
     """Notes for options of the other gains' law given a non-default value (LQR's integral action
     with PD, eq. 22's gains with LQR): they are ignored, not errors, so that one parameter set
     runs both controllers."""
-    options = (Q_INTEGRAL, INTEGRAL_LIMIT) if controller != "lqr" else PD_PARAMETERS
+    options = (Q_INTEGRAL, INTEGRAL_LIMIT, Q_ORIENTATION) if controller != "lqr" else PD_PARAMETERS
     law = "an LQR" if controller != "lqr" else "a PD"
     return [f"{p.name} is {law} option; ignored with the {controller.upper()} gains"
             for p in options if p.name in params and params[p.name] != p.default]
@@ -181,9 +187,11 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
     sim = Simulator(robot, observers=observers, label=controller)
     sim.add_push(push)
     start_feet = sim.contact_frame_poses()
-    com, momentum, feet_tilt, feet_slip = [], [], [], []
+    com, momentum, feet_tilt, feet_slip, trunk = [], [], [], [], []
+    base_quat0 = robot.q_ref[3:7]
 
     def observe(t, result):
+        trunk.append(rotation_angle_deg(sim.state()[0][3:7], base_quat0))
         com.append(robot.com - ctrl.com_ref)
         momentum.append(robot.h_G.copy())
         poses = sim.contact_frame_poses()
@@ -206,6 +214,8 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
         "cog_recovery_time_s": recovery,
         "max_foot_tilt_deg": float(max(feet_tilt)),
         "max_foot_slip_m": float(max(feet_slip)),
+        "max_trunk_rotation_deg": float(max(trunk)),
+        "final_trunk_rotation_deg": float(trunk[-1]),
         "failed_cycles": failures,
     }
     success = recovered and feet_in_place(metrics["max_foot_tilt_deg"], metrics["max_foot_slip_m"])

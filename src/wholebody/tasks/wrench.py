@@ -46,9 +46,7 @@ def trunk_inertia(robot, q=None) -> float:
     is I_G ω̇ with the legs held, so I_G, not the base link's inertia, is what K_θ works against;
     the paper's K_θ is isotropic, hence one number, the mean over the axes."""
     q = robot.q_ref if q is None else finite_array(q, "q", shape=(robot.nq,))
-    data = robot.model.createData()
-    pin.ccrba(robot.model, data, np.asarray(q, float), np.zeros(robot.nv))
-    return float(np.trace(data.Ig.inertia)) / 3.0
+    return float(np.trace(robot.centroidal_inertia(q))) / 3.0
 
 
 def trunk_gains(robot, frequency_x_hz: float | None = None,
