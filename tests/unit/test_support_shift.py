@@ -11,7 +11,9 @@ import pinocchio as pin
 import pytest
 import scipy.optimize
 
-from wholebody.planning.support_shift import shifted_posture, swing_leg_drop
+from wholebody.planning.support_shift import (BEND_FRACTIONS, automatic_swing_bend,
+                                              joint_limit_margin, shifted_posture,
+                                              support_posture, swing_leg_drop)
 from wholebody.robots.roles import leg_joints
 
 
@@ -71,3 +73,47 @@ def test_the_shift_at_standing_height_stretches_the_swing_leg(robots, name):
     data, com = _kinematics(robot, q)
     assert np.abs(com - target).max() < 1e-4
     assert _leg_length(robot, data, swing) > _leg_length(robot, standing, swing) + 1e-3
+
+
+@pytest.mark.parametrize("lift", [0.0, 0.08])
+def test_support_posture_meets_its_constraints(robots, lift):
+    """Forward kinematics here: the stance sole where it stands, the swing sole raised by
+    ``lift`` with its standing orientation, the CoG over the stance sole and 1.5 cm lower."""
+    robot = robots["talos14"]
+    stance, swing = robot.contact_names
+    q, residual = support_posture(robot, stance, swing, 0.015, lift)
+    assert residual < 1e-8
+    standing, com0 = _kinematics(robot, robot.q_ref)
+    posed, com = _kinematics(robot, q)
+    s_frame, w_frame = robot.contact(stance).frame_id, robot.contact(swing).frame_id
+    assert np.abs(pin.log6(standing.oMf[s_frame].actInv(posed.oMf[s_frame])).vector).max() < 1e-7
+    np.testing.assert_allclose(posed.oMf[w_frame].translation,
+                               standing.oMf[w_frame].translation + [0.0, 0.0, lift], atol=1e-7)
+    np.testing.assert_allclose(posed.oMf[w_frame].rotation, standing.oMf[w_frame].rotation,
+                               atol=1e-7)
+    np.testing.assert_allclose(com, np.r_[standing.oMf[s_frame].translation[:2], com0[2] - 0.015],
+                               atol=1e-7)
+
+
+def test_joint_limit_margin_is_the_nearest_limit_over_the_range(robots):
+    robot = robots["talos14"]
+    model = robot.model
+    name = robot.joint_names[3]
+    i = model.joints[model.getJointId(name)].idx_q
+    low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+    q = robot.q_ref.copy()
+    q[i] = low + 0.1 * (high - low)
+    assert joint_limit_margin(robot, q, [name]) == pytest.approx(0.1)
+    q[i] = high + 0.05 * (high - low)
+    assert joint_limit_margin(robot, q, [name]) == pytest.approx(-0.05)
+
+
+def test_automatic_bend_keeps_the_standing_height_where_the_drop_does_not_help(robots):
+    """talos14's legs keep the same joint-limit margin at every fraction (its hip yaw is the
+    nearest limit, which the drop does not move), so the paper's experiment keeps the standing
+    height; romeo's lifted swing ankle is the nearest limit and the drop brings it nearer."""
+    for name in ("talos14", "romeo"):
+        robot = robots[name]
+        stance, swing = robot.contact_names
+        assert automatic_swing_bend(robot, stance, swing, 0.08) == 0.0
+    assert BEND_FRACTIONS[0] == 0.0

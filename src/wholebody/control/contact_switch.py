@@ -27,7 +27,7 @@ import numpy as np
 
 from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
-from ..planning.support_shift import swing_leg_drop
+from ..planning.support_shift import automatic_swing_bend, swing_leg_drop
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..tasks import ForceRegularizer
 from ..tasks.momentum import momentum_gain
@@ -64,7 +64,9 @@ class ContactSwitchConfig:
     angular weight (LQR); ``lqr_blend``: blend the LQR gains during the unloading (else switch
     them at the contact switch). ``swing_bend`` in [0, 1]: the shift lowers the CoG by this
     fraction of :func:`~wholebody.planning.support_shift.swing_leg_drop` (1: the swing leg keeps
-    its standing bend; 0: the CoG keeps its standing height).
+    its standing bend; 0: the CoG keeps its standing height); None (default): the fraction
+    :func:`~wholebody.planning.support_shift.automatic_swing_bend` finds from the legs'
+    joint-limit margins.
     """
 
     shift_time: float
@@ -87,7 +89,7 @@ class ContactSwitchConfig:
     settle: float
     q_angular: float
     lqr_blend: bool
-    swing_bend: float = 0.0
+    swing_bend: float | None = None
 
 
 @dataclass
@@ -185,8 +187,9 @@ class ContactSwitch:
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_start = robot.com.copy()
         stance_pos = robot.frame_placement(robot.contact(stance).frame)[0]
-        drop = (config.swing_bend * swing_leg_drop(robot, stance, self.swing_contact)
-                if config.swing_bend > 0.0 else 0.0)
+        bend = (automatic_swing_bend(robot, stance, self.swing_contact, config.lift)
+                if config.swing_bend is None else config.swing_bend)
+        drop = bend * swing_leg_drop(robot, stance, self.swing_contact) if bend > 0.0 else 0.0
         self.com_target = np.array([stance_pos[0], stance_pos[1], self.com_start[2] - drop])
         self.lqr = None
         if lqr:

@@ -4,7 +4,9 @@ Before single support (Herzog et al. 2016, Sect. 5.4) the CoG moves over the sta
 both soles still on the floor. At the standing CoG height the pelvis then moves away from the
 swing sole and the swing leg has to stretch: on robots whose legs are a large share of their
 mass the pelvis moves far and the swing knee straightens onto its limit. Lowering the CoG by the
-drop computed here keeps the swing leg's hip at its standing distance from its sole.
+drop computed here keeps the swing leg's hip at its standing distance from its sole; lowered
+too far, the lifted leg runs into its ankle or knee limits instead. :func:`automatic_swing_bend`
+chooses the fraction of that drop from the legs' joint-limit margins in both key poses.
 """
 
 from __future__ import annotations
@@ -25,6 +27,47 @@ SHIFT_STEPS, ITERATIONS = 10, 30
 RESIDUAL_TOLERANCE = 1e-8
 #: gain of the pull toward the posture in the constraints' nullspace (per iteration)
 POSTURE_PULL = 0.3
+#: the fractions of the drop :func:`automatic_swing_bend` chooses from
+BEND_FRACTIONS = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: joint-limit margins (fractions of the joint's range) this close count as equal
+MARGIN_TIE = 0.01
+
+
+def _homotopy(robot, constraints) -> tuple[np.ndarray, float]:
+    """Gauss-Newton from the posture on ``constraints(model, data, q, s) -> (residuals,
+    jacobians)`` (lists of arrays; Pinocchio's kinematics and Jacobians are computed before each
+    call), the targets moved with ``s`` over :data:`SHIFT_STEPS`, the posture pulled in the
+    constraints' nullspace → ``(q, largest residual)``."""
+    model = robot.model
+    data = model.createData()
+    q = robot.q_ref.copy()
+    residual = np.inf
+    for s in np.linspace(0.0, 1.0, SHIFT_STEPS + 1)[1:]:
+        for _ in range(ITERATIONS):
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+            rows, jacobians = constraints(model, data, q, s)
+            r, J = np.concatenate(rows), np.vstack(jacobians)
+            residual = float(np.abs(r).max())
+            pinv = np.linalg.pinv(J)
+            step = -pinv @ r + POSTURE_PULL * (np.eye(model.nv) - pinv @ J) @ pin.difference(
+                model, q, robot.q_ref)
+            q = pin.integrate(model, q, step)
+    return q, residual
+
+
+def _standing(robot, frames) -> tuple[dict, np.ndarray]:
+    """The placements of ``frames`` and the CoG in the posture."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    return ({f: data.oMf[f].copy() for f in frames},
+            pin.centerOfMass(robot.model, data, robot.q_ref).copy())
+
+
+def _held(model, data, placements) -> tuple[list, list]:
+    """Residuals and Jacobians (LOCAL) of frames held at ``placements``."""
+    return ([pin.log6(M.actInv(data.oMf[f])).vector for f, M in placements.items()],
+            [pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in placements])
 
 
 def shifted_posture(robot, stance: str, swing: str) -> tuple[np.ndarray, float]:
@@ -38,42 +81,62 @@ def shifted_posture(robot, stance: str, swing: str) -> tuple[np.ndarray, float]:
     kinematics and CoG Jacobian with the posture pulled in the constraints' nullspace, the CoG
     target moved in :data:`SHIFT_STEPS`). ``residual``: the largest constraint error (m, rad).
     """
-    model = robot.model
-    data = model.createData()
-    q = robot.q_ref.copy()
     stance_frame, swing_frame = robot.contact(stance).frame_id, robot.contact(swing).frame_id
-    hip = model.getJointId(leg_joints(robot, swing)[0])
-    pin.framesForwardKinematics(model, data, q)
-    held = {f: data.oMf[f].copy() for f in (stance_frame, swing_frame)}
-    leg_length = float(np.linalg.norm(data.oMi[hip].translation - data.oMf[swing_frame].translation))
-    com0 = pin.centerOfMass(model, data, q).copy()
+    hip = robot.model.getJointId(leg_joints(robot, swing)[0])
+    held, com0 = _standing(robot, (stance_frame, swing_frame))
+    data0 = robot.model.createData()
+    pin.forwardKinematics(robot.model, data0, robot.q_ref)
+    leg_length = float(np.linalg.norm(data0.oMi[hip].translation - held[swing_frame].translation))
     target = held[stance_frame].translation[:2]
-    residual = np.inf
-    for s in np.linspace(0.0, 1.0, SHIFT_STEPS + 1)[1:]:
-        goal = com0[:2] + s * (target - com0[:2])
-        for _ in range(ITERATIONS):
-            pin.computeJointJacobians(model, data, q)
-            pin.updateFramePlacements(model, data)
-            com = pin.centerOfMass(model, data, q, False)
-            rows, jacobians = [], []
-            for frame, placement in held.items():
-                rows.append(pin.log6(placement.actInv(data.oMf[frame])).vector)
-                jacobians.append(pin.getFrameJacobian(model, data, frame, pin.LOCAL))
-            rows.append(com[:2] - goal)
-            jacobians.append(pin.jacobianCenterOfMass(model, data, q, False)[:2])
-            leg = data.oMi[hip].translation - data.oMf[swing_frame].translation
-            length = float(np.linalg.norm(leg))
-            rows.append(np.array([length - leg_length]))
-            J_hip = pin.getJointJacobian(model, data, hip, pin.LOCAL_WORLD_ALIGNED)[:3]
-            J_sole = pin.getFrameJacobian(model, data, swing_frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-            jacobians.append((leg / length) @ (J_hip - J_sole)[None])
-            r, J = np.concatenate(rows), np.vstack(jacobians)
-            residual = float(np.abs(r).max())
-            pinv = np.linalg.pinv(J)
-            step = -pinv @ r + POSTURE_PULL * (np.eye(model.nv) - pinv @ J) @ pin.difference(
-                model, q, robot.q_ref)
-            q = pin.integrate(model, q, step)
-    return q, residual
+
+    def constraints(model, data, q, s):
+        rows, jacobians = _held(model, data, held)
+        com = pin.centerOfMass(model, data, q, False)
+        rows.append(com[:2] - (com0[:2] + s * (target - com0[:2])))
+        jacobians.append(pin.jacobianCenterOfMass(model, data, q, False)[:2])
+        leg = data.oMi[hip].translation - data.oMf[swing_frame].translation
+        length = float(np.linalg.norm(leg))
+        rows.append(np.array([length - leg_length]))
+        J_hip = pin.getJointJacobian(model, data, hip, pin.LOCAL_WORLD_ALIGNED)[:3]
+        J_sole = pin.getFrameJacobian(model, data, swing_frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+        jacobians.append((leg / length) @ (J_hip - J_sole)[None])
+        return rows, jacobians
+
+    return _homotopy(robot, constraints)
+
+
+def support_posture(robot, stance: str, swing: str, drop: float, lift: float
+                    ) -> tuple[np.ndarray, float]:
+    """A configuration of single support's key poses → ``(q, residual)``: ``stance``'s sole in
+    place, ``swing``'s sole raised by ``lift`` (m, 0 for the shift with both soles down) with its
+    standing orientation, the CoG over the stance sole's centre and ``drop`` (m) below its standing
+    height; the rest as close to the posture as that allows (as :func:`shifted_posture`)."""
+    stance_frame, swing_frame = robot.contact(stance).frame_id, robot.contact(swing).frame_id
+    held, com0 = _standing(robot, (stance_frame, swing_frame))
+    target = np.r_[held[stance_frame].translation[:2], com0[2] - drop]
+
+    def constraints(model, data, q, s):
+        raised = held[swing_frame].copy()
+        raised.translation = raised.translation + np.array([0.0, 0.0, s * lift])
+        rows, jacobians = _held(model, data, {stance_frame: held[stance_frame],
+                                              swing_frame: raised})
+        rows.append(pin.centerOfMass(model, data, q, False) - (com0 + s * (target - com0)))
+        jacobians.append(pin.jacobianCenterOfMass(model, data, q, False))
+        return rows, jacobians
+
+    return _homotopy(robot, constraints)
+
+
+def joint_limit_margin(robot, q, joints) -> float:
+    """The smallest distance of ``joints`` (names, 1-DoF) from their nearest position limit, as a
+    fraction of their range (negative beyond a limit)."""
+    model = robot.model
+    margins = []
+    for name in joints:
+        i = model.joints[model.getJointId(name)].idx_q
+        low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        margins.append(min(q[i] - low, high - q[i]) / (high - low))
+    return float(min(margins))
 
 
 def swing_leg_drop(robot, stance: str, swing: str) -> float:
@@ -90,3 +153,29 @@ def swing_leg_drop(robot, stance: str, swing: str) -> float:
     data = model.createData()
     standing = pin.centerOfMass(model, data, robot.q_ref)[2]
     return max(0.0, float(standing - pin.centerOfMass(model, data, q)[2]))
+
+
+def automatic_swing_bend(robot, stance: str, swing: str, lift: float) -> float:
+    """The fraction of :func:`swing_leg_drop` single support should lower the CoG by: of
+    :data:`BEND_FRACTIONS`, the one whose key poses (:func:`support_posture` for the shift and
+    for the lift by ``lift``) keep both legs' joints farthest from their limits
+    (:func:`joint_limit_margin`, the worse pose counts), the smallest within
+    :data:`MARGIN_TIE` of the best (the standing height when the drop does not matter)."""
+    drop = swing_leg_drop(robot, stance, swing)
+    if drop <= 0.0:
+        return 0.0
+    joints = leg_joints(robot, stance) + leg_joints(robot, swing)
+    margins = []
+    for fraction in BEND_FRACTIONS:
+        worst = np.inf
+        for height in (0.0, lift):
+            q, residual = support_posture(robot, stance, swing, fraction * drop, height)
+            worst = min(worst, joint_limit_margin(robot, q, joints)
+                        if residual <= RESIDUAL_TOLERANCE else -np.inf)
+        margins.append(worst)
+    best = max(margins)
+    chosen = next(f for f, m in zip(BEND_FRACTIONS, margins) if m >= best - MARGIN_TIE)
+    log.info("single support on %s: swing_bend %.2g (CoG %.1f mm lower; joint-limit margins %s "
+             "for %s)", robot.name, chosen, 1e3 * chosen * drop,
+             [round(m, 3) for m in margins], list(BEND_FRACTIONS))
+    return chosen

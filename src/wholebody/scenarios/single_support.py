@@ -41,11 +41,13 @@ PARAMETERS = (
               choices=BIPED_ROLES),
     Parameter("shift_time", 2.0, "duration of the CoG shift (s)",
               **TIME_SPAN),
-    Parameter("swing_bend", 0.0, "the shift lowers the CoG by this fraction of the drop that "
-                                 "keeps the swing leg's standing bend (0: the standing CoG height; "
-                                 "1 helps robots whose swing knee straightens onto its limit, "
-                                 "costs lift where the swing ankle limits it)",
-              low=0.0, high=1.0),
+    Parameter("swing_bend", -1.0, "the shift lowers the CoG by this fraction of the drop that "
+                                  "keeps the swing leg's standing bend (0: the standing CoG "
+                                  "height; 1 helps robots whose swing knee straightens onto its "
+                                  "limit, costs lift where the swing ankle limits it; -1: the "
+                                  "fraction that keeps the legs farthest from their joint limits "
+                                  "in the shifted and lifted poses)",
+              low=0.0, high=1.0, special=(-1.0,)),
     Parameter("unload_time", 0.5, "duration of the unloading (s)",
               **TIME_SPAN),
     Parameter("lift_time", 1.0, "duration of the swing-foot lift (s)",
@@ -158,7 +160,7 @@ def config(robot, params: dict) -> ContactSwitchConfig:
         sine_kp=params["sine_kp"], sine_kd=params["sine_kd"],
         sine_push_force=params["sine_push_force"], sine_push_at=params["sine_push_at"],
         settle=params["settle"], q_angular=params["q_angular"], lqr_blend=params["lqr_blend"],
-        swing_bend=params["swing_bend"])
+        swing_bend=None if params["swing_bend"] < 0.0 else params["swing_bend"])
 
 
 def timeline(robot, params: dict) -> Timeline:
