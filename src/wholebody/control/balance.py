@@ -201,8 +201,9 @@ class MomentumBalance:
     the orientation error in the augmented LQR state (ours; see :mod:`wholebody.control.lqr`); the
     error fed back is the floating base's, ``theta = log3(R_base R_ref^T)`` (world axes) against
     the posture task's base reference. Eq. 21 turns the CoG error into angular momentum that
-    nothing returns; with this state the gains return the rotation it integrates to, so the
-    momentum task's angular rows can keep the paper's weight (``angular_weight=1e4``).
+    nothing returns; with this state the gains return the rotation it integrates to. It does not
+    make the paper's single momentum weight (``angular_weight=1e4``) usable: the moments the gains
+    ask exceed what the soles' CoP allows (docs/results.md measures both).
     ``engine``: ``"auto"`` (default: native when built), ``"native"`` — the stack solved by a
     :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and rows, the same
     solution; ``robot.update`` still runs every cycle for the references and the LQR) — or
