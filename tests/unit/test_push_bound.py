@@ -62,3 +62,41 @@ def test_geometry_of_a_preset():
     assert front["push_height"] > push_bound.push_geometry(robot, "hip-front")["push_height"]
     assert front["z0"] == pytest.approx(robot.com[2] - robot.contact_point(robot.contact_names[0])[2],
                                         abs=1e-3)
+
+
+def test_capture_mpc_prediction_is_the_stepped_model():
+    """benchmarks/capture_mpc.py's condensed prediction Phi x0 + Gamma w equals stepping the
+    discrete model x+ = Ad x + Bd (f, p, 0) one input at a time."""
+    import capture_mpc
+
+    geom = lip_geometry(height=0.3)
+    mpc = capture_mpc.AxisMPC(geom, dt=0.02, steps=12)
+    Ad, Bd = push_bound.discrete_model(geom, 0.02)
+    rng = np.random.default_rng(3)
+    x0, w = rng.normal(size=4), rng.normal(size=24)
+    x, states = x0.copy(), []
+    for k in range(12):
+        x = Ad @ x + Bd @ np.r_[w[2 * k:2 * k + 2], 0.0]
+        states.append(x)
+    np.testing.assert_allclose(mpc.Phi @ x0 + mpc.Gamma @ w, np.concatenate(states), atol=1e-9)
+    f, p = mpc.first_step(np.array([0.02, 0.2, 0.0, 0.0]))  # moving along +u: the CoP leads it
+    assert p > 0.02 and f < 0.0
+
+
+def test_push_trial_runs_the_controller_it_is_given(robots):
+    from wholebody.control.balance import MomentumBalance
+    from wholebody.scenarios.push import PARAMETERS
+    from wholebody.scenarios.pushes import push_trial
+
+    robot = robots["talos14"]
+    calls = []
+
+    class Counting(MomentumBalance):
+        def compute(self, q, v, t=0.0):
+            calls.append(t)
+            return super().compute(q, v, t)
+
+    params = {p.name: p.default for p in PARAMETERS}
+    params.update(duration=0.02, start=0.0, peak_force=10.0)
+    push_trial(robot, "lqr", params, balance=Counting(robot, gains="pd"))
+    assert len(calls) >= 20

@@ -177,13 +177,15 @@ class PushTrial:
 
 
 def push_trial(robot, controller: str, params: dict, progress: bool = False,
-               observers=()) -> PushTrial:
+               observers=(), balance: MomentumBalance | None = None) -> PushTrial:
     """One push (``make_push(params)``) on the standing robot under :class:`MomentumBalance` for
     ``duration`` s. Survived: the feet stay flat and in place and the CoG returns within 5 mm of its
     reference within 3 s after the push (:mod:`~wholebody.scenarios.measures`). ``observers``
-    watch the simulation."""
+    watch the simulation. ``balance``: a controller built by the caller (e.g. with a
+    ``reference``) instead of the one ``controller`` and ``params`` describe."""
     push = make_push(params, robot)
-    ctrl = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
+    ctrl = balance if balance is not None else MomentumBalance(
+        robot, gains=controller, **controller_options(controller, params))
     sim = Simulator(robot, observers=observers, label=controller)
     sim.add_push(push)
     start_feet = sim.contact_frame_poses()
