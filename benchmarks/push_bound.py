@@ -19,7 +19,8 @@ take out at once the angular momentum the push brings), larger ones allow a hip 
 ignores joint ranges, torque limits and the feet's compliance (the scenarios count a foot tilted
 by 2 degrees as a failure, the LP lets the CoP sit on the edge), so the real thresholds lie below.
 
-Run: ``.venv/bin/python benchmarks/push_bound.py [--robot talos14] [--phi 1,10,20,30,90]``
+Run: ``.venv/bin/python benchmarks/push_bound.py [--robot talos14] [--phi 1,10,20,30,90]
+[--sole-fraction 0.8]``
 """
 
 from __future__ import annotations
