@@ -106,6 +106,14 @@ def test_joint_limit_margin_is_the_nearest_limit_over_the_range(robots):
     assert joint_limit_margin(robot, q, [name]) == pytest.approx(0.1)
     q[i] = high + 0.05 * (high - low)
     assert joint_limit_margin(robot, q, [name]) == pytest.approx(-0.05)
+    # a joint without a finite range does not count
+    saved = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+    try:
+        model.lowerPositionLimit[i], model.upperPositionLimit[i] = -np.inf, np.inf
+        assert joint_limit_margin(robot, q, [name]) == np.inf
+        assert joint_limit_margin(robot, q, [name, robot.joint_names[2]]) < np.inf
+    finally:
+        model.lowerPositionLimit[i], model.upperPositionLimit[i] = saved
 
 
 def test_automatic_bend_keeps_the_standing_height_where_the_drop_does_not_help(robots):

@@ -128,13 +128,17 @@ def support_posture(robot, stance: str, swing: str, drop: float, lift: float
 
 
 def joint_limit_margin(robot, q, joints) -> float:
-    """The smallest distance of ``joints`` (names, 1-DoF) from their nearest position limit, as a
-    fraction of their range (negative beyond a limit)."""
+    """The smallest distance of ``joints`` (names) from their nearest position limit, as a
+    fraction of their range (negative beyond a limit); joints without a finite range (continuous
+    ones) do not count (inf if none has one)."""
     model = robot.model
-    margins = []
+    margins = [np.inf]
     for name in joints:
-        i = model.joints[model.getJointId(name)].idx_q
+        joint = model.joints[model.getJointId(name)]
+        i = joint.idx_q
         low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        if joint.nq != 1 or not (np.isfinite(low) and np.isfinite(high) and high > low):
+            continue
         margins.append(min(q[i] - low, high - q[i]) / (high - low))
     return float(min(margins))
 
