@@ -12,7 +12,7 @@ weight 1. The push itself is unknown to it. Herzog et al. 2016 has no such plann
 test whether planning within the CoP bounds closes the gap docs/results.md reports.
 
 Run: ``.venv/bin/python benchmarks/capture_mpc.py --dv 0.3 [--locations front,...]
-[--lateral 0.7]``
+[--lateral 0.7] [--bisect 0.2,0.4,5]``
 """
 
 from __future__ import annotations
@@ -116,6 +116,17 @@ class CaptureReference:
         return BalanceReference(self.com0.copy(), None, self.hdot.copy(), None)
 
 
+def trial(robot, location: str, dv: float, sole: float, lateral: float):
+    """One push of the scenario's protocol under the prototype → the push trial."""
+    params = {p.name: p.default for p in PARAMETERS}
+    params.update(location=location, dv=dv)
+    balance = MomentumBalance(
+        robot, gains="pd", P=np.diag([0.0, 0.0, 50.0, 0.0, 0.0, 0.0]),
+        D=np.diag([0.0, 0.0, 15.0, 0.0, 0.0, 5.0]), angular_weight=1.0,
+        reference=CaptureReference(robot, sole, lateral))
+    return push_trial(robot, "pd", with_peak_force(robot, params), balance=balance)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--robot", default="talos14")
@@ -123,18 +134,23 @@ def main() -> None:
     parser.add_argument("--locations", default=",".join(LOCATIONS))
     parser.add_argument("--sole", type=float, default=0.9)
     parser.add_argument("--lateral", type=float, default=1.0)
+    parser.add_argument("--bisect", default="",
+                        help="LOW,HIGH,STEPS: the largest survived dv per point by bisection")
     args = parser.parse_args()
     robot = wb.load_robot(args.robot)
     for location in args.locations.split(","):
-        params = {p.name: p.default for p in PARAMETERS}
-        params.update(location=location, dv=args.dv)
-        balance = MomentumBalance(
-            robot, gains="pd", P=np.diag([0.0, 0.0, 50.0, 0.0, 0.0, 0.0]),
-            D=np.diag([0.0, 0.0, 15.0, 0.0, 0.0, 5.0]), angular_weight=1.0,
-            reference=CaptureReference(robot, args.sole, args.lateral))
-        trial = push_trial(robot, "pd", with_peak_force(robot, params), balance=balance)
-        m = trial.metrics
-        print(f"{location:9s} dv {args.dv:.3f}: {'survived' if trial.success else 'failed':8s} "
+        if args.bisect:
+            low, high, steps = (float(x) for x in args.bisect.split(","))
+            for _ in range(int(steps)):
+                mid = 0.5 * (low + high)
+                survived = trial(robot, location, mid, args.sole, args.lateral).success
+                low, high = (mid, high) if survived else (low, mid)
+            print(f"{location:9s} largest survived dv {low:.3f} m/s (bisection on "
+                  f"{args.bisect})", flush=True)
+            continue
+        result = trial(robot, location, args.dv, args.sole, args.lateral)
+        m = result.metrics
+        print(f"{location:9s} dv {args.dv:.3f}: {'survived' if result.success else 'failed':8s} "
               f"CoG {1e3 * m['max_cog_error_m']:.1f} mm, back in {m['cog_recovery_time_s']:.2f} s, "
               f"feet tilt {m['max_foot_tilt_deg']:.1f}°, slip {1e3 * m['max_foot_slip_m']:.1f} mm, "
               f"trunk {m['max_trunk_rotation_deg']:.1f}° (end {m['final_trunk_rotation_deg']:.1f}°)",
