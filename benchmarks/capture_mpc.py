@@ -64,12 +64,14 @@ class AxisMPC:
         self.upper = np.tile([f_max, hi], steps)
         self.phi_rows = self.Gamma[3::4]
         self.phi_max = np.radians(phi_max)
+        self.linear = self.Gamma.T @ self.Q @ self.Phi  # the cost's linear term is linear @ x0
+        self.phi_free = self.Phi[3::4]  # phi without inputs
 
     def first_step(self, x0: np.ndarray) -> tuple[float, float] | None:
         """(force, CoP) of the plan's first step from the state ``x0 = (u, u', L, phi)``; without
         the bound on phi when the state is already beyond what it allows."""
-        g = self.Gamma.T @ self.Q @ (self.Phi @ x0)
-        free = self.Phi[3::4] @ x0
+        g = self.linear @ x0
+        free = self.phi_free @ x0
         upper = np.r_[self.upper, self.phi_max - free]
         lower = np.r_[self.lower, -self.phi_max - free]
         result = solve_daqp_qp(self.H, g, self.phi_rows, upper, lower,

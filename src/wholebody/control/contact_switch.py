@@ -187,9 +187,12 @@ class ContactSwitch:
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_start = robot.com.copy()
         stance_pos = robot.frame_placement(robot.contact(stance).frame)[0]
-        bend = (automatic_swing_bend(robot, stance, self.swing_contact, config.lift)
-                if config.swing_bend is None else config.swing_bend)
-        drop = bend * swing_leg_drop(robot, stance, self.swing_contact) if bend > 0.0 else 0.0
+        drop = 0.0
+        if config.swing_bend is None or config.swing_bend > 0.0:
+            full = swing_leg_drop(robot, stance, self.swing_contact)
+            bend = (automatic_swing_bend(robot, stance, self.swing_contact, config.lift, full)
+                    if config.swing_bend is None else config.swing_bend)
+            drop = bend * full
         self.com_target = np.array([stance_pos[0], stance_pos[1], self.com_start[2] - drop])
         self.lqr = None
         if lqr:

@@ -56,12 +56,13 @@ def _homotopy(robot, constraints) -> tuple[np.ndarray, float]:
     return q, residual
 
 
-def _standing(robot, frames) -> tuple[dict, np.ndarray]:
-    """The placements of ``frames`` and the CoG in the posture."""
+def _standing(robot, frames) -> tuple[dict, np.ndarray, pin.Data]:
+    """The placements of ``frames``, the CoG and the kinematics (joint placements) in the
+    posture."""
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, robot.q_ref)
     return ({f: data.oMf[f].copy() for f in frames},
-            pin.centerOfMass(robot.model, data, robot.q_ref).copy())
+            pin.centerOfMass(robot.model, data, robot.q_ref).copy(), data)
 
 
 def _held(model, data, placements) -> tuple[list, list]:
@@ -83,9 +84,7 @@ def shifted_posture(robot, stance: str, swing: str) -> tuple[np.ndarray, float]:
     """
     stance_frame, swing_frame = robot.contact(stance).frame_id, robot.contact(swing).frame_id
     hip = robot.model.getJointId(leg_joints(robot, swing)[0])
-    held, com0 = _standing(robot, (stance_frame, swing_frame))
-    data0 = robot.model.createData()
-    pin.forwardKinematics(robot.model, data0, robot.q_ref)
+    held, com0, data0 = _standing(robot, (stance_frame, swing_frame))
     leg_length = float(np.linalg.norm(data0.oMi[hip].translation - held[swing_frame].translation))
     target = held[stance_frame].translation[:2]
 
@@ -112,7 +111,7 @@ def support_posture(robot, stance: str, swing: str, drop: float, lift: float
     standing orientation, the CoG over the stance sole's centre and ``drop`` (m) below its standing
     height; the rest as close to the posture as that allows (as :func:`shifted_posture`)."""
     stance_frame, swing_frame = robot.contact(stance).frame_id, robot.contact(swing).frame_id
-    held, com0 = _standing(robot, (stance_frame, swing_frame))
+    held, com0, _ = _standing(robot, (stance_frame, swing_frame))
     target = np.r_[held[stance_frame].translation[:2], com0[2] - drop]
 
     def constraints(model, data, q, s):
@@ -159,13 +158,15 @@ def swing_leg_drop(robot, stance: str, swing: str) -> float:
     return max(0.0, float(standing - pin.centerOfMass(model, data, q)[2]))
 
 
-def automatic_swing_bend(robot, stance: str, swing: str, lift: float) -> float:
+def automatic_swing_bend(robot, stance: str, swing: str, lift: float,
+                         drop: float | None = None) -> float:
     """The fraction of :func:`swing_leg_drop` single support should lower the CoG by: of
     :data:`BEND_FRACTIONS`, the one whose key poses (:func:`support_posture` for the shift and
     for the lift by ``lift``) keep both legs' joints farthest from their limits
     (:func:`joint_limit_margin`, the worse pose counts), the smallest within
-    :data:`MARGIN_TIE` of the best (the standing height when the drop does not matter)."""
-    drop = swing_leg_drop(robot, stance, swing)
+    :data:`MARGIN_TIE` of the best (the standing height when the drop does not matter).
+    ``drop``: :func:`swing_leg_drop`'s value when the caller has it already."""
+    drop = swing_leg_drop(robot, stance, swing) if drop is None else drop
     if drop <= 0.0:
         return 0.0
     joints = leg_joints(robot, stance) + leg_joints(robot, swing)
