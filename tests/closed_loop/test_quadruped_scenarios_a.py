@@ -112,6 +112,20 @@ def test_corrected_mu_removes_slip_events(hyq):
     assert len(slip_events(same.log)) > 0
 
 
+def test_force_parallel_regularizer_keeps_the_plain_pyramid_from_slipping(hyq):
+    """mu corrected to the floor's 0.4 with the plain pyramid: the paper's regulariser pushes a
+    lightly loaded foot to a pyramid corner (|f_t| up to sqrt(2) mu f_n) and it slips; leaning
+    every force like the desired net force keeps each foot at the net force's friction ratio: no
+    slip event (the twin's measured contact-point speeds)."""
+    paper = crawl_run(hyq, 0.4, 0.4, 0.11, 4.0, K_st=200.0, D_st=30.0)
+    parallel = crawl_run(hyq, 0.4, 0.4, 0.11, 4.0, K_st=200.0, D_st=30.0,
+                         regularization="force-parallel")
+    assert len(slip_events(paper.log)) > 0
+    assert not parallel.fell and parallel.failures == 0 and parallel.distance > 0.2
+    assert slip_events(parallel.log) == []
+    assert parallel.stance_slip().max() < 0.005
+
+
 # ---------------------------------------------------------------------- Sect. V-C weak joint
 def test_weak_knee_limit_holds_and_the_hip_takes_the_load(hyq):
     """LF-KFE limited to 60 Nm in the WBC (nominal stance peak > 100 Nm): the twin never receives

@@ -2,6 +2,7 @@
 its constraints, an independent formulation (the two-level stack of the hierarchical core), the
 slack identity of eq. 33, and in closed loop in the MuJoCo twin."""
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -60,6 +61,7 @@ def test_solution_satisfies_dynamics_and_constraints(robots, rng, stance, plan_f
 @pytest.mark.parametrize("stance", STANCE_SETS)
 @pytest.mark.parametrize("options", [{}, {"regularization": "torque",
                                           "torque_weights": np.tile([1e-4, 1e-4, 1e-2], 4)},
+                                     {"regularization": "force-parallel", "tangential_weight": 1.0},
                                      {"swing_slack": "none"}])
 def test_matches_two_level_stack(robots, rng, stance, options, plan_for):
     """The dedicated assembly and the generic Formulation (two levels, method="weighted", DAQP)
@@ -275,3 +277,29 @@ def test_crawl_in_the_twin(robots, controller):
     assert abs(np.arctan2(R[1, 0], R[0, 0])) < 0.05  # heading kept
     assert run.stance_slip().max() < 0.005
     assert run.tracking(1.0)["linear_max_m"] < 0.02
+
+
+def test_force_parallel_regularization_spreads_friction_evenly(robots, plan_for):
+    """A lateral trunk acceleration on four feet: with ``regularization="force-parallel"`` every
+    stance force leans like the net force the QP returns (the same tangential-to-normal ratio on
+    each foot, computed from the solution's own sum), so the most-loaded-in-friction foot needs
+    less friction than with the paper's regulariser, which shares the tangential force equally."""
+    robot = robots["hyq"]
+    robot.update(robot.q_ref.copy(), np.zeros(robot.nv))
+    rng = np.random.default_rng(4)
+    ratios = {}
+    for scheme in ("force-normal", "force-parallel"):
+        wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names), mu=0.6,
+                         regularization=scheme, engine="python")
+        plan = plan_for(robot, rng, (True,) * 4)
+        plan.trunk = replace(plan.trunk, position=robot.com.copy(), velocity=np.zeros(3),
+                             acceleration=np.array([0.5, 2.0, 0.0]), angular_velocity=np.zeros(3),
+                             rotation=pin.Quaternion(robot.q[3:7]).toRotationMatrix())
+        sol = wbc.solve(plan)
+        assert sol.ok, sol.status
+        F = sol.lam.reshape(-1, 3)
+        net = F.sum(axis=0)
+        ratios[scheme] = np.hypot(F[:, 0], F[:, 1]) / F[:, 2]
+        if scheme == "force-parallel":
+            np.testing.assert_allclose(ratios[scheme], np.hypot(*net[:2]) / net[2], atol=0.01)
+    assert ratios["force-parallel"].max() < ratios["force-normal"].max() - 0.02

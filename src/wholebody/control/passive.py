@@ -7,7 +7,8 @@ One QP per control cycle over u = [q̈, F_grf] (eq. 7), written into the preallo
 
 * cost ‖W_com − W_com,d‖²_Q + ‖u‖²_R (eqs. 7a, 8): the trunk wrench task of eq. 4
   (:class:`~wholebody.tasks.wrench.TrunkImpedance`) plus a regulariser — either forces near the cone
-  normals or, with ``regularization="torque"``, the joint torques of the contact forces with
+  normals (or, ours, ``regularization="force-parallel"``: every force leaning like the desired net
+  force) or, with ``regularization="torque"``, the joint torques of the contact forces with
   per-joint weights (Sect. V-D, footnote 16: R_F = J_st,j R_τ J_st,jᵀ);
 * floating-base dynamics (eq. 9), here in Pinocchio's base coordinates (a linear change of rows of
   the paper's CoM coordinates: the constraint set is the same);
@@ -56,7 +57,7 @@ log = logging.getLogger(__name__)
 
 SLACKS = ("per-direction", "single", "none")
 ENGINES = ("auto", "native", "python")
-REGULARIZATIONS = ("force-normal", "torque")
+REGULARIZATIONS = ("force-normal", "force-parallel", "torque")
 
 
 @dataclass(frozen=True)
@@ -69,8 +70,10 @@ class PassiveConfig:
     ``swing_slack`` one of ``SLACKS`` (eq. 11 / 33) with weight
     ``slack_weight`` α; ``K_st``/``D_st`` stance task of eq. 32 (both 0: eq. 10); ``Q`` (6, trunk
     wrench, N² / (Nm)²), ``R_qdd`` and ``R_force`` the ‖u‖²_R term of eq. 7a;
-    ``regularization`` one of ``REGULARIZATIONS`` with ``tangential_weight`` (force-normal) or
-    ``torque_weights`` (per joint, torque; None: 1e-4 each; footnote 16);
+    ``regularization`` one of ``REGULARIZATIONS`` with ``tangential_weight`` (force-normal:
+    tangential forces ≈ 0; force-parallel, ours: every stance force leaning like the desired net
+    force W_d, the same friction ratio on every foot) or ``torque_weights`` (per joint, torque;
+    None: 1e-4 each; footnote 16);
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
     ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, else Python with
@@ -252,6 +255,7 @@ class PassiveWBC(PlannedController):
         self._radii = np.array([robot.contact(name).spec.radius for name in self.contacts])
         self._contact_order = np.array([robot.contact_names.index(n) for n in self.contacts])
         self.last_tau: np.ndarray | None = None
+        self.last_desired_wrench: np.ndarray | None = None  # W_d of the last cycle (eq. 8)
         self.last_plan = None
         self.last_x: np.ndarray | None = None  # the raw QP solution (slacks last if "single")
         self._failing = 0  # length of the current streak of failed cycles
@@ -308,6 +312,8 @@ class PassiveWBC(PlannedController):
         if self.regularization == "torque":  # footnote 16: R_F = J_st,j R_τ J_st,jᵀ
             JjT = J[:, 6:].T * np.sqrt(self.torque_weights)[:, None]
             HF += JjT.T @ JjT
+        elif self.regularization == "force-parallel" and self.tangential_weight:
+            HF += self.tangential_weight * qp.leaning_tangential(stance, W_d[:3], self.mu)
         elif self.tangential_weight:
             HF += self.tangential_weight * pat.tangential
         qp.set_cost(self._R_diagonal, HF, -GQ @ W_d)
@@ -411,6 +417,7 @@ class PassiveWBC(PlannedController):
                         self.robot.cycle, self._failing)
         self._failing = 0 if ok else self._failing + 1
         self.last_tau = tau
+        self.last_desired_wrench = W_d
         self._commanded_wrench = commanded if ok else None
         if not ok and self.observer is not None:  # the applied wrench is unknown: start afresh
             self.observer.reset()

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE
 from ..solvers.backends import DaqpResult, solve_daqp_qp
-from ..tasks.contact import friction_faces, tangent_basis
+from ..tasks.contact import friction_faces, tangent_basis, tangent_rows
 
 _INF = np.inf
 
@@ -115,15 +115,24 @@ class PassiveQP:
         for i, normal in enumerate(normals):
             rr, fi = self.r_fric + 5 * i, nv + 3 * i
             self.A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, mu)
-            t1, t2, nn = tangent_basis(normal)
-            self.A[rr + 4, fi:fi + 3] = nn
-            self._tangential[3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.outer(t1, t1) + np.outer(t2, t2)
+            self.A[rr + 4, fi:fi + 3] = tangent_basis(normal)[2]
+            rows = tangent_rows(normal)
+            self._tangential[3 * i:3 * i + 3, 3 * i:3 * i + 3] = rows.T @ rows
         c = self.n_feet
         self._fric_upper = np.tile([0.0, 0.0, 0.0, 0.0, f_max], c)
         self._fric_lower = np.tile([-_INF, -_INF, -_INF, -_INF, f_min], c)
         self._normals[:] = normals
         self._friction_key = key
         self._patterns.clear()
+
+    def leaning_tangential(self, stance: np.ndarray, lean: np.ndarray, mu: float) -> np.ndarray:
+        """The tangential regulariser (unweighted, stance feet) with each force's tangential part
+        measured from the direction of ``lean`` (:func:`~wholebody.tasks.contact.tangent_rows`)."""
+        out = np.zeros((self.nf, self.nf))
+        for i in np.flatnonzero(stance):
+            rows = tangent_rows(self._normals[i], lean, mu)
+            out[3 * i:3 * i + 3, 3 * i:3 * i + 3] = rows.T @ rows
+        return out
 
     # ------------------------------------------------------------------ row blocks
     def set_dynamics(self, M, J, h, tau_lo, tau_hi) -> None:

@@ -41,8 +41,10 @@ def passive_stack(wbc, plan):
         objective.append(ContactTorqueRegularizer(weight=np.sqrt(wbc.torque_weights),
                                                   contacts=stance))
     elif wbc.tangential_weight:
+        lean = wbc.last_desired_wrench[:3] if wbc.regularization == "force-parallel" else None
         objective.append(TangentialForceRegularizer(weight=np.sqrt(wbc.tangential_weight),
-                                                    contacts=stance, normals=normals))
+                                                    contacts=stance, normals=normals, lean=lean,
+                                                    mu=wbc.mu))
     for i, n in swing:
         foot = leg[i]
         task = FrameTask(robot.contact(n).frame, kp=wbc.swing.K, kd=wbc.swing.D,

@@ -123,6 +123,27 @@ namespace wholebody_native
     t2 = n.cross(t1);
   }
 
+  // The 2 x 3 rows t_k − r_k n that vanish on a force leaning like lean, as
+  // wholebody.tasks.contact.tangent_rows (r the lean's tangential-to-normal ratios, at most mu;
+  // r = 0 when the lean does not press into the surface).
+  inline Eigen::Matrix<double, 2, 3> tangent_rows(const Vector3d & normal, const Vector3d & lean,
+                                                   double mu)
+  {
+    Vector3d t1, t2, n;
+    tangent_basis(normal, t1, t2, n);
+    Eigen::Matrix<double, 2, 3> rows;
+    rows.row(0) = t1.transpose();
+    rows.row(1) = t2.transpose();
+    const double pressing = n.dot(lean);
+    if (!(pressing > 0.0))
+      return rows;
+    Eigen::Vector2d ratio = rows * lean / pressing;
+    const double size = std::hypot(ratio[0], ratio[1]);
+    if (size > mu)
+      ratio *= mu / size;
+    return rows - ratio * n.transpose();
+  }
+
   // Adds the joints and bodies of spec (keys parents, kinds, axes, placements, masses, levers,
   // inertias: the Python model's joints 1..njoints-1) to an empty model, and its armature.
   inline void add_joints(const py::dict & spec, wholebody::LeggedModel & model)

@@ -49,6 +49,7 @@ public:
     R_qdd_ = get<double>(spec, "R_qdd");
     R_force_ = get<double>(spec, "R_force");
     torque_regularization_ = get<std::string>(spec, "regularization") == "torque";
+    force_parallel_ = get<std::string>(spec, "regularization") == "force-parallel";
     tangential_weight_ = get<double>(spec, "tangential_weight");
     torque_weights_ = get_vector(spec, "torque_weights", na_);
     mu_ = get<double>(spec, "mu");
@@ -256,7 +257,18 @@ public:
     if (torque_regularization_) // footnote 16: R_F = J_st,j R_τ J_st,jᵀ
       HF_.noalias() += J_.rightCols(na_) * torque_weights_.asDiagonal() * J_.rightCols(na_).transpose();
     else if (tangential_weight_ != 0.0)
+    {
+      if (force_parallel_) // every force leaning like the desired net force (ours)
+        for (Index i = 0; i < nc_; ++i)
+        {
+          if (!stance_[i])
+            continue;
+          const Eigen::Matrix<double, 2, 3> rows =
+            tangent_rows(Map<const Vector3d>(normals + 3 * leg_[i]), W_d.head<3>(), mu_);
+          tangential_.block<3, 3>(3 * i, 3 * i).noalias() = rows.transpose() * rows;
+        }
       HF_ += tangential_weight_ * tangential_;
+    }
     H.block(nv, nv, nf_, nf_) += HF_;
 
     // swing feet: eq. 6 and eq. 12, as a weighted least-squares term (eq. 33) or hard (eq. 11)
@@ -513,7 +525,7 @@ private:
   std::vector<pinocchio::FrameIndex> frame_ids_;
   VectorXd radii_, q_min_, q_max_, q_, v_;
   // settings
-  bool slack_none_ = false, torque_regularization_ = false, swing_feedforward_ = true;
+  bool slack_none_ = false, torque_regularization_ = false, force_parallel_ = false, swing_feedforward_ = true;
   bool trunk_feedforward_ = true, limits_tanh_ = false;
   double slack_weight_ = 0, K_st_ = 0, D_st_ = 0, control_period_ = 0, R_qdd_ = 0, R_force_ = 0, tangential_weight_ = 0;
   double mu_ = 0, f_min_ = 0, f_max_ = 0, swing_K_ = 0, swing_D_ = 0, mass_ = 0;

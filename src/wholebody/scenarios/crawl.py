@@ -23,7 +23,7 @@ from ..tasks.wrench import TrunkImpedance
 from ..report.locomotion_figures import crawl_tracking_figure
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (GAIT, SWAY_GAIN, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
+from .locomotion import (GAIT, REGULARIZATION, SWAY_GAIN, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
                          run_gait, sway_options, trunk_gains, wbc_gains)
 
 PARAMETERS = (
@@ -41,6 +41,7 @@ PARAMETERS = (
               "feed-forward W_ff = M_com v̇_com,d (as the passive WBC does); false: feedback and "
               "gravity compensation only"),
     SWAY_GAIN,
+    REGULARIZATION,
     *WBC_GAINS,
 )
 
@@ -65,7 +66,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     names = controller.split("+")
     command = VelocityCommand.speed_ramp(params["speed_start"], params["speed_end"], 1.0,
                                          1.0 + params["ramp_time"])
-    options = {"passive": {"engine": params["engine"]},
+    options = {"passive": {"engine": params["engine"], "regularization": params["regularization"]},
                "quasi-static": {"impedance": TrunkImpedance.for_robot(
                    robot, feedforward=params["baseline_feedforward"], **trunk_gains(params))}}
     runs = {name: run_gait(robot, name, params["gait"], command, params["duration"],

@@ -15,7 +15,12 @@ Runs (all in the MuJoCo twin, whose floor has ``floor_mu``; elliptic friction co
   allow |f_t| = sqrt(2) mu f_n. The inscribed pyramid is the one that lies inside the real cone;
 * ``corrected, fast``: the inscribed correction at ``fast_speed`` (0.16 m/s);
 * ``reference: matched floor``: floor mu = controller mu = ``controller_mu`` (no mismatch), to
-  separate the effect of the mismatch from that of the pyramid's corners.
+  separate the effect of the mismatch from that of the pyramid's corners;
+* ``corrected, force-parallel`` and ``mismatch, force-parallel``: the corrected and the wrong mu
+  with the plain pyramid and ``regularization="force-parallel"`` (ours): the paper's regulariser
+  (tangential forces ≈ 0) shares the tangential force equally among the feet, so a lightly loaded
+  foot meets its pyramid's corner; leaning every force like the desired net force gives every
+  foot the same friction ratio, the net force's.
 
 Slip measurement (simulator state, not the controller's forces): the horizontal speed of each
 foot's material contact point (the bottom of the foot sphere; zero while the sphere rolls) at every
@@ -28,8 +33,9 @@ lift-off (:meth:`GaitRun.stance_slip`).
 Success: the mismatch run with the stance task does not fall, solves every cycle and its worst
 per-stance slip stays below ``slip_bound`` and below that of the run without the stance task (or
 that run fell); the inscribed-correction runs at 0.11 and ``fast_speed`` m/s have no slip event and
-no fall. The plain ``corrected mu`` run is reported, not asserted (see the notes: with the
-circumscribed pyramid it still slips).
+no fall; so has the plain-pyramid ``corrected, force-parallel`` run. The plain ``corrected mu`` run
+with the paper's regulariser is reported, not asserted (see the notes: at the circumscribed
+pyramid's corners it still slips).
 """
 
 from __future__ import annotations
@@ -102,14 +108,16 @@ def validate(robot, params: dict) -> None:
 
 def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, duration: float,
               K_st: float, D_st: float, progress: bool = False, gains: dict | None = None,
-              sway_gain: float = 1.0):
+              sway_gain: float = 1.0, regularization: str = "force-normal"):
     """One passive-WBC crawl at constant ``speed`` on a floor of ``floor_mu`` (see module doc);
     ``gains``: the trunk and swing impedances' gains
     (:func:`~wholebody.scenarios.locomotion.wbc_gains`),
-    ``sway_gain`` the crawl's lateral sway (:data:`~wholebody.scenarios.locomotion.SWAY_GAIN`)."""
+    ``sway_gain`` the crawl's lateral sway (:data:`~wholebody.scenarios.locomotion.SWAY_GAIN`),
+    ``regularization`` the passive WBC's force regulariser."""
     return run_gait(robot, "passive", "crawl", steady_command(speed), duration,
                     environment=Environment(floor_friction=floor_mu),
-                    controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st},
+                    controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st,
+                                        "regularization": regularization},
                     progress=progress, gains=gains,
                     planner_options=sway_options({SWAY_GAIN.name: sway_gain}))
 
@@ -117,37 +125,47 @@ def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, durati
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     p = params
     inscribed = p["floor_mu"] / np.sqrt(2.0)
+    paper, parallel = "force-normal", "force-parallel"
     setups = {
-        "mismatch": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"]),
-        "mismatch, no stance task": (p["controller_mu"], p["speed"], 0.0, 0.0),
-        "corrected mu": (p["floor_mu"], p["speed"], p["K_st"], p["D_st"]),
-        "corrected, inscribed": (inscribed, p["speed"], p["K_st"], p["D_st"]),
-        "corrected, fast": (inscribed, p["fast_speed"], p["K_st"], p["D_st"]),
-        "reference: matched floor": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"]),
+        "mismatch": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"], paper),
+        "mismatch, no stance task": (p["controller_mu"], p["speed"], 0.0, 0.0, paper),
+        "corrected mu": (p["floor_mu"], p["speed"], p["K_st"], p["D_st"], paper),
+        "corrected, inscribed": (inscribed, p["speed"], p["K_st"], p["D_st"], paper),
+        "corrected, fast": (inscribed, p["fast_speed"], p["K_st"], p["D_st"], paper),
+        "reference: matched floor": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"], paper),
+        "corrected, force-parallel": (p["floor_mu"], p["speed"], p["K_st"], p["D_st"], parallel),
+        "mismatch, force-parallel": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"], parallel),
     }
     runs, metrics = {}, {}
-    for name, (mu, speed, K, D) in setups.items():
-        log.info("friction-mismatch: run '%s' (controller mu %.3f, %.2f m/s, K_st %.0f)",
-                 name, mu, speed, K)
+    for name, (mu, speed, K, D, regularization) in setups.items():
+        log.info("friction-mismatch: run '%s' (controller mu %.3f, %.2f m/s, K_st %.0f, %s)",
+                 name, mu, speed, K, regularization)
         floor = p["controller_mu"] if name.startswith("reference") else p["floor_mu"]
         runs[name] = crawl_run(robot, floor, mu, speed, p["duration"], K, D, progress,
-                               wbc_gains(p), p["sway_gain"])
-        metrics[name] = {"floor_mu": floor, "controller_mu": mu, "speed_m_s": speed, "K_st": K, "D_st": D,
+                               wbc_gains(p), p["sway_gain"], regularization)
+        metrics[name] = {"floor_mu": floor, "controller_mu": mu, "speed_m_s": speed, "K_st": K,
+                         "D_st": D, "regularization": regularization,
                          **slip_metrics(runs[name], p, _commanded(speed, p["duration"]))}
     m, free = metrics["mismatch"], metrics["mismatch, no stance task"]
     bounded = (not m["fell"]) and m["failed_cycles"] == 0 and m["max_stance_slip_m"] < p["slip_bound"]
     larger_without = free["fell"] or free["max_stance_slip_m"] > m["max_stance_slip_m"]
-    clean = all(metrics[k]["slip_events"] == 0 and not metrics[k]["fell"]
-                and metrics[k]["distance_m"] > 0.8 * metrics[k]["commanded_distance_m"]
-                for k in ("corrected, inscribed", "corrected, fast"))
+    def clean(*names):
+        return all(metrics[k]["slip_events"] == 0 and not metrics[k]["fell"]
+                   and metrics[k]["distance_m"] > 0.8 * metrics[k]["commanded_distance_m"]
+                   for k in names)
+    inscribed_clean = clean("corrected, inscribed", "corrected, fast")
+    parallel_clean = clean("corrected, force-parallel")
     metrics["claims"] = {
         "slip bounded with the stance task": bool(bounded),
         "slip larger without the stance task": bool(larger_without),
-        "no slip events with mu corrected (inscribed pyramid), 0.11 and fast speed": bool(clean),
+        "no slip events with mu corrected (inscribed pyramid), 0.11 and fast speed":
+            bool(inscribed_clean),
         "no slip events with mu corrected (same number, circumscribed pyramid)":
             bool(metrics["corrected mu"]["slip_events"] == 0),
+        "no slip events with mu corrected (same number, force-parallel regulariser)":
+            bool(parallel_clean),
     }
-    success = bounded and larger_without and clean
+    success = bounded and larger_without and inscribed_clean and parallel_clean
     notes = [
         f"mismatch (floor {p['floor_mu']}, WBC {p['controller_mu']}): worst per-stance slip "
         f"{m['max_stance_slip_m'] * 100:.1f} cm, {m['slip_events']} slip events, fell={m['fell']}; "
@@ -164,6 +182,11 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         f"{metrics['reference: matched floor']['slip_events']} slip events, worst slip "
         f"{metrics['reference: matched floor']['max_stance_slip_m'] * 1e3:.1f} mm (the same "
         "pyramid-corner effect without any mismatch)",
+        f"force-parallel regulariser, controller mu = floor mu: "
+        f"{metrics['corrected, force-parallel']['slip_events']} slip events (worst slip "
+        f"{metrics['corrected, force-parallel']['max_stance_slip_m'] * 1e3:.1f} mm); with the wrong "
+        f"mu {p['controller_mu']}: {metrics['mismatch, force-parallel']['slip_events']} slip events "
+        f"(worst {metrics['mismatch, force-parallel']['max_stance_slip_m'] * 1e3:.1f} mm)",
     ]
     figures = []
     if out_dir is not None:

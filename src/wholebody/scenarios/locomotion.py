@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ..control.passive import PassiveWBC, SwingGains
+from ..control.passive import REGULARIZATIONS, PassiveWBC, SwingGains
 from ..control.quasi_static import QuasiStaticController
 from ..planning.gait import CRAWL_PERIOD, TROT_PERIOD, crawl, stand, trot
 from ..planning.planner import GaitPlanner
@@ -70,6 +70,13 @@ WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS)
 SWAY_GAIN = Parameter("sway_gain", 1.0, "crawl: lateral CoM sway toward the centroid of the "
                       "three stance feet (1: onto its lateral coordinate, 0: no sway); a gentler "
                       "sway asks less lateral acceleration of the trunk", low=0.0, high=1.0)
+
+
+#: the passive WBC's force regulariser (:class:`~wholebody.control.passive.PassiveConfig`)
+REGULARIZATION = Parameter("regularization", "force-normal", "passive WBC's force regulariser: "
+                           "force-normal (the paper's: tangential forces small), force-parallel "
+                           "(ours: every foot at the net force's friction ratio) or torque",
+                           choices=REGULARIZATIONS)
 
 
 def sway_options(params: dict) -> dict:

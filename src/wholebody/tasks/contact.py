@@ -26,6 +26,25 @@ def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return t1, cross3(n, t1), n
 
 
+def tangent_rows(normal: np.ndarray, lean: np.ndarray | None = None, mu: float = np.inf) -> np.ndarray:
+    """The 2 x 3 rows R with R f = 0 <=> f leans like ``lean`` about ``normal``: rows t_k − r_k n,
+    r_k = (t_k·lean)/(n·lean) the lean's tangential-to-normal ratios, scaled down to a ratio of
+    at most ``mu`` (a lean outside the cone cannot be met). ``lean`` None, or not pressing into
+    the surface: r = 0, the rows [t1; t2] (the force's tangential part)."""
+    t1, t2, n = tangent_basis(normal)
+    rows = np.array([t1, t2])
+    if lean is None:
+        return rows
+    pressing = float(n @ lean)
+    if not pressing > 0.0:
+        return rows
+    ratio = rows @ lean / pressing
+    size = float(np.hypot(*ratio))
+    if size > mu:
+        ratio *= mu / size
+    return rows - np.outer(ratio, n)
+
+
 def _rotation_map(block_of) -> np.ndarray:
     """K with ``block_of(R).ravel() == K @ R.ravel()`` for rows that are linear in a rotation R
     (a sole's measured axes): built once from the nine unit matrices, so that a control cycle

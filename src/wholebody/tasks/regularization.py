@@ -7,7 +7,7 @@ import numpy as np
 
 from ..robot import FREE_FLYER_NV
 from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, normal_map
-from .contact import WORLD_UP, tangent_basis
+from .contact import WORLD_UP, tangent_rows
 
 
 class AccelerationRegularizer(Task):
@@ -20,23 +20,31 @@ class AccelerationRegularizer(Task):
 class TangentialForceRegularizer(Task):
     """Tangential components of point-contact forces ≈ 0: forces near the cone normals (Sect. V-D,
     "robustness to uncertainties in the friction parameters"). 2 rows per contact. ``contacts``:
-    None = all active contacts, an empty list = none (no rows); ``normals`` finite, non-zero."""
+    None = all active contacts, an empty list = none (no rows); ``normals`` finite, non-zero.
+
+    ``lean`` (a force, e.g. the desired net contact force; ours): each force's tangential part
+    measured from the lean's direction instead (:func:`~wholebody.tasks.contact.tangent_rows`,
+    its ratio capped at ``mu``), so that every contact uses the same friction ratio and none is
+    pushed to its cone's edge while others stay near the normal."""
 
     contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
     normals = checked_attribute(normal_map, "contact name -> non-zero surface normal.")
 
-    def __init__(self, name=None, weight=1.0, contacts=None, normals=None):
+    def __init__(self, name=None, weight=1.0, contacts=None, normals=None, lean=None,
+                 mu: float = np.inf):
         super().__init__(name, weight)
         self.contacts = contacts
         self.normals = normals
+        self.lean = None if lean is None else np.asarray(lean, dtype=float)
+        self.mu = mu
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
         A = np.zeros((2 * len(names), variables.n_lambda))
         for i, n in enumerate(names):
-            t1, t2, _ = tangent_basis(np.asarray(self.normals.get(n, WORLD_UP), dtype=float))
             sl = variables.lambda_slices[n]
-            A[2 * i, sl.start:sl.start + 3], A[2 * i + 1, sl.start:sl.start + 3] = t1, t2
+            A[2 * i:2 * i + 2, sl.start:sl.start + 3] = tangent_rows(
+                np.asarray(self.normals.get(n, WORLD_UP), dtype=float), self.lean, self.mu)
         return TaskRows(qdd=None, lam=A, tau=None, target=np.zeros(A.shape[0]))
 
 

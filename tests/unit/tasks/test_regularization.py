@@ -51,6 +51,50 @@ def test_tangential_force_regularizer_costs_the_tangential_force(robots):
             np.linalg.norm(tangential[3 * i:3 * i + 3]), rel=1e-10)
 
 
+def _parallel_gap(force, normal, lean):
+    """|f − (f·n / lean·n) lean|: how far a force is from the lean's direction at the same normal
+    component (the lean scaled to the force's normal part, then subtracted)."""
+    return np.linalg.norm(force - (force @ normal) / (lean @ normal) * lean)
+
+
+def test_leaning_tangential_regularizer_costs_the_departure_from_the_lean(robots):
+    """With a lean (e.g. the desired net force), the residual vanishes on forces parallel to the
+    lean, whatever their size, and otherwise measures the distance from the lean's ray at the
+    same normal component; a lean that does not press into the surface leaves the plain
+    tangential rows."""
+    robot = robots["hyq"]
+    _at(robot, 1)
+    variables = Variables(robot)
+    rng = np.random.default_rng(3)
+    tilted = np.array([0.1, -0.2, 1.0]) / np.linalg.norm([0.1, -0.2, 1.0])
+    normals = {robot.contact_names[1]: tilted}
+    n_of = {c: normals.get(c, np.array([0.0, 0.0, 1.0])) for c in robot.contact_names}
+    lean = np.array([60.0, -110.0, 800.0])  # tangential-to-normal ratio < 0.2 about every normal
+    rows = TangentialForceRegularizer(normals=normals, lean=lean, mu=0.6).rows(robot, variables)
+    parallel = np.concatenate([rng.uniform(0.05, 0.5) * lean for _ in robot.contact_names])
+    np.testing.assert_allclose(_fd.row_residual(rows, lam=parallel), 0, atol=1e-10)
+    forces = parallel + rng.normal(scale=20.0, size=parallel.shape)
+    residual = _fd.row_residual(rows, lam=forces)
+    for i, c in enumerate(robot.contact_names):
+        assert np.linalg.norm(residual[2 * i:2 * i + 2]) == pytest.approx(
+            _parallel_gap(forces[3 * i:3 * i + 3], n_of[c], lean), rel=1e-10)
+    plain = TangentialForceRegularizer(normals=normals).rows(robot, variables).lam
+    pulling = TangentialForceRegularizer(normals=normals, lean=-lean).rows(robot, variables).lam
+    np.testing.assert_allclose(pulling, plain, atol=0)
+
+
+def test_leaning_regularizer_caps_the_lean_at_the_cone(robots):
+    """A lean steeper than the friction cone is met at the cone's edge in its direction: a force
+    of tangential-to-normal ratio mu along the lean's tangential direction has zero residual."""
+    robot = robots["hyq"]
+    _at(robot, 1)
+    lean = np.array([300.0, 400.0, 500.0])  # ratio 1.0 about the vertical
+    rows = TangentialForceRegularizer(lean=lean, mu=0.5).rows(robot, Variables(robot))
+    edge = np.array([0.3, 0.4, 1.0]) * 100.0  # ratio 0.5 along (0.6, 0.8)
+    np.testing.assert_allclose(rows.lam[:2, :3] @ edge, 0, atol=1e-10)
+    assert np.linalg.norm(rows.lam[:2, :3] @ lean) > 1.0
+
+
 @pytest.mark.parametrize("name", ROBOTS)
 def test_contact_torque_regularizer_rows_are_the_joint_torques_of_the_forces(robots, name):
     """Rows -J_jᵀ λ: the joint part of the generalized force of λ, negated (J by finite
