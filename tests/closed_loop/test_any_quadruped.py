@@ -50,3 +50,24 @@ def test_every_quadruped_preset_trots_over_the_ramp(name):
     assert m["roll_error_max_rad"] < 0.2 and m["pitch_error_max_rad"] < 0.2, m
     assert min(m["final_feet_x_m"]) > m["course_end_x_m"], m
     assert -m["desired_pitch_range_rad"][0] > 0.15  # the reference did pitch with the slopes
+
+
+def test_two_joint_legs_crawl():
+    """ODRI's 8-DoF Solo (hip and knee flexion only, stance rows linearly dependent): the passive
+    WBC crawls it on its defaults, no fall, every cycle solved, about as far as commanded; its
+    trunk cannot sway sideways (no hip abduction), so the CoM error is larger than on the
+    presets but stays a fraction of the standing height."""
+    robot = wb.load_robot({
+        "name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",
+        "srdf": "erd:solo_description/srdf/solo.srdf", "posture": "standing",
+        "torque_limits": {"overrides": {f"{leg}_{j}": 2.7 for leg in ("FL", "FR", "HL", "HR")
+                                        for j in ("HFE", "KFE")}},
+        "contacts": [{"name": n, "frame": n, "type": "point", "radius": 0.016}
+                     for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]})
+    speed = 0.1 * froude_ratio(robot)
+    command = VelocityCommand.speed_ramp(speed / 3, speed, 1.0, 3.0)
+    run = run_gait(robot, "passive", "crawl", command, DURATION)
+    assert not run.fell and run.failures == 0, run.failures
+    expected = (speed * 2 / 3) * 2.0 + speed * (DURATION - 3.0)
+    assert run.distance == pytest.approx(expected, rel=0.25), run.distance
+    assert run.tracking(t_from=1.0)["linear_max_m"] < 0.3 * robot.q_ref[2]

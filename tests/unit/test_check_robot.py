@@ -171,7 +171,7 @@ def test_run_and_sweep_refuse_what_check_robot_rejects(tmp_path, capsys, monkeyp
 def test_two_joint_legs_are_a_warning():
     """ODRI's 8-DoF Solo (hip and knee flexion only): each stance foot's lateral row depends on the
     base alone, so four feet give four lateral rows of rank 3 (checked here on the stacked contact
-    Jacobian from Pinocchio); check-robot warns that the walking scenarios do not apply."""
+    Jacobian from Pinocchio); check-robot warns what this means for the walking scenarios."""
     from wholebody.robots.check import check_robot
 
     description = {"name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",

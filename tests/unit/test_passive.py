@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 import quadprog
 
-from wholebody.control.passive import PassiveWBC, SwingGains
+from wholebody.control.passive import STANCE_RANK_TOLERANCE, PassiveWBC, SwingGains
 from wholebody.formulation import Formulation
 from wholebody.guard import Outcome
 from wholebody.tasks.contact import friction_faces
@@ -303,3 +303,44 @@ def test_force_parallel_regularization_spreads_friction_evenly(robots, plan_for)
         if scheme == "force-parallel":
             np.testing.assert_allclose(ratios[scheme], np.hypot(*net[:2]) / net[2], atol=0.01)
     assert ratios["force-parallel"].max() < ratios["force-normal"].max() - 0.02
+
+
+def test_dependent_stance_rows_are_met_in_the_least_squares_sense(rng, plan_for):
+    """ODRI's 8-DoF Solo (two joints per leg): its stance rows are linearly dependent, so the
+    stance task's targets are generally inconsistent. The controller still solves: the dynamics
+    hold (RNEA), and the stance feet's accelerations are the least-squares part of the target
+    (J_s J_s⁺ b_s, by numpy's lstsq on the rows the test builds); the native engine refuses it."""
+    import wholebody as wb
+    solo = wb.load_robot({
+        "name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",
+        "srdf": "erd:solo_description/srdf/solo.srdf", "posture": "standing",
+        "contacts": [{"name": n, "frame": n, "type": "point", "radius": 0.016}
+                     for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]})
+    planner = SimpleNamespace(legs=solo.contact_names)
+    with pytest.raises(ValueError, match="engine: 'native' needs linearly independent"):
+        PassiveWBC(solo, planner=planner, engine="native")
+    wbc = PassiveWBC(solo, planner=planner, engine="python")
+    assert wbc.dependent_stance
+    solved = 0
+    for stance in [(True,) * 4, (False, True, True, True)]:
+        for _ in range(3):
+            solo.update(*standing_state(solo, rng, noise=0.05))
+            sol = wbc.solve(plan_for(solo, rng, stance, swing_noise=(0.005, 0.05, 0.2)))
+            assert sol.ok, sol.status
+            solved += 1
+            J = solo.stacked_contact_jacobian()
+            rnea = pin.rnea(solo.model, solo.model.createData(), solo.q, solo.v, sol.qdd)
+            np.testing.assert_allclose(rnea, np.concatenate([np.zeros(6), sol.tau]) + J.T @ sol.lam,
+                                       atol=1e-6)
+            rows = np.repeat(np.array(stance), 3)
+            Js = J[rows]
+            points = solo.contact_points[rows[::3]]
+            target = (-solo.stacked_contact_drift()[rows]
+                      + wbc.K_st * (wbc._anchors[rows[::3]] - points).ravel() - wbc.D_st * Js @ solo.v)
+            # lstsq truncates the singular values the controller treats as zero
+            reachable = Js @ np.linalg.lstsq(Js, target, rcond=STANCE_RANK_TOLERANCE)[0]
+            assert np.linalg.norm(Js @ sol.qdd - reachable) < 1e-6 * max(1.0, np.linalg.norm(target))
+            if all(stance):
+                assert np.linalg.matrix_rank(Js, tol=1e-9) < Js.shape[0]
+                assert np.linalg.norm(target - reachable) > 1e-4  # an inconsistent target
+    assert solved == 6

@@ -40,6 +40,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
 from ..cycle import warn_python_fallback
 from ..formulation import Solution, TaskReport
@@ -50,10 +51,32 @@ from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound
 from ..validation import finite_array, nonnegative, number, positive
 from .base import PlannedController
-from .passive_qp import PassiveQP, StancePattern
+from .passive_qp import FREE, PassiveQP, StancePattern
 from .passive_stack import passive_stack
 
 log = logging.getLogger(__name__)
+
+#: singular values of the stance rows below this fraction of the largest count as dependent
+STANCE_RANK_TOLERANCE = 1e-4
+
+
+def stance_rank(robot, contacts) -> int:
+    """Rank of the point contacts' stacked position Jacobians (their frames', world axes) in the
+    standing posture ``robot.q_ref``, computed on a Data of its own (the robot's state is left)."""
+    model = robot.model
+    data = model.createData()
+    pin.computeJointJacobians(model, data, robot.q_ref)
+    pin.updateFramePlacements(model, data)
+    J = np.vstack([pin.getFrameJacobian(model, data, robot.contact(n).frame_id,
+                                        pin.LOCAL_WORLD_ALIGNED)[:3] for n in contacts])
+    return independent_rank(J)
+
+
+def independent_rank(J: np.ndarray | None = None, singular: np.ndarray | None = None) -> int:
+    """Number of singular values (of ``J``, or given) above STANCE_RANK_TOLERANCE σ_max."""
+    if singular is None:
+        singular = np.linalg.svd(J, compute_uv=False)
+    return int((singular > STANCE_RANK_TOLERANCE * singular[0]).sum()) if singular.size else 0
 
 SLACKS = ("per-direction", "single", "none")
 ENGINES = ("auto", "native", "python")
@@ -261,7 +284,10 @@ class PassiveWBC(PlannedController):
         self._failing = 0  # length of the current streak of failed cycles
         self.observer = observer
         self._commanded_wrench: np.ndarray | None = None  # G F of the last solved cycle
-        self.engine = self._resolve_engine(config)
+        #: the stance feet's rows are linearly dependent in the standing posture (legs of fewer
+        #: than three joints): each cycle they are replaced by an independent set
+        self.dependent_stance = stance_rank(robot, self.contacts) < 3 * c
+        self.engine = self._resolve_engine(config, self.dependent_stance)
         self._native = None
         if self.engine == "native":
             self._native = self._build_native()
@@ -300,6 +326,8 @@ class PassiveWBC(PlannedController):
             target += self.K_st * (self._anchors - points).ravel()
             target -= self.D_st * velocity
         qp.set_feet(J, target, pat)
+        if self.dependent_stance:
+            self._independent_stance_rows(J, target, pat)
         qp.set_forces(pat)
         # cost: ‖u‖²_R, the trunk wrench (eqs. 7a, 8), the force regulariser (Sect. V-D)
         G = contact_wrench_map(robot, self.contacts, self._G, points)
@@ -337,6 +365,24 @@ class PassiveWBC(PlannedController):
         self._slip[~held] = 0.0
         self._was_stance[:] = stance
         np.subtract(points, self._slip, out=self._anchors)
+
+    def _independent_stance_rows(self, J, target, pat: StancePattern) -> None:
+        """Stance rows J_s q̈ = b_s that are linearly dependent (legs of fewer than three joints:
+        a foot cannot move sideways without the body) replaced by U_rᵀ J_s q̈ = U_rᵀ b_s, J_s = U Σ
+        Vᵀ, over the singular values above ``STANCE_RANK_TOLERANCE`` σ_max; the other rows are
+        freed. The least-squares part of b_s is kept; what no q̈ can meet is dropped instead of
+        making the equalities inconsistent."""
+        qp = self.qp
+        rows = np.flatnonzero(pat.s3)
+        U, singular, _ = np.linalg.svd(J[rows], full_matrices=True)
+        rank = independent_rank(singular=singular)
+        at = qp.n + qp.r_feet + rows
+        qp.A[qp.r_feet + rows, :self.robot.nv] = U.T @ J[rows]
+        qp.upper[at] = qp.lower[at] = U.T @ target[rows]
+        qp.sense[at[rank:]] = FREE
+        qp.upper[at[rank:]], qp.lower[at[rank:]] = np.inf, -np.inf
+        if qp.dual is not None:  # the rows changed: their old multipliers mean nothing
+            qp.dual[at] = 0.0
 
     def _swing_rows(self, plan, pat: StancePattern) -> None:
         """Swing feet: eq. 6 (desired foot acceleration) and eq. 12 rows J q̈ = v̇_d − J̇ v, all
@@ -436,8 +482,18 @@ class PassiveWBC(PlannedController):
 
     # ------------------------------------------------------------------ native engine
     @staticmethod
-    def _resolve_engine(config: PassiveConfig) -> str:
-        """``config.engine``, with "auto" resolved: native when built and the slack supported."""
+    def _resolve_engine(config: PassiveConfig, dependent_stance: bool = False) -> str:
+        """``config.engine``, with "auto" resolved: native when built and the slack and the
+        stance rows supported."""
+        if dependent_stance:
+            if config.engine == "native":
+                raise ValueError("engine: 'native' needs linearly independent stance rows (legs "
+                                 "of three joints or more); this robot's are dependent, use "
+                                 "engine='python' or 'auto'")
+            if config.engine == "auto":
+                warn_python_fallback("PassiveWBC", "the stance feet's rows are linearly "
+                                                   "dependent (legs of fewer than three joints)")
+                return "python"
         if config.engine != "auto":
             return config.engine
         if config.swing_slack == "single":

@@ -150,13 +150,13 @@ def _roles(robot, report: RobotCheck) -> None:
         else:
             listed = ", ".join(f"{name}: {n}" for name, n in short.items())
             report.add("warning", "class",
-                       f"legs with fewer than 3 joints ({listed}): a stance foot's three position "
-                       f"rows (the contact constraint, eq. 32's stance task) are then linearly "
-                       f"dependent across the feet, and the passive WBC's QP is refused by its "
-                       f"solver; the walking scenarios fail on this robot (stand and the "
-                       f"quasi-static baseline do not need them)",
-                       "give each leg three joints (e.g. a hip abduction), or walk it with the "
-                       "quasi-static controller")
+                       f"legs with fewer than 3 joints ({listed}): a foot cannot move sideways "
+                       f"without the body, so the stance feet's position rows (the contact "
+                       f"constraint, eq. 32's stance task) are linearly dependent; the passive WBC "
+                       f"replaces them by an independent set every cycle (Python engine only) and "
+                       f"the trunk's sideways sway is out of reach: crawling works, a trot on two "
+                       f"such legs (crawl --set gait=trot, ramp) falls",
+                       "give each leg three joints (e.g. a hip abduction) to trot")
     elif len(roles) == 2:
         report.add("note", "class", "a biped (two soles): the humanoid scenarios (push, squat, "
                    "...) and stand apply")
