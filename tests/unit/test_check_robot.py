@@ -189,9 +189,35 @@ def test_two_joint_legs_are_a_warning():
                                         pin.LOCAL_WORLD_ALIGNED)[:3] for c in robot.contacts])
     assert np.linalg.matrix_rank(J, tol=1e-9) < 12
     report = check_robot(description)
-    (finding,) = [f for f in report.findings if "fewer than 3 joints" in f.message]
+    (finding,) = [f for f in report.findings if "fewer than 3 moving joints" in f.message]
     assert finding.level == "warning" and report.ok
     assert not [f for f in check_robot("solo12").findings if "fewer than 3" in f.message]
+    # the scenarios refuse the trot before simulating, and let it crawl
+    from wholebody.scenarios.locomotion import check_quadruped
+    with pytest.raises(ValueError, match="a trot needs legs of at least 3 moving joints.*FL_HFE, "
+                                         "FL_KFE.*--set gait=crawl"):
+        check_quadruped(robot, "the ramp scenario", "trot")
+    check_quadruped(robot, "the crawl scenario", "crawl")
+
+
+def test_joints_with_equal_limits_do_not_count_as_leg_joints():
+    """TSID's toy quadruped: each leg a hip and a knee whose limits are [0, 0] (URDF), i.e. one
+    joint that moves: the crawl refuses it, naming the hips."""
+    from wholebody.robots.roles import leg_joints, moving_leg_joints
+    from wholebody.scenarios.locomotion import check_quadruped
+
+    robot = wb.load_robot({
+        "name": "toy", "urdf": "erd:quadruped_description/urdf/quadruped.urdf",
+        "contacts": [{"name": n, "frame": f"{n}_contact", "type": "point", "radius": 0.0,
+                      "role": r} for n, r in (("FL", "left-front"), ("FR", "right-front"),
+                                              ("BL", "left-hind"), ("BR", "right-hind"))],
+        "posture": {"FL_HFE": 0.0}})
+    knee = robot.joint_names.index("FL_KFE")
+    assert robot.q_min[knee] == robot.q_max[knee]
+    assert leg_joints(robot, "FL") == ("FL_HFE", "FL_KFE")
+    assert moving_leg_joints(robot, "FL") == ("FL_HFE",)
+    with pytest.raises(ValueError, match="a crawl needs legs of at least 2 moving joints.*FL: FL_HFE"):
+        check_quadruped(robot, "the crawl scenario", "crawl")
 
 
 SWAPPED = """name = "swapped"

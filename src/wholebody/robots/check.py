@@ -19,7 +19,7 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull, QhullError
 
 from .description import DescriptionError
-from .roles import contact_roles, leg_joints, role_in_name
+from .roles import GAIT_LEG_JOINTS, contact_roles, leg_joints, moving_leg_joints, role_in_name
 
 log = logging.getLogger(__name__)
 
@@ -142,20 +142,21 @@ def _roles(robot, report: RobotCheck) -> None:
             report.add("warning", "roles", f"contact '{c.name}' is named like the {named} "
                        f"{_part(c)} but is the {roles[c.name]} one by {why}", fix)
     if len(roles) == 4:
-        joints = {name: len(leg_joints(robot, name)) for name in roles}
-        short = {name: n for name, n in joints.items() if n < 3}
+        joints = {name: len(moving_leg_joints(robot, name)) for name in roles}
+        short = {name: n for name, n in joints.items() if n < GAIT_LEG_JOINTS["trot"]}
         if not short:
             report.add("note", "class", "a quadruped (four point feet): the quadruped scenarios "
                        "(crawl, ramp, ...) and stand apply")
         else:
             listed = ", ".join(f"{name}: {n}" for name, n in short.items())
             report.add("warning", "class",
-                       f"legs with fewer than 3 joints ({listed}): a foot cannot move sideways "
-                       f"without the body, so the stance feet's position rows (the contact "
-                       f"constraint, eq. 32's stance task) are linearly dependent; the passive WBC "
-                       f"replaces them by an independent set every cycle (Python engine only) and "
-                       f"the trunk's sideways sway is out of reach: crawling works, a trot on two "
-                       f"such legs (crawl --set gait=trot, ramp) falls",
+                       f"legs with fewer than 3 moving joints ({listed}; joints with equal limits "
+                       f"do not count): a foot cannot move sideways without the body, so the "
+                       f"stance feet's position rows (the contact constraint, eq. 32's stance "
+                       f"task) are linearly dependent; the passive WBC replaces them by an "
+                       f"independent set every cycle (Python engine only) and the trunk's sideways "
+                       f"sway is out of reach. The trotting scenarios (crawl --set gait=trot, "
+                       f"ramp) refuse such a robot; the crawl needs 2 moving joints per leg",
                        "give each leg three joints (e.g. a hip abduction) to trot")
     elif len(roles) == 2:
         report.add("note", "class", "a biped (two soles): the humanoid scenarios (push, squat, "

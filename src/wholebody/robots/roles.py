@@ -114,6 +114,33 @@ def leg_joints(robot, contact: str) -> tuple[str, ...]:
     return tuple(reversed(chain))
 
 
+def moving_leg_joints(robot, contact: str) -> tuple[str, ...]:
+    """:func:`leg_joints` of ``contact`` that can move: a range wider than 1e-6 rad (a joint
+    whose limits are equal is a fixed joint in disguise)."""
+    index = {name: i for i, name in enumerate(robot.joint_names)}
+    return tuple(j for j in leg_joints(robot, contact)
+                 if j not in index or not robot.q_max[index[j]] - robot.q_min[index[j]] <= 1e-6)
+
+
+#: moving joints per leg each gait needs: a crawl steps one foot at a time, a foot moving in the
+#: leg's plane; a trot stands on two point feet and must also move them sideways
+GAIT_LEG_JOINTS = {"crawl": 2, "trot": 3}
+
+
+def check_gait_legs(robot, legs, gait: str, what: str) -> None:
+    """ValueError naming ``what`` unless every leg of ``legs`` (contact names) has the moving
+    joints ``gait`` needs (:data:`GAIT_LEG_JOINTS`)."""
+    need = GAIT_LEG_JOINTS.get(gait, 0)
+    short = {leg: moving_leg_joints(robot, leg) for leg in legs}
+    short = {leg: joints for leg, joints in short.items() if len(joints) < need}
+    if short:
+        listed = "; ".join(f"{leg}: {', '.join(j) or 'none'}" for leg, j in short.items())
+        raise ValueError(f"{what}: a {gait} needs legs of at least {need} moving joints; "
+                         f"{robot.name}'s have fewer ({listed}; joints with equal limits do not "
+                         f"count)" + ("; --set gait=crawl walks it" if gait == "trot" and all(
+                             len(j) >= GAIT_LEG_JOINTS["crawl"] for j in short.values()) else ""))
+
+
 def joint_axis(robot, joint: str, data=None) -> np.ndarray:
     """The unit rotation axis of the revolute ``joint`` in its own frame (from its motion
     subspace; the axis is fixed in that frame). ``data``: a Pinocchio data after forward

@@ -55,8 +55,8 @@ def commanded_distance(params: dict) -> float:
 
 
 def validate(robot, params: dict) -> None:
-    check_quadruped(robot, "the crawl scenario")
     check_gait(params)
+    check_quadruped(robot, "the crawl scenario", params["gait"])
     if params["engine"] not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
 

@@ -29,7 +29,7 @@ from ..planning.terrain import Terrain
 from ..planning.trunk import VelocityCommand
 from ..robots import reference
 from ..robots.reference import froude_ratio
-from ..robots.roles import quadruped_legs
+from ..robots.roles import check_gait_legs, quadruped_legs
 from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
 from ..tasks.wrench import DAMPING_RATIO_THETA, DAMPING_RATIO_X, TrunkImpedance
@@ -151,12 +151,15 @@ RUN_DURATION = Parameter("duration", 10.0, "simulated time per run (s); the craw
                          **TIME_SPAN)
 
 
-def check_quadruped(robot, scenario: str) -> None:
-    """ValueError unless ``robot`` has four point-foot contacts whose roles are known."""
+def check_quadruped(robot, scenario: str, gait: str = "crawl") -> None:
+    """ValueError unless ``robot`` has four point-foot contacts whose roles are known and legs
+    with the moving joints ``gait`` needs (:func:`~wholebody.robots.roles.check_gait_legs`)."""
     try:
-        quadruped_legs(robot)
+        legs = quadruped_legs(robot)
+        check_gait_legs(robot, legs, gait, scenario)
     except ValueError as exc:
-        raise ValueError(f"{scenario}: {exc}") from None
+        raise ValueError(f"{scenario}: {exc}" if not str(exc).startswith(scenario)
+                         else str(exc)) from None
 
 
 def check_joint(robot, joint: str) -> None:

@@ -155,8 +155,8 @@ def summarize(balance: dict, t_from: float = 0.0) -> dict:
 
 
 def validate(robot, params: dict) -> None:
-    check_quadruped(robot, "the passivity scenario")
     check_gait(params)
+    check_quadruped(robot, "the passivity scenario", params["gait"])
     if not 2.0 <= params["duration"]:
         raise ValueError("--set duration: need at least 2 s")
 

@@ -87,11 +87,12 @@ def course_end(course: Course) -> float:
 
 
 def validate(robot, params: dict) -> None:
-    check_quadruped(robot, "the ramp scenario")
     if params["course"] not in COURSES:
         raise ValueError(f"--set course: expected one of {COURSES}, got '{params['course']}'")
     if params["gait"] not in ("auto", "crawl", "trot"):
         raise ValueError(f"--set gait: expected auto, crawl or trot, got '{params['gait']}'")
+    gait = DEFAULTS[params["course"]]["gait"] if params["gait"] == "auto" else params["gait"]
+    check_quadruped(robot, "the ramp scenario", gait)
 
 
 class _Recorder:
