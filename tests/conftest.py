@@ -75,6 +75,28 @@ def alexander_description() -> dict:
                           "offset": [0.051, 0.0, -0.072]} for side in ("LEFT", "RIGHT")]}
 
 
+def centauro_description() -> dict:
+    """IIT Centauro's legs (4 x 5 joints) from example-robot-data; wheels, torso, arms and head
+    locked at homing_nominal; each wheel a point contact with a sphere of its radius."""
+    return {"name": "centauro", "urdf": "erd:centauro_description/urdf/centauro.urdf",
+            "srdf": "erd:centauro_description/srdf/centauro.srdf", "posture": "homing_nominal",
+            "locked_joints": ["j_wheel_1", "j_wheel_2", "j_wheel_3", "j_wheel_4", "torso_yaw",
+                              *(f"j_arm{a}_{j}" for a in (1, 2) for j in range(1, 7)),
+                              "d435_head_joint", "velodyne_joint"],
+            "contacts": [{"name": f"wheel_{i}", "frame": f"wheel_{i}", "type": "point",
+                          "radius": 0.119} for i in range(1, 5)]}
+
+
+def solo8_description() -> dict:
+    """ODRI's 8-DoF Solo (hip and knee flexion only) with solo12's feet and 2.7 Nm actuators."""
+    joints = [f"{leg}_{j}" for leg in ("FL", "FR", "HL", "HR") for j in ("HFE", "KFE")]
+    return {"name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",
+            "srdf": "erd:solo_description/srdf/solo.srdf", "posture": "standing",
+            "torque_limits": {"overrides": {j: 2.7 for j in joints}},
+            "contacts": [{"name": n, "frame": n, "type": "point", "radius": 0.016}
+                         for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]}
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

@@ -57,13 +57,9 @@ def test_two_joint_legs_crawl():
     WBC crawls it on its defaults, no fall, every cycle solved, about as far as commanded; its
     trunk cannot sway sideways (no hip abduction), so the CoM error is larger than on the
     presets but stays a fraction of the standing height."""
-    robot = wb.load_robot({
-        "name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",
-        "srdf": "erd:solo_description/srdf/solo.srdf", "posture": "standing",
-        "torque_limits": {"overrides": {f"{leg}_{j}": 2.7 for leg in ("FL", "FR", "HL", "HR")
-                                        for j in ("HFE", "KFE")}},
-        "contacts": [{"name": n, "frame": n, "type": "point", "radius": 0.016}
-                     for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]})
+    from conftest import solo8_description
+
+    robot = wb.load_robot(solo8_description())
     speed = 0.1 * froude_ratio(robot)
     command = VelocityCommand.speed_ramp(speed / 3, speed, 1.0, 3.0)
     run = run_gait(robot, "passive", "crawl", command, DURATION)
@@ -71,3 +67,20 @@ def test_two_joint_legs_crawl():
     expected = (speed * 2 / 3) * 2.0 + speed * (DURATION - 3.0)
     assert run.distance == pytest.approx(expected, rel=0.25), run.distance
     assert run.tracking(t_from=1.0)["linear_max_m"] < 0.3 * robot.q_ref[2]
+
+
+@pytest.mark.parametrize("gait", ["crawl", "trot"])
+def test_legs_of_five_joints_walk(gait):
+    """IIT Centauro's legs (five joints each, wheels locked as spheres): the stance and swing
+    tasks leave two joints per leg free, which the posture regulariser holds; the passive WBC
+    walks it on its defaults, no fall, every cycle solved, about as far as commanded."""
+    from conftest import centauro_description
+
+    robot = wb.load_robot(centauro_description())
+    speed = 0.1 * froude_ratio(robot)
+    command = VelocityCommand.speed_ramp(speed / 3, speed, 1.0, 3.0)
+    run = run_gait(robot, "passive", gait, command, DURATION)
+    assert not run.fell and run.failures == 0, run.failures
+    expected = (speed * 2 / 3) * 2.0 + speed * (DURATION - 3.0)
+    assert run.distance == pytest.approx(expected, rel=0.25), run.distance
+    assert run.tracking(t_from=1.0)["linear_max_m"] < 0.1 * robot.q_ref[2]

@@ -174,13 +174,9 @@ def test_two_joint_legs_are_a_warning():
     Jacobian from Pinocchio); check-robot warns what this means for the walking scenarios."""
     from wholebody.robots.check import check_robot
 
-    description = {"name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",
-                   "srdf": "erd:solo_description/srdf/solo.srdf", "posture": "standing",
-                   "torque_limits": {"overrides": {j: 2.7 for j in (
-                       "FL_HFE", "FL_KFE", "FR_HFE", "FR_KFE", "HL_HFE", "HL_KFE", "HR_HFE",
-                       "HR_KFE")}},
-                   "contacts": [{"name": n, "frame": n, "type": "point", "radius": 0.016}
-                                for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]}
+    from conftest import solo8_description
+
+    description = solo8_description()
     robot = wb.load_robot(description)
     data = robot.model.createData()
     pin.computeJointJacobians(robot.model, data, robot.q_ref)

@@ -310,12 +310,10 @@ def test_dependent_stance_rows_are_met_in_the_least_squares_sense(rng, plan_for)
     stance task's targets are generally inconsistent. The controller still solves: the dynamics
     hold (RNEA), and the stance feet's accelerations are the least-squares part of the target
     (J_s J_s⁺ b_s, by numpy's lstsq on the rows the test builds); the native engine refuses it."""
+    from conftest import solo8_description
+
     import wholebody as wb
-    solo = wb.load_robot({
-        "name": "solo8", "urdf": "erd:solo_description/robots/solo.urdf",
-        "srdf": "erd:solo_description/srdf/solo.srdf", "posture": "standing",
-        "contacts": [{"name": n, "frame": n, "type": "point", "radius": 0.016}
-                     for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]})
+    solo = wb.load_robot(solo8_description())
     planner = SimpleNamespace(legs=solo.contact_names)
     with pytest.raises(ValueError, match="engine: 'native' needs linearly independent"):
         PassiveWBC(solo, planner=planner, engine="native")
@@ -344,3 +342,35 @@ def test_dependent_stance_rows_are_met_in_the_least_squares_sense(rng, plan_for)
                 assert np.linalg.matrix_rank(Js, tol=1e-9) < Js.shape[0]
                 assert np.linalg.norm(target - reachable) > 1e-4  # an inconsistent target
     assert solved == 6
+
+
+def test_posture_regularizer_damps_the_legs_null_space(rng, plan_for):
+    """Legs of five joints on point feet: with every foot held, the joints still have a null space
+    of the stance rows (computed here with scipy). At the posture with a joint velocity inside
+    it, the posture regulariser adds −2ζω q̇ to the joints' acceleration along it: the solution's
+    q̈ there, with the regulariser minus without (posture_frequency=0, where nothing opposes the
+    motion), is −2ζω per unit of q̇."""
+    from conftest import centauro_description
+    from scipy.linalg import null_space
+
+    import wholebody as wb
+    robot = wb.load_robot(centauro_description())
+    robot.update(robot.q_ref.copy(), np.zeros(robot.nv))
+    J = robot.stacked_contact_jacobian()
+    N = null_space(J[:, 6:])  # joint motions that move no foot with the base still
+    assert N.shape[1] == robot.na - J.shape[0] > 0
+    v = np.zeros(robot.nv)
+    v[6:] = N @ rng.normal(size=N.shape[1])
+    v[6:] *= 0.5 / np.linalg.norm(v[6:])
+    robot.update(robot.q_ref.copy(), v)
+    plan = plan_for(robot, rng, (True,) * 4)
+    plan.trunk.position, plan.trunk.velocity = robot.com.copy(), robot.vcom.copy()
+    along = {}
+    for omega in (0.0, None):
+        wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
+                         posture_frequency=omega, engine="python")
+        sol = wbc.solve(plan)
+        assert sol.ok, sol.status
+        along[omega] = (N.T @ sol.qdd[6:]) @ (N.T @ v[6:]) / (v[6:] @ v[6:])
+    damping = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names)).posture_D
+    assert along[None] - along[0.0] == pytest.approx(-damping, rel=0.05)

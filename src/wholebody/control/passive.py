@@ -41,11 +41,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+import pinocchio as pin
 
 from ..cycle import warn_python_fallback
 from ..formulation import Solution, TaskReport
 from ..guard import Outcome, guard_torque
 from ..robot import Robot
+from ..robots.reference import froude_ratio
 from ..solvers.backends import DaqpResult, solve_daqp_qp
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound
@@ -55,6 +57,9 @@ from .passive_qp import FREE, PassiveQP, StancePattern
 from .passive_stack import passive_stack
 
 log = logging.getLogger(__name__)
+
+#: the posture regulariser's natural frequency on HyQ (rad/s), scaled by the robot's size
+POSTURE_FREQUENCY = 8.0
 
 #: singular values of the stance rows below this fraction of the largest count as dependent
 STANCE_RANK_TOLERANCE = 1e-4
@@ -97,6 +102,11 @@ class PassiveConfig:
     tangential forces ≈ 0; force-parallel, ours: every stance force leaning like the desired net
     force W_d, the same friction ratio on every foot) or ``torque_weights`` (per joint, torque;
     None: 1e-4 each; footnote 16);
+    ``posture_frequency`` ω (rad/s; None: POSTURE_FREQUENCY on HyQ, divided by the robot's
+    :func:`~wholebody.robots.reference.froude_ratio`; 0: off) and ``posture_damping`` ζ (ours): the
+    ‖q̈‖²_R term of eq. 7a pulls the joints' accelerations toward ω² (q_ref − q) − 2ζω q̇ instead
+    of 0, which holds the legs' null space (legs of more than three joints) near the standing
+    posture and leaves legs that the stance and swing tasks determine alone;
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
     ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, else Python with
@@ -116,6 +126,8 @@ class PassiveConfig:
     R_force: float = 1e-4
     regularization: str = "force-normal"
     tangential_weight: float = 1e-3
+    posture_frequency: float | None = None
+    posture_damping: float = 1.0
     torque_weights: tuple | None = None
     torque_limit_override: dict[str, float] | None = None
     control_period: float = 0.004
@@ -140,7 +152,9 @@ class PassiveConfig:
             raise ValueError(f"f_max: must exceed f_min = {self.f_min}, got {self.f_max!r}")
         for name in ("slack_weight", "R_qdd", "R_force", "control_period", "f_max_weights"):
             positive(getattr(self, name), name)
-        for name in ("K_st", "D_st", "tangential_weight"):
+        if self.posture_frequency is not None:
+            nonnegative(self.posture_frequency, "posture_frequency")
+        for name in ("K_st", "D_st", "tangential_weight", "posture_damping"):
             nonnegative(getattr(self, name), name)
         # arrays as tuples of floats (exact), so that configurations compare by value
         Q = np.broadcast_to(finite_array(self.Q, "Q", nonnegative=True), 6)
@@ -241,6 +255,10 @@ class PassiveWBC(PlannedController):
         self.planner = planner if planner is not None else default_planner(robot)
         self._leg = np.array([tuple(self.planner.legs).index(n) for n in self.contacts])
         self.mu = robot.friction if config.mu is None else float(config.mu)
+        omega = (POSTURE_FREQUENCY / froude_ratio(robot) if config.posture_frequency is None
+                 else config.posture_frequency)
+        #: the posture regulariser's gains: q̈_posture = K (q_ref − q) − D q̇ (1/s², 1/s)
+        self.posture_K, self.posture_D = omega ** 2, 2.0 * config.posture_damping * omega
         self.f_min = config.f_min
         self.f_max = (force_bound(robot, config.f_max_weights) if config.f_max is None
                       else config.f_max)
@@ -345,6 +363,8 @@ class PassiveWBC(PlannedController):
         elif self.tangential_weight:
             HF += self.tangential_weight * pat.tangential
         qp.set_cost(self._R_diagonal, HF, -GQ @ W_d)
+        if self.posture_K or self.posture_D:
+            qp.g[6:robot.nv] -= self.R_qdd * self.posture_acceleration()
         if self.swing_slack == "single":
             qp.set_single_slacks(stance, self.slack_weight)
         if not pat.all_stance:
@@ -353,6 +373,13 @@ class PassiveWBC(PlannedController):
         result = self._solve_qp()
         t2 = time.perf_counter()
         return self._solution(result, J, W_d, G, pat, {"assemble": t1 - t0, "solve": t2 - t1})
+
+    def posture_acceleration(self) -> np.ndarray:
+        """The joints' q̈ the ‖q̈‖²_R term pulls toward: K (q_ref − q) − D q̇ (Lie difference, so
+        continuous joints count their angle)."""
+        robot = self.robot
+        error = pin.difference(robot.model, robot.q, robot.q_ref)[6:]
+        return self.posture_K * error - self.posture_D * robot.v[6:]
 
     def _stance_anchors(self, stance, points, velocity) -> None:
         """Writes x̂_st of eq. 32 into ``_anchors``, consistent with a rolling foot: the contact
@@ -553,6 +580,8 @@ class PassiveWBC(PlannedController):
             "K_st": float(self.K_st), "D_st": float(self.D_st),
             "control_period": float(self.control_period), "Q": self.Q,
             "R_qdd": float(self.R_qdd), "R_force": float(self.R_force),
+            "posture": robot.q_ref, "posture_K": float(self.posture_K),
+            "posture_D": float(self.posture_D),
             "regularization": self.regularization,
             "tangential_weight": float(self.tangential_weight),
             "torque_weights": self.torque_weights, "mu": self.mu, "f_min": float(self.f_min),

@@ -10,7 +10,7 @@ import numpy as np
 from ..formulation import Stack
 from ..tasks import (ContactConstraint, ForceRegularizer, FrameTask, FrictionCone, NewtonEuler,
                      NormalForceBounds)
-from ..tasks.regularization import (AccelerationRegularizer, ContactTorqueRegularizer,
+from ..tasks.regularization import (AccelerationTarget, ContactTorqueRegularizer,
                                     TangentialForceRegularizer)
 from ..tasks.wrench import TrunkWrenchTask
 from ..variables import Variables
@@ -35,7 +35,8 @@ def passive_stack(wbc, plan):
             wbc.torque_limits, wbc.joint_limits]
     wrench = TrunkWrenchTask(wbc.impedance, weight=np.sqrt(wbc.Q), contacts=stance)
     wrench.reference = plan.trunk
-    objective = [wrench, AccelerationRegularizer(weight=np.sqrt(wbc.R_qdd)),
+    posture = np.concatenate([np.zeros(6), wbc.posture_acceleration()])
+    objective = [wrench, AccelerationTarget(posture, weight=np.sqrt(wbc.R_qdd)),
                  ForceRegularizer(weight=np.sqrt(wbc.R_force), contacts=stance)]
     if wbc.regularization == "torque":
         objective.append(ContactTorqueRegularizer(weight=np.sqrt(wbc.torque_weights),

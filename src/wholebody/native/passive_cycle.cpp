@@ -11,6 +11,7 @@
 #include <pinocchio/algorithm/centroidal.hpp>
 #include <pinocchio/algorithm/compute-all-terms.hpp>
 #include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/spatial.hpp>
 
@@ -48,6 +49,9 @@ public:
     Q_ = get_vector(spec, "Q", 6);
     R_qdd_ = get<double>(spec, "R_qdd");
     R_force_ = get<double>(spec, "R_force");
+    posture_ = get_vector(spec, "posture", nq_);
+    posture_K_ = get<double>(spec, "posture_K");
+    posture_D_ = get<double>(spec, "posture_D");
     torque_regularization_ = get<std::string>(spec, "regularization") == "torque";
     force_parallel_ = get<std::string>(spec, "regularization") == "force-parallel";
     tangential_weight_ = get<double>(spec, "tangential_weight");
@@ -254,6 +258,11 @@ public:
     GQ_.noalias() = G_.transpose() * Q_.asDiagonal();
     HF_.noalias() = GQ_ * G_;
     g.segment(nv, nf_).noalias() = -GQ_ * W_d;
+    if (posture_K_ != 0.0 || posture_D_ != 0.0) // ‖q̈ − q̈_posture‖²_R (PassiveWBC.posture_acceleration)
+    {
+      pinocchio::difference(model_, q_, posture_, posture_error_);
+      g.segment(6, na_) -= R_qdd_ * (posture_K_ * posture_error_.tail(na_) - posture_D_ * v_.tail(na_));
+    }
     if (torque_regularization_) // footnote 16: R_F = J_st,j R_τ J_st,jᵀ
       HF_.noalias() += J_.rightCols(na_) * torque_weights_.asDiagonal() * J_.rightCols(na_).transpose();
     else if (tangential_weight_ != 0.0)
@@ -396,6 +405,7 @@ private:
     nq_ = model_.nq;
     nv_ = model_.nv;
     na_ = nv_ - 6;
+    posture_error_.setZero(nv_);
 
     auto contact_joints = get<std::vector<int>>(spec, "contact_joints");
     leg_ = get<std::vector<int>>(spec, "leg");
@@ -537,6 +547,8 @@ private:
   Eigen::Matrix<double, Eigen::Dynamic, 3> frame_drifts_, origins_, points_, anchors_, slip_,
     swing_targets_;
   MatrixXd J_, G_, GQ_, HF_, tangential_;
+  VectorXd posture_, posture_error_;
+  double posture_K_ = 0, posture_D_ = 0;
   RowMatrix H_full_, A_full_;
   VectorXd g_full_, upper_full_, lower_full_, x_full_;
   std::vector<int32_t> sense_full_;

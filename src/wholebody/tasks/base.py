@@ -203,6 +203,19 @@ def contact_list(value, field: str, obj=None) -> tuple[str, ...] | None:
     return names
 
 
+def vector_rule(size: int | None = None, optional: bool = False) -> Rule:
+    """A finite 1-D float vector (of ``size`` entries if given; ``optional``: None allowed)."""
+    def rule(value, field, obj=None):
+        if optional and value is None:
+            return None
+        arr = finite_array(value, field)
+        if arr.ndim != 1 or (size is not None and arr.size != size):
+            raise ValueError(f"{field}: expected a vector of {size or 'any number of'} numbers, "
+                             f"got shape {arr.shape}")
+        return arr
+    return rule
+
+
 def normal_map(value, field: str, obj=None) -> dict:
     """contact name -> surface normal: finite, non-zero 3-vectors (None: none, world up)."""
     out = {}

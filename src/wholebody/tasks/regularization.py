@@ -3,10 +3,13 @@ force-regularisation schemes of their Sect. V-D, as equality tasks toward zero."
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..robot import FREE_FLYER_NV
-from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, normal_map
+from .base import (Task, TaskRows, checked_attribute, contact_list, contact_subset, normal_map,
+                   scalar_rule, vector_rule)
 from .contact import WORLD_UP, tangent_rows
 
 
@@ -15,6 +18,20 @@ class AccelerationRegularizer(Task):
 
     def rows(self, robot, variables):
         return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None, target=np.zeros(robot.nv))
+
+
+class AccelerationTarget(AccelerationRegularizer):
+    """q̈ ≈ ``target`` (nv,): the regulariser pulled toward given accelerations (PassiveWBC's
+    posture regulariser: 0 on the base, a PD toward the posture on the joints)."""
+
+    target = checked_attribute(vector_rule(), "Accelerations (nv,), finite.")
+
+    def __init__(self, target, name=None, weight=1.0):
+        super().__init__(name, weight)
+        self.target = target
+
+    def rows(self, robot, variables):
+        return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None, target=self.target.copy())
 
 
 class TangentialForceRegularizer(Task):
@@ -29,13 +46,16 @@ class TangentialForceRegularizer(Task):
 
     contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
     normals = checked_attribute(normal_map, "contact name -> non-zero surface normal.")
+    lean = checked_attribute(vector_rule(3, optional=True), "None or a finite force (3,).")
+    mu = checked_attribute(scalar_rule(low=0.0, low_open=True, allow_inf=True),
+                           "Largest friction ratio of the lean, > 0 (inf: no cap).")
 
     def __init__(self, name=None, weight=1.0, contacts=None, normals=None, lean=None,
-                 mu: float = np.inf):
+                 mu: float = math.inf):
         super().__init__(name, weight)
         self.contacts = contacts
         self.normals = normals
-        self.lean = None if lean is None else np.asarray(lean, dtype=float)
+        self.lean = lean
         self.mu = mu
 
     def rows(self, robot, variables):

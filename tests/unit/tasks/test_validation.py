@@ -21,8 +21,8 @@ from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, Force
                              FrameTask, FrictionCone, FullDynamics, JointAccelerationLimits,
                              JointTrajectoryTask, MomentumForce, MomentumPD, NewtonEuler,
                              NormalForceBounds, PostureTask, Task, TorqueLimits)
-from wholebody.tasks.regularization import (AccelerationRegularizer, ContactTorqueRegularizer,
-                                            TangentialForceRegularizer)
+from wholebody.tasks.regularization import (AccelerationRegularizer, AccelerationTarget,
+                                            ContactTorqueRegularizer, TangentialForceRegularizer)
 from wholebody.tasks.wrench import TrunkImpedance, TrunkWrenchTask
 from wholebody.variables import Variables
 
@@ -37,6 +37,7 @@ TASKS = {
     CoMTask: {}, FrameTask: {"frame": "left_sole_link"}, PostureTask: {},
     JointTrajectoryTask: {"joints": ["leg_left_4_joint", "leg_right_4_joint"]},
     AccelerationRegularizer: {}, TangentialForceRegularizer: {}, ContactTorqueRegularizer: {},
+    AccelerationTarget: {"target": np.zeros(18)},
     TrunkWrenchTask: {},
 }
 
@@ -103,6 +104,11 @@ BAD = [
     (MomentumPD, "P", np.ones(5), "shape (5,)"), (MomentumPD, "D", 5.0, "5.0"),
     (MomentumPD, "P", np.eye(3), "shape (3, 3)"),
     (TangentialForceRegularizer, "normals", {"left_sole": [0.0, 0.0, 0.0]}, "[0.0, 0.0, 0.0]"),
+    (TangentialForceRegularizer, "lean", [0.0, NAN, 1.0], "nan"),
+    (TangentialForceRegularizer, "lean", [0.0, 1.0], "shape (2,)"),
+    (TangentialForceRegularizer, "mu", 0.0, "0.0"), (TangentialForceRegularizer, "mu", NAN, "nan"),
+    (AccelerationTarget, "target", [0.0, INF], "inf"),
+    (AccelerationTarget, "target", np.zeros((2, 2)), "shape (2, 2)"),
     (FrictionCone, "normals", {"left_sole": [NAN, 0.0, 1.0]}, "nan"),
     (NormalForceBounds, "normals", {"left_sole": [0.0, 1.0]}, "got (2,)"),
     (FrictionCone, "contacts", "left_sole", "'left_sole'"),
