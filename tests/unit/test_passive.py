@@ -374,3 +374,38 @@ def test_posture_regularizer_damps_the_legs_null_space(rng, plan_for):
         along[omega] = (N.T @ sol.qdd[6:]) @ (N.T @ v[6:]) / (v[6:] @ v[6:])
     damping = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names)).posture_D
     assert along[None] - along[0.0] == pytest.approx(-damping, rel=0.05)
+
+
+def test_quasi_static_baseline_holds_only_the_legs_null_space(rng, plan_for):
+    """The quasi-static baseline on legs of five joints: what the posture hold adds to the static
+    map's torques moves no foot force (it lies in each leg Jacobian's null space, checked with
+    scipy) and pushes the joints back toward the posture; on HyQ's three-joint legs it adds
+    nothing."""
+    from conftest import centauro_description
+    from scipy.linalg import null_space
+
+    import wholebody as wb
+    from wholebody.control.quasi_static import QuasiStaticController
+    robot = wb.load_robot(centauro_description())
+    q = robot.q_ref.copy()
+    robot.update(q, np.zeros(robot.nv))
+    J = robot.stacked_contact_jacobian()
+    held = QuasiStaticController(robot, SimpleNamespace(legs=robot.contact_names))
+    legs = [cols for _, cols in held._redundant_legs]
+    assert len(legs) == 4
+    # displace the first leg's joints inside its null space
+    N0 = null_space(J[0:3, 6 + legs[0]])
+    q[7 + legs[0]] += N0 @ np.array([0.05, -0.03])
+    robot.update(q, np.zeros(robot.nv))
+    plan = plan_for(robot, rng, (True,) * 4)
+    free = QuasiStaticController(robot, SimpleNamespace(legs=robot.contact_names))
+    free._redundant_legs = []
+    added = held.solve(plan).tau - free.solve(plan).tau
+    J = robot.stacked_contact_jacobian()
+    for i, cols in enumerate(legs):
+        Jl = J[3 * i:3 * i + 3, 6 + cols]
+        np.testing.assert_allclose(Jl @ added[cols], 0.0, atol=1e-8 * max(1.0, np.abs(added).max()))
+    displacement = pin.difference(robot.model, q, robot.q_ref)[6:]
+    assert added[legs[0]] @ displacement[legs[0]] > 0.0
+    hyq = wb.load_robot("hyq")
+    assert QuasiStaticController(hyq, SimpleNamespace(legs=hyq.contact_names))._redundant_legs == []

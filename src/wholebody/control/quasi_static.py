@@ -25,7 +25,9 @@ from ..tasks.limits import TorqueLimits
 from ..robots import reference
 from ..tasks.wrench import TrunkImpedance, contact_wrench_map, force_bound
 from .base import PlannedController
-from .passive import default_planner
+from ..robots.reference import froude_ratio
+from ..robots.roles import leg_joints
+from .passive import POSTURE_FREQUENCY, default_planner
 
 log = logging.getLogger(__name__)
 
@@ -80,8 +82,29 @@ class QuasiStaticController(PlannedController):
         self.lower = np.zeros(self.nf + 5 * c)
         self.sense = np.zeros(self.nf + 5 * c, dtype=np.int32)
         self._G = np.zeros((6, self.nf))
+        omega = POSTURE_FREQUENCY / froude_ratio(robot)
+        self.posture_K, self.posture_D = omega ** 2, 2.0 * omega
+        #: joint indices of the legs with more than three joints (their null space is held)
+        self._redundant_legs = [
+            (i, np.array([robot.joint_names.index(j) for j in leg_joints(robot, name)]))
+            for i, name in enumerate(self.contacts) if len(leg_joints(robot, name)) > 3]
         self.last_tau: np.ndarray | None = None
         self.last_plan = None
+
+    def _hold_leg_null_space(self, J, tau) -> None:
+        """Legs of more than three joints: add N M_ll (K (q_ref − q) − D q̇) to their torques, N
+        the projector onto the leg Jacobian's null space (torques that move no foot force): the
+        posture PD of :class:`~wholebody.control.passive.PassiveWBC`'s regulariser where the
+        static map leaves the leg free (ours; legs of three joints have no such space)."""
+        robot = self.robot
+        if not self._redundant_legs:
+            return
+        error = pin.difference(robot.model, robot.q, robot.q_ref)[6:]
+        for i, cols in self._redundant_legs:
+            Jl = J[3 * i:3 * i + 3, 6 + cols]
+            N = np.eye(len(cols)) - np.linalg.pinv(Jl) @ Jl
+            a = self.posture_K * error[cols] - self.posture_D * robot.v[6 + cols]
+            tau[cols] += N @ (robot.M[np.ix_(6 + cols, 6 + cols)] @ a)
 
     def solve(self, plan) -> Solution:
         t0 = time.perf_counter()
@@ -120,6 +143,7 @@ class QuasiStaticController(PlannedController):
         F = np.array(result.x) if ok else np.zeros(nf)
         gravity = pin.computeGeneralizedGravity(robot.model, robot.data, robot.q)[6:]
         tau = gravity - J[:, 6:].T @ F
+        self._hold_leg_null_space(J, tau)
         swing_errors = []
         for i, name in enumerate(self.contacts):
             if stance[i]:
