@@ -41,7 +41,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-import pinocchio as pin
 
 from ..cycle import warn_python_fallback
 from ..formulation import Solution, TaskReport
@@ -82,6 +81,7 @@ def independent_rank(J: np.ndarray | None = None, singular: np.ndarray | None = 
     if singular is None:
         singular = np.linalg.svd(J, compute_uv=False)
     return int((singular > STANCE_RANK_TOLERANCE * singular[0]).sum()) if singular.size else 0
+
 
 SLACKS = ("per-direction", "single", "none")
 ENGINES = ("auto", "native", "python")

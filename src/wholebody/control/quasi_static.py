@@ -23,10 +23,9 @@ from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE, sol
 from ..tasks.contact import friction_faces, tangent_basis
 from ..tasks.limits import TorqueLimits
 from ..robots import reference
+from ..robots.roles import leg_joints
 from ..tasks.wrench import TrunkImpedance, contact_wrench_map, force_bound
 from .base import PlannedController
-from ..robots.reference import froude_ratio
-from ..robots.roles import leg_joints
 from .passive import POSTURE_FREQUENCY, default_planner
 
 log = logging.getLogger(__name__)
@@ -82,7 +81,7 @@ class QuasiStaticController(PlannedController):
         self.lower = np.zeros(self.nf + 5 * c)
         self.sense = np.zeros(self.nf + 5 * c, dtype=np.int32)
         self._G = np.zeros((6, self.nf))
-        omega = POSTURE_FREQUENCY / froude_ratio(robot)
+        omega = POSTURE_FREQUENCY / reference.froude_ratio(robot)
         self.posture_K, self.posture_D = omega ** 2, 2.0 * omega
         #: joint indices of the legs with more than three joints (their null space is held)
         self._redundant_legs = [

@@ -171,7 +171,7 @@ def static_knee_torque(robot, q, joint: str, supports, mu: float | None = None) 
             A_eq[:3, 3 * i:3 * i + 3] = np.eye(3)
             A_eq[3:, 3 * i:3 * i + 3] = pin.skew(r)
         b_eq = np.array([0.0, 0.0, weight, 0.0, 0.0, 0.0])
-        rows, bounds = [], []
+        rows = []
         for i in range(len(stance)):
             for axis in (0, 1):
                 for sign in (1.0, -1.0):
