@@ -94,6 +94,19 @@ def test_robot_file_missing_field_named(tmp_path, capsys):
     assert "missing required field 'contacts'" in capsys.readouterr().err
 
 
+def test_robot_without_feet_is_refused(tmp_path, capsys):
+    """A robot with no contacts (an upper body such as example-robot-data's Alex) is refused at
+    load, by check-robot and by run, with what a contact is for."""
+    robot_file = tmp_path / "upper_body.toml"
+    robot_file.write_text('name = "alex"\nurdf = "erd:alex_description/urdf/alex_nub_hands.urdf"\n'
+                          'srdf = "erd:alex_description/srdf/alex_nub_hands.srdf"\n'
+                          'posture = "default"\ncontacts = []\n')
+    for argv in (["check-robot", str(robot_file)], ["run", "stand", "--robot", str(robot_file)]):
+        assert main(argv) == 2
+        err = capsys.readouterr()
+        assert "field 'contacts' is empty" in err.err + err.out
+
+
 def test_console_script_entry_point():
     """`python -m wholebody` / the installed script reach the same main()."""
     proc = subprocess.run([sys.executable, "-m", "wholebody", "run", "nothing"],

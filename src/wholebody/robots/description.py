@@ -210,6 +210,11 @@ class RobotDescription:
         where = f"robot description '{data.get('name', '?')}'"
 
         def need(key: str) -> Any:
+            if key == "contacts" and isinstance(data.get(key), (list, tuple)) and not data[key]:
+                raise DescriptionError(
+                    f"{where}: field 'contacts' is empty; wholebody controls robots that stand on "
+                    f"their feet: give at least the feet (point contacts) or the soles "
+                    f"(rectangles), docs/robots.md; a robot without feet cannot be used")
             if key not in data or data[key] in (None, "", [], ()):
                 raise DescriptionError(f"{where}: missing required field '{key}'")
             return data[key]
