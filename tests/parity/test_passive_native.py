@@ -82,7 +82,7 @@ CONFIGS = {
     "default": {},
     "hard swing": {"swing_slack": "none"},
     "torque regularisation": {"regularization": "torque"},
-    "force-parallel regularisation": {"regularization": "force-parallel", "tangential_weight": 1.0},
+    "the paper's force regulariser": {"regularization": "force-normal", "tangential_weight": 1.0},
     "weak knee, eq. 10 stance": {"torque_limit_override": {"lf_kfe_joint": 26.0}, "K_st": 0.0,
                                  "D_st": 0.0},
     "no feed-forward, mu 0.4": {"mu": 0.4, "f_min": 10.0},

@@ -62,6 +62,7 @@ def test_solution_satisfies_dynamics_and_constraints(robots, rng, stance, plan_f
 @pytest.mark.parametrize("options", [{}, {"regularization": "torque",
                                           "torque_weights": np.tile([1e-4, 1e-4, 1e-2], 4)},
                                      {"regularization": "force-parallel", "tangential_weight": 1.0},
+                                     {"regularization": "force-normal"},
                                      {"swing_slack": "none"}])
 def test_matches_two_level_stack(robots, rng, stance, options, plan_for):
     """The dedicated assembly and the generic Formulation (two levels, method="weighted", DAQP)
@@ -374,6 +375,18 @@ def test_posture_regularizer_damps_the_legs_null_space(rng, plan_for):
         along[omega] = (N.T @ sol.qdd[6:]) @ (N.T @ v[6:]) / (v[6:] @ v[6:])
     damping = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names)).posture_D
     assert along[None] - along[0.0] == pytest.approx(-damping, rel=0.05)
+
+
+def test_posture_regularizer_leaves_three_joint_legs_alone(robots, rng, plan_for):
+    """On HyQ (three joints per leg, every joint determined by its foot's task) the posture
+    regulariser is off: the same torques as with posture_frequency=0, away from the posture."""
+    robot = robots["hyq"]
+    robot.update(*standing_state(robot, rng, noise=0.1))
+    plan = plan_for(robot, rng, (True, False, True, True))
+    taus = [PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
+                       posture_frequency=omega, engine="python").solve(plan).tau
+            for omega in (None, 0.0)]
+    np.testing.assert_array_equal(taus[0], taus[1])
 
 
 def test_quasi_static_baseline_holds_only_the_legs_null_space(rng, plan_for):

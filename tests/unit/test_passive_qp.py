@@ -34,7 +34,7 @@ STANCES = [(True, True, True, True), (False, True, True, True), (True, False, Fa
 
 @pytest.mark.parametrize("options", [{}, {"swing_slack": "none"}, {"swing_slack": "single"},
                                      {"regularization": "torque", "mu": 0.5, "f_min": 5.0},
-                                     {"regularization": "force-parallel", "mu": 0.4}])
+                                     {"regularization": "force-normal", "mu": 0.4}])
 def test_adapter_optimum_matches_quadprog(robots, rng, options, plan_for):
     """Cycle after cycle (so that DAQP is warm-started from the previous multipliers), the x the
     controller got through the adapter is quadprog's optimum of the same arrays."""

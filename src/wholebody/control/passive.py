@@ -6,10 +6,12 @@ One QP per control cycle over u = [q̈, F_grf] (eq. 7), written into the preallo
 :meth:`PassiveWBC.as_stack`, but costs much more per cycle):
 
 * cost ‖W_com − W_com,d‖²_Q + ‖u‖²_R (eqs. 7a, 8): the trunk wrench task of eq. 4
-  (:class:`~wholebody.tasks.wrench.TrunkImpedance`) plus a regulariser — either forces near the cone
-  normals (or, ours, ``regularization="force-parallel"``: every force leaning like the desired net
-  force) or, with ``regularization="torque"``, the joint torques of the contact forces with
-  per-joint weights (Sect. V-D, footnote 16: R_F = J_st,j R_τ J_st,jᵀ);
+  (:class:`~wholebody.tasks.wrench.TrunkImpedance`) plus a regulariser — forces near the cone
+  normals (``regularization="force-normal"``, the paper's), every force leaning like the desired
+  net force (``"force-parallel"``, ours, the default: the robust reading of "GRFs closer to the
+  friction cone normals" when the net force is not vertical) or, with ``"torque"``, the joint
+  torques of the contact forces with per-joint weights (Sect. V-D, footnote 16:
+  R_F = J_st,j R_τ J_st,jᵀ);
 * floating-base dynamics (eq. 9), here in Pinocchio's base coordinates (a linear change of rows of
   the paper's CoM coordinates: the constraint set is the same);
 * stance feet: eq. 10, or the stance task of eq. 32 (``K_st``, ``D_st`` > 0; the anchor follows a
@@ -47,6 +49,7 @@ from ..formulation import Solution, TaskReport
 from ..guard import Outcome, guard_torque
 from ..robot import Robot
 from ..robots.reference import froude_ratio
+from ..robots.roles import leg_joints
 from ..solvers.backends import DaqpResult, solve_daqp_qp
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound
@@ -62,6 +65,20 @@ POSTURE_FREQUENCY = 8.0
 
 #: singular values of the stance rows below this fraction of the largest count as dependent
 STANCE_RANK_TOLERANCE = 1e-4
+
+
+def free_joints(robot) -> np.ndarray:
+    """(na,) bool: the joints that point-foot tasks (three rows per foot, stance or swing) do not
+    determine: every joint of a leg of more than three joints, and joints in no leg (a spine, a
+    torso). The posture regulariser acts on these only; a leg of three joints is left to its
+    foot's task (on such legs the regulariser made small robots' trunks track worse)."""
+    free = np.ones(robot.na, dtype=bool)
+    index = {name: i for i, name in enumerate(robot.joint_names)}
+    for contact in robot.contact_names:
+        joints = leg_joints(robot, contact)
+        if len(joints) <= 3:
+            free[[index[j] for j in joints if j in index]] = False
+    return free
 
 
 def stance_rank(robot, contacts) -> int:
@@ -98,15 +115,16 @@ class PassiveConfig:
     ``swing_slack`` one of ``SLACKS`` (eq. 11 / 33) with weight
     ``slack_weight`` α; ``K_st``/``D_st`` stance task of eq. 32 (both 0: eq. 10); ``Q`` (6, trunk
     wrench, N² / (Nm)²), ``R_qdd`` and ``R_force`` the ‖u‖²_R term of eq. 7a;
-    ``regularization`` one of ``REGULARIZATIONS`` with ``tangential_weight`` (force-normal:
-    tangential forces ≈ 0; force-parallel, ours: every stance force leaning like the desired net
-    force W_d, the same friction ratio on every foot) or ``torque_weights`` (per joint, torque;
-    None: 1e-4 each; footnote 16);
+    ``regularization`` one of ``REGULARIZATIONS`` with ``tangential_weight`` (force-normal, the
+    paper's: tangential forces ≈ 0, which shares the tangential force equally among the feet;
+    force-parallel, ours and the default: every stance force leaning like the desired net force
+    W_d, the same friction ratio on every foot, identical to force-normal when W_d is vertical) or
+    ``torque_weights`` (per joint, torque; None: 1e-4 each; footnote 16);
     ``posture_frequency`` ω (rad/s; None: POSTURE_FREQUENCY on HyQ, divided by the robot's
     :func:`~wholebody.robots.reference.froude_ratio`; 0: off) and ``posture_damping`` ζ (ours): the
-    ‖q̈‖²_R term of eq. 7a pulls the joints' accelerations toward ω² (q_ref − q) − 2ζω q̇ instead
-    of 0, which holds the legs' null space (legs of more than three joints) near the standing
-    posture and leaves legs that the stance and swing tasks determine alone;
+    ‖q̈‖²_R term of eq. 7a pulls the accelerations of the joints no foot task determines (legs of
+    more than three joints, joints in no leg: :func:`free_joints`) toward ω² (q_ref − q) − 2ζω q̇
+    instead of 0, which holds them near the standing posture;
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
     ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, else Python with
@@ -124,7 +142,7 @@ class PassiveConfig:
     Q: tuple = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     R_qdd: float = 1e-4
     R_force: float = 1e-4
-    regularization: str = "force-normal"
+    regularization: str = "force-parallel"
     tangential_weight: float = 1e-3
     posture_frequency: float | None = None
     posture_damping: float = 1.0
@@ -257,8 +275,10 @@ class PassiveWBC(PlannedController):
         self.mu = robot.friction if config.mu is None else float(config.mu)
         omega = (POSTURE_FREQUENCY / froude_ratio(robot) if config.posture_frequency is None
                  else config.posture_frequency)
-        #: the posture regulariser's gains: q̈_posture = K (q_ref − q) − D q̇ (1/s², 1/s)
+        #: the posture regulariser's gains: q̈_posture = K (q_ref − q) − D q̇ (1/s², 1/s), on
+        #: the joints no point-foot task determines (:func:`free_joints`)
         self.posture_K, self.posture_D = omega ** 2, 2.0 * config.posture_damping * omega
+        self.posture_mask = free_joints(robot).astype(float)
         self.f_min = config.f_min
         self.f_max = (force_bound(robot, config.f_max_weights) if config.f_max is None
                       else config.f_max)
@@ -363,7 +383,7 @@ class PassiveWBC(PlannedController):
         elif self.tangential_weight:
             HF += self.tangential_weight * pat.tangential
         qp.set_cost(self._R_diagonal, HF, -GQ @ W_d)
-        if self.posture_K or self.posture_D:
+        if (self.posture_K or self.posture_D) and self.posture_mask.any():
             qp.g[6:robot.nv] -= self.R_qdd * self.posture_acceleration()
         if self.swing_slack == "single":
             qp.set_single_slacks(stance, self.slack_weight)
@@ -379,7 +399,7 @@ class PassiveWBC(PlannedController):
         continuous joints count their angle)."""
         robot = self.robot
         error = pin.difference(robot.model, robot.q, robot.q_ref)[6:]
-        return self.posture_K * error - self.posture_D * robot.v[6:]
+        return self.posture_mask * (self.posture_K * error - self.posture_D * robot.v[6:])
 
     def _stance_anchors(self, stance, points, velocity) -> None:
         """Writes x̂_st of eq. 32 into ``_anchors``, consistent with a rolling foot: the contact
@@ -581,7 +601,7 @@ class PassiveWBC(PlannedController):
             "control_period": float(self.control_period), "Q": self.Q,
             "R_qdd": float(self.R_qdd), "R_force": float(self.R_force),
             "posture": robot.q_ref, "posture_K": float(self.posture_K),
-            "posture_D": float(self.posture_D),
+            "posture_D": float(self.posture_D), "posture_mask": self.posture_mask,
             "regularization": self.regularization,
             "tangential_weight": float(self.tangential_weight),
             "torque_weights": self.torque_weights, "mu": self.mu, "f_min": float(self.f_min),

@@ -52,6 +52,7 @@ public:
     posture_ = get_vector(spec, "posture", nq_);
     posture_K_ = get<double>(spec, "posture_K");
     posture_D_ = get<double>(spec, "posture_D");
+    posture_mask_ = get_vector(spec, "posture_mask", na_);
     torque_regularization_ = get<std::string>(spec, "regularization") == "torque";
     force_parallel_ = get<std::string>(spec, "regularization") == "force-parallel";
     tangential_weight_ = get<double>(spec, "tangential_weight");
@@ -261,7 +262,8 @@ public:
     if (posture_K_ != 0.0 || posture_D_ != 0.0) // ‖q̈ − q̈_posture‖²_R (PassiveWBC.posture_acceleration)
     {
       pinocchio::difference(model_, q_, posture_, posture_error_);
-      g.segment(6, na_) -= R_qdd_ * (posture_K_ * posture_error_.tail(na_) - posture_D_ * v_.tail(na_));
+      g.segment(6, na_) -= R_qdd_ * posture_mask_.cwiseProduct(
+        posture_K_ * posture_error_.tail(na_) - posture_D_ * v_.tail(na_));
     }
     if (torque_regularization_) // footnote 16: R_F = J_st,j R_τ J_st,jᵀ
       HF_.noalias() += J_.rightCols(na_) * torque_weights_.asDiagonal() * J_.rightCols(na_).transpose();
@@ -547,7 +549,7 @@ private:
   Eigen::Matrix<double, Eigen::Dynamic, 3> frame_drifts_, origins_, points_, anchors_, slip_,
     swing_targets_;
   MatrixXd J_, G_, GQ_, HF_, tangential_;
-  VectorXd posture_, posture_error_;
+  VectorXd posture_, posture_error_, posture_mask_;
   double posture_K_ = 0, posture_D_ = 0;
   RowMatrix H_full_, A_full_;
   VectorXd g_full_, upper_full_, lower_full_, x_full_;

@@ -389,19 +389,19 @@ def _friction(s: Summary) -> tuple[str, str]:
     claims = m["claims"]
     mis, free = m["mismatch"], m["mismatch, no stance task"]
     ins, fast = m["corrected, inscribed"], m["corrected, fast"]
-    plain, parallel = m["corrected mu"], m["corrected, force-parallel"]
+    plain, paper = m["corrected mu"], m["corrected, paper's regulariser"]
     text = (f"worst slip {100 * mis['max_stance_slip_m']:.1f} cm per stance, "
             f"{'fell' if mis['fell'] else 'no fall'}; without the stance task "
             + ("the robot falls" if free["fell"] else
                f"{100 * free['max_stance_slip_m']:.1f} cm")
             + f"; μ corrected (inscribed pyramid): {ins['slip_events']} and {fast['slip_events']} "
             f"slip events at {ins['speed_m_s']:.2f} and {fast['speed_m_s']:.2f} m/s; plain "
-            f"pyramid: {plain['slip_events']} with the paper's regulariser, "
-            f"{parallel['slip_events']} with force-parallel")
+            f"pyramid: {plain['slip_events']} (force-parallel regulariser), "
+            f"{paper['slip_events']} with the paper's")
     bounded = claims["slip bounded with the stance task"]
     larger = claims["slip larger without the stance task"]
     clean = (claims["no slip events with mu corrected (inscribed pyramid), 0.11 and fast speed"]
-             and claims["no slip events with mu corrected (same number, force-parallel regulariser)"])
+             and claims["no slip events with mu corrected (same number, plain pyramid)"])
     return text, (REPRODUCED if bounded and larger and clean else
                   PARTLY if bounded and larger else NOT_REPRODUCED)
 

@@ -73,10 +73,10 @@ SWAY_GAIN = Parameter("sway_gain", 1.0, "crawl: lateral CoM sway toward the cent
 
 
 #: the passive WBC's force regulariser (:class:`~wholebody.control.passive.PassiveConfig`)
-REGULARIZATION = Parameter("regularization", "force-normal", "passive WBC's force regulariser: "
-                           "force-normal (the paper's: tangential forces small), force-parallel "
-                           "(ours: every foot at the net force's friction ratio) or torque",
-                           choices=REGULARIZATIONS)
+REGULARIZATION = Parameter("regularization", "force-parallel", "passive WBC's force "
+                           "regulariser: force-parallel (ours: every foot at the net force's "
+                           "friction ratio), force-normal (the paper's: tangential forces small) "
+                           "or torque", choices=REGULARIZATIONS)
 
 
 def sway_options(params: dict) -> dict:
