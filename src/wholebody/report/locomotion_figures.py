@@ -33,11 +33,12 @@ def friction_mismatch_figure(path: Path, robot_name: str, runs: dict, stance_spe
     n = min(len(r.log["t"]) for r in runs.values())
     t = next(iter(runs.values())).log["t"][:n]
     first = ("mismatch", "mismatch, no stance task")
-    rest = ("corrected mu", "corrected, inscribed", "corrected, fast", "reference: matched floor")
+    rest = [k for k in runs if k.startswith(("corrected", "reference"))]
     panels = [
         (f"floor mu {floor_mu}, WBC mu {controller_mu}: stance task on/off (eq. 32)",
          "slip speed (m/s)", {k: np.minimum(stance_speed[k], 1.0) for k in first}),
-        ("WBC mu corrected; matched-floor reference", "slip speed (m/s)",
+        ("WBC mu corrected (plain pyramid with either regulariser, inscribed pyramid); "
+         "matched-floor reference", "slip speed (m/s)",
          {k: stance_speed[k] for k in rest}),
         ("CoM tracking error", "||e_x|| (m)",
          {k: np.minimum(np.linalg.norm(r.log["com_error"][:n], axis=1), 0.1)
