@@ -194,6 +194,10 @@ def test_two_joint_legs_are_a_warning():
                                          "FL_KFE.*--set gait=crawl"):
         check_quadruped(robot, "the ramp scenario", "trot")
     check_quadruped(robot, "the crawl scenario", "crawl")
+    from wholebody.scenarios import crawl
+    with pytest.raises(ValueError, match="--set engine: 'native' needs linearly independent"):
+        crawl.validate(robot, {"gait": "crawl", "engine": "native"})
+    crawl.validate(robot, {"gait": "crawl", "engine": "auto"})
 
 
 def test_joints_with_equal_limits_do_not_count_as_leg_joints():

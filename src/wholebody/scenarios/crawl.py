@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..control.passive import ENGINES
+from ..control.passive import ENGINES, stance_rank
 from ..planning.trunk import VelocityCommand
 from ..tasks.wrench import TrunkImpedance
 from ..report.locomotion_figures import crawl_tracking_figure
@@ -59,6 +59,10 @@ def validate(robot, params: dict) -> None:
     check_quadruped(robot, "the crawl scenario", params["gait"])
     if params["engine"] not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
+    if params["engine"] == "native" and stance_rank(robot, robot.contact_names) < 3 * len(
+            robot.contact_names):
+        raise ValueError("--set engine: 'native' needs linearly independent stance rows (legs of "
+                         f"three joints or more); {robot.name}'s are dependent: use auto or python")
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
