@@ -118,7 +118,7 @@ def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, durati
     ``gains``: the trunk and swing impedances' gains
     (:func:`~wholebody.scenarios.locomotion.wbc_gains`),
     ``sway_gain`` the crawl's lateral sway (:data:`~wholebody.scenarios.locomotion.SWAY_GAIN`),
-    ``regularization`` the passive WBC's force regulariser."""
+    ``regularization`` the passive WBC's force regulariser (default: the paper's)."""
     return run_gait(robot, "passive", "crawl", steady_command(speed), duration,
                     environment=Environment(floor_friction=floor_mu),
                     controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st,
@@ -154,6 +154,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     m, free = metrics["mismatch"], metrics["mismatch, no stance task"]
     bounded = (not m["fell"]) and m["failed_cycles"] == 0 and m["max_stance_slip_m"] < p["slip_bound"]
     larger_without = free["fell"] or free["max_stance_slip_m"] > m["max_stance_slip_m"]
+
     def clean(*names):
         return all(metrics[k]["slip_events"] == 0 and not metrics[k]["fell"]
                    and metrics[k]["distance_m"] > 0.8 * metrics[k]["commanded_distance_m"]
