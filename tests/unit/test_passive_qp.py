@@ -117,3 +117,23 @@ def test_config_and_overrides(robots):
     assert config.K_st == 100.0  # the given configuration is not changed
     with pytest.raises(TypeError, match="K_sw"):
         PassiveWBC(robot, planner, K_sw=1.0)
+
+
+def test_leaning_tangential_matches_the_rows_built_one_by_one(rng):
+    """The vectorised regulariser of the QP equals the blocks Rᵀ R of
+    tasks.contact.tangent_rows built foot by foot: tilted normals, a lean inside the cone, one
+    steeper than mu (capped) and one that does not press into the ground (no lean)."""
+    from wholebody.tasks.contact import tangent_rows
+    qp = PassiveQP(nv=18, n_feet=4)
+    normals = np.array([[0.0, 0.0, 1.0], [0.2, -0.1, 1.0], [-0.3, 0.0, 1.0], [0.0, 0.25, 1.0]])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    qp.set_friction(normals, 0.6, 0.0, 1000.0)
+    stance = np.array([True, True, False, True])
+    for lean in ([30.0, -20.0, 500.0], [400.0, 300.0, 200.0], [0.0, 10.0, -50.0]):
+        lean = np.asarray(lean)
+        got = qp.leaning_tangential(stance, lean, 0.6)
+        want = np.zeros((12, 12))
+        for i in np.flatnonzero(stance):
+            rows = tangent_rows(normals[i], lean, 0.6)
+            want[3 * i:3 * i + 3, 3 * i:3 * i + 3] = rows.T @ rows
+        np.testing.assert_allclose(got, want, atol=1e-12)

@@ -70,6 +70,7 @@ class PassiveQP:
         self.cols_slack = slice(nv + self.nf, self.n)
         self.dual: np.ndarray | None = None  # multipliers of the last successful solve
         self._normals = np.full((c, 3), np.nan)  # friction rows are rebuilt when these change
+        self._bases = np.zeros((c, 3, 3))  # per foot [t1; t2; n] of its terrain normal
         self._friction_key = None
         self._tangential = np.zeros((self.nf, self.nf))
         self._patterns: dict[bytes, StancePattern] = {}
@@ -115,7 +116,8 @@ class PassiveQP:
         for i, normal in enumerate(normals):
             rr, fi = self.r_fric + 5 * i, nv + 3 * i
             self.A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, mu)
-            self.A[rr + 4, fi:fi + 3] = tangent_basis(normal)[2]
+            self._bases[i] = tangent_basis(normal)
+            self.A[rr + 4, fi:fi + 3] = self._bases[i, 2]
             rows = tangent_rows(normal)
             self._tangential[3 * i:3 * i + 3, 3 * i:3 * i + 3] = rows.T @ rows
         c = self.n_feet
@@ -127,11 +129,20 @@ class PassiveQP:
 
     def leaning_tangential(self, stance: np.ndarray, lean: np.ndarray, mu: float) -> np.ndarray:
         """The tangential regulariser (unweighted, stance feet) with each force's tangential part
-        measured from the direction of ``lean`` (:func:`~wholebody.tasks.contact.tangent_rows`)."""
+        measured from the direction of ``lean``: the rows of
+        :func:`~wholebody.tasks.contact.tangent_rows` for all stance feet at once (the two-level
+        stack builds them one by one; tests compare the two)."""
+        feet = np.flatnonzero(stance)
+        tangents, normals = self._bases[feet, :2], self._bases[feet, 2]  # (s, 2, 3), (s, 3)
+        pressing = normals @ lean
+        ratio = np.where(pressing[:, None] > 0.0,
+                         tangents @ lean / np.where(pressing > 0.0, pressing, 1.0)[:, None], 0.0)
+        size = np.hypot(ratio[:, 0], ratio[:, 1])
+        ratio *= np.minimum(1.0, mu / np.maximum(size, 1e-300))[:, None]  # at most mu
+        rows = tangents - ratio[:, :, None] * normals[:, None, :]
         out = np.zeros((self.nf, self.nf))
-        for i in np.flatnonzero(stance):
-            rows = tangent_rows(self._normals[i], lean, mu)
-            out[3 * i:3 * i + 3, 3 * i:3 * i + 3] = rows.T @ rows
+        index = 3 * feet[:, None] + np.arange(3)
+        out[index[:, :, None], index[:, None, :]] = np.einsum("sij,sik->sjk", rows, rows)
         return out
 
     # ------------------------------------------------------------------ row blocks
