@@ -473,10 +473,10 @@ def test_integral_removes_cog_offset_of_a_mass_error(talos):
     assert e0[2] < -0.03, e0  # sinks (heavier robot), still going
     assert np.abs(e1).max() < 1e-4, e1
     assert np.abs(sol1.sol(np.linspace(0.0, 10.0, 201))[2] - com_ref[2]).max() < 5e-3
-    # at rest the integral's forces carry the bias: the total vertical force equals m_true g
+    # at rest the integral's forces carry the bias: the model's weight plus the bias, m_true g
     K, k = lqi.feedback(talos, com_ref, integral=sol1.y[9:, -1])
-    np.testing.assert_allclose(vertical_force(k - K @ sol1.y[:9, -1], dims), true_mass * G0,
-                               rtol=1e-5)
+    np.testing.assert_allclose(vertical_force(k - K @ sol1.y[:9, -1], dims),
+                               talos.mass * G0 + bias, rtol=1e-5)
 
 
 def test_integral_clamp_limits_the_correction(talos):
