@@ -24,7 +24,7 @@ import numpy as np
 
 from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE
 from ..solvers.backends import DaqpResult, solve_daqp_qp
-from ..tasks.contact import friction_faces, tangent_basis, tangent_rows
+from ..tasks.contact import friction_faces, lean_rows, tangent_basis, tangent_rows
 
 _INF = np.inf
 
@@ -71,6 +71,7 @@ class PassiveQP:
         self.dual: np.ndarray | None = None  # multipliers of the last successful solve
         self._normals = np.full((c, 3), np.nan)  # friction rows are rebuilt when these change
         self._bases = np.zeros((c, 3, 3))  # per foot [t1; t2; n] of its terrain normal
+        self._leaning = np.zeros((self.nf, self.nf))  # leaning_tangential's output
         self._friction_key = None
         self._tangential = np.zeros((self.nf, self.nf))
         self._patterns: dict[bytes, StancePattern] = {}
@@ -129,18 +130,12 @@ class PassiveQP:
 
     def leaning_tangential(self, stance: np.ndarray, lean: np.ndarray, mu: float) -> np.ndarray:
         """The tangential regulariser (unweighted, stance feet) with each force's tangential part
-        measured from the direction of ``lean``: the rows of
-        :func:`~wholebody.tasks.contact.tangent_rows` for all stance feet at once (the two-level
-        stack builds them one by one; tests compare the two)."""
+        measured from the direction of ``lean`` (:func:`~wholebody.tasks.contact.lean_rows` for
+        all stance feet at once); the returned array is reused by the next call."""
         feet = np.flatnonzero(stance)
-        tangents, normals = self._bases[feet, :2], self._bases[feet, 2]  # (s, 2, 3), (s, 3)
-        pressing = normals @ lean
-        ratio = np.where(pressing[:, None] > 0.0,
-                         tangents @ lean / np.where(pressing > 0.0, pressing, 1.0)[:, None], 0.0)
-        size = np.hypot(ratio[:, 0], ratio[:, 1])
-        ratio *= np.minimum(1.0, mu / np.maximum(size, 1e-300))[:, None]  # at most mu
-        rows = tangents - ratio[:, :, None] * normals[:, None, :]
-        out = np.zeros((self.nf, self.nf))
+        rows = lean_rows(self._bases[feet, :2], self._bases[feet, 2], lean, mu)
+        out = self._leaning
+        out[:] = 0.0
         index = 3 * feet[:, None] + np.arange(3)
         out[index[:, :, None], index[:, None, :]] = np.einsum("sij,sik->sjk", rows, rows)
         return out

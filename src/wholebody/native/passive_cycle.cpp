@@ -53,6 +53,7 @@ public:
     posture_K_ = get<double>(spec, "posture_K");
     posture_D_ = get<double>(spec, "posture_D");
     posture_mask_ = get_vector(spec, "posture_mask", na_);
+    posture_on_ = (posture_K_ != 0.0 || posture_D_ != 0.0) && posture_mask_.any();
     torque_regularization_ = get<std::string>(spec, "regularization") == "torque";
     force_parallel_ = get<std::string>(spec, "regularization") == "force-parallel";
     tangential_weight_ = get<double>(spec, "tangential_weight");
@@ -259,7 +260,7 @@ public:
     GQ_.noalias() = G_.transpose() * Q_.asDiagonal();
     HF_.noalias() = GQ_ * G_;
     g.segment(nv, nf_).noalias() = -GQ_ * W_d;
-    if (posture_K_ != 0.0 || posture_D_ != 0.0) // ‖q̈ − q̈_posture‖²_R (PassiveWBC.posture_acceleration)
+    if (posture_on_) // ‖q̈ − q̈_posture‖²_R (PassiveWBC.posture_acceleration)
     {
       pinocchio::difference(model_, q_, posture_, posture_error_);
       g.segment(6, na_) -= R_qdd_ * posture_mask_.cwiseProduct(
@@ -551,6 +552,7 @@ private:
   MatrixXd J_, G_, GQ_, HF_, tangential_;
   VectorXd posture_, posture_error_, posture_mask_;
   double posture_K_ = 0, posture_D_ = 0;
+  bool posture_on_ = false;
   RowMatrix H_full_, A_full_;
   VectorXd g_full_, upper_full_, lower_full_, x_full_;
   std::vector<int32_t> sense_full_;

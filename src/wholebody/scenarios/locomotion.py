@@ -156,10 +156,9 @@ def check_quadruped(robot, scenario: str, gait: str = "crawl") -> None:
     with the moving joints ``gait`` needs (:func:`~wholebody.robots.roles.check_gait_legs`)."""
     try:
         legs = quadruped_legs(robot)
-        check_gait_legs(robot, legs, gait, scenario)
     except ValueError as exc:
-        raise ValueError(f"{scenario}: {exc}" if not str(exc).startswith(scenario)
-                         else str(exc)) from None
+        raise ValueError(f"{scenario}: {exc}") from None
+    check_gait_legs(robot, legs, gait, scenario)
 
 
 def check_joint(robot, joint: str) -> None:

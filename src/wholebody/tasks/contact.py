@@ -26,6 +26,19 @@ def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return t1, cross3(n, t1), n
 
 
+def lean_rows(tangents: np.ndarray, normals: np.ndarray, lean: np.ndarray, mu: float = np.inf
+              ) -> np.ndarray:
+    """:func:`tangent_rows` for a stack of bases: ``tangents`` (s, 2, 3) and ``normals`` (s, 3)
+    of :func:`tangent_basis` → (s, 2, 3)."""
+    pressing = normals @ lean
+    presses = pressing > 0.0
+    ratio = tangents @ lean / np.where(presses, pressing, 1.0)[:, None]
+    ratio[~presses] = 0.0
+    size = np.hypot(ratio[:, 0], ratio[:, 1])
+    ratio *= np.minimum(1.0, mu / np.maximum(size, 1e-300))[:, None]  # at most mu
+    return tangents - ratio[:, :, None] * normals[:, None, :]
+
+
 def tangent_rows(normal: np.ndarray, lean: np.ndarray | None = None, mu: float = np.inf) -> np.ndarray:
     """The 2 x 3 rows R with R f = 0 <=> f leans like ``lean`` about ``normal``: rows t_k − r_k n,
     r_k = (t_k·lean)/(n·lean) the lean's tangential-to-normal ratios, scaled down to a ratio of
@@ -35,14 +48,7 @@ def tangent_rows(normal: np.ndarray, lean: np.ndarray | None = None, mu: float =
     rows = np.array([t1, t2])
     if lean is None:
         return rows
-    pressing = float(n @ lean)
-    if not pressing > 0.0:
-        return rows
-    ratio = rows @ lean / pressing
-    size = float(np.hypot(*ratio))
-    if size > mu:
-        ratio *= mu / size
-    return rows - np.outer(ratio, n)
+    return lean_rows(rows[None], n[None], np.asarray(lean, dtype=float), mu)[0]
 
 
 def _rotation_map(block_of) -> np.ndarray:
