@@ -3,6 +3,7 @@ force bounds derived from the robot (its roles, standing height, mass and inerti
 HyQ's absolute numbers. Short runs in the twin: a crawl and a trot, judged by the simulator
 (no fall, every cycle solved, the robot went forward about as commanded)."""
 
+import numpy as np
 import pytest
 
 import wholebody as wb
@@ -84,3 +85,25 @@ def test_legs_of_five_joints_walk(gait):
     expected = (speed * 2 / 3) * 2.0 + speed * (DURATION - 3.0)
     assert run.distance == pytest.approx(expected, rel=0.25), run.distance
     assert run.tracking(t_from=1.0)["linear_max_m"] < 0.1 * robot.q_ref[2]
+
+
+def test_a_gait_run_stops_a_grace_period_after_the_fall():
+    """Knees limited to 1 Nm cannot hold HyQ up: the run ends FALL_GRACE after the fall, and the
+    simulator's own base state says the robot was up before the recorded fall time and down at it
+    (base below half its standing height, or tilted by more than 45 degrees)."""
+    from wholebody.scenarios.locomotion import FALL_GRACE
+    from wholebody.scenarios.measures import FALL_HEIGHT_FRACTION
+
+    robot = wb.load_robot("hyq")
+    knees = [j for j in robot.joint_names if "kfe" in j]
+    states = []
+    run = run_gait(robot, "passive", "stand", duration=6.0,
+                   controller_options={"torque_limit_override": dict.fromkeys(knees, 1.0)},
+                   on_cycle=lambda t, r, c, sim: states.append((t, *sim.state()[0][:7])))
+    assert run.fell and run.fell_at is not None
+    t, z, qx, qy = np.array(states)[:, [0, 3, 4, 5]].T
+    cos_tilt = 1.0 - 2.0 * (qx ** 2 + qy ** 2)  # R[2, 2] of the base quaternion (x, y, z, w)
+    down = (z < FALL_HEIGHT_FRACTION * robot.q_ref[2]) | (cos_tilt < np.cos(np.radians(45.0)))
+    assert down[np.searchsorted(t, run.fell_at)] and not down[t < run.fell_at].any()
+    assert run.fell_at + FALL_GRACE <= run.sim.t < run.fell_at + FALL_GRACE + 0.01
+    assert run.sim.t < 5.0  # stopped well before the 6 s asked

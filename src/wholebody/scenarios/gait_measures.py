@@ -19,8 +19,12 @@ IMPACT_SKIP = 0.02  # s after touchdown ignored by the slip measures (the impact
 
 
 def outcome(run) -> dict:
-    """Whether the run fell, how many WBC cycles failed and the distance walked (simulator base)."""
-    return {"fell": run.fell, "failed_cycles": int(run.failures), "distance_m": run.distance}
+    """Whether the run fell (and when: ``fell_at_s``, only if it fell), how many WBC cycles failed
+    and the distance walked (simulator base)."""
+    out = {"fell": run.fell, "failed_cycles": int(run.failures), "distance_m": run.distance}
+    if run.fell_at is not None:
+        out["fell_at_s"] = float(run.fell_at)
+    return out
 
 
 def intervals(t: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:

@@ -95,6 +95,9 @@ def trunk_gains(params: dict) -> dict:
             "damping_ratio_theta": get["trunk_angular_damping_ratio"]}
 GAITS = ("crawl", "trot", "stand")
 FALL_TILT = np.radians(45.0)
+#: a gait run goes on this long (s) after the robot has fallen, so that its figures show the fall,
+#: then stops: what follows a fall measures nothing
+FALL_GRACE = 1.0
 #: the set-ups of Fahmi et al. 2019 are HyQ's, whose standing base height this is:
 #: :func:`paper_length` and :class:`PaperSpeed` keep their proportions on any other robot
 PAPER_BASE_HEIGHT = reference.BASE_HEIGHT
@@ -280,12 +283,16 @@ class GaitLog:
 
 @dataclass
 class GaitRun:
+    """A gait run's log and outcome; ``fell_at``: the time of the fall (None: it did not fall),
+    after which the run went on for at most ``FALL_GRACE`` s."""
+
     log: dict[str, np.ndarray]
     fell: bool
     failures: int
     distance: float
     controller: object
     sim: Simulator
+    fell_at: float | None = None
 
     def tracking(self, t_from: float = 0.0) -> dict[str, float]:
         """l2 norms of the linear and angular trunk errors (Fig. 5): RMS and max over t ≥ t_from."""
@@ -329,7 +336,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              control_period: float = 0.004, controller_options: dict | None = None,
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
              on_cycle=None, planner=None, observers=(), q0=None,
-             gains: dict | None = None) -> GaitRun:
+             gains: dict | None = None, after_fall: float | None = FALL_GRACE) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
@@ -340,7 +347,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     ``q0``: the initial configuration (default: the standing posture ``robot.q_ref``), resting on
     the support surface; the planner starts from it. ``gains``: the trunk and swing impedances'
     gains (:func:`wbc_gains`), unless ``controller_options`` gives an ``impedance`` or a
-    ``swing``.
+    ``swing``. ``after_fall``: once the robot has fallen, the run stops this many seconds later
+    (None: it runs its whole ``duration``).
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()
@@ -364,13 +372,13 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     base0 = sim.state()[0][:3].copy()
     # fallen: the base below FALL_HEIGHT_FRACTION of its standing height above the terrain under it
     fall_height = FALL_HEIGHT_FRACTION * float(robot.q_ref[2])
-    fell = False
+    fell_at = None
     legs = planner.legs
     frame_ids = [robot.model.getFrameId(robot.contact(n).frame) for n in legs]
     pin_data = robot.model.createData()
 
     def observe(t, result):
-        nonlocal fell
+        nonlocal fell_at
         plan = ctrl.last_plan
         q, v = sim.state()
         if not (np.array_equal(robot.q, q) and np.array_equal(robot.v, v)):
@@ -396,12 +404,17 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         log.contact_speed.append([np.linalg.norm((robot.contact_jacobians[n] @ robot.v)[:2])
                                   for n in legs])
         tilt = np.arccos(np.clip(pin.Quaternion(q[3:7]).toRotationMatrix()[2, 2], -1, 1))
-        if q[2] - planner.terrain.height(q[0], q[1]) < fall_height or tilt > FALL_TILT:
-            fell = True
+        if fell_at is None and (q[2] - planner.terrain.height(q[0], q[1]) < fall_height
+                                or tilt > FALL_TILT):
+            fell_at = t
         if on_cycle is not None:
             on_cycle(t, result, ctrl, sim)
 
+    def stop() -> bool:
+        return after_fall is not None and fell_at is not None and sim.t >= fell_at + after_fall
+
     failures = run_closed_loop(sim, ctrl, duration, control_period=control_period,
-                               progress=progress, on_result=observe)
+                               progress=progress, on_result=observe, until=stop)
     q, _ = sim.state()
-    return GaitRun(log.arrays(), fell, failures, float(q[0] - base0[0]), ctrl, sim)
+    return GaitRun(log.arrays(), fell_at is not None, failures, float(q[0] - base0[0]), ctrl, sim,
+                   fell_at)

@@ -11,10 +11,12 @@ from ..sim.simulator import Simulator
 
 
 def run_closed_loop(sim: Simulator, controller, duration: float, control_period: float | None = None,
-                    progress: bool = False, on_result: Callable | None = None) -> int:
+                    progress: bool = False, on_result: Callable | None = None,
+                    until: Callable[[], bool] | None = None) -> int:
     """Step ``sim`` for ``duration`` s; the controller runs every ``control_period`` (default: every
     simulation step) and its last torque is held in between. Returns the number of failed cycles
-    (results with ``ok`` False); ``on_result(t, result)`` sees every controller result.
+    (results with ``ok`` False); ``on_result(t, result)`` sees every controller result;
+    ``until()``, asked after each of them, ends the run early when it returns True.
     """
     steps = int(round(duration / sim.dt))
     every = 1 if control_period is None else max(1, int(round(control_period / sim.dt)))
@@ -30,6 +32,8 @@ def run_closed_loop(sim: Simulator, controller, duration: float, control_period:
                 failures += not result.ok
                 if on_result is not None:
                     on_result(sim.t, result)
+                if until is not None and until():
+                    break
             sim.step(tau)
             if k % 100 == 99:
                 bar.update(100)
