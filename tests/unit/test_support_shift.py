@@ -11,10 +11,14 @@ import pinocchio as pin
 import pytest
 import scipy.optimize
 
-from wholebody.planning.support_shift import (BEND_FRACTIONS, automatic_swing_bend,
-                                              joint_limit_margin, shifted_posture,
+import wholebody as wb
+from wholebody.planning.support_shift import (BEND_FRACTIONS, KEY_POSE_MARGIN, KEY_POSE_TOLERANCE,
+                                              MAX_DROP, automatic_swing_bend, joint_limit_margin,
+                                              key_pose, shift_key_pose, shifted_posture,
                                               support_posture, swing_leg_drop)
 from wholebody.robots.roles import leg_joints
+
+from conftest import ICUB_RIGHT_LEG_INERTIAS, icub_description
 
 
 def _kinematics(robot, q):
@@ -125,3 +129,68 @@ def test_automatic_bend_keeps_the_standing_height_where_the_drop_does_not_help(r
         stance, swing = robot.contact_names
         assert automatic_swing_bend(robot, stance, swing, 0.08) == 0.0
     assert BEND_FRACTIONS[0] == 0.0
+
+
+def _inside_limits(robot, q, margin):
+    """Whether every limited single-coordinate joint of ``q`` is ``margin`` of its range inside
+    its limits (or no further out than the posture has it)."""
+    model = robot.model
+    for joint in model.joints[1:]:
+        i = joint.idx_q
+        low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        if joint.nq != 1 or not (np.isfinite(low) and np.isfinite(high)):
+            continue
+        inset = min(margin * (high - low), robot.q_ref[i] - low, high - robot.q_ref[i])
+        if not low + inset - 1e-9 <= q[i] <= high - inset + 1e-9:
+            return False
+    return True
+
+
+@pytest.mark.parametrize("name", ["talos14", "romeo"])
+@pytest.mark.parametrize("lift", [0.0, 0.05])
+def test_key_pose_meets_its_targets_inside_the_joint_limits(robots, name, lift):
+    robot = robots[name]
+    stance, swing = robot.contact_names
+    drop = 0.02
+    q, residual = key_pose(robot, stance, swing, drop, lift)
+    assert residual < KEY_POSE_TOLERANCE
+    standing, com0 = _kinematics(robot, robot.q_ref)
+    posed, com = _kinematics(robot, q)
+    for contact, rise in ((stance, 0.0), (swing, lift)):
+        frame = robot.contact(contact).frame_id
+        target = standing.oMf[frame].copy()
+        target.translation = target.translation + np.array([0.0, 0.0, rise])
+        assert np.abs(pin.log6(target.actInv(posed.oMf[frame])).vector).max() < KEY_POSE_TOLERANCE
+    stance_centre = standing.oMf[robot.contact(stance).frame_id].translation
+    np.testing.assert_allclose(com, [*stance_centre[:2], com0[2] - drop], atol=KEY_POSE_TOLERANCE)
+    assert _inside_limits(robot, q, KEY_POSE_MARGIN)
+
+
+def test_the_shift_goes_lower_when_the_joint_limits_need_it():
+    """iCub's swing hip abduction ends before its pelvis is over the stance sole at the standing
+    CoG height: the unbounded Gauss-Newton pose there takes a leg joint beyond its limits, no
+    pose inside them is found, and the shift's key pose is lower, inside them, on its targets
+    (forward kinematics)."""
+    robot = wb.load_robot(icub_description(inertia_overrides=ICUB_RIGHT_LEG_INERTIAS))
+    stance, swing = "left_sole", "right_sole"
+    joints = leg_joints(robot, stance) + leg_joints(robot, swing)
+    unbounded, _ = support_posture(robot, stance, swing, 0.0, 0.0)
+    assert joint_limit_margin(robot, unbounded, joints) < 0.0
+    assert key_pose(robot, stance, swing, 0.0)[1] > KEY_POSE_TOLERANCE
+    drop, q = shift_key_pose(robot, stance, swing, 0.0)
+    assert 0.0 < drop <= MAX_DROP * _kinematics(robot, robot.q_ref)[1][2]
+    assert _inside_limits(robot, q, KEY_POSE_MARGIN)
+    standing, com0 = _kinematics(robot, robot.q_ref)
+    posed, com = _kinematics(robot, q)
+    for contact in (stance, swing):
+        frame = robot.contact(contact).frame_id
+        assert np.abs(pin.log6(standing.oMf[frame].actInv(posed.oMf[frame])).vector).max() < 1e-4
+    np.testing.assert_allclose(com, [*standing.oMf[robot.contact(stance).frame_id].translation[:2],
+                                     com0[2] - drop], atol=1e-4)
+
+
+def test_shift_key_pose_keeps_a_drop_that_the_limits_allow(robots):
+    robot = robots["talos14"]
+    stance, swing = robot.contact_names
+    drop, q = shift_key_pose(robot, stance, swing, 0.01)
+    assert drop == 0.01 and _inside_limits(robot, q, KEY_POSE_MARGIN)

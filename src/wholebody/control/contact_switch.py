@@ -4,8 +4,13 @@
 Phases of :class:`ContactSwitch`:
 
 1. shift: the CoG reference moves (quintic, with its velocity and acceleration as the momentum
-   feedforward) over the stance sole and as low as the swing leg's bend needs
-   (:mod:`~wholebody.planning.support_shift`), Table 2 hierarchy;
+   feedforward) over the stance sole and as low as the swing leg's bend and the joint limits
+   need (:mod:`~wholebody.planning.support_shift`), Table 2 hierarchy; the posture reference
+   (joints and base) moves with it, along the same quintic, from the standing posture to the
+   shift's key pose inside the joint limits
+   (:func:`~wholebody.planning.support_shift.shift_key_pose`), which stays the posture
+   reference of the later phases (ours: toward the standing posture, the posture task pulls the
+   base back and the legs into their limits, e.g. a swing hip's abduction);
 2. unload: a force regulariser drives the leaving sole's wrench from its value at the start of the
    phase to zero (a ramp of the target, not of the weight: ramping the weight over six decades gives
    large torque jumps per cycle). With LQR gains, the gains are blended over the same ramp from
@@ -24,10 +29,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import pinocchio as pin
 
 from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
-from ..planning.support_shift import automatic_swing_bend, swing_leg_drop
+from ..planning.support_shift import automatic_swing_bend, shift_key_pose, swing_leg_drop
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..tasks import ForceRegularizer
 from ..tasks.momentum import momentum_gain
@@ -193,6 +199,9 @@ class ContactSwitch:
             bend = (automatic_swing_bend(robot, stance, self.swing_contact, config.lift, full)
                     if config.swing_bend is None else config.swing_bend)
             drop = bend * full
+        drop, self.key_pose = shift_key_pose(robot, stance, self.swing_contact, drop)
+        self.double_posture = self.double.find("posture")
+        self.single.find("posture").q_ref = self.key_pose
         self.com_target = np.array([stance_pos[0], stance_pos[1], self.com_start[2] - drop])
         self.lqr = None
         if lqr:
@@ -268,6 +277,8 @@ class ContactSwitch:
         robot, c, tl = self.robot, self.config, self.timeline
         robot.update(q, v)
         if t < tl.switch:
+            s = quintic_blend(min(t / c.shift_time, 1.0), c.shift_time)[0]
+            self.double_posture.q_ref = pin.interpolate(robot.model, robot.q_ref, self.key_pose, s)
             gains = self.lqr.gains(robot, self.double_contacts) if self.lqr else None
             if t >= c.shift_time:
                 if self.unload_start is None:
@@ -302,15 +313,15 @@ class ContactSwitch:
                 self.joint_task.position, self.joint_task.velocity = qd, vd
                 self.joint_task.acceleration = ad
                 # handover over the amplitude ramp: the Cartesian foot task fades out and the
-                # posture reference of the swing leg moves from the standing posture to the
+                # posture reference of the swing leg moves from the key pose to the
                 # lifted leg (the swinging joints: to their sine references), so the torques stay
                 # continuous
                 ramp = max(c.sine_ramp, 1e-6)
                 e = quintic_blend((t - tl.sine_start) / ramp, ramp)[0]
                 self.swing.weight = 1.0 - e
-                q_post = robot.q_ref.copy()
-                q_post[leg] = (1.0 - e) * robot.q_ref[leg] + e * self.held_q
-                q_post[idx] = (1.0 - e) * robot.q_ref[idx] + e * qd
+                q_post = self.key_pose.copy()
+                q_post[leg] = (1.0 - e) * self.key_pose[leg] + e * self.held_q
+                q_post[idx] = (1.0 - e) * self.key_pose[idx] + e * qd
                 self.swing_posture.q_ref = q_post
                 self.swing_posture.kp = self._posture_kp * (1.0 - (1.0 - e) * self._leg_mask)
                 stack = self.swinging

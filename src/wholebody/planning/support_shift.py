@@ -7,6 +7,8 @@ mass the pelvis moves far and the swing knee straightens onto its limit. Lowerin
 drop computed here keeps the swing leg's hip at its standing distance from its sole; lowered
 too far, the lifted leg runs into its ankle or knee limits instead. :func:`automatic_swing_bend`
 chooses the fraction of that drop from the legs' joint-limit margins in both key poses.
+:func:`shift_key_pose` is the pose the shift ends in, inside the joint limits (the posture
+reference follows it during the shift), and lowers the CoG further when the limits need it.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import logging
 
 import numpy as np
 import pinocchio as pin
+from scipy.optimize import least_squares
 
 from ..robots.roles import leg_joints
 
@@ -31,6 +34,15 @@ POSTURE_PULL = 0.3
 BEND_FRACTIONS = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: joint-limit margins (fractions of the joint's range) this close count as equal
 MARGIN_TIE = 0.01
+#: :func:`key_pose`: the joints stay this fraction of their range inside their limits (or where
+#: the posture has them, if nearer); the CoG's and the posture's weights against the soles' 1
+#: (m, rad); the largest sole or CoG error (m, rad) of a pose that counts as found
+KEY_POSE_MARGIN = 0.05
+KEY_POSE_COG_WEIGHT, KEY_POSE_POSTURE_WEIGHT = 0.1, 1e-4
+KEY_POSE_TOLERANCE = 1e-4
+#: :func:`shift_key_pose` lowers the CoG in steps of this fraction of its standing height, down
+#: to MAX_DROP of it, until the shifted pose is found within the limits
+DROP_STEP, MAX_DROP = 0.01, 0.15
 
 
 def _homotopy(robot, constraints) -> tuple[np.ndarray, float]:
@@ -124,6 +136,78 @@ def support_posture(robot, stance: str, swing: str, drop: float, lift: float
         return rows, jacobians
 
     return _homotopy(robot, constraints)
+
+
+def _joint_bounds(robot, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of a tangent step from the posture (nv): ``margin`` of each limited joint's range
+    inside its limits (no further than the posture itself is); the base and unlimited or
+    multi-coordinate joints free."""
+    model, q0 = robot.model, robot.q_ref
+    lower, upper = np.full(model.nv, -np.inf), np.full(model.nv, np.inf)
+    for joint in model.joints[1:]:
+        i, k = joint.idx_q, joint.idx_v
+        low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        if joint.nq != 1 or not (np.isfinite(low) and np.isfinite(high) and high > low):
+            continue
+        inset = min(margin * (high - low), q0[i] - low, high - q0[i])
+        lower[k], upper[k] = low + inset - q0[i], high - inset - q0[i]
+    return lower, upper
+
+
+def key_pose(robot, stance: str, swing: str, drop: float, lift: float = 0.0
+             ) -> tuple[np.ndarray, float]:
+    """:func:`support_posture`'s key pose inside the joint limits → ``(q, residual)``:
+    ``stance``'s sole in place, ``swing``'s raised by ``lift`` (m), the CoG over the stance sole's
+    centre and ``drop`` (m) below its standing height, every joint at least
+    :data:`KEY_POSE_MARGIN` of its range inside its limits. A bounded least squares (scipy's
+    trust-region reflective) over a step from the posture: the soles' placement errors (weight
+    1), the CoG's (:data:`KEY_POSE_COG_WEIGHT`) and the step itself
+    (:data:`KEY_POSE_POSTURE_WEIGHT`, which keeps the rest near the posture). ``residual``: the
+    largest sole (m, rad) or CoG (m) error; the pose is found when it is below
+    :data:`KEY_POSE_TOLERANCE`."""
+    model = robot.model
+    data = model.createData()
+    stance_frame, swing_frame = robot.contact(stance).frame_id, robot.contact(swing).frame_id
+    held, com0, _ = _standing(robot, (stance_frame, swing_frame))
+    held[swing_frame].translation = held[swing_frame].translation + np.array([0.0, 0.0, lift])
+    target = np.r_[held[stance_frame].translation[:2], com0[2] - drop]
+
+    def errors(step):
+        q = pin.integrate(model, robot.q_ref, step)
+        pin.framesForwardKinematics(model, data, q)
+        soles = [pin.log6(M.actInv(data.oMf[f])).vector for f, M in held.items()]
+        return np.concatenate([*soles, KEY_POSE_COG_WEIGHT * (pin.centerOfMass(model, data, q)
+                                                              - target),
+                               KEY_POSE_POSTURE_WEIGHT * step])
+
+    fit = least_squares(errors, np.zeros(model.nv), bounds=_joint_bounds(robot, KEY_POSE_MARGIN),
+                        xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    residual = np.abs(fit.fun[:15] / np.r_[np.ones(12), np.full(3, KEY_POSE_COG_WEIGHT)]).max()
+    return pin.integrate(model, robot.q_ref, fit.x), float(residual)
+
+
+def shift_key_pose(robot, stance: str, swing: str, drop: float) -> tuple[float, np.ndarray]:
+    """The pose the CoG shift ends in and its drop → ``(drop, q)``: :func:`key_pose` with both
+    soles down, at ``drop`` or, when the joint limits leave no such pose (a swing hip whose
+    abduction range ends before the pelvis is over the stance sole), at the smallest drop in steps
+    of :data:`DROP_STEP` of the standing CoG height that has one (logged); if none down to
+    :data:`MAX_DROP` has, ``drop`` and its closest pose (logged)."""
+    com_height = float(pin.centerOfMass(robot.model, robot.model.createData(), robot.q_ref)[2])
+    q, residual = key_pose(robot, stance, swing, drop)
+    if residual <= KEY_POSE_TOLERANCE:
+        return drop, q
+    first = (q, residual)
+    step = DROP_STEP * com_height
+    for lower in np.arange(drop + step, MAX_DROP * com_height, step):
+        q, residual = key_pose(robot, stance, swing, float(lower))
+        if residual <= KEY_POSE_TOLERANCE:
+            log.info("single support on %s: the joint limits need the CoG %.1f mm lower for the "
+                     "shift over %s (%.1f mm asked)", robot.name, 1e3 * lower, stance, 1e3 * drop)
+            return float(lower), q
+    log.warning("single support on %s: no pose within the joint limits puts the CoG over %s "
+                "(residual %.3g m at the %.1f mm drop asked); the shift goes on toward the "
+                "closest", robot.name, stance, first[1], 1e3 * drop)
+    return drop, first[0]
 
 
 def joint_limit_margin(robot, q, joints) -> float:

@@ -11,8 +11,12 @@ tracking 0.25 Hz sines.
 
 Success: every cycle solved, the foot lifted (and never touching the floor again), the CoG back within 5 mm of its reference within
 ``recovery_time`` after every push and at the end, the stance sole flat (< 2 deg) and in place
-(< 1 cm), and no cycle-to-cycle torque change above ``max_torque_jump`` outside the push windows.
-All of these are measured on the simulator (its state, sole poses and contact wrenches).
+(< 1 cm), and no cycle-to-cycle torque change above ``max_torque_jump`` outside the push windows
+and the first :data:`SETTLE_TIME` s (reported apart): the twin places the robot with its soles
+touching the floor at zero penetration, it sinks onto its soft contacts' equilibrium (a fraction
+of a millimetre) and the controller's answer to that sink, the largest cycle-to-cycle change on
+every humanoid, is not a phase switch. All of these are measured on the simulator (its state,
+sole poses and contact wrenches).
 """
 
 from __future__ import annotations
@@ -35,6 +39,9 @@ from .measures import (COG_TOLERANCE_M, RECOVERY_WINDOW_S, cog_recovery, cop_in_
 from .pushes import LOCATIONS, HumanoidScaled, location_of, make_push
 
 log = logging.getLogger(__name__)
+
+#: the start of a run while the twin's contacts settle (s), not counted in the torque continuity
+SETTLE_TIME = 0.05
 
 PARAMETERS = (
     Parameter("stance", "left", "the sole kept, by role (the other is lifted)",
@@ -233,6 +240,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     in_push = np.zeros(len(t), dtype=bool)
     for push in pushes:  # the push and the 0.3 s after it: torques follow the impact
         in_push |= (t >= push.start) & (t <= push.start + push.duration + 0.3)
+    settling = t < SETTLE_TIME
 
     def jump_near(t0):
         near = np.abs(t - t0) <= 0.02
@@ -276,7 +284,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         "max_stance_tilt_deg": float(max(tilt)),
         "max_stance_slip_m": float(max(slip)),
         "max_torque_jump_Nm": float(jumps.max()),
-        "max_torque_jump_outside_pushes_Nm": float(jumps[~in_push].max()),
+        "max_torque_jump_settling_Nm": float(jumps[settling].max()),
+        "max_torque_jump_outside_pushes_Nm": float(jumps[~in_push & ~settling].max()),
         "torque_jump_at_unload_start_Nm": jump_near(tl.shift_end),
         "torque_jump_at_switch_Nm": jump_near(tl.switch),
         "torque_jump_at_swing_swap_Nm": jump_near(tl.sine_start) if tl.sine_start else None,
