@@ -14,8 +14,8 @@ Success: every cycle solved, the foot lifted (and never touching the floor again
 (< 1 cm), and no cycle-to-cycle torque change above ``max_torque_jump`` outside the push windows
 and the first :data:`SETTLE_TIME` s (reported apart): the twin places the robot with its soles
 touching the floor at zero penetration, it sinks onto its soft contacts' equilibrium (a fraction
-of a millimetre) and the controller's answer to that sink, the largest cycle-to-cycle change on
-every humanoid, is not a phase switch. All of these are measured on the simulator (its state,
+of a millimetre) and the controller's answer to that sink, with PD gains the largest
+cycle-to-cycle change of every humanoid's run, is not a phase switch. All of these are measured on the simulator (its state,
 sole poses and contact wrenches).
 """
 
