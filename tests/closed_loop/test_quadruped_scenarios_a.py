@@ -56,8 +56,13 @@ def test_intervals_settled_stance_and_outcome():
     assert np.flatnonzero(settled[:, 1]).tolist() == list(range(1, 10))
 
     class Run:
-        fell, failures, distance = False, np.int64(2), 0.5
+        fell, failures, distance, fell_at = False, np.int64(2), 0.5, None
     assert outcome(Run) == {"fell": False, "failed_cycles": 2, "distance_m": 0.5}
+
+    class Fallen:
+        fell, failures, distance, fell_at = True, 0, 0.1, 1.5
+    assert outcome(Fallen) == {"fell": True, "failed_cycles": 0, "distance_m": 0.1,
+                               "fell_at_s": 1.5}
 
 
 def test_controller_joint_limits_touch_only_the_controller_side(hyq):
