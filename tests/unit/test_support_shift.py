@@ -14,8 +14,8 @@ import scipy.optimize
 import wholebody as wb
 from wholebody.planning.support_shift import (BEND_FRACTIONS, KEY_POSE_MARGIN, KEY_POSE_TOLERANCE,
                                               MAX_DROP, automatic_swing_bend, joint_limit_margin,
-                                              key_pose, shift_key_pose, shifted_posture,
-                                              support_posture, swing_leg_drop)
+                                              key_pose, key_pose_problem, shift_key_pose,
+                                              shifted_posture, support_posture, swing_leg_drop)
 from wholebody.robots.roles import leg_joints
 
 from conftest import ICUB_RIGHT_LEG_INERTIAS, icub_description
@@ -194,3 +194,13 @@ def test_shift_key_pose_keeps_a_drop_that_the_limits_allow(robots):
     stance, swing = robot.contact_names
     drop, q = shift_key_pose(robot, stance, swing, 0.01)
     assert drop == 0.01 and _inside_limits(robot, q, KEY_POSE_MARGIN)
+
+
+def test_key_pose_jacobian_matches_finite_differences(robots):
+    robot = robots["talos14"]
+    errors, jacobian = key_pose_problem(robot, *robot.contact_names, 0.02, 0.03)
+    step = 0.05 * np.random.default_rng(0).standard_normal(robot.model.nv)
+    h = 1e-7
+    numeric = np.column_stack([(errors(step + h * e) - errors(step - h * e)) / (2 * h)
+                               for e in np.eye(robot.model.nv)])
+    np.testing.assert_allclose(jacobian(step), numeric, atol=1e-7)

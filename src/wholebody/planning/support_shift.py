@@ -154,17 +154,11 @@ def _joint_bounds(robot, margin: float) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
-def key_pose(robot, stance: str, swing: str, drop: float, lift: float = 0.0
-             ) -> tuple[np.ndarray, float]:
-    """:func:`support_posture`'s key pose inside the joint limits → ``(q, residual)``:
-    ``stance``'s sole in place, ``swing``'s raised by ``lift`` (m), the CoG over the stance sole's
-    centre and ``drop`` (m) below its standing height, every joint at least
-    :data:`KEY_POSE_MARGIN` of its range inside its limits. A bounded least squares (scipy's
-    trust-region reflective) over a step from the posture: the soles' placement errors (weight
-    1), the CoG's (:data:`KEY_POSE_COG_WEIGHT`) and the step itself
-    (:data:`KEY_POSE_POSTURE_WEIGHT`, which keeps the rest near the posture). ``residual``: the
-    largest sole (m, rad) or CoG (m) error; the pose is found when it is below
-    :data:`KEY_POSE_TOLERANCE`."""
+def key_pose_problem(robot, stance: str, swing: str, drop: float, lift: float = 0.0):
+    """The least squares of :func:`key_pose` → ``(errors, jacobian)``, functions of a step from
+    the posture (nv): the soles' placement errors (log6, weight 1), the CoG's error
+    (:data:`KEY_POSE_COG_WEIGHT`) and the step itself (:data:`KEY_POSE_POSTURE_WEIGHT`), and their
+    derivative through the tangent map of ``pin.integrate``."""
     model = robot.model
     data = model.createData()
     stance_frame, swing_frame = robot.contact(stance).frame_id, robot.contact(swing).frame_id
@@ -180,10 +174,34 @@ def key_pose(robot, stance: str, swing: str, drop: float, lift: float = 0.0
                                                               - target),
                                KEY_POSE_POSTURE_WEIGHT * step])
 
-    fit = least_squares(errors, np.zeros(model.nv), bounds=_joint_bounds(robot, KEY_POSE_MARGIN),
+    def jacobian(step):
+        q = pin.integrate(model, robot.q_ref, step)
+        d_q = pin.dIntegrate(model, robot.q_ref, step, pin.ArgumentPosition.ARG1)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        rows = [pin.Jlog6(M.actInv(data.oMf[f])) @ pin.getFrameJacobian(model, data, f, pin.LOCAL)
+                for f, M in held.items()]
+        rows.append(KEY_POSE_COG_WEIGHT * pin.jacobianCenterOfMass(model, data, q, False))
+        return np.vstack([np.vstack(rows) @ d_q, KEY_POSE_POSTURE_WEIGHT * np.eye(model.nv)])
+
+    return errors, jacobian
+
+
+def key_pose(robot, stance: str, swing: str, drop: float, lift: float = 0.0
+             ) -> tuple[np.ndarray, float]:
+    """:func:`support_posture`'s key pose inside the joint limits → ``(q, residual)``:
+    ``stance``'s sole in place, ``swing``'s raised by ``lift`` (m), the CoG over the stance sole's
+    centre and ``drop`` (m) below its standing height, every joint at least
+    :data:`KEY_POSE_MARGIN` of its range inside its limits: :func:`key_pose_problem` solved by
+    scipy's bounded least squares (trust-region reflective), the step's weight keeping the rest
+    near the posture. ``residual``: the largest sole (m, rad) or CoG (m) error; the pose is found
+    when it is below :data:`KEY_POSE_TOLERANCE`."""
+    errors, jacobian = key_pose_problem(robot, stance, swing, drop, lift)
+    fit = least_squares(errors, np.zeros(robot.model.nv), jac=jacobian,
+                        bounds=_joint_bounds(robot, KEY_POSE_MARGIN),
                         xtol=1e-12, ftol=1e-12, gtol=1e-12)
     residual = np.abs(fit.fun[:15] / np.r_[np.ones(12), np.full(3, KEY_POSE_COG_WEIGHT)]).max()
-    return pin.integrate(model, robot.q_ref, fit.x), float(residual)
+    return pin.integrate(robot.model, robot.q_ref, fit.x), float(residual)
 
 
 def shift_key_pose(robot, stance: str, swing: str, drop: float) -> tuple[float, np.ndarray]:
