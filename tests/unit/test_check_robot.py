@@ -45,6 +45,9 @@ def test_every_preset_passes(capsys, name):
     assert roles in ({"left-front", "right-front", "left-hind", "right-hind"}, {"left", "right"})
     assert all(c["touches_floor"] for c in report["contacts"])
     assert not [f for f in report["findings"] if f["topic"] == "roles"]  # names agree with roles
+    # every preset humanoid shifts its CoG over either sole at its standing height within its
+    # joint limits
+    assert not [f for f in report["findings"] if f["topic"] == "single support"]
 
 
 def test_a_lifted_contact_is_an_error(tmp_path, capsys):
@@ -264,3 +267,24 @@ def test_a_name_that_contradicts_the_role_is_a_warning(tmp_path, capsys):
 def test_role_in_name(name, kind, role):
     from wholebody.robots.roles import role_in_name
     assert role_in_name(name, kind) == role
+
+
+@pytest.mark.slow
+def test_a_biped_whose_shift_needs_a_lower_cog_gets_a_note():
+    """iCub's swing hip abduction ends before its pelvis is over either sole at the standing CoG
+    height (tests/unit/test_support_shift.py): check-robot says so for both soles, with a drop
+    at which a pose inside the limits exists, and still passes."""
+    from conftest import ICUB_RIGHT_LEG_INERTIAS, icub_description
+    from wholebody.planning.support_shift import KEY_POSE_TOLERANCE, key_pose
+    from wholebody.robots.check import check_robot
+
+    description = icub_description(inertia_overrides=ICUB_RIGHT_LEG_INERTIAS)
+    report = check_robot(description)
+    notes = [f.message for f in report.findings if f.topic == "single support"]
+    assert report.ok and len(notes) == 2, report.findings
+    robot = wb.load_robot(description)
+    for note, (stance, swing) in zip(notes, (robot.contact_names, robot.contact_names[::-1])):
+        assert note.startswith(f"over {stance},")
+        drop = float(note.split(" mm lower")[0].rsplit(" ", 1)[1]) / 1e3
+        assert key_pose(robot, stance, swing, drop)[1] <= 2 * KEY_POSE_TOLERANCE
+        assert key_pose(robot, stance, swing, 0.0)[1] > KEY_POSE_TOLERANCE

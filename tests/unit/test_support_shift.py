@@ -177,7 +177,8 @@ def test_the_shift_goes_lower_when_the_joint_limits_need_it():
     unbounded, _ = support_posture(robot, stance, swing, 0.0, 0.0)
     assert joint_limit_margin(robot, unbounded, joints) < 0.0
     assert key_pose(robot, stance, swing, 0.0)[1] > KEY_POSE_TOLERANCE
-    drop, q = shift_key_pose(robot, stance, swing, 0.0)
+    drop, q, residual = shift_key_pose(robot, stance, swing, 0.0)
+    assert residual < KEY_POSE_TOLERANCE
     assert 0.0 < drop <= MAX_DROP * _kinematics(robot, robot.q_ref)[1][2]
     assert _inside_limits(robot, q, KEY_POSE_MARGIN)
     standing, com0 = _kinematics(robot, robot.q_ref)
@@ -192,7 +193,7 @@ def test_the_shift_goes_lower_when_the_joint_limits_need_it():
 def test_shift_key_pose_keeps_a_drop_that_the_limits_allow(robots):
     robot = robots["talos14"]
     stance, swing = robot.contact_names
-    drop, q = shift_key_pose(robot, stance, swing, 0.01)
+    drop, q, _ = shift_key_pose(robot, stance, swing, 0.01)
     assert drop == 0.01 and _inside_limits(robot, q, KEY_POSE_MARGIN)
 
 

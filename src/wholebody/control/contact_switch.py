@@ -199,7 +199,7 @@ class ContactSwitch:
             bend = (automatic_swing_bend(robot, stance, self.swing_contact, config.lift, full)
                     if config.swing_bend is None else config.swing_bend)
             drop = bend * full
-        drop, self.key_pose = shift_key_pose(robot, stance, self.swing_contact, drop)
+        drop, self.key_pose, _ = shift_key_pose(robot, stance, self.swing_contact, drop)
         self.double_posture = self.double.find("posture")
         self.single.find("posture").q_ref = self.key_pose
         self.com_target = np.array([stance_pos[0], stance_pos[1], self.com_start[2] - drop])

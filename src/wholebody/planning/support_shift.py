@@ -204,16 +204,18 @@ def key_pose(robot, stance: str, swing: str, drop: float, lift: float = 0.0
     return pin.integrate(robot.model, robot.q_ref, fit.x), float(residual)
 
 
-def shift_key_pose(robot, stance: str, swing: str, drop: float) -> tuple[float, np.ndarray]:
-    """The pose the CoG shift ends in and its drop → ``(drop, q)``: :func:`key_pose` with both
-    soles down, at ``drop`` or, when the joint limits leave no such pose (a swing hip whose
-    abduction range ends before the pelvis is over the stance sole), at the smallest drop in steps
-    of :data:`DROP_STEP` of the standing CoG height that has one (logged); if none down to
-    :data:`MAX_DROP` has, ``drop`` and its closest pose (logged)."""
+def shift_key_pose(robot, stance: str, swing: str, drop: float
+                   ) -> tuple[float, np.ndarray, float]:
+    """The pose the CoG shift ends in and its drop → ``(drop, q, residual)``: :func:`key_pose`
+    with both soles down, at ``drop`` or, when the joint limits leave no such pose (a swing hip
+    whose abduction range ends before the pelvis is over the stance sole), at the smallest drop in
+    steps of :data:`DROP_STEP` of the standing CoG height that has one (logged); if none down to
+    :data:`MAX_DROP` has, ``drop``, its closest pose and that pose's residual (above
+    :data:`KEY_POSE_TOLERANCE`; logged)."""
     com_height = float(pin.centerOfMass(robot.model, robot.model.createData(), robot.q_ref)[2])
     q, residual = key_pose(robot, stance, swing, drop)
     if residual <= KEY_POSE_TOLERANCE:
-        return drop, q
+        return drop, q, residual
     first = (q, residual)
     step = DROP_STEP * com_height
     for lower in np.arange(drop + step, MAX_DROP * com_height, step):
@@ -221,11 +223,11 @@ def shift_key_pose(robot, stance: str, swing: str, drop: float) -> tuple[float, 
         if residual <= KEY_POSE_TOLERANCE:
             log.info("single support on %s: the joint limits need the CoG %.1f mm lower for the "
                      "shift over %s (%.1f mm asked)", robot.name, 1e3 * lower, stance, 1e3 * drop)
-            return float(lower), q
+            return float(lower), q, residual
     log.warning("single support on %s: no pose within the joint limits puts the CoG over %s "
                 "(residual %.3g m at the %.1f mm drop asked); the shift goes on toward the "
                 "closest", robot.name, stance, first[1], 1e3 * drop)
-    return drop, first[0]
+    return drop, first[0], first[1]
 
 
 def joint_limit_margin(robot, q, joints) -> float:

@@ -97,7 +97,11 @@ def check_robot(name_or_path) -> RobotCheck:
         robot_log.propagate = propagate
     for message in collect.messages:
         report.add("warning", "torque limits", message)
-    return inspect_robot(robot, report)
+    inspect_robot(robot, report)
+    if report.ok and len(robot.contacts) == 2 and all(c.spec.type == "rectangle"
+                                                      for c in robot.contacts):
+        _single_support(robot, report)
+    return report
 
 
 def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
@@ -112,6 +116,28 @@ def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
     _support(robot, data, report)
     _gravity_torques(robot, report)
     return report
+
+
+def _single_support(robot, report: RobotCheck) -> None:
+    """A biped's CoG shift over each sole (single-support): whether a pose inside the joint
+    limits has the CoG over the sole at its standing height, or how much lower it must go
+    (:func:`~wholebody.planning.support_shift.shift_key_pose`). Not part of
+    :func:`inspect_robot`: it solves a few least squares, which ``run`` need not repeat."""
+    from ..planning.support_shift import (KEY_POSE_MARGIN, KEY_POSE_TOLERANCE, MAX_DROP,
+                                          shift_key_pose)
+    for stance, swing in (robot.contact_names, robot.contact_names[::-1]):
+        drop, _, residual = shift_key_pose(robot, stance, swing, 0.0)
+        if residual > KEY_POSE_TOLERANCE:
+            report.add("warning", "single support",
+                       f"no pose inside the joint limits (each joint {KEY_POSE_MARGIN:.0%} of its "
+                       f"range inside them) puts the CoG over {stance}, down to {MAX_DROP:.0%} "
+                       f"of its height below standing: single-support over it will not work",
+                       "check the sole's placement and the legs' joint limits")
+        elif drop > 0.0:
+            report.add("note", "single support",
+                       f"over {stance}, no pose inside the joint limits has the CoG at its "
+                       f"standing height; one has it {1e3 * drop:.1f} mm lower (single-support "
+                       f"lowers the CoG until such a pose exists)")
 
 
 def _facts(robot, report: RobotCheck) -> None:
