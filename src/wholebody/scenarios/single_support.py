@@ -50,10 +50,11 @@ PARAMETERS = (
               **TIME_SPAN),
     Parameter("swing_bend", -1.0, "the shift lowers the CoG by this fraction of the drop that "
                                   "keeps the swing leg's standing bend (0: the standing CoG "
-                                  "height; 1 helps robots whose swing knee straightens onto its "
-                                  "limit, costs lift where the swing ankle limits it; -1: the "
-                                  "fraction that keeps the legs farthest from their joint limits "
-                                  "in the shifted and lifted poses)",
+                                  "height; larger fractions keep the swing leg bent and cost lift "
+                                  "where the swing ankle limits it; -1: the fraction that keeps "
+                                  "the legs farthest from their joint limits in the shifted and "
+                                  "lifted poses); lower still when no pose inside the joint "
+                                  "limits has the CoG there",
               low=0.0, high=1.0, special=(-1.0,)),
     Parameter("unload_time", 0.5, "duration of the unloading (s)",
               **TIME_SPAN),
