@@ -138,6 +138,16 @@ def support_posture(robot, stance: str, swing: str, drop: float, lift: float
     return _homotopy(robot, constraints)
 
 
+def _range(model, joint) -> tuple[float, float] | None:
+    """(lower, upper) position limits of a single-coordinate joint with a finite range, else
+    None (continuous and multi-coordinate joints, the free flyer)."""
+    i = joint.idx_q
+    low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+    if joint.nq != 1 or not (np.isfinite(low) and np.isfinite(high) and high > low):
+        return None
+    return float(low), float(high)
+
+
 def _joint_bounds(robot, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of a tangent step from the posture (nv): ``margin`` of each limited joint's range
     inside its limits (no further than the posture itself is); the base and unlimited or
@@ -145,10 +155,10 @@ def _joint_bounds(robot, margin: float) -> tuple[np.ndarray, np.ndarray]:
     model, q0 = robot.model, robot.q_ref
     lower, upper = np.full(model.nv, -np.inf), np.full(model.nv, np.inf)
     for joint in model.joints[1:]:
-        i, k = joint.idx_q, joint.idx_v
-        low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
-        if joint.nq != 1 or not (np.isfinite(low) and np.isfinite(high) and high > low):
+        limits = _range(model, joint)
+        if limits is None:
             continue
+        (low, high), i, k = limits, joint.idx_q, joint.idx_v
         inset = min(margin * (high - low), q0[i] - low, high - q0[i])
         lower[k], upper[k] = low + inset - q0[i], high - inset - q0[i]
     return lower, upper
@@ -238,10 +248,10 @@ def joint_limit_margin(robot, q, joints) -> float:
     margins = [np.inf]
     for name in joints:
         joint = model.joints[model.getJointId(name)]
-        i = joint.idx_q
-        low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
-        if joint.nq != 1 or not (np.isfinite(low) and np.isfinite(high) and high > low):
+        limits = _range(model, joint)
+        if limits is None:
             continue
+        (low, high), i = limits, joint.idx_q
         margins.append(min(q[i] - low, high - q[i]) / (high - low))
     return float(min(margins))
 
