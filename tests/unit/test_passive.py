@@ -422,3 +422,43 @@ def test_quasi_static_baseline_holds_only_the_legs_null_space(rng, plan_for):
     assert added[legs[0]] @ displacement[legs[0]] > 0.0
     hyq = wb.load_robot("hyq")
     assert QuasiStaticController(hyq, SimpleNamespace(legs=hyq.contact_names))._redundant_legs == []
+
+
+def test_quasi_static_baseline_redistributes_forces_within_torque_limits(robots, rng, plan_for):
+    """The static map τ = g − Jᵀ F is affine in F, so the baseline meets the stance legs' torque
+    limits by redistributing the forces. One joint's limit set to 60 % of what the force QP asks of
+    it without limits: the torque stays inside (solved, not clipped), the limit is active, the
+    torque is the static map recomputed with Pinocchio's RNEA, and the forces stay in the
+    pyramid. Limits no forces can meet (every joint at 0.1 Nm with the normal forces capped at
+    0.01 N: the legs' own gravity torques are larger) are flagged and the torques still leave
+    inside the limits."""
+    from wholebody.control.quasi_static import QuasiStaticController
+    robot = robots["hyq"]
+    robot.update(*standing_state(robot, rng, noise=0.05))
+    plan = plan_for(robot, rng, (True,) * 4)
+    legs = SimpleNamespace(legs=robot.contact_names)
+    free = QuasiStaticController(robot, legs).solve(plan)
+    assert free.outcome is Outcome.SOLVED
+    knee = int(np.argmax(np.abs(free.tau) / robot.model.effortLimit[6:]))
+    name = robot.joint_names[knee]
+    bound = 0.6 * abs(free.tau[knee])
+    baseline = QuasiStaticController(robot, legs, torque_limit_override={name: bound})
+    sol = baseline.solve(plan)
+    assert sol.outcome is Outcome.SOLVED, sol.status
+    assert abs(sol.tau[knee]) == pytest.approx(bound, rel=1e-6)  # active
+    gravity = pin.rnea(robot.model, robot.model.createData(), robot.q, np.zeros(robot.nv),
+                       np.zeros(robot.nv))
+    J = robot.stacked_contact_jacobian()
+    np.testing.assert_allclose(sol.tau, gravity[6:] - J[:, 6:].T @ sol.lam, atol=1e-8)
+    assert np.all(np.abs(sol.tau) <= robot.model.effortLimit[6:] + 1e-9)
+    for i in range(4):
+        f = sol.lam[3 * i:3 * i + 3]
+        assert np.all(friction_faces(np.array([0.0, 0.0, 1.0]), robot.friction) @ f <= 1e-9)
+    # the same joint's limit met, the trunk wrench is matched less well than without it
+    assert sol.level_costs[0] > free.level_costs[0]
+
+    weak = QuasiStaticController(robot, legs, f_max=0.01,
+                                 torque_limit_override={j: 0.1 for j in robot.joint_names})
+    sol = weak.solve(plan)
+    assert sol.outcome is Outcome.CLIPPED and "out of reach" in sol.status
+    assert np.all(np.abs(sol.tau) <= 0.1)

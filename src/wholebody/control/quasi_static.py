@@ -3,7 +3,10 @@
 The desired CoM wrench (the same trunk impedance, eq. 4) is distributed to the stance feet by a QP
 over the contact forces only — min ‖G F − W_com,d‖²_Q + ‖F‖²_R subject to the friction pyramid and
 normal-force bounds — and mapped to torques by τ = g_j(q) − J_st,jᵀ F: gravity compensation of the
-legs plus the static force map, with no joint accelerations and no leg dynamics. Swing legs follow a
+legs plus the static force map, with no joint accelerations and no leg dynamics. That map is affine
+in F, so the stance legs' torque limits are linear rows on F in the same QP (ours: without them the
+map asked beyond the limits of a heavy robot's joints and was clipped); when they cannot be met
+together with friction, the forces are solved without them and the torques clipped (flagged). Swing legs follow a
 Cartesian impedance τ = g_j + J_swᵀ (K Δx + D Δv) (eq. 5 without its feed-forward). Same planner,
 same references, same limits clipping as :class:`~wholebody.control.passive.PassiveWBC`.
 """
@@ -75,11 +78,13 @@ class QuasiStaticController(PlannedController):
         self.torque_limits = TorqueLimits(upper_override=torque_limit_override)
         c = len(self.contacts)
         self.nf = 3 * c
-        self.A = np.zeros((5 * c, self.nf))
+        nj = robot.nv - 6
+        #: rows: 5 per foot (friction pyramid, normal force), then one per joint (torque limits)
+        self.A = np.zeros((5 * c + nj, self.nf))
         self.H = np.zeros((self.nf, self.nf))
-        self.upper = np.zeros(self.nf + 5 * c)
-        self.lower = np.zeros(self.nf + 5 * c)
-        self.sense = np.zeros(self.nf + 5 * c, dtype=np.int32)
+        self.upper = np.zeros(self.nf + 5 * c + nj)
+        self.lower = np.zeros(self.nf + 5 * c + nj)
+        self.sense = np.zeros(self.nf + 5 * c + nj, dtype=np.int32)
         self._G = np.zeros((6, self.nf))
         omega = POSTURE_FREQUENCY / reference.froude_ratio(robot)
         self.posture_K, self.posture_D = omega ** 2, 2.0 * omega
@@ -104,6 +109,33 @@ class QuasiStaticController(PlannedController):
             N = np.eye(len(cols)) - np.linalg.pinv(Jl) @ Jl
             a = self.posture_K * error[cols] - self.posture_D * robot.v[6 + cols]
             tau[cols] += N @ (robot.M[np.ix_(6 + cols, 6 + cols)] @ a)
+
+    def _swing_torques(self, plan, stance, tau) -> list[TaskReport]:
+        """Add the swing legs' Cartesian PD to ``tau`` (eq. 5 without its feed-forward; only the
+        leg's own columns of its Jacobian are nonzero) and return their tracking reports."""
+        robot, reports = self.robot, []
+        for i, name in enumerate(self.contacts):
+            if stance[i]:
+                continue
+            leg = self._leg[i]
+            Ji = robot.frame_jacobian(robot.contact(name).frame)[:3]
+            pos = robot.data.oMf[robot.contact(name).frame_id].translation
+            error = plan.foot_position[leg] - pos
+            force = self.swing_K * error + self.swing_D * (plan.foot_velocity[leg] - Ji @ robot.v)
+            tau += Ji[:, 6:].T @ force
+            reports.append(TaskReport(f"swing {name}", 1, "eq", 3, float(np.linalg.norm(error))))
+        return reports
+
+    def _torque_rows(self, J, stance, tau0, lo_tau, hi_tau) -> None:
+        """Rows lo − τ₀ ≤ −J_jᵀ F ≤ hi − τ₀ for the joints that carry a stance foot's force (τ₀:
+        the torque that does not depend on F); the other joints' rows are left free."""
+        n, rows = self.nf + 5 * len(self.contacts), self.A[5 * len(self.contacts):]
+        rows[:] = -J[:, 6:].T
+        stance_columns = np.repeat(stance, 3)
+        rows[:, ~stance_columns] = 0.0
+        carried = np.abs(rows).sum(axis=1) > 0.0
+        self.upper[n:] = np.where(carried, hi_tau - tau0, np.inf)
+        self.lower[n:] = np.where(carried, lo_tau - tau0, -np.inf)
 
     def solve(self, plan) -> Solution:
         t0 = time.perf_counter()
@@ -136,31 +168,29 @@ class QuasiStaticController(PlannedController):
                 up[n + rr:n + rr + 5], lo[n + rr:n + rr + 5] = np.inf, -np.inf
                 up[fi:fi + 3] = lo[fi:fi + 3] = 0.0
                 sense[fi:fi + 3] = EQ
+        tau0 = pin.computeGeneralizedGravity(robot.model, robot.data, robot.q)[6:].copy()
+        self._hold_leg_null_space(J, tau0)
+        swing_errors = self._swing_torques(plan, stance, tau0)
+        lo_tau, hi_tau = self.torque_limits.bounds(robot)
+        self._torque_rows(J, stance, tau0, lo_tau, hi_tau)
         result = solve_daqp_qp(H, g, self.A, up, lo, sense)
+        status, fallback = "solved", ""
+        if not result.ok:  # the torque limits out of reach with friction: forces without them
+            torque_rows = slice(nf + 5 * len(self.contacts), None)
+            up[torque_rows], lo[torque_rows] = np.inf, -np.inf
+            result = solve_daqp_qp(H, g, self.A, up, lo, sense)
+            status = fallback = "torque limits out of reach: forces solved without them"
         t1 = time.perf_counter()
         ok = result.ok
         F = np.array(result.x) if ok else np.zeros(nf)
-        gravity = pin.computeGeneralizedGravity(robot.model, robot.data, robot.q)[6:]
-        tau = gravity - J[:, 6:].T @ F
-        self._hold_leg_null_space(J, tau)
-        swing_errors = []
-        for i, name in enumerate(self.contacts):
-            if stance[i]:
-                continue
-            leg = self._leg[i]
-            Ji = robot.frame_jacobian(robot.contact(name).frame)[:3]
-            pos = robot.data.oMf[robot.contact(name).frame_id].translation
-            error = plan.foot_position[leg] - pos
-            force = self.swing_K * error + self.swing_D * (plan.foot_velocity[leg] - Ji @ robot.v)
-            tau += Ji[:, 6:].T @ force  # eq. 5, no feed-forward (only this leg's columns nonzero)
-            swing_errors.append(TaskReport(f"swing {name}", 1, "eq", 3,
-                                           float(np.linalg.norm(error))))
-        lo_tau, hi_tau = self.torque_limits.bounds(robot)
-        status = "solved" if ok else f"{result.status}: zero forces"
+        tau = tau0 - J[:, 6:].T @ F
         if not ok:
+            status = f"{result.status}: zero forces"
             log.warning("quasi-static cycle %d: %s", robot.cycle, status)
         tau, outcome, status = guard_torque(tau, lo_tau, hi_tau,
                                             Outcome.SOLVED if ok else Outcome.HELD, status)
+        if fallback and fallback not in status:
+            status = f"{fallback}; {status}"
         self.last_tau = tau
         forces = {name: F[3 * i:3 * i + 3] for i, name in enumerate(self.contacts) if stance[i]}
         wrench_error = G @ F - W_d
