@@ -87,6 +87,27 @@ def test_legs_of_five_joints_walk(gait):
     assert run.tracking(t_from=1.0)["linear_max_m"] < 0.1 * robot.q_ref[2]
 
 
+def test_quasi_static_baseline_crawls_a_heavy_robot_inside_its_torque_limits():
+    """IIT Centauro (117 kg) crawling at the crawl scenario's top speed: the baseline's static map
+    needs some stance joints at their torque limits (the torques the simulator applies reach 95 %
+    of a limit), and with the limits as rows of its force QP every cycle is solved inside them:
+    none flagged, none the simulator had to clip, no fall."""
+    from conftest import centauro_description
+
+    robot = wb.load_robot(centauro_description())
+    speed = 0.15 * froude_ratio(robot)
+    command = VelocityCommand.speed_ramp(speed / 3, speed, 1.0, 3.0)
+    used, clipped = [], []
+
+    def on_cycle(t, result, controller, sim):
+        used.append(np.max(np.abs(sim.data.ctrl) / robot.model.effortLimit[6:]))
+        clipped.append(np.max(np.abs(sim.last_clipped)))
+
+    run = run_gait(robot, "quasi-static", "crawl", command, DURATION, on_cycle=on_cycle)
+    assert not run.fell and run.failures == 0, run.failures
+    assert max(used) >= 0.95 and max(clipped[1:]) < 1e-6
+
+
 def test_a_gait_run_stops_a_grace_period_after_the_fall():
     """Knees limited to 1 Nm cannot hold HyQ up: the run ends FALL_GRACE after the fall, and the
     simulator's own base state says the robot was up before the recorded fall time and down at it
