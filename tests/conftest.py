@@ -87,6 +87,16 @@ def centauro_description() -> dict:
                           "radius": 0.119} for i in range(1, 5)]}
 
 
+def anymal_b_description() -> dict:
+    """ANYbotics' ANYmal B (simple description) from example-robot-data: point feet whose spheres
+    (radius 3.1 cm) are centred 2.325 cm above the FOOT frames."""
+    return {"name": "anymal_b", "urdf": "erd:anymal_b_simple_description/robots/anymal.urdf",
+            "srdf": "erd:anymal_b_simple_description/srdf/anymal.srdf", "posture": "standing",
+            "contacts": [{"name": f"{leg}_FOOT", "frame": f"{leg}_FOOT", "type": "point",
+                          "radius": 0.031, "offset": [0.0, 0.0, 0.02325]}
+                         for leg in ("LF", "RF", "LH", "RH")]}
+
+
 def solo8_description() -> dict:
     """ODRI's 8-DoF Solo (hip and knee flexion only) with solo12's feet and 2.7 Nm actuators."""
     joints = [f"{leg}_{j}" for leg in ("FL", "FR", "HL", "HR") for j in ("HFE", "KFE")]

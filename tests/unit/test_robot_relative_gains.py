@@ -154,6 +154,7 @@ def test_hyq_gets_the_papers_gains(quadrupeds):
         # allowed the last bit elsewhere
         np.testing.assert_allclose(imp.K_theta, PAPER["K_theta"], rtol=1e-13, atol=0)
         np.testing.assert_allclose(imp.D_theta, PAPER["D_theta"], rtol=1e-13, atol=0)
+        assert tuple(wbc.Q) == (1.0,) * 6  # the trunk weights stay ours, exactly 1
     # the baseline's swing PD of the crawl comparison keeps the values it was tuned with on HyQ
     qs = QuasiStaticController(robot, planner(robot))
     assert (qs.swing_K, qs.swing_D) == (2000.0, 50.0)

@@ -52,7 +52,8 @@ from ..robots.reference import froude_ratio
 from ..robots.roles import leg_joints
 from ..solvers.backends import DaqpResult, solve_daqp_qp
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
-from ..tasks.wrench import F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound
+from ..tasks.wrench import (F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound,
+                            heading_weights, trunk_weights)
 from ..validation import finite_array, nonnegative, number, positive
 from .base import PlannedController
 from .passive_qp import FREE, PassiveQP, StancePattern
@@ -114,7 +115,8 @@ class PassiveConfig:
     default is the paper's 2000 N on HyQ, :func:`~wholebody.tasks.wrench.force_bound`);
     ``swing_slack`` one of ``SLACKS`` (eq. 11 / 33) with weight
     ``slack_weight`` α; ``K_st``/``D_st`` stance task of eq. 32 (both 0: eq. 10); ``Q`` (6, trunk
-    wrench, N² / (Nm)²), ``R_qdd`` and ``R_force`` the ‖u‖²_R term of eq. 7a;
+    wrench, N² / (Nm)², about the trunk reference's heading frame; None: the robot-relative
+    :func:`~wholebody.tasks.wrench.trunk_weights`, all 1 on HyQ), ``R_qdd`` and ``R_force`` the ‖u‖²_R term of eq. 7a;
     ``regularization`` one of ``REGULARIZATIONS`` with ``tangential_weight`` (force-normal, the
     paper's: tangential forces ≈ 0, which shares the tangential force equally among the feet;
     force-parallel, ours and the default: every stance force leaning like the desired net force
@@ -139,7 +141,7 @@ class PassiveConfig:
     slack_weight: float = 1e4
     K_st: float = 200.0
     D_st: float = 30.0
-    Q: tuple = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    Q: tuple | None = None
     R_qdd: float = 1e-4
     R_force: float = 1e-4
     regularization: str = "force-parallel"
@@ -175,8 +177,9 @@ class PassiveConfig:
         for name in ("K_st", "D_st", "tangential_weight", "posture_damping"):
             nonnegative(getattr(self, name), name)
         # arrays as tuples of floats (exact), so that configurations compare by value
-        Q = np.broadcast_to(finite_array(self.Q, "Q", nonnegative=True), 6)
-        object.__setattr__(self, "Q", tuple(Q.tolist()))
+        if self.Q is not None:
+            Q = np.broadcast_to(finite_array(self.Q, "Q", nonnegative=True), 6)
+            object.__setattr__(self, "Q", tuple(Q.tolist()))
         if self.torque_weights is not None:
             weights = np.ravel(finite_array(self.torque_weights, "torque_weights",
                                             nonnegative=True))
@@ -203,13 +206,14 @@ class SwingGains:
         self.K, self.D = nonnegative(self.K, "swing.K"), nonnegative(self.D, "swing.D")
 
 
-def relative_slack_weight(robot: Robot, ratio: float, Q=PassiveConfig.Q) -> float:
+def relative_slack_weight(robot: Robot, ratio: float, Q=None) -> float:
     """The slack weight α of eq. 33 for a ``ratio`` to the trunk wrench task: α = ratio · max(Q) · m²
     (m the robot's mass). The slack ε is a foot acceleration (m/s²), the trunk task a wrench error
     (N, Nm) weighed by Q; a CoM acceleration error a costs max(Q) (m a)², so ``ratio`` 1 weighs a
     swing foot's acceleration error as much as the same acceleration error of the whole robot's
     CoM, on any robot. The paper only asks for "a high weight α"; the default α = 1e4 is a ratio of
-    1.3 on HyQ (86.8 kg, Q = 1)."""
+    1.3 on HyQ (86.8 kg, Q = 1). ``Q`` None: the robot's :func:`trunk_weights`."""
+    Q = trunk_weights(robot) if Q is None else Q
     q_max = float(np.max(np.asarray(Q, dtype=float)))
     if not q_max > 0.0:
         raise ValueError(f"Q: the trunk weights must not all be zero, got {Q!r}")
@@ -290,7 +294,7 @@ class PassiveWBC(PlannedController):
         self.swing_slack = config.swing_slack
         self.slack_weight = float(config.slack_weight)
         self.K_st, self.D_st = config.K_st, config.D_st
-        self.Q = np.array(config.Q, dtype=float)
+        self.Q = np.array(trunk_weights(robot) if config.Q is None else config.Q, dtype=float)
         self.R_qdd, self.R_force = config.R_qdd, config.R_force
         self.regularization = config.regularization
         self.tangential_weight = config.tangential_weight
@@ -373,7 +377,7 @@ class PassiveWBC(PlannedController):
             self.impedance.external_wrench = self.observer.update(
                 robot.h_G, self._commanded_wrench, robot.mass, self.control_period)
         W_d = self.impedance.wrench(robot, plan.trunk)
-        GQ = G.T * self.Q
+        GQ = G.T @ heading_weights(self.Q, plan.trunk.rotation)
         HF = GQ @ G
         if self.regularization == "torque":  # footnote 16: R_F = J_st,j R_τ J_st,jᵀ
             JjT = J[:, 6:].T * np.sqrt(self.torque_weights)[:, None]

@@ -27,7 +27,8 @@ from ..tasks.contact import friction_faces, tangent_basis
 from ..tasks.limits import TorqueLimits
 from ..robots import reference
 from ..robots.roles import leg_joints
-from ..tasks.wrench import TrunkImpedance, contact_wrench_map, force_bound
+from ..tasks.wrench import (TrunkImpedance, contact_wrench_map, force_bound, heading_weights,
+                            trunk_weights)
 from .base import PlannedController
 from .passive import POSTURE_FREQUENCY, default_planner
 
@@ -53,12 +54,14 @@ class QuasiStaticController(PlannedController):
     ``swing_K``/``swing_D``: Cartesian swing-leg stiffness (N/m) and damping (N s/m), None: 2000 N/m
     and 50 N s/m on HyQ, scaled by the robot's mass on any other (:func:`swing_gains`);
     ``f_max`` None and ``impedance`` None: the robot-relative defaults of
-    :class:`~wholebody.control.passive.PassiveWBC` (the paper's 2000 N and trunk gains on HyQ).
+    :class:`~wholebody.control.passive.PassiveWBC` (the paper's 2000 N and trunk gains on HyQ);
+    ``Q`` (6) the trunk wrench weights about the heading frame, None: the robot-relative
+    :func:`~wholebody.tasks.wrench.trunk_weights` of the passive WBC.
     """
 
     def __init__(self, robot: Robot, planner=None, mu: float | None = None, f_min: float = 0.0,
                  f_max: float | None = None, impedance: TrunkImpedance | None = None,
-                 Q=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), R_force: float = 1e-4,
+                 Q=None, R_force: float = 1e-4,
                  tangential_weight: float = 1e-3, swing_K: float | None = None, swing_D: float | None = None,
                  torque_limit_override: dict[str, float] | None = None):
         if any(c.dim != 3 for c in robot.contacts):
@@ -70,7 +73,8 @@ class QuasiStaticController(PlannedController):
         self.mu = robot.friction if mu is None else float(mu)
         self.f_min, self.f_max = f_min, force_bound(robot) if f_max is None else f_max
         self.impedance = impedance or TrunkImpedance.for_robot(robot)
-        self.Q = np.broadcast_to(np.asarray(Q, dtype=float), 6).copy()
+        self.Q = np.broadcast_to(np.asarray(trunk_weights(robot) if Q is None else Q,
+                                            dtype=float), 6).copy()
         self.R_force, self.tangential_weight = R_force, tangential_weight
         default_K, default_D = swing_gains(robot)
         self.swing_K = default_K if swing_K is None else swing_K
@@ -144,7 +148,7 @@ class QuasiStaticController(PlannedController):
         J = robot.stacked_contact_jacobian(self.contacts)
         G = contact_wrench_map(robot, self.contacts, self._G)
         W_d = self.impedance.wrench(robot, plan.trunk)
-        GQ = G.T * self.Q
+        GQ = G.T @ heading_weights(self.Q, plan.trunk.rotation)
         H = self.H
         H[:] = GQ @ G
         H.flat[::nf + 1] += self.R_force

@@ -250,14 +250,15 @@ public:
       Gi.topRows<3>().setIdentity();
       Gi.bottomRows<3>() << 0.0, -r[2], r[1], r[2], 0.0, -r[0], -r[1], r[0], 0.0;
     }
+    const double * rotation = input(trunk_rotation, 9, "trunk.rotation");
     trunk_wrench(
       input(trunk_position, 3, "trunk.position"), input(trunk_velocity, 3, "trunk.velocity"),
-      input(trunk_acceleration, 3, "trunk.acceleration"), input(trunk_rotation, 9, "trunk.rotation"),
+      input(trunk_acceleration, 3, "trunk.acceleration"), rotation,
       input(trunk_angular_velocity, 3, "trunk.angular_velocity"),
       input(trunk_angular_acceleration, 3, "trunk.angular_acceleration"),
       input(external_wrench, 6, "external_wrench"));
     const Map<const Eigen::Matrix<double, 6, 1>> W_d(wrench_d_);
-    GQ_.noalias() = G_.transpose() * Q_.asDiagonal();
+    GQ_.noalias() = G_.transpose() * heading_weights(rotation);
     HF_.noalias() = GQ_ * G_;
     g.segment(nv, nf_).noalias() = -GQ_ * W_d;
     if (posture_on_) // ‖q̈ − q̈_posture‖²_R (PassiveWBC.posture_acceleration)
@@ -505,6 +506,22 @@ private:
   }
 
   // W_com,d of eq. 4 (wholebody.tasks.wrench.TrunkImpedance.wrench).
+  // wholebody.tasks.wrench.heading_weights: Q_ about the heading frame of the trunk reference
+  // (row-major 3 x 3 rotation); weights equal about x and y: diag(Q_) exactly.
+  Eigen::Matrix<double, 6, 6> heading_weights(const double * rotation) const
+  {
+    Eigen::Matrix<double, 6, 6> W = Q_.asDiagonal();
+    const double norm = std::hypot(rotation[0], rotation[3]);
+    if ((Q_[0] == Q_[1] && Q_[3] == Q_[4]) || norm == 0.0)
+      return W;
+    const double c = rotation[0] / norm, s = rotation[3] / norm;
+    Matrix3d Rh;
+    Rh << c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0;
+    W.topLeftCorner<3, 3>() = Rh * Q_.head<3>().asDiagonal() * Rh.transpose();
+    W.bottomRightCorner<3, 3>() = Rh * Q_.tail<3>().asDiagonal() * Rh.transpose();
+    return W;
+  }
+
   void trunk_wrench(
     const double * position, const double * velocity, const double * acceleration,
     const double * rotation, const double * angular_velocity, const double * angular_acceleration,

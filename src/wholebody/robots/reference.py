@@ -17,6 +17,10 @@ import math
 MASS = 86.77400500000003  # kg
 INERTIA = 9.3599731892699  # kg m², trace(I_G) / 3 (wholebody.tasks.wrench.trunk_inertia)
 BASE_HEIGHT = 0.5992595750374548  # m, the base above the floor standing (robot.q_ref[2])
+#: tan ψ of the angle ψ between the heading and a diagonal of the standing feet: the feet's mean
+#: lateral over their mean fore-aft distance from their centroid
+#: (wholebody.tasks.wrench.stance_aspect)
+STANCE_ASPECT = 0.8740296557577911
 #: the humanoid our push set-ups (Herzog et al. 2016 Sect. 5.2.2 on talos14) were made for: its
 #: standing base height (m), from which push points and lifts scale, and its mass (kg), from which
 #: push forces scale

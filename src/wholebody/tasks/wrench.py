@@ -83,6 +83,56 @@ def trunk_gains(robot, frequency_x_hz: float | None = None,
                         * (damping_ratio_theta / DAMPING_RATIO_THETA))}
 
 
+def stance_aspect(robot) -> float:
+    """tan ψ of the standing stance: the feet's mean lateral over their mean fore-aft distance
+    from their centroid, in the base frame at the reference posture (ψ: the angle between the
+    heading and a diagonal of a quadruped's feet; HyQ 0.874)."""
+    from ..planning.footholds import Footprint  # planning depends on tasks' modules, not back
+    feet = Footprint.from_robot(robot).feet[:, :2]
+    spread = np.abs(feet - feet.mean(axis=0)).mean(axis=0)
+    if not spread[0] > 1e-9 * max(spread[1], 1.0):
+        raise ValueError(f"robot '{robot.name}': its contacts have no fore-aft extent about their "
+                         "centroid; the trunk weights need a support area")
+    return float(spread[1] / spread[0])
+
+
+def trunk_weights(robot) -> tuple[float, ...]:
+    """Default Q of ‖W_com − W_com,d‖²_Q (eq. 7a; the paper gives no values): force x, y, z and
+    moment about the heading, lateral and vertical axes (the trunk reference's heading frame,
+    :func:`heading_weights`). All 1 except the pitch weight, tan ψ / tan ψ_HyQ (ours).
+
+    Two diagonal feet (a trot) at angle ψ to the heading make no moment about the line between
+    them; the horizontal moment they do make is along n = (−sin ψ, cos ψ) (roll, pitch), so a
+    roll moment comes with cot ψ times as much pitch, which the pitch error then asks back. The
+    least squares weighs the two asks along n as w_roll sin ψ against w_pitch cos ψ; with
+    w_pitch = tan ψ / tan ψ_HyQ every robot trades them as HyQ does with the paper's unit weights.
+    With unit weights a narrow robot (ANYmal B, tan ψ 0.55) trotted with a steady roll error that
+    its pitch asks cancelled (docs/results.md); HyQ's weights are exactly 1."""
+    return (1.0, 1.0, 1.0, 1.0, stance_aspect(robot) / reference.STANCE_ASPECT, 1.0)
+
+
+def heading_weights(Q, rotation) -> np.ndarray:
+    """(6, 6) weight of the wrench error for weights ``Q`` (6) about the heading frame of the
+    trunk reference ``rotation`` (3 x 3): blockdiag(R_h diag(Q_f) R_hᵀ, R_h diag(Q_m) R_hᵀ), R_h
+    the rotation about z by the heading (the direction of the rotation's x axis on the ground; a
+    vertical x axis: the world axes). Weights equal about x and y are the same in any heading:
+    then diag(Q) exactly."""
+    Q = np.asarray(Q, dtype=float)
+    W = np.diag(Q)
+    if Q[0] == Q[1] and Q[3] == Q[4]:
+        return W
+    R = np.asarray(rotation, dtype=float)
+    c, s = R[0, 0], R[1, 0]
+    norm = math.hypot(c, s)
+    if norm == 0.0:
+        return W
+    c, s = c / norm, s / norm
+    Rh = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    W[:3, :3] = (Rh * Q[:3]) @ Rh.T
+    W[3:, 3:] = (Rh * Q[3:]) @ Rh.T
+    return W
+
+
 def force_bound(robot, weights: float = F_MAX_WEIGHTS) -> float:
     """A normal-force bound (N) of ``weights`` (> 0) times the robot's weight m g (default: the
     paper's 2000 N on HyQ, evaluated as 2000 N x m / m_ref so that HyQ's is exact)."""

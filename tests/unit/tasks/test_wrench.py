@@ -136,3 +136,55 @@ def test_the_checks_detect_a_wrong_wrench_map(robots):
         with pytest.raises(AssertionError):
             np.testing.assert_allclose(wrong, expected, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(rows.lam @ forces.reshape(-1), expected, rtol=1e-9, atol=1e-9)
+
+
+def _feet_about_their_centroid(robot):
+    """(n, 2) horizontal sphere-centre positions of the feet about their centroid at the
+    reference posture, by forward kinematics on a Data of this test's own (base yaw 0)."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    feet = np.array([data.oMf[c.frame_id].translation[:2] for c in robot.contacts])
+    R = pin.Quaternion(robot.q_ref[3:7]).normalized().toRotationMatrix()
+    feet = feet @ R[:2, :2]  # into the base's axes (identity at a level posture)
+    return feet - feet.mean(axis=0)
+
+
+def test_trunk_weights_are_ones_on_hyq_and_scale_pitch_by_the_stance_aspect(robots):
+    """Q of eq. 7a: exactly 1 on HyQ (the paper's results stay); on a narrower stance only the
+    pitch weight changes, by tan ψ / tan ψ_HyQ, tan ψ the feet's mean lateral over mean fore-aft
+    distance from their centroid (measured here by forward kinematics)."""
+    import wholebody as wb
+    from conftest import anymal_b_description
+    from wholebody.tasks.wrench import stance_aspect, trunk_weights
+
+    assert trunk_weights(robots["hyq"]) == (1.0,) * 6
+    hyq = np.abs(_feet_about_their_centroid(robots["hyq"])).mean(axis=0)
+    for robot in (wb.load_robot(anymal_b_description()), wb.load_robot("go1")):
+        feet = np.abs(_feet_about_their_centroid(robot)).mean(axis=0)
+        aspect = feet[1] / feet[0]
+        assert stance_aspect(robot) == pytest.approx(aspect, rel=1e-9)
+        Q = trunk_weights(robot)
+        assert Q[:4] == (1.0,) * 4 and Q[5] == 1.0
+        assert Q[4] == pytest.approx(aspect / (hyq[1] / hyq[0]), rel=1e-9)
+        assert 0.5 < Q[4] < 0.9  # both stand narrower than HyQ
+
+
+def test_heading_weights_weigh_the_error_in_the_heading_frame(rng):
+    """eᵀ W e equals the diagonal weights applied to the force and moment errors expressed in the
+    heading frame (rotated by −yaw, with Pinocchio's rotation), whatever the trunk's pitch and
+    roll; horizontally isotropic weights give diag(Q) exactly."""
+    from wholebody.tasks.wrench import heading_weights
+
+    Q = np.array([1.0, 0.5, 2.0, 1.0, 0.63, 1.5])
+    for _ in range(5):
+        yaw, pitch, roll = rng.uniform(-np.pi, np.pi), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5)
+        R = pin.rpy.rpyToMatrix(roll, pitch, yaw)
+        e = rng.normal(size=6)
+        Rz = pin.rpy.rpyToMatrix(0.0, 0.0, yaw)
+        heading = np.concatenate([Rz.T @ e[:3], Rz.T @ e[3:]])
+        W = heading_weights(Q, R)
+        assert e @ W @ e == pytest.approx(heading @ (Q * heading), rel=1e-12)
+        np.testing.assert_allclose(W, W.T, atol=1e-15)
+    iso = np.array([1.0, 1.0, 3.0, 0.7, 0.7, 2.0])
+    np.testing.assert_array_equal(heading_weights(iso, pin.rpy.rpyToMatrix(0.1, 0.2, 1.0)),
+                                  np.diag(iso))
