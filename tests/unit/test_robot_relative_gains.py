@@ -289,7 +289,8 @@ def test_quadruped_scenarios_take_the_trunk_gains(name):
     (their defaults, 0 Hz, keep the robot-relative gains) and the swing impedance's gains."""
     params = {p.name: p for p in get_scenario(name).parameters}
     for key in ("trunk_frequency", "trunk_damping_ratio", "trunk_angular_frequency",
-                "trunk_angular_damping_ratio", "swing_stiffness", "swing_damping"):
+                "trunk_angular_damping_ratio", "trunk_pitch_weight", "swing_stiffness",
+                "swing_damping"):
         assert key in params, (name, key)
     assert params["trunk_frequency"].default == 0.0
     with pytest.raises(ValueError, match="--set trunk_frequency"):
@@ -297,16 +298,18 @@ def test_quadruped_scenarios_take_the_trunk_gains(name):
 
 
 def test_trunk_gains_reach_the_controller_in_closed_loop(quadrupeds):
-    """``--set trunk_frequency=2 --set trunk_angular_frequency=3 --set swing_stiffness=900``:
-    the passive WBC that run_gait builds has K_x = m (2 pi 2)^2 and K_theta = I (2 pi 3)^2 (I
-    summed body by body here) and K_sw = 900; without them, the robot-relative defaults."""
+    """``--set trunk_frequency=2 --set trunk_angular_frequency=3 --set swing_stiffness=900
+    --set trunk_pitch_weight=0.4``: the passive WBC that run_gait builds has K_x = m (2 pi 2)^2
+    and K_theta = I (2 pi 3)^2 (I summed body by body here), K_sw = 900 and the pitch weight 0.4;
+    without them, the robot-relative defaults."""
     from wholebody.scenarios.locomotion import run_gait, wbc_gains
     robot = quadrupeds["go1"]
     params = {"trunk_frequency": 2.0, "trunk_damping_ratio": 0.7,
               "trunk_angular_frequency": 3.0, "trunk_angular_damping_ratio": 1.0,
-              "swing_stiffness": 900.0, "swing_damping": 15.0}
+              "swing_stiffness": 900.0, "swing_damping": 15.0, "trunk_pitch_weight": 0.4}
     run = run_gait(robot, "passive", "stand", duration=0.02, gains=wbc_gains(params))
     assert (run.controller.swing.K, run.controller.swing.D) == (900.0, 15.0)
+    assert tuple(run.controller.Q) == (1.0, 1.0, 1.0, 1.0, 0.4, 1.0)
     imp = run.controller.impedance
     m, inertia = robot.mass, np.trace(centroidal_inertia_by_bodies(robot)) / 3
     np.testing.assert_allclose(imp.K_x, m * (2 * math.pi * 2.0) ** 2, rtol=1e-9)
@@ -315,6 +318,7 @@ def test_trunk_gains_reach_the_controller_in_closed_loop(quadrupeds):
     default = run_gait(robot, "passive", "stand", duration=0.02, gains=wbc_gains({}))
     np.testing.assert_allclose(default.controller.impedance.K_x,
                                TrunkImpedance.for_robot(robot).K_x, rtol=1e-12)
+    assert 0.0 < default.controller.Q[4] < 1.0  # go1 stands narrower than HyQ
 
 
 def test_sway_gain_reaches_the_crawl_planner(quadrupeds):

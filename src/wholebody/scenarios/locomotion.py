@@ -32,7 +32,7 @@ from ..robots.reference import froude_ratio
 from ..robots.roles import check_gait_legs, quadruped_legs
 from ..sim.environment import Box, Environment
 from ..sim.simulator import Simulator
-from ..tasks.wrench import DAMPING_RATIO_THETA, DAMPING_RATIO_X, TrunkImpedance
+from ..tasks.wrench import DAMPING_RATIO_THETA, DAMPING_RATIO_X, TrunkImpedance, trunk_weights
 from .base import TIME_SPAN, BaseHeight, Parameter, RobotRelative
 from .loop import run_closed_loop
 from .measures import FALL_HEIGHT_FRACTION
@@ -52,6 +52,10 @@ TRUNK_GAINS = (
     Parameter("trunk_angular_damping_ratio", round(DAMPING_RATIO_THETA, 6), "trunk impedance: "
               "damping ratio of the orientation loop (the paper's D_theta on HyQ)", low=0.0,
               high=100.0),
+    Parameter("trunk_pitch_weight", 0.0, "trunk wrench task (eq. 7a): weight of the pitch moment "
+              "against the forces' and the other moments' 1 (0: tan psi / tan psi_HyQ, psi the "
+              "angle of a diagonal of the standing feet to the heading; 1 on HyQ)", low=0.0,
+              high=1e3),
 )
 
 
@@ -325,9 +329,10 @@ class GaitRun:
 def wbc_gains(params: dict) -> dict:
     """The :data:`WBC_GAINS` parameters (missing ones at their defaults) as ``run_gait``'s
     ``gains``: ``{"impedance": trunk_gains(params), "swing": (K_sw, D_sw)}``."""
-    get = {p.name: params.get(p.name, p.default) for p in SWING_GAINS}
+    get = {p.name: params.get(p.name, p.default) for p in (*SWING_GAINS, *TRUNK_GAINS)}
     return {"impedance": trunk_gains(params),
-            "swing": (get["swing_stiffness"], get["swing_damping"])}
+            "swing": (get["swing_stiffness"], get["swing_damping"]),
+            "pitch_weight": get["trunk_pitch_weight"] or None}
 
 
 def run_gait(robot, controller: str = "passive", gait: str = "crawl",
@@ -361,6 +366,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         options["impedance"] = TrunkImpedance.for_robot(robot, **gains["impedance"])
     if gains is not None and controller == "passive" and "swing" not in options:
         options["swing"] = SwingGains(*gains["swing"])
+    if gains is not None and gains.get("pitch_weight") is not None and "Q" not in options:
+        options["Q"] = trunk_weights(robot, pitch=gains["pitch_weight"])
     if controller == "passive":
         options.setdefault("control_period", control_period)
     ctrl = make_controller(robot, controller, planner, **options)

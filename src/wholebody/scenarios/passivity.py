@@ -176,7 +176,7 @@ def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10
     meter = StorageMeter(robot, impedance, swing.K, swing.D)
     run = run_gait(robot, "passive", duration=duration, planner=planner, progress=progress,
                    controller_options={"impedance": impedance, "swing": swing},
-                   on_cycle=meter)
+                   on_cycle=meter, gains=gains or None)
     storage = meter.log.arrays()
     balance = energy_balance(storage, run.sim.log.arrays())
     return run, storage, balance

@@ -96,7 +96,7 @@ def stance_aspect(robot) -> float:
     return float(spread[1] / spread[0])
 
 
-def trunk_weights(robot) -> tuple[float, ...]:
+def trunk_weights(robot, pitch: float | None = None) -> tuple[float, ...]:
     """Default Q of ‖W_com − W_com,d‖²_Q (eq. 7a; the paper gives no values): force x, y, z and
     moment about the heading, lateral and vertical axes (the trunk reference's heading frame,
     :func:`heading_weights`). All 1 except the pitch weight, tan ψ / tan ψ_HyQ (ours).
@@ -107,8 +107,11 @@ def trunk_weights(robot) -> tuple[float, ...]:
     least squares weighs the two asks along n as w_roll sin ψ against w_pitch cos ψ; with
     w_pitch = tan ψ / tan ψ_HyQ every robot trades them as HyQ does with the paper's unit weights.
     With unit weights a narrow robot (ANYmal B, tan ψ 0.55) trotted with a steady roll error that
-    its pitch asks cancelled (docs/results.md); HyQ's weights are exactly 1."""
-    return (1.0, 1.0, 1.0, 1.0, stance_aspect(robot) / reference.STANCE_ASPECT, 1.0)
+    its pitch asks cancelled (docs/results.md); HyQ's weights are exactly 1. ``pitch``: that
+    weight instead (>= 0)."""
+    if pitch is None:
+        pitch = stance_aspect(robot) / reference.STANCE_ASPECT
+    return (1.0, 1.0, 1.0, 1.0, nonnegative(pitch, "trunk_pitch_weight"), 1.0)
 
 
 def heading_weights(Q, rotation) -> np.ndarray:
