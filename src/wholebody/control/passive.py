@@ -116,7 +116,8 @@ class PassiveConfig:
     ``swing_slack`` one of ``SLACKS`` (eq. 11 / 33) with weight
     ``slack_weight`` α; ``K_st``/``D_st`` stance task of eq. 32 (both 0: eq. 10); ``Q`` (6, trunk
     wrench, N² / (Nm)², about the trunk reference's heading frame; None: the robot-relative
-    :func:`~wholebody.tasks.wrench.trunk_weights`, all 1 on HyQ), ``R_qdd`` and ``R_force`` the ‖u‖²_R term of eq. 7a;
+    :func:`~wholebody.tasks.wrench.trunk_weights`, all 1 on HyQ), ``R_qdd`` and ``R_force`` the
+    ‖u‖²_R term of eq. 7a;
     ``regularization`` one of ``REGULARIZATIONS`` with ``tangential_weight`` (force-normal, the
     paper's: tangential forces ≈ 0, which shares the tangential force equally among the feet;
     force-parallel, ours and the default: every stance force leaning like the desired net force

@@ -6,9 +6,10 @@ normal-force bounds — and mapped to torques by τ = g_j(q) − J_st,jᵀ F: gr
 legs plus the static force map, with no joint accelerations and no leg dynamics. That map is affine
 in F, so the stance legs' torque limits are linear rows on F in the same QP (ours: without them the
 map asked beyond the limits of a heavy robot's joints and was clipped); when they cannot be met
-together with friction, the forces are solved without them and the torques clipped (flagged). Swing legs follow a
-Cartesian impedance τ = g_j + J_swᵀ (K Δx + D Δv) (eq. 5 without its feed-forward). Same planner,
-same references, same limits clipping as :class:`~wholebody.control.passive.PassiveWBC`.
+together with friction, the forces are solved without them and the torques clipped (flagged).
+Swing legs follow a Cartesian impedance τ = g_j + J_swᵀ (K Δx + D Δv) (eq. 5 without its
+feed-forward). Same planner, same references, same limits clipping as
+:class:`~wholebody.control.passive.PassiveWBC`.
 """
 
 from __future__ import annotations

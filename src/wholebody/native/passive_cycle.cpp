@@ -505,7 +505,6 @@ private:
     }
   }
 
-  // W_com,d of eq. 4 (wholebody.tasks.wrench.TrunkImpedance.wrench).
   // wholebody.tasks.wrench.heading_weights: Q_ about the heading frame of the trunk reference
   // (row-major 3 x 3 rotation); weights equal about x and y: diag(Q_) exactly.
   Eigen::Matrix<double, 6, 6> heading_weights(const double * rotation) const
@@ -522,6 +521,7 @@ private:
     return W;
   }
 
+  // W_com,d of eq. 4 (wholebody.tasks.wrench.TrunkImpedance.wrench).
   void trunk_wrench(
     const double * position, const double * velocity, const double * acceleration,
     const double * rotation, const double * angular_velocity, const double * angular_acceleration,

@@ -328,7 +328,8 @@ class GaitRun:
 
 def wbc_gains(params: dict) -> dict:
     """The :data:`WBC_GAINS` parameters (missing ones at their defaults) as ``run_gait``'s
-    ``gains``: ``{"impedance": trunk_gains(params), "swing": (K_sw, D_sw)}``."""
+    ``gains``: ``{"impedance": trunk_gains(params), "swing": (K_sw, D_sw), "pitch_weight": w}``
+    (w None: the robot-relative trunk weights)."""
     get = {p.name: params.get(p.name, p.default) for p in (*SWING_GAINS, *TRUNK_GAINS)}
     return {"impedance": trunk_gains(params),
             "swing": (get["swing_stiffness"], get["swing_damping"]),
@@ -351,8 +352,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     are then ignored. ``observers`` watch the simulation (labelled with the controller's name).
     ``q0``: the initial configuration (default: the standing posture ``robot.q_ref``), resting on
     the support surface; the planner starts from it. ``gains``: the trunk and swing impedances'
-    gains (:func:`wbc_gains`), unless ``controller_options`` gives an ``impedance`` or a
-    ``swing``. ``after_fall``: once the robot has fallen, the run stops this many seconds later
+    gains and the trunk task's pitch weight (:func:`wbc_gains`), unless ``controller_options``
+    gives an ``impedance``, a ``swing`` or a ``Q``. ``after_fall``: once the robot has fallen, the run stops this many seconds later
     (None: it runs its whole ``duration``).
     """
     if q0 is not None:

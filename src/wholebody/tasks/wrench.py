@@ -105,10 +105,10 @@ def trunk_weights(robot, pitch: float | None = None) -> tuple[float, ...]:
     them; the horizontal moment they do make is along n = (−sin ψ, cos ψ) (roll, pitch), so a
     roll moment comes with cot ψ times as much pitch, which the pitch error then asks back. The
     least squares weighs the two asks along n as w_roll sin ψ against w_pitch cos ψ; with
-    w_pitch = tan ψ / tan ψ_HyQ every robot trades them as HyQ does with the paper's unit weights.
-    With unit weights a narrow robot (ANYmal B, tan ψ 0.55) trotted with a steady roll error that
-    its pitch asks cancelled (docs/results.md); HyQ's weights are exactly 1. ``pitch``: that
-    weight instead (>= 0)."""
+    w_pitch = tan ψ / tan ψ_HyQ every robot trades them as HyQ does with unit weights. With unit
+    weights a robot standing narrower than HyQ trotted with a steady roll error that its pitch
+    asks cancelled (docs/results.md); HyQ's weights are exactly 1. ``pitch``: that weight instead
+    (>= 0)."""
     if pitch is None:
         pitch = stance_aspect(robot) / reference.STANCE_ASPECT
     return (1.0, 1.0, 1.0, 1.0, nonnegative(pitch, "trunk_pitch_weight"), 1.0)
