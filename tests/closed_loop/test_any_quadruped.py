@@ -116,6 +116,40 @@ def test_a_narrow_robot_trots_without_a_steady_roll(controller):
     assert mean_roll["robot-relative"] < 0.02 and mean_roll["unit"] > 0.03, mean_roll
 
 
+def test_the_trunk_weights_turn_with_the_heading(monkeypatch):
+    """ANYmal B trotting while it turns 2.1 rad (0.3 rad/s): its pitch weight acts about the trunk
+    reference's heading axes, so the mean roll (the simulator's base, after 3 s) stays small; the
+    same weights left in world axes, which once the robot has turned weigh its roll instead, let it
+    trot rolled to one side."""
+    import pinocchio as pin
+    import wholebody.control.passive as passive
+    from conftest import anymal_b_description
+
+    robot = wb.load_robot(anymal_b_description())
+    command = VelocityCommand.constant(0.1 * froude_ratio(robot), 0.0, 0.3)
+
+    def mean_roll():
+        rolls = []
+
+        def on_cycle(t, result, controller_, sim):
+            if t > 3.0:
+                q = sim.state()[0]
+                R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+                rolls.append(np.arctan2(R[2, 1], R[2, 2]))
+
+        run = run_gait(robot, "passive", "trot", command, 8.0, on_cycle=on_cycle,
+                       controller_options={"engine": "python"})
+        assert not run.fell and run.failures == 0
+        yaw = pin.rpy.matrixToRpy(pin.Quaternion(run.sim.state()[0][3:7]).toRotationMatrix())[2]
+        assert abs(yaw) > 1.5  # it did turn
+        return abs(np.mean(rolls))
+
+    heading = mean_roll()
+    monkeypatch.setattr(passive, "heading_weights", lambda Q, rotation: np.diag(np.asarray(Q)))
+    world = mean_roll()
+    assert heading < 0.03 and world > 0.06, (heading, world)
+
+
 def test_quasi_static_baseline_crawls_a_heavy_robot_inside_its_torque_limits():
     """IIT Centauro (117 kg) crawling at the crawl scenario's top speed: the baseline's static map
     needs some stance joints at their torque limits (the torques the simulator applies reach 95 %
