@@ -87,6 +87,26 @@ def test_legs_of_five_joints_walk(gait):
     assert run.tracking(t_from=1.0)["linear_max_m"] < 0.1 * robot.q_ref[2]
 
 
+def _trot_mean_roll(robot, controller, command, duration, options):
+    """(|mean roll| of the simulator's base after 3 s, its final yaw) of a trot that must neither
+    fall nor fail a cycle."""
+    import pinocchio as pin
+
+    rolls = []
+
+    def on_cycle(t, result, controller_, sim):
+        if t > 3.0:
+            q = sim.state()[0]
+            R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+            rolls.append(np.arctan2(R[2, 1], R[2, 2]))
+
+    run = run_gait(robot, controller, "trot", command, duration, on_cycle=on_cycle,
+                   controller_options=options)
+    assert not run.fell and run.failures == 0, (options, run.failures)
+    yaw = pin.rpy.matrixToRpy(pin.Quaternion(run.sim.state()[0][3:7]).toRotationMatrix())[2]
+    return abs(np.mean(rolls)), yaw
+
+
 @pytest.mark.parametrize("controller", ["passive", "quasi-static"])
 def test_a_narrow_robot_trots_without_a_steady_roll(controller):
     """ANYmal B stands narrow (tan ψ 0.55 against HyQ's 0.87): with unit trunk weights the pitch
@@ -97,22 +117,9 @@ def test_a_narrow_robot_trots_without_a_steady_roll(controller):
     from conftest import anymal_b_description
 
     robot = wb.load_robot(anymal_b_description())
-    speed = 0.1 * froude_ratio(robot)
-    command = VelocityCommand.speed_ramp(0.0, speed, 1.0, 2.0)
-    mean_roll = {}
-    for label, Q in (("robot-relative", None), ("unit", (1.0,) * 6)):
-        rolls = []
-
-        def on_cycle(t, result, controller_, sim):
-            if t > 3.0:
-                q = sim.state()[0]
-                R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
-                rolls.append(np.arctan2(R[2, 1], R[2, 2]))
-
-        run = run_gait(robot, controller, "trot", command, 6.0, on_cycle=on_cycle,
-                       controller_options={"Q": Q})
-        assert not run.fell and run.failures == 0, (label, run.failures)
-        mean_roll[label] = abs(np.mean(rolls))
+    command = VelocityCommand.speed_ramp(0.0, 0.1 * froude_ratio(robot), 1.0, 2.0)
+    mean_roll = {label: _trot_mean_roll(robot, controller, command, 6.0, {"Q": Q})[0]
+                 for label, Q in (("robot-relative", None), ("unit", (1.0,) * 6))}
     assert mean_roll["robot-relative"] < 0.02 and mean_roll["unit"] > 0.03, mean_roll
 
 
@@ -121,32 +128,16 @@ def test_the_trunk_weights_turn_with_the_heading(monkeypatch):
     reference's heading axes, so the mean roll (the simulator's base, after 3 s) stays small; the
     same weights left in world axes, which once the robot has turned weigh its roll instead, let it
     trot rolled to one side."""
-    import pinocchio as pin
     import wholebody.control.passive as passive
     from conftest import anymal_b_description
 
     robot = wb.load_robot(anymal_b_description())
     command = VelocityCommand.constant(0.1 * froude_ratio(robot), 0.0, 0.3)
-
-    def mean_roll():
-        rolls = []
-
-        def on_cycle(t, result, controller_, sim):
-            if t > 3.0:
-                q = sim.state()[0]
-                R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
-                rolls.append(np.arctan2(R[2, 1], R[2, 2]))
-
-        run = run_gait(robot, "passive", "trot", command, 8.0, on_cycle=on_cycle,
-                       controller_options={"engine": "python"})
-        assert not run.fell and run.failures == 0
-        yaw = pin.rpy.matrixToRpy(pin.Quaternion(run.sim.state()[0][3:7]).toRotationMatrix())[2]
-        assert abs(yaw) > 1.5  # it did turn
-        return abs(np.mean(rolls))
-
-    heading = mean_roll()
+    python = {"engine": "python"}  # the patch below reaches the Python engine only
+    heading, yaw = _trot_mean_roll(robot, "passive", command, 8.0, python)
+    assert abs(yaw) > 1.5  # it did turn
     monkeypatch.setattr(passive, "heading_weights", lambda Q, rotation: np.diag(np.asarray(Q)))
-    world = mean_roll()
+    world, _ = _trot_mean_roll(robot, "passive", command, 8.0, python)
     assert heading < 0.03 and world > 0.06, (heading, world)
 
 
