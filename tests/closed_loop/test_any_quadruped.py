@@ -113,7 +113,6 @@ def test_a_narrow_robot_trots_without_a_steady_roll(controller):
     asks cancelled the roll moment its diagonal feet can make and it trotted rolled to one side;
     with the robot-relative pitch weight its mean roll (the simulator's base, 3-6 s) stays small,
     and nothing else changed between the two runs."""
-    import pinocchio as pin
     from conftest import anymal_b_description
 
     robot = wb.load_robot(anymal_b_description())
