@@ -288,3 +288,23 @@ def test_a_biped_whose_shift_needs_a_lower_cog_gets_a_note():
         drop = float(note.split(" mm lower")[0].rsplit(" ", 1)[1]) / 1e3
         assert key_pose(robot, stance, swing, drop)[1] <= 2 * KEY_POSE_TOLERANCE
         assert key_pose(robot, stance, swing, 0.0)[1] > KEY_POSE_TOLERANCE
+
+
+def test_a_sphere_as_large_as_a_wheel_gets_a_note():
+    """IIT Centauro's wheels described as spheres of their 0.119 m radius (15 % of its standing
+    height, from the posture's own kinematics here) get a note each, and the check passes; the
+    feet of the quadruped presets (spheres of 2-3 cm) get none."""
+    from conftest import centauro_description
+    from wholebody.robots.check import WHEEL_RADIUS_FRACTION, check_robot
+
+    description = centauro_description()
+    report = check_robot(description)
+    notes = [f for f in report.findings if f.topic == "contacts" and "rolls" in f.message]
+    assert report.ok and len(notes) == 4, report.findings
+    robot = wb.load_robot(description)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    lowest = min(data.oMf[c.frame_id].translation[2] - 0.119 for c in robot.contacts)
+    assert 0.119 > WHEEL_RADIUS_FRACTION * (robot.q_ref[2] - lowest)
+    for preset in ("hyq", "anymal_c", "go1", "solo12"):
+        assert not [f for f in check_robot(preset).findings if "rolls" in f.message], preset

@@ -28,6 +28,9 @@ log = logging.getLogger(__name__)
 FLOATING_CONTACT_FRACTION = 0.01
 #: a sole tilted by more than this (deg) in the posture does not stand flat
 SOLE_TILT_DEG = 1.0
+#: a point contact whose sphere's radius exceeds this fraction of the standing base height is a
+#: wheel rather than a foot (feet of the example-robot-data quadrupeds: 4-8 %)
+WHEEL_RADIUS_FRACTION = 0.1
 
 
 @dataclass
@@ -218,6 +221,12 @@ def _contacts_on_the_floor(robot, data, report: RobotCheck) -> None:
                        f"the floor in the posture: the robot does not stand on it",
                        "choose a posture (SRDF state or a joint table) with all feet down, or "
                        "check the contact's frame, offset and radius/half_size")
+        wheel = WHEEL_RADIUS_FRACTION * float(robot.q_ref[2])
+        if c.spec.type == "point" and c.spec.radius > wheel:
+            report.add("note", "contacts", f"contact '{c.name}' is a sphere of radius "
+                       f"{c.spec.radius:.3g} m, {c.spec.radius / float(robot.q_ref[2]):.0%} of the "
+                       f"standing height: it rolls when its leg turns it and carries no moment, "
+                       f"which slopes may need (docs/robots.md, wheels)")
         if c.spec.type == "rectangle":
             tilt = math.degrees(math.acos(min(1.0, abs(float(placement.rotation[2, 2])))))
             row["tilt_deg"] = tilt
