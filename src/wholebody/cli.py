@@ -190,6 +190,8 @@ def _cmd_run(args) -> int:
         failed = ScenarioResult(scenario.name, robot.name, controller, False,
                                 {"diverged_at_s": exc.t}, params, [str(exc)],
                                 wall_time_s=time.perf_counter() - start)
+        failed.incidents = exc.incidents
+        _print_incidents(failed.incidents)
         _report_cut_short(failed, out_dir, f"FAILED: {exc}")
         _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): diverged",
                       out_dir)
@@ -203,10 +205,29 @@ def _cmd_run(args) -> int:
     _print_metrics(result.summary()["metrics"], indent=2)
     for note in result.notes:
         print(f"  note: {note}")
+    if not result.success:
+        _print_incidents(result.incidents)
     print(f"wrote {out_dir / 'summary.json'}" +
           (f" and {len(result.figures)} figure(s)" if result.figures else ""))
     _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): {status}", out_dir)
     return EXIT_OK if result.success else EXIT_SCENARIO_FAILED
+
+
+#: how many of a failed run's first incidents the command line prints (summary.json has all)
+PRINTED_INCIDENTS = 6
+
+
+def _print_incidents(incidents) -> None:
+    """The first incidents of a failed run, one per line ("5.712 s  joint ... limit")."""
+    if not incidents:
+        return
+    print("  first incidents in the twin:")
+    several = len({x.get("run") for x in incidents}) > 1
+    for x in incidents[:PRINTED_INCIDENTS]:
+        run = f" [{x['run']}]" if several else ""
+        print(f"    {x['t']:.3f} s{run}  {x['what']}")
+    if len(incidents) > PRINTED_INCIDENTS:
+        print(f"    ... {len(incidents) - PRINTED_INCIDENTS} more in summary.json")
 
 
 def _check_observed(args, scenario, params: dict) -> None:

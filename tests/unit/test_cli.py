@@ -369,7 +369,7 @@ def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys, monkey
     made for a 90 kg Talos (kp = 1000, kd = 30; the defaults before they were derived from the
     robot), far too stiff for a 2.5 kg robot: MuJoCo diverges within the first hundredth of a
     second. The run ends with exit 1 and a summary that says when, not with an error from
-    downstream."""
+    downstream, and what went wrong before (the incidents, printed too)."""
     robot = tmp_path / "solo12.toml"
     robot.write_text('name = "solo12"\nurdf = "erd:solo_description/robots/solo12.urdf"\n'
                      'srdf = "erd:solo_description/srdf/solo.srdf"\nposture = "standing"\n'
@@ -382,4 +382,8 @@ def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys, monkey
                  "--out", str(out), "--no-progress"]) == 1
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success"] is False and 0.0 < summary["metrics"]["diverged_at_s"] < 0.1
-    assert "the simulation diverged at t = " in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert "the simulation diverged at t = " in printed.err
+    incidents = summary["incidents"]
+    assert incidents and all(x["t"] <= summary["metrics"]["diverged_at_s"] for x in incidents)
+    assert "first incidents in the twin:" in printed.out and incidents[0]["what"] in printed.out

@@ -13,6 +13,8 @@ from typing import Any, Callable, ClassVar, Sequence
 import numpy as np
 
 from ..cycle import ENGINES
+from ..sim.incidents import IncidentLog
+from ..sim.simulator import SimulationDiverged
 from ..tasks.momentum import MOMENTUM_D_ANGULAR, MOMENTUM_D_LINEAR, MOMENTUM_P
 
 log = logging.getLogger(__name__)
@@ -383,9 +385,12 @@ class ScenarioResult:
     wall_time_s: float = 0.0
     #: the run was cut short (Ctrl-C): ``metrics`` and ``figures`` are what was known by then
     interrupted: bool = False
+    #: what first went wrong in the twin (:class:`~wholebody.sim.incidents.Incident` dicts), when
+    #: the run was watched by an :class:`~wholebody.sim.incidents.IncidentLog`; None otherwise
+    incidents: list[dict] | None = None
 
     def summary(self) -> dict[str, Any]:
-        return {
+        out = {
             "scenario": self.scenario,
             "robot": self.robot,
             "controller": self.controller,
@@ -397,6 +402,9 @@ class ScenarioResult:
             "figures": self.figures,
             "wall_time_s": round(self.wall_time_s, 3),
         }
+        if self.incidents is not None:
+            out["incidents"] = self.incidents
+        return out
 
     def write(self, out_dir: Path) -> Path:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -489,21 +497,30 @@ class Scenario:
             out_dir: Path | None = None, progress: bool = False,
             observers: Sequence = ()) -> ScenarioResult:
         """Run the scenario; ``observers`` watch its simulations (only for a scenario that
-        declares ``simulations``, ValueError otherwise)."""
+        declares ``simulations``, ValueError otherwise). A scenario that declares them is also
+        watched by an :class:`~wholebody.sim.incidents.IncidentLog`, whose first incidents go
+        into ``result.incidents`` (or, if the simulation diverged, into the exception's)."""
         controller = controller or self.controllers[0]
         if controller not in self.controllers:
             raise ValueError(f"scenario '{self.name}' has no controller '{controller}'; "
                              f"controllers: {', '.join(self.controllers)}")
         params = self.validate(robot, overrides)
-        extra = {}
-        if observers:
-            if self.simulations is None:
-                raise ValueError(f"scenario '{self.name}' does not declare its simulations; it "
-                                 f"takes no observers")
-            extra["observers"] = tuple(observers)
+        extra, incidents = {}, None
+        if observers and self.simulations is None:
+            raise ValueError(f"scenario '{self.name}' does not declare its simulations; it "
+                             f"takes no observers")
+        if self.simulations is not None:
+            incidents = IncidentLog()
+            extra["observers"] = (*observers, incidents)
         start = time.perf_counter()
-        result = self.run_function(robot, controller, params, out_dir, progress, **extra)
+        try:
+            result = self.run_function(robot, controller, params, out_dir, progress, **extra)
+        except SimulationDiverged as exc:
+            exc.incidents = None if incidents is None else incidents.as_dicts()
+            raise
         result.wall_time_s = time.perf_counter() - start
+        if incidents is not None:
+            result.incidents = incidents.as_dicts()
         if out_dir is not None:
             result.write(Path(out_dir))
         return result

@@ -30,6 +30,8 @@ def run_closed_loop(sim: Simulator, controller, duration: float, control_period:
                 result = controller.compute(q, v, sim.t)
                 tau = result.tau
                 failures += not result.ok
+                for observer in sim.observers:
+                    observer.controller_result(sim, result)
                 if on_result is not None:
                     on_result(sim.t, result)
                 if until is not None and until():

@@ -103,6 +103,9 @@ class LiveView:
         if ahead > 0:
             time.sleep(float(np.minimum(ahead, 1.0)))
 
+    def controller_result(self, sim, result) -> None:
+        """The view shows the twin only."""
+
     def close(self) -> None:
         """Close the window and wait for the viewer's thread to end (a process that exits while
         that thread tears down GLFW crashes)."""

@@ -136,6 +136,9 @@ class ReplayRecorder:
         d = sim.data
         rec.body_poses.append([np.r_[d.xpos[b], d.xquat[b]] for b in self._bodies])
 
+    def controller_result(self, sim, result) -> None:
+        """A replay shows the twin only."""
+
     def _contact_points(self, sim, wrenches: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where each contact force acts (sole: its CoP; point foot: the bottom of the sphere)
         and whether the contact carries load."""

@@ -35,6 +35,9 @@ class SimulationDiverged(RuntimeError):
 
     def __init__(self, t: float, what: str):
         self.t = t
+        #: what first went wrong before (:class:`~wholebody.sim.incidents.Incident` dicts), filled
+        #: in by :meth:`~wholebody.scenarios.base.Scenario.run`; None if nobody watched
+        self.incidents: list[dict] | None = None
         super().__init__(f"the simulation diverged at t = {t:.3f} s ({what}): the torques or the "
                          f"robot model drove the state to NaN/inf")
 
@@ -67,13 +70,17 @@ class SimObserver(Protocol):
     """Watches a :class:`Simulator`: ``start(sim)`` after every reset (the state at t = 0), then
     ``step(sim)`` at the start of every step, when the simulator holds what its log records for
     that step: the state (``sim.t``, ``sim.state()``), the contact wrenches of that state and the
-    pushes applied during the step (``sim.active_pushes``). The replay recorder and the live
-    viewer are observers; one with ``draws_twin = True`` gets a twin with the robot's skeleton
-    geoms (visual only)."""
+    pushes applied during the step (``sim.active_pushes``); ``controller_result(sim, result)``
+    with each control cycle's :class:`~wholebody.formulation.Solution`, from the closed loop
+    (:func:`~wholebody.scenarios.loop.run_closed_loop`), before the step that applies it. The
+    replay recorder, the live viewer and the incident log are observers; one with
+    ``draws_twin = True`` gets a twin with the robot's skeleton geoms (visual only)."""
 
     def start(self, sim: "Simulator") -> None: ...
 
     def step(self, sim: "Simulator") -> None: ...
+
+    def controller_result(self, sim: "Simulator", result) -> None: ...
 
 
 class Simulator:

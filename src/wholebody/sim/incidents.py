@@ -1,0 +1,85 @@
+"""What went wrong first in a simulated run: the twin's joints reaching their position limits and
+the controller's failed cycles, each with the time it first happened.
+
+A failed run's metrics say that it fell and when; the first incidents say what came before (a knee
+at its limit at 5.71 s, the first failed cycle at 5.85 s), which is where a new robot's problem is
+found. :class:`IncidentLog` is a :class:`~wholebody.sim.simulator.SimObserver`;
+:meth:`~wholebody.scenarios.base.Scenario.run` watches every scenario that declares its
+simulations with one, and ``summary.json`` has what it saw (``incidents``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Incident:
+    """Something that first happened at simulated time ``t`` (s) in the run labelled ``run``."""
+
+    t: float
+    what: str
+    run: str = ""
+
+    def as_dict(self) -> dict:
+        return {"t": round(self.t, 4), "what": self.what, **({"run": self.run} if self.run else {})}
+
+
+class IncidentLog:
+    """Watches simulations (one run per :meth:`start`, i.e. per simulator reset) and keeps, for each
+    run, the first time each of these happened:
+
+    * a joint of the twin at or beyond a limit of its range, once per joint and side;
+    * a controller cycle that failed (``Solution.ok`` false: held or clipped), with its status.
+
+    ``incidents`` lists them run by run (runs by their simulator's ``label``; a reset starts its
+    run over), each run's in time order.
+    """
+
+    def __init__(self):
+        self._runs: dict[str, list[Incident]] = {}
+        self._label = ""
+        self._failure_seen = False
+
+    def start(self, sim) -> None:
+        self._label = sim.label
+        self._runs[self._label] = []
+        self._failure_seen = False
+        model = sim.model
+        limited = np.flatnonzero(model.jnt_limited)
+        self._names = [model.joint(int(j)).name for j in limited]
+        self._qpos = model.jnt_qposadr[limited]
+        self._lower, self._upper = model.jnt_range[limited].T.copy()
+        self._seen = np.zeros((limited.size, 2), dtype=bool)  # [joint, lower / upper]
+
+    def step(self, sim) -> None:
+        q = sim.data.qpos[self._qpos]
+        low, high = q <= self._lower, q >= self._upper
+        if not (low.any() or high.any()):
+            return
+        beyond = np.stack((low, high), axis=1) & ~self._seen
+        for joint, side in zip(*np.nonzero(beyond)):
+            self._seen[joint, side] = True
+            limit = (self._lower, self._upper)[side][joint]
+            self._add(sim.t, f"joint {self._names[joint]} at its {('lower', 'upper')[side]} "
+                             f"position limit ({limit:.3f})")
+
+    def controller_result(self, sim, result) -> None:
+        if not result.ok and not self._failure_seen:
+            self._failure_seen = True
+            self._add(sim.t, f"first failed controller cycle ({result.outcome.value}): "
+                             f"{result.status}")
+
+    def _add(self, t: float, what: str) -> None:
+        self._runs.setdefault(self._label, []).append(Incident(float(t), what, self._label))
+
+    @property
+    def incidents(self) -> list[Incident]:
+        """Every run's first incidents, run by run (in the order they started), in time order."""
+        return [x for run in self._runs.values() for x in run]
+
+    def as_dicts(self) -> list[dict]:
+        """:attr:`incidents` as JSON-ready dicts (``t``, ``what``, and ``run`` if labelled)."""
+        return [x.as_dict() for x in self.incidents]

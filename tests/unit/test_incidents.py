@@ -1,0 +1,107 @@
+"""The incident log: what first went wrong in a run, checked against the simulator's own log of
+joint positions and the Pinocchio model's limits, and against the controller results the closed
+loop saw; and it reaches summary.json through Scenario.run."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wholebody.guard import Outcome
+from wholebody.formulation import Solution
+from wholebody.scenarios import get_scenario
+from wholebody.scenarios.base import ScenarioResult
+from wholebody.scenarios.loop import run_closed_loop
+from wholebody.sim.incidents import IncidentLog
+from wholebody.sim.simulator import Simulator
+
+
+class ConstantTorque:
+    """A controller that sends ``tau`` every cycle; the cycles listed in ``failing`` (0-based)
+    are reported as held with the status 'stub failure'."""
+
+    def __init__(self, tau, failing=()):
+        self.tau, self.failing, self.cycle, self.times = np.asarray(tau, float), set(failing), 0, []
+
+    def compute(self, q, v, t=0.0):
+        outcome = Outcome.HELD if self.cycle in self.failing else Outcome.SOLVED
+        self.cycle += 1
+        self.times.append(t)
+        return Solution(qdd=np.zeros(0), lam=np.zeros(0), tau=self.tau, forces={},
+                        outcome=outcome, status="stub failure" if outcome is Outcome.HELD
+                        else "solved", level_costs=np.zeros(0))
+
+
+def _first_limit_times(sim, robot) -> dict[tuple[str, str], float]:
+    """(joint, side) -> first logged time at which the joint's position was at or beyond the
+    model's limit on that side (Pinocchio convention, the robot's own model)."""
+    t, q = np.asarray(sim.log.t), np.asarray(sim.log.q)[:, robot.model.nq - robot.na:]
+    lower = robot.model.lowerPositionLimit[-robot.na:]
+    upper = robot.model.upperPositionLimit[-robot.na:]
+    out = {}
+    for j, name in enumerate(robot.joint_names):
+        for side, hit in (("lower", q[:, j] <= lower[j]), ("upper", q[:, j] >= upper[j])):
+            if hit.any():
+                out[(name, side)] = float(t[np.argmax(hit)])
+    return out
+
+
+def _limit_incidents(log) -> dict[tuple[str, str], float]:
+    out = {}
+    for x in log.incidents:
+        if x.what.startswith("joint "):
+            name, side = x.what.split()[1], x.what.split()[4]
+            assert (name, side) not in out, "each joint and side is reported once"
+            out[(name, side)] = x.t
+    return out
+
+
+def test_joint_limits_are_reported_when_the_logged_state_first_reaches_them(robots):
+    """HyQ pushed by half its torque limits on every joint for 0.4 s: its joints run into their
+    ranges. Every (joint, side) whose logged position reached the model's limit is reported, at
+    that step's time, and nothing else."""
+    robot = robots["hyq"]
+    log = IncidentLog()
+    sim = Simulator(robot, observers=[log])
+    tau = 0.5 * robot.torque_limits.upper(robot.q_ref[7:])
+    run_closed_loop(sim, ConstantTorque(tau), 0.4, control_period=0.004)
+    expected = _first_limit_times(sim, robot)
+    assert len(expected) >= 4  # the check below compares something
+    assert _limit_incidents(log) == expected
+    assert all(x.run == "" for x in log.incidents)
+
+
+def test_the_first_failed_cycle_is_reported_once_with_its_status(robots):
+    robot = robots["hyq"]
+    hold = np.zeros(robot.na)  # 0.05 s: the robot only starts to sag
+    log = IncidentLog()
+    sim = Simulator(robot, observers=[log], label="stub")
+    controller = ConstantTorque(hold, failing=(3, 4, 9))
+    run_closed_loop(sim, controller, 0.05, control_period=0.004)
+    failures = [x for x in log.incidents if "controller" in x.what]
+    assert len(failures) == 1
+    assert failures[0].t == controller.times[3]
+    assert failures[0].what == "first failed controller cycle (held): stub failure"
+    assert failures[0].as_dict() == {"t": round(controller.times[3], 4), "what": failures[0].what,
+                                     "run": "stub"}
+    sim.reset()  # a reset starts the run over
+    assert log.incidents == []
+    run_closed_loop(sim, ConstantTorque(hold), 0.05, control_period=0.004)
+    assert log.incidents == []
+
+
+def test_runs_are_kept_apart_by_label(robots):
+    robot = robots["hyq"]
+    log = IncidentLog()
+    for label, failing in (("first", (2,)), ("second", (5,))):
+        sim = Simulator(robot, observers=[log], label=label)
+        run_closed_loop(sim, ConstantTorque(np.zeros(robot.na), failing), 0.05,
+                        control_period=0.004)
+    assert [(x.run, round(x.t, 3)) for x in log.incidents] == [("first", 0.008), ("second", 0.02)]
+
+
+def test_scenario_run_puts_the_incidents_into_its_summary(robots):
+    """A scenario that declares its simulations is watched: a short stand has an (empty) incident
+    list in its summary; a result nobody watched has no such key."""
+    result = get_scenario("stand").run(robots["hyq"], overrides={"duration": "0.2"})
+    assert result.incidents == [] and result.summary()["incidents"] == []
+    assert "incidents" not in ScenarioResult("stand", "hyq", "standing", True, {}, {}).summary()
