@@ -194,7 +194,7 @@ def _cmd_run(args) -> int:
         _print_incidents(failed.incidents)
         _report_cut_short(failed, out_dir, f"FAILED: {exc}")
         _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): diverged",
-                      out_dir)
+                      out_dir, failed.incidents)
         return EXIT_SCENARIO_FAILED
     finally:
         if view is not None:
@@ -209,7 +209,8 @@ def _cmd_run(args) -> int:
         _print_incidents(result.incidents)
     print(f"wrote {out_dir / 'summary.json'}" +
           (f" and {len(result.figures)} figure(s)" if result.figures else ""))
-    _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): {status}", out_dir)
+    _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): {status}", out_dir,
+                  result.incidents)
     return EXIT_OK if result.success else EXIT_SCENARIO_FAILED
 
 
@@ -264,13 +265,14 @@ def _observers(args, out_dir: Path):
     return (ReplayRecorder() if args.replay else None), (LiveView() if args.view else None)
 
 
-def _write_replay(recorder, title: str, out_dir: Path) -> None:
-    """Write ``out_dir/replay.html`` from what ``recorder`` (``--replay``) saw, if anything."""
+def _write_replay(recorder, title: str, out_dir: Path, incidents=None) -> None:
+    """Write ``out_dir/replay.html`` from what ``recorder`` (``--replay``) saw, if anything, with
+    the run's ``incidents``."""
     if recorder is None or not any(r.frames for r in recorder.recordings):
         return
     from .report.replay import write_replay
 
-    path = write_replay(out_dir / "replay.html", recorder.recordings, title)
+    path = write_replay(out_dir / "replay.html", recorder.recordings, title, incidents)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
 
 

@@ -93,3 +93,38 @@ def test_replay_renders_and_the_slider_moves_the_robot(scenario, robot, settings
     moved = _changed(shots[0], shots[1])
     assert (moved & robot_area).sum() > 300, "the robot did not move between the slider positions"
     assert (moved & robot_area).sum() > 0.5 * moved.sum(), "what changed is not the robot"
+
+
+def test_an_incident_link_moves_the_replay_to_its_time(tmp_path):
+    """The first incidents are listed on the page; clicking one stops the player at its time
+    (the clock and the slider say so) and marks it and the earlier ones as past."""
+    _browser_or_skip()
+    import wholebody as wb
+    from wholebody.control.standing import StandingController
+    from wholebody.report.replay import write_replay
+    from wholebody.scenarios.loop import run_closed_loop
+    from wholebody.sim.recorder import ReplayRecorder
+    from wholebody.sim.simulator import Simulator
+
+    robot = wb.load_robot("hyq")
+    recorder = ReplayRecorder()
+    run_closed_loop(Simulator(robot, observers=[recorder]), StandingController(robot), 1.0)
+    incidents = [{"t": 0.3, "what": "joint lf_kfe_joint at its upper position limit (1.000)"},
+                 {"t": 0.725, "what": "first failed controller cycle (held): <b>not markup</b>"}]
+    replay = write_replay(tmp_path / "replay.html", recorder.recordings, "hyq", incidents)
+    with browser.replay_page(replay) as (page, problems):
+        links = page.locator("#wb-incidents a")
+        assert links.count() == 2
+        assert links.nth(1).text_content() == "0.725 s  " + incidents[1]["what"]  # text, not HTML
+        links.nth(1).click()
+        browser.rendered(page)
+        assert "t = 0.7" in page.evaluate("document.getElementById('wb-clock').textContent")
+        assert abs(float(page.evaluate("document.getElementById('wb-time').value")) - 0.725) < 0.03
+        past = page.evaluate("[...document.querySelectorAll('#wb-incidents a')]"
+                             ".map(a => a.classList.contains('past'))")
+        assert past == [True, True]
+        links.nth(0).click()
+        browser.rendered(page)
+        assert page.evaluate("[...document.querySelectorAll('#wb-incidents a')]"
+                             ".map(a => a.classList.contains('past'))") == [True, False]
+    assert not problems, problems

@@ -14,7 +14,7 @@ import pytest
 
 from wholebody.cli import main
 from wholebody.control.standing import StandingController
-from wholebody.report.replay import replay_html, unpack
+from wholebody.report.replay import replay_html, robot_visuals, unpack
 from wholebody.robots.locate import resolve_model_path
 from wholebody.scenarios import SCENARIOS, get_scenario
 from wholebody.scenarios.base import Scenario
@@ -56,6 +56,18 @@ def test_the_page_fetches_nothing(replay):
     for command in _commands(html):  # textures and meshes are inline too
         text = repr(command)
         assert "http" not in text or set(re.findall(r"https?://[^\s'\"]+", text)) <= NAMESPACES
+
+
+def test_incidents_are_in_the_settings_and_cannot_close_the_script(replay):
+    """A run's incidents ride in the page's settings as given, even text that looks like markup
+    or would end the <script> element (the page shows them as text, see the browser test)."""
+    _, recorder, html = replay
+    assert json.loads(_element(html, "wb-settings"))["incidents"] == []
+    incidents = [{"t": 0.1, "what": "first failed controller cycle (held): </script><b>x</b>",
+                  "run": "passive"}]
+    settings = json.loads(_element(replay_html(recorder.recordings, "t", incidents),
+                                   "wb-settings"))
+    assert settings["incidents"] == incidents
 
 
 def test_frames_are_the_log_subsampled(replay):
@@ -111,6 +123,33 @@ def test_link_poses_are_forward_kinematics(replay, robots):
         np.testing.assert_allclose(rotation, expected.rotation, atol=1e-6)
         checked += 1
     assert checked
+
+
+def test_a_mesh_scale_applies_once(robots):
+    """A URDF mesh's scale (talos14 draws its left parts with the right ones' meshes mirrored,
+    scale (1, -1, 1)) is on the mesh object, and the node that the animation moves carries the pose
+    alone: the animation sets only a node's position and quaternion, so a scale there would apply
+    on top of the object's (mirrored parts drawn unmirrored; meshes in millimetres, scale 0.001,
+    shrunk a thousandfold)."""
+    robot = robots["talos14"]
+    recorder = ReplayRecorder()
+    run_closed_loop(Simulator(robot, observers=[recorder]), StandingController(robot), 0.03)
+    _, visual = robot_visuals(robot)
+    mirrored = [g for g in visual.geometryObjects if np.prod(g.meshScale) < 0]
+    assert mirrored, "talos14 has mirrored meshes"
+    static, scale = {}, {}
+    for command in _commands(replay_html(recorder.recordings)):
+        path = command.get("path", "")
+        if command.get("type") == "set_transform" and "/visuals/" in path:
+            static[path] = np.asarray(command["matrix"], float).reshape(4, 4).T
+        if command.get("type") == "set_property" and command.get("property") == "scale":
+            scale[path] = np.asarray(command["value"], float)
+    for g in visual.geometryObjects:
+        node = f"/meshcat/run0/robot/visuals/{g.name}"
+        np.testing.assert_allclose(scale[f"{node}/<object>"], g.meshScale, rtol=1e-6)
+        linear = static[node][:3, :3]
+        np.testing.assert_allclose(linear.T @ linear, np.eye(3), atol=1e-9)
+        assert np.linalg.det(linear) > 0
 
 
 def test_the_scene_holds_robot_floor_and_markers(replay):

@@ -44,6 +44,7 @@ FRAME_FILL = 0.8  # the motion fills this fraction of the view (height or width)
 CAMERA_AZIMUTH_DEG, CAMERA_ELEVATION_DEG = -45.0, 18.0  # from the robot's front-right, above
 FLOOR_SIZE = 20.0  # side of the drawn floor, in h
 GRID_CELL = 0.5  # side of the grid cells drawn on the floor and the scene's boxes, in h
+SHOWN_INCIDENTS = 8  # incidents listed on the page (summary.json has them all)
 COLORS = {"contact": 0x2f6fdf, "push": 0xd02090, "com": 0xe02020, "cop": 0x10a040,
           "floor": 0xd8d8dc}
 
@@ -295,9 +296,12 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
         for w in caught:
             log.warning("replay: %s", w.message)
         visuals = [f"{root}/robot/visuals/{g.name}" for g in visual.geometryObjects]
-        for g, path in zip(visual.geometryObjects, visuals):  # not in the animated pose; also
-            # resets what a clone copied from its source
+        for g, path in zip(visual.geometryObjects, visuals):
+            # the mesh's scale on the object (also resets what a clone copied from its source);
+            # the node's transform is the pose alone: the animation sets only its position and
+            # quaternion, so a scale left there by loadViewerModel would apply twice
             vis[f"{path}/<object>"].set_property("scale", [float(x) for x in g.meshScale])
+            vis[path].set_transform(np.eye(4))
         arrays = rec.arrays()
         moving = {}
         for j, g in enumerate(rec.geoms):
@@ -419,18 +423,23 @@ def unpack(text: str) -> list[dict]:
     return out
 
 
-def replay_html(recordings: Sequence[Recording], title: str = "") -> str:
-    """The self-contained replay page of ``recordings``."""
+def replay_html(recordings: Sequence[Recording], title: str = "",
+                incidents: Sequence[dict] | None = None) -> str:
+    """The self-contained replay page of ``recordings``; ``incidents`` (``summary.json``'s, see
+    :mod:`wholebody.sim.incidents`) are listed on it as links to their times."""
     commands, settings = build_commands(recordings)
     settings["title"] = title or recordings[0].robot.name
+    settings["incidents"] = list(incidents or ())
+    settings["shown_incidents"] = SHOWN_INCIDENTS
     viewer_js = (resources.files("meshcat") / "viewer" / "dist" / "main.min.js").read_text(
         encoding="utf-8")
     return page(viewer_js, settings, pack(commands))
 
 
-def write_replay(path, recordings: Sequence[Recording], title: str = "") -> Path:
+def write_replay(path, recordings: Sequence[Recording], title: str = "",
+                 incidents: Sequence[dict] | None = None) -> Path:
     """Write :func:`replay_html` to ``path``; returns the path."""
     path = Path(path)
-    path.write_text(replay_html(recordings, title), encoding="utf-8")
+    path.write_text(replay_html(recordings, title, incidents), encoding="utf-8")
     log.info("replay: wrote %s (%.1f MB)", path, path.stat().st_size / 1e6)
     return path

@@ -23,6 +23,9 @@ html, body { margin: 0; height: 100%; overflow: hidden; font: 13px system-ui, sa
 #wb-time { flex: 1; }
 #wb-clock { font-variant-numeric: tabular-nums; min-width: 10em; }
 #wb-push { color: #d02090; min-width: 7em; font-variant-numeric: tabular-nums; }
+#wb-incidents a { display: block; color: #a03000; text-decoration: none;
+  font-variant-numeric: tabular-nums; }
+#wb-incidents a.past { color: #606060; }
 """
 
 # Our player: meshcat's animator only evaluates the clip at a time (``seek``); the clock, the
@@ -67,6 +70,28 @@ _SCRIPT = r"""
     $("wb-legend").innerHTML = out;
   }
 
+  // the run's first incidents (summary.json's), each a link to its time
+  function incidents(seek) {
+    const list = settings.incidents || [];
+    if (!list.length) return;
+    const several = new Set(list.map((x) => x.run || "")).size > 1;
+    const box = $("wb-incidents");
+    box.textContent = "first incidents:";
+    for (const x of list.slice(0, settings.shown_incidents)) {
+      const a = document.createElement("a");
+      a.href = "#";
+      a.dataset.t = x.t;
+      a.textContent = `${x.t.toFixed(3)} s  ${several && x.run ? "[" + x.run + "] " : ""}${x.what}`;
+      a.addEventListener("click", (e) => { e.preventDefault(); seek(x.t - settings.t0); });
+      box.appendChild(a);
+    }
+    if (list.length > settings.shown_incidents) {
+      const more = document.createElement("div");
+      more.textContent = `${list.length - settings.shown_incidents} more in summary.json`;
+      box.appendChild(more);
+    }
+  }
+
   async function main() {
     const viewer = new MeshCat.Viewer($("wb-pane"));
     viewer.gui.close();
@@ -105,6 +130,9 @@ _SCRIPT = r"""
       slider.value = time;
       $("wb-clock").textContent =
         `t = ${(settings.t0 + time).toFixed(2)} / ${(settings.t0 + span).toFixed(2)} s`;
+      for (const a of document.querySelectorAll("#wb-incidents a")) {
+        a.classList.toggle("past", parseFloat(a.dataset.t) <= settings.t0 + time + 1e-9);
+      }
       const k = Math.min(Math.round(time / period), settings.push_magnitude.length - 1);
       const push = settings.push_magnitude[k] || 0;
       $("wb-push").textContent = push > 0 ? `push ${push.toFixed(0)} N` : "";
@@ -136,6 +164,7 @@ _SCRIPT = r"""
       }
       requestAnimationFrame(tick);
     }
+    incidents((t) => { setPlaying(false); show(t); });
     show(0);
     requestAnimationFrame(tick);
     requestAnimationFrame(() => requestAnimationFrame(() => {
@@ -161,7 +190,7 @@ def _script_safe(text: str) -> str:
 
 def page(viewer_js: str, settings: dict, data: str) -> str:
     """The page: ``viewer_js`` (meshcat's main.min.js), ``settings`` (JSON: title, time span,
-    frame period, camera, legend) and ``data`` (the packed commands, base64)."""
+    frame period, camera, legend, incidents) and ``data`` (the packed commands, base64)."""
     if "</script" in viewer_js.lower():
         raise ValueError("meshcat's main.min.js contains '</script': cannot embed it")
     title = html.escape(settings.get("title", "replay"))
@@ -177,7 +206,7 @@ def page(viewer_js: str, settings: dict, data: str) -> str:
 <body>
 <div id="wb-pane"></div>
 <div id="wb-info"><div class="title">{title}</div><div id="wb-legend"></div>
-<div id="wb-status">loading&hellip;</div></div>
+<div id="wb-incidents"></div><div id="wb-status">loading&hellip;</div></div>
 <div id="wb-bar">
 <button id="wb-play" type="button">&#9654; play</button>
 <input id="wb-time" type="range" min="0" max="1" step="0.001" value="0" aria-label="time">
