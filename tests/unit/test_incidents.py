@@ -70,6 +70,29 @@ def test_joint_limits_are_reported_when_the_logged_state_first_reaches_them(robo
     assert all(x.run == "" for x in log.incidents)
 
 
+def test_a_joint_that_starts_on_a_limit_is_left_out(robots):
+    """A posture on a limit (talos's closed grippers, which then touch it on and off) is not an
+    incident, on that side; the other side still is."""
+    robot = robots["hyq"]
+    joint = robot.joint_names.index("lf_kfe_joint")
+    lower = robot.model.lowerPositionLimit[7 + joint]
+    upper = robot.model.upperPositionLimit[7 + joint]
+    q = robot.q_ref.copy()
+    q[7 + joint] = upper
+    log = IncidentLog()
+    sim = Simulator(robot, observers=[log])
+    sim.reset(q)
+    adr = sim.model.jnt_qposadr[sim.model.joint("lf_kfe_joint").id]
+    for value in (upper, upper - 0.1, upper):
+        sim.data.qpos[adr] = value
+        log.step(sim)
+    assert log.incidents == []
+    sim.data.qpos[adr] = lower
+    log.step(sim)
+    assert [x.what for x in log.incidents] == [
+        f"joint lf_kfe_joint at its lower position limit ({lower:.3f})"]
+
+
 def test_the_first_failed_cycle_is_reported_once_with_its_status(robots):
     robot = robots["hyq"]
     hold = np.zeros(robot.na)  # 0.05 s: the robot only starts to sag

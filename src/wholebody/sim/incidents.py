@@ -31,7 +31,8 @@ class IncidentLog:
     """Watches simulations (one run per :meth:`start`, i.e. per simulator reset) and keeps, for each
     run, the first time each of these happened:
 
-    * a joint of the twin at or beyond a limit of its range, once per joint and side;
+    * a joint of the twin arriving at or beyond a limit of its range, once per joint and side (a
+      joint that starts on that limit is left out for the run);
     * a controller cycle that failed (``Solution.ok`` false: held or clipped), with its status.
 
     ``incidents`` lists them run by run (runs by their simulator's ``label``; a reset starts its
@@ -52,15 +53,17 @@ class IncidentLog:
         self._names = [model.joint(int(j)).name for j in limited]
         self._qpos = model.jnt_qposadr[limited]
         self._lower, self._upper = model.jnt_range[limited].T.copy()
-        self._seen = np.zeros((limited.size, 2), dtype=bool)  # [joint, lower / upper]
+        q = sim.data.qpos[self._qpos]  # a posture on a limit (e.g. closed grippers, which then
+        # touch it on and off) is not something that went wrong: only arrivals count
+        self._seen = np.stack((q <= self._lower, q >= self._upper), axis=1)  # [joint, side]
 
     def step(self, sim) -> None:
         q = sim.data.qpos[self._qpos]
-        low, high = q <= self._lower, q >= self._upper
+        low = (q <= self._lower) & ~self._seen[:, 0]
+        high = (q >= self._upper) & ~self._seen[:, 1]
         if not (low.any() or high.any()):
             return
-        beyond = np.stack((low, high), axis=1) & ~self._seen
-        for joint, side in zip(*np.nonzero(beyond)):
+        for joint, side in zip(*np.nonzero(np.stack((low, high), axis=1))):
             self._seen[joint, side] = True
             limit = (self._lower, self._upper)[side][joint]
             self._add(sim.t, f"joint {self._names[joint]} at its {('lower', 'upper')[side]} "
