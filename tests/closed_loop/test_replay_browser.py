@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import os
 import sys
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -128,3 +129,55 @@ def test_an_incident_link_moves_the_replay_to_its_time(tmp_path):
         assert page.evaluate("[...document.querySelectorAll('#wb-incidents a')]"
                              ".map(a => a.classList.contains('past'))") == [True, False]
     assert not problems, problems
+
+
+def _standing_recordings(name: str, duration: float):
+    import wholebody as wb
+    from wholebody.control.standing import StandingController
+    from wholebody.scenarios.loop import run_closed_loop
+    from wholebody.sim.recorder import ReplayRecorder
+    from wholebody.sim.simulator import Simulator
+
+    robot = wb.load_robot(name)
+    recorder = ReplayRecorder()
+    run_closed_loop(Simulator(robot, observers=[recorder]), StandingController(robot), duration)
+    return recorder.recordings
+
+
+def test_a_command_the_viewer_cannot_carry_out_is_skipped_and_reported(tmp_path):
+    """One broken record (bytes msgpack cannot decode) does not stop the page: it becomes ready,
+    draws the rest, and says how many commands failed."""
+    _browser_or_skip()
+    from wholebody.report import replay as rp
+
+    commands, settings = rp.build_commands(_standing_recordings("hyq", 0.2))
+    commands.insert(len(commands) // 2, rp.COMMAND + b"\xc1")  # 0xc1: never used by msgpack
+    viewer_js = (resources.files("meshcat") / "viewer" / "dist" / "main.min.js").read_text(
+        encoding="utf-8")
+    path = tmp_path / "broken.html"
+    path.write_text(rp.page(viewer_js, {**settings, "title": "broken"}, rp.pack(commands)))
+    with browser.replay_page(path) as (page, problems):
+        assert page.evaluate("window.wholebodyReplay.failed.length") == 1
+        assert "1 scene command(s) could not be drawn" in page.evaluate(
+            "document.getElementById('wb-status').textContent")
+    assert not problems, problems
+
+
+def test_anymal_c_meshes_are_drawn_without_a_failed_command(tmp_path, monkeypatch):
+    """ANYmal C's base.dae mixes parts with and without texture coordinates, which meshcat's
+    viewer cannot merge: sent as a Collada file, the page reports failed commands; drawn from the
+    triangles Pinocchio loaded (what collada_drawable decides), none."""
+    _browser_or_skip()
+    from wholebody.report import replay as rp
+
+    recordings = _standing_recordings("anymal_c", 0.1)
+    failed = {}
+    for label, convert in (("as files", False), ("converted", True)):
+        if not convert:
+            monkeypatch.setattr(rp, "_draw_from_triangles", lambda visual: set())
+        else:
+            monkeypatch.undo()
+        path = rp.write_replay(tmp_path / f"{label}.html", recordings, label)
+        with browser.replay_page(path) as (page, problems):
+            failed[label] = page.evaluate("window.wholebodyReplay.failed.length")
+    assert failed["as files"] >= 1 and failed["converted"] == 0

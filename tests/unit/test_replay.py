@@ -7,6 +7,8 @@ from __future__ import annotations
 import json
 import re
 import sys
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -14,7 +16,7 @@ import pytest
 
 from wholebody.cli import main
 from wholebody.control.standing import StandingController
-from wholebody.report.replay import replay_html, robot_visuals, unpack
+from wholebody.report.replay import collada_drawable, replay_html, robot_visuals, unpack
 from wholebody.robots.locate import resolve_model_path
 from wholebody.scenarios import SCENARIOS, get_scenario
 from wholebody.scenarios.base import Scenario
@@ -150,6 +152,88 @@ def test_a_mesh_scale_applies_once(robots):
         linear = static[node][:3, :3]
         np.testing.assert_allclose(linear.T @ linear, np.eye(3), atol=1e-9)
         assert np.linalg.det(linear) > 0
+
+
+def _local_hyq(tmp_path, mesh_package: str | None = None):
+    """hyq from a copy of its URDF in ``tmp_path`` (meshes moved to ``package://mesh_package/``
+    if given), as a user's own file would be."""
+    import wholebody as wb
+
+    urdf = resolve_model_path("erd:hyq_description/robots/hyq_no_sensors.urdf").read_text()
+    if mesh_package is not None:
+        urdf = re.sub(r'filename="package://[^"]*/([^/"]+)"',
+                      rf'filename="package://{mesh_package}/\1"', urdf)
+    (tmp_path / "hyq.urdf").write_text(urdf)
+    preset = (resources.files("wholebody.robots") / "presets" / "hyq.toml").read_text()
+    (tmp_path / "hyq.toml").write_text(preset.replace(
+        'urdf = "erd:hyq_description/robots/hyq_no_sensors.urdf"', 'urdf = "hyq.urdf"'))
+    return wb.load_robot(tmp_path / "hyq.toml")
+
+
+def test_a_local_urdf_finds_example_robot_data_meshes(tmp_path):
+    """A URDF copied out of example-robot-data still names its meshes package://example-robot-data/
+    ...: they are found (example-robot-data is one of the package directories)."""
+    _, visual = robot_visuals(_local_hyq(tmp_path))
+    meshes = [g.meshPath for g in visual.geometryObjects
+              if Path(g.meshPath).suffix.lower() in (".dae", ".stl", ".obj")]
+    assert meshes and all(Path(m).is_file() for m in meshes)
+
+
+def test_missing_meshes_give_a_stick_figure_along_the_bones(tmp_path, caplog):
+    """Meshes that cannot be found (a package nowhere): a warning, and capsules from each joint to
+    its children and to the feet, checked against Pinocchio's forward kinematics."""
+    robot = _local_hyq(tmp_path, mesh_package="nowhere")
+    with caplog.at_level("WARNING"):
+        model, figure = robot_visuals(robot)
+    assert "stick figure" in caplog.text and "nowhere" in caplog.text
+    assert model is robot.model
+    data, gdata = model.createData(), figure.createData()
+    pin.forwardKinematics(model, data, robot.q_ref)
+    pin.updateFramePlacements(model, data)
+    pin.updateGeometryPlacements(model, data, figure, gdata)
+    ends = set()
+    for g, placement in zip(figure.geometryObjects, gdata.oMg):
+        half = g.geometry.halfLength
+        start = placement.act(np.array([0.0, 0.0, -half]))
+        np.testing.assert_allclose(start, data.oMi[g.parentJoint].translation, atol=1e-9)
+        ends.add(tuple(np.round(placement.act(np.array([0.0, 0.0, half])), 9)))
+    children = {tuple(np.round(data.oMi[j].translation, 9)) for j in range(2, model.njoints)}
+    feet = {tuple(np.round(data.oMf[c.frame_id].translation, 9)) for c in robot.contacts}
+    assert ends == (children | feet) - {tuple(np.round(data.oMi[1].translation, 9))}
+
+
+def _collada(*primitives: str) -> str:
+    """A Collada document with one mesh per primitive (``"triangles:NORMAL,TEXCOORD"``: its tag
+    and the inputs besides VERTEX, whose <vertices> give POSITION)."""
+    meshes = []
+    for i, text in enumerate(primitives):
+        tag, _, inputs = text.partition(":")
+        extra = "".join(f'<input semantic="{x}" source="#s{i}" offset="{k + 1}"/>'
+                        for k, x in enumerate(filter(None, inputs.split(","))))
+        meshes.append(f'<geometry id="g{i}"><mesh><vertices id="v{i}"><input semantic="POSITION" '
+                      f'source="#p{i}"/></vertices><{tag} count="1"><input semantic="VERTEX" '
+                      f'source="#v{i}" offset="0"/>{extra}<p>0 0 0</p></{tag}></mesh></geometry>')
+    return ('<?xml version="1.0"?><COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" '
+            f'version="1.4.1"><library_geometries>{"".join(meshes)}</library_geometries>'
+            '</COLLADA>')
+
+
+@pytest.mark.parametrize(("primitives", "drawable"), [
+    (("triangles:NORMAL", "polylist:NORMAL"), True),
+    (("triangles:NORMAL", "triangles:NORMAL,TEXCOORD"), False),  # ANYmal C's base.dae
+    (("triangles:NORMAL,TEXCOORD", "lines:"), True),  # lines are not merged with the meshes
+])
+def test_collada_files_meshcat_can_merge(primitives, drawable, tmp_path):
+    path = tmp_path / "mesh.dae"
+    path.write_text(_collada(*primitives))
+    assert collada_drawable(path) is drawable
+
+
+def test_an_unreadable_collada_file_is_not_drawable(tmp_path):
+    path = tmp_path / "broken.dae"
+    path.write_text("<COLLADA><unclosed>")
+    assert collada_drawable(path) is False
+    assert collada_drawable(tmp_path / "missing.dae") is False
 
 
 def test_the_scene_holds_robot_floor_and_markers(replay):

@@ -23,6 +23,7 @@ import logging
 import math
 import struct
 import warnings
+import xml.etree.ElementTree as ElementTree
 from importlib import resources
 from pathlib import Path
 from typing import Sequence
@@ -96,16 +97,23 @@ _UUID_KEYS = {"uuid", "geometry", "material", "map", "image"}
 
 def robot_visuals(robot) -> tuple[pin.Model, pin.GeometryModel]:
     """``robot``'s model rebuilt with its URDF visual geometry (meshes found through the URDF's
-    parent folders as package directories), locked joints merged as in ``robot.model``."""
-    from ..robots.locate import resolve_model_path
+    parent folders and example-robot-data's as package directories), locked joints merged as in
+    ``robot.model``; if a mesh cannot be found, the robot's own model with a stick figure
+    (:func:`stick_figure`, a warning says why)."""
+    from ..robots.locate import example_robot_data_dir, resolve_model_path
 
     d = robot.description
     urdf = resolve_model_path(d.urdf, d.base_dir)
     full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        visual = pin.buildGeomFromUrdf(full, str(urdf), pin.GeometryType.VISUAL,
-                                       package_dirs=[str(p) for p in urdf.parents])
+    packages = [str(p) for p in urdf.parents] + [str(example_robot_data_dir().parents[1])]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            visual = pin.buildGeomFromUrdf(full, str(urdf), pin.GeometryType.VISUAL,
+                                           package_dirs=packages)
+    except ValueError as exc:  # Pinocchio's "Mesh ... could not be found"
+        log.warning("replay: %s; the robot is drawn as a stick figure", str(exc).rstrip("."))
+        return robot.model, stick_figure(robot)
     model = full
     if d.locked_joints:
         posture = type(robot).full_posture(full, d)  # the posture robot.model was reduced at
@@ -115,6 +123,73 @@ def robot_visuals(robot) -> tuple[pin.Model, pin.GeometryModel]:
         raise RuntimeError(f"robot '{robot.name}': the visual model's joints differ from the "
                            f"robot's")
     return model, visual
+
+
+#: Collada primitives that three.js's ColladaLoader makes meshes of (lines are drawn apart)
+_COLLADA_MESH_PRIMITIVES = {"triangles", "polylist", "polygons", "trifans", "tristrips"}
+
+
+def collada_drawable(path) -> bool:
+    """Whether meshcat's viewer can draw the Collada file ``path``: it merges the file's meshes
+    into one geometry, which fails (and, unguarded, stops the page) unless they all carry the same
+    vertex attributes (ANYmal C's ``base.dae``: five parts without texture coordinates, one with)."""
+    try:
+        root = ElementTree.parse(path).getroot()
+    except (ElementTree.ParseError, OSError):
+        return False
+    ns = root.tag[:root.tag.index("}") + 1] if root.tag.startswith("{") else ""
+    kinds = set()
+    for mesh in root.iter(f"{ns}mesh"):
+        shared = {i.get("semantic") for v in mesh.iter(f"{ns}vertices")
+                  for i in v.findall(f"{ns}input")}
+        for primitive in mesh:
+            if primitive.tag[len(ns):] not in _COLLADA_MESH_PRIMITIVES:
+                continue
+            semantics = set()
+            for i in primitive.findall(f"{ns}input"):
+                semantic = i.get("semantic")
+                semantics |= shared if semantic == "VERTEX" else {semantic + (i.get("set") or "")}
+            kinds.add(frozenset(semantics))
+    return len(kinds) <= 1
+
+
+def _draw_from_triangles(visual: pin.GeometryModel) -> set[int]:
+    """Geometry objects whose mesh file meshcat cannot draw (:func:`collada_drawable`) are sent as
+    the triangles Pinocchio loaded instead (already scaled, in the URDF material's colour): their
+    mesh path is cleared, which makes ``MeshcatVisualizer`` use the loaded geometry. Returns their
+    indices."""
+    undrawable = set()
+    for gid, g in enumerate(visual.geometryObjects):
+        if g.meshPath.lower().endswith(".dae") and not collada_drawable(g.meshPath):
+            log.info("replay: %s drawn from its triangles (meshcat cannot merge its parts)",
+                     g.meshPath)
+            g.meshPath = ""
+            undrawable.add(gid)
+    return undrawable
+
+
+def stick_figure(robot) -> pin.GeometryModel:
+    """Capsules along the bones of :func:`~wholebody.sim.twin.skeleton_segments` on
+    ``robot.model``, the live view's stick figure, for a robot whose meshes cannot be drawn."""
+    import coal
+
+    from ..sim.twin import SKELETON_RADIUS, SKELETON_RGBA, skeleton_segments
+
+    radius = SKELETON_RADIUS * float(robot.q_ref[2])
+    figure = pin.GeometryModel()
+    for j, k, end in skeleton_segments(robot):
+        length = float(np.linalg.norm(end))
+        placement = pin.SE3(_z_to(end / length), 0.5 * end)  # a capsule's axis is its z
+        bone = pin.GeometryObject(f"bone_{robot.model.names[j]}_{k}", j, placement,
+                                  coal.Capsule(radius, length))
+        bone.meshColor = np.array(SKELETON_RGBA)
+        figure.addGeometryObject(bone)
+    return figure
+
+
+def _z_to(direction: np.ndarray) -> np.ndarray:
+    """A rotation taking the z axis to the unit vector ``direction``."""
+    return pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), direction).matrix()
 
 
 def _homogeneous(position, quaternion_wxyz=None, rotation=None) -> np.ndarray:
@@ -274,6 +349,7 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
     vis["/Axes"].set_property("visible", False)
     vis["/Grid"].set_property("visible", False)  # lines: drawn as the floor's texture instead
     model, visual = robot_visuals(robot)
+    from_triangles = _draw_from_triangles(visual)
     data, gdata = model.createData(), visual.createData()
     bounds = _robot_bounds(model, visual, recordings[0].q[0])
     top = float(bounds[1][2] - bounds[0][2])
@@ -296,11 +372,13 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
         for w in caught:
             log.warning("replay: %s", w.message)
         visuals = [f"{root}/robot/visuals/{g.name}" for g in visual.geometryObjects]
-        for g, path in zip(visual.geometryObjects, visuals):
-            # the mesh's scale on the object (also resets what a clone copied from its source);
-            # the node's transform is the pose alone: the animation sets only its position and
-            # quaternion, so a scale left there by loadViewerModel would apply twice
-            vis[f"{path}/<object>"].set_property("scale", [float(x) for x in g.meshScale])
+        for gid, (g, path) in enumerate(zip(visual.geometryObjects, visuals)):
+            # the mesh's scale on the object (also resets what a clone copied from its source;
+            # loaded triangles are scaled already); the node's transform is the pose alone: the
+            # animation sets only its position and quaternion, so a scale left there by
+            # loadViewerModel would apply twice
+            scale = np.ones(3) if gid in from_triangles else g.meshScale
+            vis[f"{path}/<object>"].set_property("scale", [float(x) for x in scale])
             vis[path].set_transform(np.eye(4))
         arrays = rec.arrays()
         moving = {}

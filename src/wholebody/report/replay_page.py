@@ -98,15 +98,20 @@ _SCRIPT = r"""
     const bytes = await unpack($("wb-data").textContent);
     const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
     const path = (text) => text.split("/").filter((x) => x.length > 0);
+    const failed = [];  // a command the viewer cannot carry out (a mesh it cannot read) is skipped
     for (let at = 0; at < bytes.length;) {  // records: uint32 length, kind, body
       const n = view.getUint32(at, true);
       const body = bytes.slice(at + 5, at + 4 + n);
-      if (bytes[at + 4] === 0) {
-        viewer.handle_command_bytearray(body);
-      } else {  // a clone of an object already loaded: "source path\nnew path"
-        const [source, target] = new TextDecoder().decode(body).split("\n");
-        const object = viewer.scene_tree.find(path(source).concat(["<object>"])).object;
-        viewer.set_object(path(target), object.clone());
+      try {
+        if (bytes[at + 4] === 0) {
+          viewer.handle_command_bytearray(body);
+        } else {  // a clone of an object already loaded: "source path\nnew path"
+          const [source, target] = new TextDecoder().decode(body).split("\n");
+          const object = viewer.scene_tree.find(path(source).concat(["<object>"])).object;
+          viewer.set_object(path(target), object.clone());
+        }
+      } catch (err) {
+        failed.push(String(err));
       }
       at += 4 + n;
     }
@@ -168,9 +173,10 @@ _SCRIPT = r"""
     show(0);
     requestAnimationFrame(tick);
     requestAnimationFrame(() => requestAnimationFrame(() => {
-      status.textContent = "";
+      status.textContent = failed.length ?
+        `${failed.length} scene command(s) could not be drawn (first: ${failed[0]})` : "";
       document.body.dataset.ready = "true";
-      window.wholebodyReplay = { show: show, duration: span, viewer: viewer };
+      window.wholebodyReplay = { show: show, duration: span, viewer: viewer, failed: failed };
     }));
   }
 

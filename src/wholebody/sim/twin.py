@@ -155,31 +155,40 @@ def build_spec(robot: Robot, environment: Environment | None = None,
 
 SKELETON_RADIUS = 0.02  # of the skeleton's capsules, in standing base heights
 SKELETON_GROUP = 1  # MuJoCo geom group of the skeleton
+SKELETON_RGBA = (0.55, 0.6, 0.7, 1.0)
 
 
-def _add_skeleton(robot: Robot, bodies: dict) -> None:
-    """A stick figure of the robot for MuJoCo's viewer (the twin has no meshes): a capsule from
-    each joint to each child joint and to each contact frame. Visual only: no collision, no mass
-    (the bodies' inertias are explicit), so the dynamics are unchanged."""
+def skeleton_segments(robot: Robot) -> list[tuple[int, int, np.ndarray]]:
+    """The bones of the robot's stick figure: (joint id, index among that joint's bones, far end
+    in the joint's frame), one from each joint to each child joint and to each contact frame (the
+    near end is the joint's origin; bones of zero length are left out)."""
     model = robot.model
-    radius = SKELETON_RADIUS * float(robot.q_ref[2])
     ends: dict[int, list[np.ndarray]] = {j: [] for j in range(1, model.njoints)}
     for j in range(2, model.njoints):
         ends[model.parents[j]].append(model.jointPlacements[j].translation)
     for contact in robot.contacts:
         frame = model.frames[contact.frame_id]
         ends[frame.parentJoint].append(frame.placement.translation)
-    for j, points in ends.items():
-        for k, end in enumerate(p for p in points if np.linalg.norm(p) > 1e-6):
-            geom = bodies[j].add_geom()
-            geom.name = f"skeleton_{model.names[j]}_{k}"
-            geom.type = mujoco.mjtGeom.mjGEOM_CAPSULE
-            geom.fromto = [0.0, 0.0, 0.0, *end]
-            geom.size = [radius, 0, 0]
-            geom.contype = geom.conaffinity = 0
-            geom.mass = 0.0
-            geom.group = SKELETON_GROUP
-            geom.rgba = [0.55, 0.6, 0.7, 1.0]
+    return [(j, k, end) for j, points in ends.items()
+            for k, end in enumerate(p for p in points if np.linalg.norm(p) > 1e-6)]
+
+
+def _add_skeleton(robot: Robot, bodies: dict) -> None:
+    """A stick figure of the robot for MuJoCo's viewer (the twin has no meshes): a capsule for each
+    of :func:`skeleton_segments`. Visual only: no collision, no mass (the bodies' inertias are
+    explicit), so the dynamics are unchanged."""
+    model = robot.model
+    radius = SKELETON_RADIUS * float(robot.q_ref[2])
+    for j, k, end in skeleton_segments(robot):
+        geom = bodies[j].add_geom()
+        geom.name = f"skeleton_{model.names[j]}_{k}"
+        geom.type = mujoco.mjtGeom.mjGEOM_CAPSULE
+        geom.fromto = [0.0, 0.0, 0.0, *end]
+        geom.size = [radius, 0, 0]
+        geom.contype = geom.conaffinity = 0
+        geom.mass = 0.0
+        geom.group = SKELETON_GROUP
+        geom.rgba = list(SKELETON_RGBA)
 
 
 def _env_geom(body, name: str, friction: float, options: SimOptions):
