@@ -179,17 +179,12 @@ def stick_figure(robot) -> pin.GeometryModel:
     figure = pin.GeometryModel()
     for j, k, end in skeleton_segments(robot):
         length = float(np.linalg.norm(end))
-        placement = pin.SE3(_z_to(end / length), 0.5 * end)  # a capsule's axis is its z
+        placement = pin.SE3(_turn_to(end, axis=(0.0, 0.0, 1.0)), 0.5 * end)  # a capsule: along z
         bone = pin.GeometryObject(f"bone_{robot.model.names[j]}_{k}", j, placement,
                                   coal.Capsule(radius, length))
         bone.meshColor = np.array(SKELETON_RGBA)
         figure.addGeometryObject(bone)
     return figure
-
-
-def _z_to(direction: np.ndarray) -> np.ndarray:
-    """A rotation taking the z axis to the unit vector ``direction``."""
-    return pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), direction).matrix()
 
 
 def _homogeneous(position, quaternion_wxyz=None, rotation=None) -> np.ndarray:
@@ -203,12 +198,12 @@ def _homogeneous(position, quaternion_wxyz=None, rotation=None) -> np.ndarray:
     return T
 
 
-def _y_to(direction: np.ndarray) -> np.ndarray:
-    """A rotation taking the y axis (three.js cylinders) to ``direction``."""
+def _turn_to(direction: np.ndarray, axis=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """A rotation taking ``axis`` (default y: three.js cylinders) to ``direction``."""
     n = np.linalg.norm(direction)
     if n == 0:
         return np.eye(3)
-    return pin.Quaternion.FromTwoVectors(np.array([0.0, 1.0, 0.0]),
+    return pin.Quaternion.FromTwoVectors(np.asarray(axis, float),
                                          direction / n).toRotationMatrix()
 
 
@@ -232,7 +227,7 @@ class _Arrow:
         shown = shown and length > 2.0 * self.head
         node = frame[self.path]
         node.set_property("visible", "bool", bool(shown))
-        node.set_transform(_homogeneous(start, rotation=_y_to(vector)))
+        node.set_transform(_homogeneous(start, rotation=_turn_to(vector)))
         shaft = max(length - self.head, 1e-6) if shown else 1e-6
         node["shaft"].set_property("position", "vector3", [0.0, 0.5 * shaft, 0.0])
         node["shaft"].set_property("scale", "vector3", [1.0, shaft, 1.0])
@@ -401,7 +396,7 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
         _marker(vis, f"{root}/com", mg.Sphere(0.035 * h), COLORS["com"])
         _marker(vis, f"{root}/com_ground", mg.Cylinder(0.004 * h, 0.022 * h), COLORS["com"], 12)
         _marker(vis, f"{root}/cop", mg.Cylinder(0.006 * h, 0.04 * h), COLORS["cop"])
-        flat = _homogeneous(np.zeros(3), rotation=_y_to(np.array([0.0, 0.0, 1.0])))
+        flat = _homogeneous(np.zeros(3), rotation=_turn_to(np.array([0.0, 0.0, 1.0])))
         force_scale = FORCE_LENGTH * h / weight
         for k in range(rec.frames):
             frame = animation.at_frame(vis, k)
