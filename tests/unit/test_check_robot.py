@@ -10,6 +10,7 @@ import pytest
 import wholebody as wb
 from wholebody.cli import main
 from wholebody.robots import preset_description, preset_names
+from wholebody.robots.roles import leg_joints
 
 
 def check(capsys, *args):
@@ -308,3 +309,33 @@ def test_a_sphere_as_large_as_a_wheel_gets_a_note():
     assert 0.119 > WHEEL_RADIUS_FRACTION * (robot.q_ref[2] - lowest)
     for preset in ("hyq", "anymal_c", "go1", "solo12"):
         assert not [f for f in check_robot(preset).findings if "rolls" in f.message], preset
+
+
+def test_leg_joints_that_do_not_move_their_foot_get_a_note():
+    """Centauro's ankle yaws turn each wheel (a sphere) about its centre: the note lists exactly
+    the leg joints that, turned by 0.01 rad in the posture (forward kinematics), move their foot's
+    centre by less than a micrometre; the presets' legs have none."""
+    from conftest import centauro_description
+    from wholebody.robots.check import check_robot
+
+    description = centauro_description()
+    report = check_robot(description)
+    notes = [f for f in report.findings if "about the sphere's centre" in f.message]
+    assert report.ok and len(notes) == 1
+    listed = set(notes[0].message.split("joint(s) ")[1].split(" turn")[0].split(", "))
+    robot = wb.load_robot(description)
+    data = robot.model.createData()
+    idle = set()
+    for c in robot.contacts:
+        for joint in leg_joints(robot, c.name):
+            q = robot.q_ref.copy()
+            pin.framesForwardKinematics(robot.model, data, q)
+            before = data.oMf[c.frame_id].translation.copy()
+            q[7 + robot.joint_names.index(joint)] += 0.01
+            pin.framesForwardKinematics(robot.model, data, q)
+            if np.linalg.norm(data.oMf[c.frame_id].translation - before) < 1e-6:
+                idle.add(joint)
+    assert listed == idle and len(idle) == 4
+    for preset in ("hyq", "anymal_c", "go1", "solo12"):
+        assert not [f for f in check_robot(preset).findings
+                    if "about the sphere's centre" in f.message], preset

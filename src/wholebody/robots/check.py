@@ -31,6 +31,9 @@ SOLE_TILT_DEG = 1.0
 #: a point contact whose sphere's radius exceeds this fraction of the standing base height is a
 #: wheel rather than a foot (feet of the example-robot-data quadrupeds: 4-8 %)
 WHEEL_RADIUS_FRACTION = 0.1
+#: a leg joint that moves its point foot by less than this fraction of the standing base height
+#: per radian in the posture does not move it (its axis passes through the sphere's centre)
+IDLE_JOINT_LEVER_FRACTION = 1e-3
 
 
 @dataclass
@@ -116,6 +119,7 @@ def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
     data = robot.model.createData()  # the posture's kinematics, for the two checks below
     pin.framesForwardKinematics(robot.model, data, robot.q_ref)
     _contacts_on_the_floor(robot, data, report)
+    _joints_that_leave_the_feet(robot, report)
     _support(robot, data, report)
     _gravity_torques(robot, report)
     return report
@@ -234,6 +238,31 @@ def _contacts_on_the_floor(robot, data, report: RobotCheck) -> None:
                 report.add("warning", "posture", f"sole '{c.name}' is tilted {tilt:.1f} deg in "
                            f"the posture: it touches the floor with an edge",
                            "adjust the ankle joints of the posture until the soles are flat")
+
+
+def _joints_that_leave_the_feet(robot, report: RobotCheck) -> None:
+    """Leg joints that do not move their point foot in the posture (an axis through the sphere's
+    centre, like Centauro's ankle yaws through its wheels): no foot task determines them; the
+    passive WBC's posture regulariser holds them, the quasi-static baseline's static map only
+    through a PD without the legs' dynamics."""
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, robot.q_ref)
+    pin.updateFramePlacements(robot.model, data)
+    lever = IDLE_JOINT_LEVER_FRACTION * float(robot.q_ref[2])
+    idle = []
+    for c in robot.contacts:
+        if c.spec.type != "point":
+            continue
+        J = pin.getFrameJacobian(robot.model, data, c.frame_id, pin.LOCAL_WORLD_ALIGNED)[:3]
+        for joint in leg_joints(robot, c.name):
+            column = 6 + robot.joint_names.index(joint)
+            if np.linalg.norm(J[:, column]) < lever:
+                idle.append(joint)
+    if idle:
+        report.add("note", "contacts", f"joint(s) {', '.join(idle)} turn their foot about the "
+                   f"sphere's centre (the axis passes through it): no foot task moves them, only "
+                   f"the posture regulariser holds them",
+                   "lock them (locked_joints) unless the robot needs them")
 
 
 def _support(robot, data, report: RobotCheck) -> None:
