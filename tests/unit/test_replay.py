@@ -5,6 +5,7 @@ command line refuses --replay/--view where they cannot work, before anything is 
 from __future__ import annotations
 
 import json
+import logging
 import re
 import sys
 from importlib import resources
@@ -179,12 +180,20 @@ def test_a_local_urdf_finds_example_robot_data_meshes(tmp_path):
     assert meshes and all(Path(m).is_file() for m in meshes)
 
 
-def test_missing_meshes_give_a_stick_figure_along_the_bones(tmp_path, caplog):
+def test_missing_meshes_give_a_stick_figure_along_the_bones(tmp_path, caplog, monkeypatch):
     """Meshes that cannot be found (a package nowhere): a warning, and capsules from each joint to
     its children and to the feet, checked against Pinocchio's forward kinematics."""
     robot = _local_hyq(tmp_path, mesh_package="nowhere")
-    with caplog.at_level("WARNING"):
-        model, figure = robot_visuals(robot)
+    replay_log = logging.getLogger("wholebody.report.replay")
+    # the handler on the module's logger itself: whatever earlier tests left in the logging tree
+    # (a disabled logger, propagation off) cannot hide the record
+    monkeypatch.setattr(replay_log, "disabled", False)
+    replay_log.addHandler(caplog.handler)
+    try:
+        with caplog.at_level("WARNING", logger=replay_log.name):
+            model, figure = robot_visuals(robot)
+    finally:
+        replay_log.removeHandler(caplog.handler)
     assert "stick figure" in caplog.text and "nowhere" in caplog.text
     assert model is robot.model
     data, gdata = model.createData(), figure.createData()
