@@ -267,8 +267,21 @@ def test_scenarios_declare_their_simulations():
     params = get_scenario("crawl").resolve({})
     assert get_scenario("crawl").simulation_count(params, "passive+quasi-static") == 2
     assert get_scenario("crawl").simulation_count(params, "passive") == 1
-    for name in ("push", "stand", "squat", "platform", "tilt-board", "ramp"):
+    for name in ("push", "stand", "squat", "platform", "tilt-board", "ramp", "single-support"):
         assert get_scenario(name).simulation_count(get_scenario(name).resolve({})) == 1, name
+    stepping = get_scenario("stepping")
+    assert stepping.simulation_count(stepping.resolve({})) == 2  # reduced and full
+    assert stepping.simulation_count(stepping.resolve({"formulations": "full"})) == 1
+
+
+def test_single_support_is_watched(robots):
+    """single-support passes its observers to its simulator: a short run is recorded (one
+    recording with frames) and has its incident list."""
+    recorder = ReplayRecorder()
+    result = get_scenario("single-support").run(robots["talos14"], "lqr", {"duration": "0.1"},
+                                                observers=[recorder])
+    assert len(recorder.recordings) == 1 and recorder.recordings[0].frames > 0
+    assert result.incidents == []
 
 
 def test_observers_need_a_declared_scenario(robots):

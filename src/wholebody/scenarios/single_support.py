@@ -195,13 +195,14 @@ def _push(robot, location: str, force: float, start: float, duration: float):
                       "push_duration": duration}, robot)
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     stance, _ = stance_and_swing(robot, params)
     pd_gains = momentum_gains(controller, params) if controller == "pd" else {}
     ctrl = ContactSwitch(robot, stance, config(robot, params), gains=controller, **pd_gains)
     tl = ctrl.timeline
     duration = params["duration"] if params["duration"] > 0 else tl.end
-    sim = Simulator(robot)
+    sim = Simulator(robot, observers=observers)
     pushes = [_push(robot, params["push_location"], f, t0, params["push_duration"])
               for t0, f in tl.pushes]
     if tl.sine_push is not None:
@@ -356,4 +357,5 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=validate,
+    simulations=1,
 )

@@ -84,11 +84,13 @@ def _stats(x: np.ndarray) -> dict:
             "max_ms": float(ms.max())}
 
 
-def run_once(robot, params: dict, reduced: bool, progress: bool = False) -> dict:
-    """One closed-loop stepping run; returns measurements (simulator-based) and timings."""
+def run_once(robot, params: dict, reduced: bool, progress: bool = False,
+             observers=()) -> dict:
+    """One closed-loop stepping run; returns measurements (simulator-based) and timings.
+    ``observers`` watch it, labelled with the formulation."""
     ctrl = Stepping(robot, config(robot, params), reduced=reduced, engine=params["engine"])
     duration = ctrl.phases[-1].end
-    sim = Simulator(robot)
+    sim = Simulator(robot, observers=observers, label="reduced" if reduced else "full")
     names = list(robot.contact_names)
     start_poses = sim.contact_frame_poses()
     base_z0 = sim.state()[0][2]
@@ -160,13 +162,18 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False) -> dict
             "_t": t, "_cycles": cycles, "_nc": nc, "_phases": ctrl.phases}
 
 
+def formulations(params: dict) -> list[str]:
+    """The formulations ``--set formulations`` asks for, in order."""
+    return [k.strip() for k in str(params["formulations"]).split(",") if k.strip()]
+
+
 def run(robot, controller: str, params: dict, out_dir: Path | None,
-        progress: bool) -> ScenarioResult:
-    kinds = [k.strip() for k in str(params["formulations"]).split(",") if k.strip()]
+        progress: bool, observers=()) -> ScenarioResult:
     runs = {}
-    for kind in kinds:
+    for kind in formulations(params):
         log.info("stepping: %s formulation", kind)
-        runs[kind] = run_once(robot, params, reduced=(kind == "reduced"), progress=progress)
+        runs[kind] = run_once(robot, params, reduced=(kind == "reduced"), progress=progress,
+                              observers=observers)
     metrics = {k: {key: val for key, val in r.items() if not key.startswith("_")}
                for k, r in runs.items()}
     if "reduced" in runs and "full" in runs:
@@ -210,7 +217,7 @@ def validate(robot, params: dict) -> None:
     if int(params["steps"]) < 1:
         raise ValueError("--set steps: must be >= 1")
     check_engine(params)
-    kinds = [k.strip() for k in str(params["formulations"]).split(",") if k.strip()]
+    kinds = formulations(params)
     if not kinds or any(k not in ("reduced", "full") for k in kinds):
         raise ValueError(f"--set formulations: comma-separated 'reduced'/'full', got "
                          f"'{params['formulations']}'")
@@ -225,4 +232,5 @@ SCENARIO = Scenario(
     default_robot="talos",
     run_function=run,
     validate_function=validate,
+    simulations=lambda params, controller: len(formulations(params)),
 )
