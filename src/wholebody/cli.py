@@ -219,7 +219,7 @@ PRINTED_INCIDENTS = 6
 
 
 def _print_incidents(incidents) -> None:
-    """The first incidents of a failed run, one per line ("5.712 s  joint ... limit")."""
+    """The first incidents of a failed run, one per line (time, then what happened)."""
     if not incidents:
         return
     print("  first incidents in the twin:")

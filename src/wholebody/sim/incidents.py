@@ -2,8 +2,7 @@
 the controller's failed cycles, each with the time it first happened.
 
 A failed run's metrics say that it fell and when; the first incidents say what came before (a knee
-at its limit at 5.71 s, the first failed cycle at 5.85 s), which is where a new robot's problem is
-found. :class:`IncidentLog` is a :class:`~wholebody.sim.simulator.SimObserver`;
+at its limit, then the first failed cycle), which is where a new robot's problem is found. :class:`IncidentLog` is a :class:`~wholebody.sim.simulator.SimObserver`;
 :meth:`~wholebody.scenarios.base.Scenario.run` watches every scenario that declares its
 simulations with one, and ``summary.json`` has what it saw (``incidents``).
 """
