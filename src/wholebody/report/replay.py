@@ -132,7 +132,8 @@ _COLLADA_MESH_PRIMITIVES = {"triangles", "polylist", "polygons", "trifans", "tri
 def collada_drawable(path) -> bool:
     """Whether meshcat's viewer can draw the Collada file ``path``: it merges the file's meshes
     into one geometry, which fails (and, unguarded, stops the page) unless they all carry the same
-    vertex attributes (ANYmal C's ``base.dae``: five parts without texture coordinates, one with)."""
+    vertex attributes (ANYmal C's ``base.dae``: five parts without texture coordinates, one
+    with)."""
     try:
         root = ElementTree.parse(path).getroot()
     except (ElementTree.ParseError, OSError):
@@ -158,9 +159,13 @@ def _draw_from_triangles(visual: pin.GeometryModel) -> set[int]:
     the triangles Pinocchio loaded instead (already scaled, in the URDF material's colour): their
     mesh path is cleared, which makes ``MeshcatVisualizer`` use the loaded geometry. Returns their
     indices."""
-    undrawable = set()
+    undrawable, drawable = set(), {}  # a file shared by several links is read once
     for gid, g in enumerate(visual.geometryObjects):
-        if g.meshPath.lower().endswith(".dae") and not collada_drawable(g.meshPath):
+        if not g.meshPath.lower().endswith(".dae"):
+            continue
+        if g.meshPath not in drawable:
+            drawable[g.meshPath] = collada_drawable(g.meshPath)
+        if not drawable[g.meshPath]:
             log.info("replay: %s drawn from its triangles (meshcat cannot merge its parts)",
                      g.meshPath)
             g.meshPath = ""

@@ -116,10 +116,10 @@ def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
     report = RobotCheck(robot.name) if report is None else report
     _facts(robot, report)
     _roles(robot, report)
-    data = robot.model.createData()  # the posture's kinematics, for the two checks below
+    data = robot.model.createData()  # the posture's kinematics, for the checks below
     pin.framesForwardKinematics(robot.model, data, robot.q_ref)
     _contacts_on_the_floor(robot, data, report)
-    _joints_that_leave_the_feet(robot, report)
+    _joints_that_leave_the_feet(robot, data, report)
     _support(robot, data, report)
     _gravity_torques(robot, report)
     return report
@@ -240,14 +240,12 @@ def _contacts_on_the_floor(robot, data, report: RobotCheck) -> None:
                            "adjust the ankle joints of the posture until the soles are flat")
 
 
-def _joints_that_leave_the_feet(robot, report: RobotCheck) -> None:
+def _joints_that_leave_the_feet(robot, data, report: RobotCheck) -> None:
     """Leg joints that do not move their point foot in the posture (an axis through the sphere's
     centre, like Centauro's ankle yaws through its wheels): no foot task determines them; the
     passive WBC's posture regulariser holds them, the quasi-static baseline's static map only
     through a PD without the legs' dynamics."""
-    data = robot.model.createData()
-    pin.computeJointJacobians(robot.model, data, robot.q_ref)
-    pin.updateFramePlacements(robot.model, data)
+    pin.computeJointJacobians(robot.model, data, robot.q_ref)  # the posture's, as in ``data``
     lever = IDLE_JOINT_LEVER_FRACTION * float(robot.q_ref[2])
     idle = []
     for c in robot.contacts:

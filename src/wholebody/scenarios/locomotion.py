@@ -353,8 +353,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     ``q0``: the initial configuration (default: the standing posture ``robot.q_ref``), resting on
     the support surface; the planner starts from it. ``gains``: the trunk and swing impedances'
     gains and the trunk task's pitch weight (:func:`wbc_gains`), unless ``controller_options``
-    gives an ``impedance``, a ``swing`` or a ``Q``. ``after_fall``: once the robot has fallen, the run stops this many seconds later
-    (None: it runs its whole ``duration``).
+    gives an ``impedance``, a ``swing`` or a ``Q``. ``after_fall``: once the robot has fallen,
+    the run stops this many seconds later (None: it runs its whole ``duration``).
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()

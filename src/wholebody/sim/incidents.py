@@ -2,7 +2,8 @@
 the controller's failed cycles, each with the time it first happened.
 
 A failed run's metrics say that it fell and when; the first incidents say what came before (a knee
-at its limit, then the first failed cycle), which is where a new robot's problem is found. :class:`IncidentLog` is a :class:`~wholebody.sim.simulator.SimObserver`;
+at its limit, then the first failed cycle), which is where a new robot's problem is found.
+:class:`IncidentLog` is a :class:`~wholebody.sim.simulator.SimObserver`;
 :meth:`~wholebody.scenarios.base.Scenario.run` watches every scenario that declares its
 simulations with one, and ``summary.json`` has what it saw (``incidents``).
 """

@@ -177,7 +177,8 @@ def test_heading_weights_weigh_the_error_in_the_heading_frame(rng):
 
     Q = np.array([1.0, 0.5, 2.0, 1.0, 0.63, 1.5])
     for _ in range(5):
-        yaw, pitch, roll = rng.uniform(-np.pi, np.pi), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5)
+        yaw, pitch, roll = (rng.uniform(-np.pi, np.pi), rng.uniform(-0.5, 0.5),
+                            rng.uniform(-0.5, 0.5))
         R = pin.rpy.rpyToMatrix(roll, pitch, yaw)
         e = rng.normal(size=6)
         Rz = pin.rpy.rpyToMatrix(0.0, 0.0, yaw)
