@@ -290,9 +290,16 @@ def test_quadruped_scenarios_take_the_trunk_gains(name):
     params = {p.name: p for p in get_scenario(name).parameters}
     for key in ("trunk_frequency", "trunk_damping_ratio", "trunk_angular_frequency",
                 "trunk_angular_damping_ratio", "trunk_pitch_weight", "swing_stiffness",
-                "swing_damping"):
+                "swing_damping", "stance_stiffness", "stance_damping", "posture_frequency",
+                "posture_damping_ratio"):
         assert key in params, (name, key)
     assert params["trunk_frequency"].default == 0.0
+    assert params["posture_frequency"].default == 0.0
+    # the defaults are the controllers' own
+    assert (params["stance_stiffness"].default, params["stance_damping"].default) == (
+        PassiveConfig.K_st, PassiveConfig.D_st)
+    assert params["posture_damping_ratio"].default == PassiveConfig.posture_damping
+    assert ("baseline_swing_stiffness" in params) == (name == "crawl")  # the one with a baseline
     with pytest.raises(ValueError, match="--set trunk_frequency"):
         params["trunk_frequency"].parse("-1")
 
@@ -319,6 +326,53 @@ def test_trunk_gains_reach_the_controller_in_closed_loop(quadrupeds):
     np.testing.assert_allclose(default.controller.impedance.K_x,
                                TrunkImpedance.for_robot(robot).K_x, rtol=1e-12)
     assert 0.0 < default.controller.Q[4] < 1.0  # go1 stands narrower than HyQ
+
+
+def test_stance_and_posture_gains_reach_both_controllers(quadrupeds):
+    """``--set stance_stiffness=150 --set stance_damping=12 --set posture_frequency=2
+    --set posture_damping_ratio=0.5 --set baseline_swing_stiffness=700
+    --set baseline_swing_damping=9``: the passive WBC that run_gait builds has K_st = 150, D_st = 12
+    and the posture regulariser's K = (2 pi 2)^2, D = 2 * 0.5 * 2 pi 2; the quasi-static baseline
+    the same posture PD and a 700 N/m, 9 N s/m swing PD. Without them: the controllers' own
+    defaults (the posture Froude-scaled from HyQ's 8 rad/s)."""
+    from wholebody.control.passive import POSTURE_FREQUENCY
+    from wholebody.control.quasi_static import swing_gains
+    from wholebody.robots.reference import froude_ratio
+    from wholebody.scenarios.locomotion import run_gait, wbc_gains
+    robot = quadrupeds["go1"]
+    params = {"stance_stiffness": 150.0, "stance_damping": 12.0, "posture_frequency": 2.0,
+              "posture_damping_ratio": 0.5, "baseline_swing_stiffness": 700.0,
+              "baseline_swing_damping": 9.0}
+    omega = 2 * math.pi * 2.0
+    for controller in ("passive", "quasi-static"):
+        ctrl = run_gait(robot, controller, "stand", duration=0.02,
+                        gains=wbc_gains(params)).controller
+        np.testing.assert_allclose((ctrl.posture_K, ctrl.posture_D),
+                                   (omega ** 2, 2 * 0.5 * omega), rtol=1e-12)
+        default = run_gait(robot, controller, "stand", duration=0.02,
+                           gains=wbc_gains({})).controller
+        omega0 = POSTURE_FREQUENCY / froude_ratio(robot)
+        np.testing.assert_allclose((default.posture_K, default.posture_D),
+                                   (omega0 ** 2, 2 * omega0), rtol=1e-12)
+        if controller == "passive":
+            assert (ctrl.K_st, ctrl.D_st) == (150.0, 12.0)
+            assert (default.K_st, default.D_st) == (PassiveConfig.K_st, PassiveConfig.D_st)
+        else:
+            assert (ctrl.swing_K, ctrl.swing_D) == (700.0, 9.0)
+            assert (default.swing_K, default.swing_D) == swing_gains(robot)
+    # options a scenario passes itself win over the parameters (friction-mismatch's runs
+    # without a stance task)
+    run = run_gait(robot, "passive", "stand", duration=0.02, gains=wbc_gains(params),
+                   controller_options={"K_st": 0.0, "D_st": 0.0})
+    assert (run.controller.K_st, run.controller.D_st) == (0.0, 0.0)
+
+
+def test_friction_mismatch_needs_a_stance_task(quadrupeds):
+    """The stance-task runs of ``friction-mismatch`` need K_st > 0: ``--set stance_stiffness=0``
+    is refused naming the parameter."""
+    scenario = get_scenario("friction-mismatch")
+    with pytest.raises(ValueError, match="--set stance_stiffness"):
+        scenario.validate(quadrupeds["hyq"], {"stance_stiffness": "0"})
 
 
 def test_sway_gain_reaches_the_crawl_planner(quadrupeds):

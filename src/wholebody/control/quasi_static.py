@@ -31,6 +31,7 @@ from ..robots.roles import leg_joints
 from ..tasks.wrench import (TrunkImpedance, contact_wrench_map, force_bound, heading_weights,
                             trunk_weights)
 from .base import PlannedController
+from ..validation import nonnegative
 from .passive import POSTURE_FREQUENCY, default_planner
 
 log = logging.getLogger(__name__)
@@ -57,14 +58,18 @@ class QuasiStaticController(PlannedController):
     ``f_max`` None and ``impedance`` None: the robot-relative defaults of
     :class:`~wholebody.control.passive.PassiveWBC` (the paper's 2000 N and trunk gains on HyQ);
     ``Q`` (6) the trunk wrench weights about the heading frame, None: the robot-relative
-    :func:`~wholebody.tasks.wrench.trunk_weights` of the passive WBC.
+    :func:`~wholebody.tasks.wrench.trunk_weights` of the passive WBC; ``posture_frequency`` ω
+    (rad/s; None: the passive WBC's default) and ``posture_damping`` ζ: the PD that holds the null
+    space of legs of more than three joints.
     """
 
     def __init__(self, robot: Robot, planner=None, mu: float | None = None, f_min: float = 0.0,
                  f_max: float | None = None, impedance: TrunkImpedance | None = None,
                  Q=None, R_force: float = 1e-4,
-                 tangential_weight: float = 1e-3, swing_K: float | None = None, swing_D: float | None = None,
-                 torque_limit_override: dict[str, float] | None = None):
+                 tangential_weight: float = 1e-3, swing_K: float | None = None,
+                 swing_D: float | None = None,
+                 torque_limit_override: dict[str, float] | None = None,
+                 posture_frequency: float | None = None, posture_damping: float = 1.0):
         if any(c.dim != 3 for c in robot.contacts):
             raise ValueError(f"robot '{robot.name}': the quasi-static controller needs point feet")
         self.robot = robot
@@ -78,8 +83,8 @@ class QuasiStaticController(PlannedController):
                                             dtype=float), 6).copy()
         self.R_force, self.tangential_weight = R_force, tangential_weight
         default_K, default_D = swing_gains(robot)
-        self.swing_K = default_K if swing_K is None else swing_K
-        self.swing_D = default_D if swing_D is None else swing_D
+        self.swing_K = default_K if swing_K is None else nonnegative(swing_K, "swing_K")
+        self.swing_D = default_D if swing_D is None else nonnegative(swing_D, "swing_D")
         self.torque_limits = TorqueLimits(upper_override=torque_limit_override)
         c = len(self.contacts)
         self.nf = 3 * c
@@ -91,8 +96,10 @@ class QuasiStaticController(PlannedController):
         self.lower = np.zeros(self.nf + 5 * c + nj)
         self.sense = np.zeros(self.nf + 5 * c + nj, dtype=np.int32)
         self._G = np.zeros((6, self.nf))
-        omega = POSTURE_FREQUENCY / reference.froude_ratio(robot)
-        self.posture_K, self.posture_D = omega ** 2, 2.0 * omega
+        omega = (POSTURE_FREQUENCY / reference.froude_ratio(robot) if posture_frequency is None
+                 else nonnegative(posture_frequency, "posture_frequency"))
+        zeta = nonnegative(posture_damping, "posture_damping")
+        self.posture_K, self.posture_D = omega ** 2, 2.0 * zeta * omega
         #: joint indices of the legs with more than three joints (their null space is held)
         self._redundant_legs = [
             (i, np.array([robot.joint_names.index(j) for j in leg_joints(robot, name)]))

@@ -23,8 +23,9 @@ from ..tasks.wrench import TrunkImpedance
 from ..report.locomotion_figures import crawl_tracking_figure
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (GAIT, REGULARIZATION, SWAY_GAIN, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
-                         run_gait, sway_options, trunk_gains, wbc_gains)
+from .locomotion import (BASELINE_GAINS, GAIT, REGULARIZATION, SWAY_GAIN, WBC_GAINS, PaperSpeed,
+                         check_gait, check_quadruped, run_gait, sway_options, trunk_gains,
+                         wbc_gains)
 
 PARAMETERS = (
     Parameter("speed_start", PaperSpeed(0.04), "forward speed at the start of the ramp (m/s)",
@@ -43,6 +44,7 @@ PARAMETERS = (
     SWAY_GAIN,
     REGULARIZATION,
     *WBC_GAINS,
+    *BASELINE_GAINS,
 )
 
 CONTROLLER_CHOICES = ("passive+quasi-static", "passive", "quasi-static")

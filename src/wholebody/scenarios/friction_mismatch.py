@@ -69,9 +69,6 @@ PARAMETERS = (
     Parameter("fast_speed", PaperSpeed(0.16), "speed of the corrected-mu run at higher speed (m/s)",
               low=0.0, low_open=True, high=5.0),
     RUN_DURATION,
-    Parameter("K_st", 200.0, "stance-task stiffness of eq. 32 (1/s^2) in the stance-task runs",
-              low=0.0, low_open=True),
-    Parameter("D_st", 30.0, "stance-task damping of eq. 32 (1/s)", low=0.0),
     Parameter("slip_speed", PaperSpeed(0.02), "slip-event threshold on the contact-point speed (m/s)",
               low=0.0, low_open=True, high=5.0),
     Parameter("slip_time", 0.02, "slip-event minimum duration (s)",
@@ -107,8 +104,9 @@ def validate(robot, params: dict) -> None:
     check_quadruped(robot, "friction-mismatch")
     check_positive(params, ("floor_mu", "controller_mu", "speed", "fast_speed", "duration",
                             "slip_speed", "slip_time", "slip_bound"))
-    if params["K_st"] <= 0 or params["D_st"] < 0:
-        raise ValueError("--set K_st, D_st: the stance-task runs need K_st > 0, D_st >= 0")
+    if params["stance_stiffness"] <= 0:
+        raise ValueError("--set stance_stiffness: the stance-task runs need K_st > 0, got "
+                         f"{params['stance_stiffness']}")
 
 
 def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, duration: float,
@@ -129,17 +127,18 @@ def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, durati
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     p = params
+    K_st, D_st = p["stance_stiffness"], p["stance_damping"]
     inscribed = p["floor_mu"] / np.sqrt(2.0)
     paper, default = "force-normal", PassiveConfig.regularization
     setups = {
-        "mismatch": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"], paper),
+        "mismatch": (p["controller_mu"], p["speed"], K_st, D_st, paper),
         "mismatch, no stance task": (p["controller_mu"], p["speed"], 0.0, 0.0, paper),
-        "corrected, paper's regulariser": (p["floor_mu"], p["speed"], p["K_st"], p["D_st"], paper),
-        "corrected, inscribed": (inscribed, p["speed"], p["K_st"], p["D_st"], paper),
-        "corrected, fast": (inscribed, p["fast_speed"], p["K_st"], p["D_st"], paper),
-        "reference: matched floor": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"], paper),
-        "corrected mu": (p["floor_mu"], p["speed"], p["K_st"], p["D_st"], default),
-        "mismatch, force-parallel": (p["controller_mu"], p["speed"], p["K_st"], p["D_st"], default),
+        "corrected, paper's regulariser": (p["floor_mu"], p["speed"], K_st, D_st, paper),
+        "corrected, inscribed": (inscribed, p["speed"], K_st, D_st, paper),
+        "corrected, fast": (inscribed, p["fast_speed"], K_st, D_st, paper),
+        "reference: matched floor": (p["controller_mu"], p["speed"], K_st, D_st, paper),
+        "corrected mu": (p["floor_mu"], p["speed"], K_st, D_st, default),
+        "mismatch, force-parallel": (p["controller_mu"], p["speed"], K_st, D_st, default),
     }
     runs, metrics = {}, {}
     for name, (mu, speed, K, D, regularization) in setups.items():

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ..control.passive import REGULARIZATIONS, PassiveWBC, SwingGains
+from ..control.passive import REGULARIZATIONS, PassiveConfig, PassiveWBC, SwingGains
 from ..control.quasi_static import QuasiStaticController
 from ..planning.gait import CRAWL_PERIOD, TROT_PERIOD, crawl, stand, trot
 from ..planning.planner import GaitPlanner
@@ -66,8 +66,34 @@ SWING_GAINS = (
     Parameter("swing_damping", SwingGains.D, "passive WBC swing impedance: D_sw (1/s; the "
               "paper's 20)", low=0.0, high=1e4),
 )
+#: the stance task of eq. 32 (the passive WBC; accelerations, the same on every robot)
+STANCE_GAINS = (
+    Parameter("stance_stiffness", PassiveConfig.K_st, "passive WBC stance task (eq. 32): K_st, "
+              "foot acceleration per metre of slip (1/s^2; 0 with stance_damping 0: eq. 10)",
+              low=0.0, high=1e6),
+    Parameter("stance_damping", PassiveConfig.D_st, "passive WBC stance task: D_st, per m/s of "
+              "slip velocity (1/s)", low=0.0, high=1e4),
+)
+#: the posture regulariser of both controllers (ours): the joints no foot task determines pulled
+#: toward the standing posture (:class:`~wholebody.control.passive.PassiveConfig`)
+POSTURE_GAINS = (
+    Parameter("posture_frequency", 0.0, "posture regulariser (both controllers): frequency (Hz) "
+              "of the pull of the joints no foot task determines toward the standing posture (0: "
+              "HyQ's 8 rad/s, Froude-scaled)", low=0.0, high=100.0),
+    Parameter("posture_damping_ratio", PassiveConfig.posture_damping, "posture regulariser: "
+              "damping ratio", low=0.0, high=100.0),
+)
 #: every gain of the quadruped controllers a scenario takes (:func:`wbc_gains`)
-WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS)
+WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS, *STANCE_GAINS, *POSTURE_GAINS)
+#: the quasi-static baseline's Cartesian swing PD (force-level), for the scenarios that run it
+BASELINE_GAINS = (
+    Parameter("baseline_swing_stiffness", 0.0, "quasi-static baseline: swing legs' Cartesian "
+              "stiffness (N/m; 0: HyQ's 2000 times the robot's mass over HyQ's)",
+              low=0.0, high=1e7),
+    Parameter("baseline_swing_damping", 0.0, "quasi-static baseline: swing legs' Cartesian "
+              "damping (N s/m; 0: HyQ's 50 times the robot's mass over HyQ's)",
+              low=0.0, high=1e6),
+)
 
 
 #: the crawl's lateral sway (:class:`~wholebody.planning.trunk.CrawlSway`) as a parameter
@@ -327,13 +353,41 @@ class GaitRun:
 
 
 def wbc_gains(params: dict) -> dict:
-    """The :data:`WBC_GAINS` parameters (missing ones at their defaults) as ``run_gait``'s
-    ``gains``: ``{"impedance": trunk_gains(params), "swing": (K_sw, D_sw), "pitch_weight": w}``
-    (w None: the robot-relative trunk weights)."""
-    get = {p.name: params.get(p.name, p.default) for p in (*SWING_GAINS, *TRUNK_GAINS)}
+    """The :data:`WBC_GAINS` and :data:`BASELINE_GAINS` parameters (missing ones at their defaults)
+    as ``run_gait``'s ``gains``: ``{"impedance": trunk_gains(params), "swing": (K_sw, D_sw),
+    "pitch_weight": w, "stance": (K_st, D_st), "posture": (ω, ζ), "baseline_swing": (K, D)}`` (w,
+    ω, K or D None: the robot-relative default; ω in rad/s)."""
+    get = {p.name: params.get(p.name, p.default) for p in (*WBC_GAINS, *BASELINE_GAINS)}
+    frequency = get["posture_frequency"]
     return {"impedance": trunk_gains(params),
             "swing": (get["swing_stiffness"], get["swing_damping"]),
-            "pitch_weight": get["trunk_pitch_weight"] or None}
+            "pitch_weight": get["trunk_pitch_weight"] or None,
+            "stance": (get["stance_stiffness"], get["stance_damping"]),
+            "posture": (2.0 * math.pi * frequency if frequency else None,
+                        get["posture_damping_ratio"]),
+            "baseline_swing": (get["baseline_swing_stiffness"] or None,
+                               get["baseline_swing_damping"] or None)}
+
+
+def gain_options(robot, controller: str, gains: dict, options: dict) -> dict:
+    """``options`` for ``controller`` (``make_controller``'s keywords) with what the
+    :func:`wbc_gains` ``gains`` set for it added, except what ``options`` already gives: the trunk
+    impedance and weights (both controllers), the swing impedance and stance task (passive), the
+    Cartesian swing PD (quasi-static), the posture regulariser (both)."""
+    extra = {}
+    if "impedance" in gains:
+        extra["impedance"] = TrunkImpedance.for_robot(robot, **gains["impedance"])
+    if gains.get("pitch_weight") is not None:
+        extra["Q"] = trunk_weights(robot, pitch=gains["pitch_weight"])
+    if "posture" in gains:
+        extra["posture_frequency"], extra["posture_damping"] = gains["posture"]
+    if controller == "passive" and "swing" in gains:
+        extra["swing"] = SwingGains(*gains["swing"])
+    if controller == "passive" and "stance" in gains:
+        extra["K_st"], extra["D_st"] = gains["stance"]
+    if controller != "passive" and "baseline_swing" in gains:
+        extra["swing_K"], extra["swing_D"] = gains["baseline_swing"]
+    return {**extra, **options}
 
 
 def run_gait(robot, controller: str = "passive", gait: str = "crawl",
@@ -351,9 +405,9 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     instead of building one; ``gait``, ``command``, ``terrain``, ``planner_options`` and ``start``
     are then ignored. ``observers`` watch the simulation (labelled with the controller's name).
     ``q0``: the initial configuration (default: the standing posture ``robot.q_ref``), resting on
-    the support surface; the planner starts from it. ``gains``: the trunk and swing impedances'
-    gains and the trunk task's pitch weight (:func:`wbc_gains`), unless ``controller_options``
-    gives an ``impedance``, a ``swing`` or a ``Q``. ``after_fall``: once the robot has fallen,
+    the support surface; the planner starts from it. ``gains``: the controllers' gains
+    (:func:`wbc_gains`; :func:`gain_options` says which each takes), unless ``controller_options``
+    gives the same keyword. ``after_fall``: once the robot has fallen,
     the run stops this many seconds later (None: it runs its whole ``duration``).
     """
     if q0 is not None:
@@ -362,13 +416,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start), command, terrain,
                                         q=q0, t0=0.0,
                                         **{**gait_options(robot), **(planner_options or {})})
-    options = dict(controller_options or {})
-    if gains is not None and "impedance" not in options:
-        options["impedance"] = TrunkImpedance.for_robot(robot, **gains["impedance"])
-    if gains is not None and controller == "passive" and "swing" not in options:
-        options["swing"] = SwingGains(*gains["swing"])
-    if gains is not None and gains.get("pitch_weight") is not None and "Q" not in options:
-        options["Q"] = trunk_weights(robot, pitch=gains["pitch_weight"])
+    options = gain_options(robot, controller, gains or {}, controller_options or {})
     if controller == "passive":
         options.setdefault("control_period", control_period)
     ctrl = make_controller(robot, controller, planner, **options)
