@@ -229,11 +229,76 @@ def test_push_series_hands_every_controller_option_to_its_trials(monkeypatch):
         seen.append(p) or SimpleNamespace(success=True, metrics={})))
     params = {"push_duration": 0.1, "duration": 3.5, "q_angular": 2.0, "angular_weight": 1e-3,
               "q_integral": 0.0, "integral_limit": 0.01, "q_orientation": 5.0, "pd_stiffness": 14.0,
-              "pd_damping": 7.5, "pd_angular_damping": 2.0, "engine": "python"}
+              "pd_damping": 7.5, "pd_angular_damping": 2.0, "posture_stiffness": 30.0,
+              "posture_damping": 9.0, "engine": "python"}
     push_series._one(None, "pd", "front", 100.0, params)
     (p,) = seen
     assert {o.name: p[o.name] for o in CONTROLLER_PARAMETERS} == {
         o.name: params[o.name] for o in CONTROLLER_PARAMETERS}
+
+
+HUMANOID_SCENARIOS = ("push", "push-series", "robust-push", "platform", "tilt-board", "squat",
+                      "single-support", "stepping")
+
+
+@pytest.mark.parametrize("name", HUMANOID_SCENARIOS)
+def test_humanoid_scenarios_take_the_task_gains(name):
+    """Every humanoid scenario declares the posture task's PD; those with a swing foot (single
+    support, stepping) its PD, stepping the CoG task's; the defaults are the stacks' own."""
+    from wholebody.control.stacks import COM_GAINS, POSTURE_GAINS, SWING_GAINS
+    from wholebody.scenarios import get_scenario
+
+    params = {p.name: p.default for p in get_scenario(name).parameters}
+    expected = {"posture": POSTURE_GAINS}
+    if name in ("single-support", "stepping"):
+        expected["swing"] = SWING_GAINS
+    if name == "stepping":
+        expected["com"] = COM_GAINS
+    for task in ("posture", "swing", "com"):
+        declared = (params.get(f"{task}_stiffness"), params.get(f"{task}_damping"))
+        assert declared == expected.get(task, (None, None)), (name, task)
+
+
+def test_task_gains_reach_every_hierarchy(robots):
+    """``--set posture_stiffness=30 --set posture_damping=9`` (and the swing-foot and CoG PDs where
+    declared): the momentum balance of the push scenarios, every stack of the contact switch and
+    of stepping hold exactly those gains (joints and base alike); the defaults are the stacks'."""
+    from wholebody.control.contact_switch import ContactSwitch
+    from wholebody.control.stacks import POSTURE_GAINS
+    from wholebody.control.stepping import Stepping
+    from wholebody.scenarios import get_scenario, single_support, stepping
+    from wholebody.scenarios.pushes import controller_options
+
+    robot = robots["talos14"]
+    sets = {"posture_stiffness": "30", "posture_damping": "9", "swing_stiffness": "250",
+            "swing_damping": "31", "com_stiffness": "64", "com_damping": "16"}
+
+    def check(stack, posture=(30.0, 9.0)):
+        task = stack.find("posture")  # single support's swing leg: no stiffness, the rest kp
+        assert (np.max(task.kp), task.kd, task.base_kp, task.base_kd) == (
+            posture[0], posture[1], posture[0], posture[1])
+
+    params = get_scenario("push").validate(robot, {k: v for k, v in sets.items()
+                                                   if k.startswith("posture")})
+    check(MomentumBalance(robot, "pd", **controller_options("pd", params)).stack)
+    check(MomentumBalance(robot, "pd", **controller_options("pd", {})).stack, POSTURE_GAINS)
+
+    params = get_scenario("single-support").validate(
+        robot, {k: v for k, v in sets.items() if not k.startswith("com")})
+    stance, _ = single_support.stance_and_swing(robot, params)
+    ctrl = ContactSwitch(robot, stance, single_support.config(robot, params), gains="lqr")
+    for stack in (ctrl.double, ctrl.single, ctrl.swinging):
+        check(stack)
+    assert (ctrl.swing.kp, ctrl.swing.kd) == (250.0, 31.0)
+
+    params = get_scenario("stepping").validate(robot, sets)
+    ctrl = Stepping(robot, stepping.config(robot, params), engine="python")
+    for stack in (ctrl.double, *ctrl.single.values()):
+        check(stack)
+        com = stack.find("com")
+        assert (com.kp, com.kd) == (64.0, 16.0)
+    for task in ctrl.swing_task.values():
+        assert (task.kp, task.kd) == (250.0, 31.0)
 
 
 def test_single_support_takes_the_pd_gains(robots):

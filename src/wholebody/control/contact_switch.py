@@ -41,7 +41,7 @@ from ..tasks.motion import JointTrajectoryTask
 from ..variables import Variables
 from .balance import lqr_q
 from .lqr import MomentumLQR
-from .stacks import TORSION, table2_stack, table4_stack
+from .stacks import POSTURE_GAINS, SWING_GAINS, TORSION, table2_stack, table4_stack
 
 GAINS = ("pd", "lqr")
 
@@ -72,7 +72,9 @@ class ContactSwitchConfig:
     fraction of :func:`~wholebody.planning.support_shift.swing_leg_drop` (1: the swing leg keeps
     its standing bend; 0: the CoG keeps its standing height); None (default): the fraction
     :func:`~wholebody.planning.support_shift.automatic_swing_bend` finds from the legs'
-    joint-limit margins.
+    joint-limit margins. ``posture_gains``, ``swing_gains``: the posture's and the swing-foot
+    task's (kp, kd) in every stack (:data:`~wholebody.control.stacks.POSTURE_GAINS`,
+    :data:`~wholebody.control.stacks.SWING_GAINS`).
     """
 
     shift_time: float
@@ -96,6 +98,8 @@ class ContactSwitchConfig:
     q_angular: float
     lqr_blend: bool
     swing_bend: float | None = None
+    posture_gains: tuple[float, float] = POSTURE_GAINS
+    swing_gains: tuple[float, float] = SWING_GAINS
 
 
 @dataclass
@@ -154,12 +158,15 @@ class ContactSwitch:
         lqr = gains == "lqr"
         self.double_contacts = tuple(robot.contact_names)
         bw = BASE_ORIENTATION_WEIGHT
-        self.double = table2_stack(robot, lqr=lqr, base_orientation_weight=bw, torsion=torsion)
+        gains = {"posture_gains": config.posture_gains}
+        self.double = table2_stack(robot, lqr=lqr, base_orientation_weight=bw, torsion=torsion,
+                                   **gains)
         self.double_vars = Variables(robot)
         self.unload = self.double.insert(
             2, ForceRegularizer(name="unload", contacts=[swing_contact], weight=0.0))
+        gains["swing_gains"] = config.swing_gains
         self.single = table4_stack(robot, [stance], [self.swing_frame], lqr=lqr,
-                                   base_orientation_weight=bw, torsion=torsion)
+                                   base_orientation_weight=bw, torsion=torsion, **gains)
         self.single_vars = Variables(robot, [stance])
         self.swing = self.single.find(f"swing {self.swing_frame}")
         # Sect. 5.4: the Cartesian swing-foot task swapped for a joint-space task
@@ -167,7 +174,7 @@ class ContactSwitch:
         self.joint_task = JointTrajectoryTask(self.joints, kp=config.sine_kp, kd=config.sine_kd,
                                               name="swing joints")
         self.swinging = table4_stack(robot, [stance], [], lqr=lqr, base_orientation_weight=bw,
-                                     torsion=torsion)
+                                     torsion=torsion, **gains)
         self.swinging.insert(2, self.joint_task, before="posture")
         self.swinging.insert(2, self.swing, before="posture")  # the foot task fades out (handover)
         self.swing_posture = self.swinging.find("posture")

@@ -87,6 +87,36 @@ def momentum_task(lqr: bool, angular_weight: float = 1e4):
 #: Weight of the posture task's rows (Sect. 5.2.1's 1e-1).
 POSTURE_WEIGHT = 1e-1
 
+#: (kp, kd) of the posture task, joints and base alike (1/s², 1/s): 7.1 rad/s, damping ratio 0.99
+POSTURE_GAINS = (50.0, 14.0)
+#: (kp, kd) of the swing-foot task of Tables 1 and 4 (1/s², 1/s): 20 rad/s, damping ratio 1
+SWING_GAINS = (400.0, 40.0)
+#: (kp, kd) of the CoG task of Table 1 (1/s², 1/s): 10 rad/s, damping ratio 1
+COM_GAINS = (100.0, 20.0)
+
+
+def pd_gains(gains, name: str) -> tuple[float, float]:
+    """``gains`` = (kp, kd) as two finite floats >= 0 (ValueError naming ``name``)."""
+    try:
+        kp, kd = gains
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected (kp, kd), got {gains!r}") from None
+    return nonnegative(kp, f"{name} kp"), nonnegative(kd, f"{name} kd")
+
+
+def posture_task(robot: Robot, base_orientation_weight: float | None = None,
+                 gains=POSTURE_GAINS) -> PostureTask:
+    """The posture task (joints and base) with :func:`posture_weight` and the PD ``gains``."""
+    kp, kd = pd_gains(gains, "posture_gains")
+    return PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
+                       kp=kp, kd=kd, base_kp=kp, base_kd=kd)
+
+
+def swing_tasks(swing_frames: Sequence[str], gains=SWING_GAINS) -> list[FrameTask]:
+    """One 6D swing-foot PD per frame of ``swing_frames``."""
+    kp, kd = pd_gains(gains, "swing_gains")
+    return [FrameTask(f, kp=kp, kd=kd, name=f"swing {f}", mask="6d") for f in swing_frames]
+
 
 def posture_weight(robot: Robot, base_orientation_weight: float | None):
     """The posture task's row weights: :data:`POSTURE_WEIGHT` on every row, or with
@@ -102,7 +132,8 @@ def posture_weight(robot: Robot, base_orientation_weight: float | None):
 def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool = False,
                  full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
-                 base_orientation_weight: float | None = None, torsion: bool = TORSION) -> Stack:
+                 base_orientation_weight: float | None = None, torsion: bool = TORSION,
+                 posture_gains=POSTURE_GAINS) -> Stack:
     """Table 2, double support: (1) Newton-Euler + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) momentum control, posture (joints + base), GRF
     regulariser.
@@ -129,15 +160,15 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     ``base_orientation_weight``: None = the posture's 1e-1 on all its rows, else the weight of its
     three base-orientation rows (:func:`posture_weight`). ``torsion`` (default :data:`TORSION`,
     True): the friction task's torsional rows on the rectangle contacts (the soles' yaw-moment
-    bound, not in the paper); False gives the paper's friction pyramid only."""
+    bound, not in the paper); False gives the paper's friction pyramid only. ``posture_gains``:
+    the posture's (kp, kd), :data:`POSTURE_GAINS` by default."""
     contacts = _contacts(robot, contacts, "contacts", default_all=True)
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=contacts)]
         + _contact_conditions(robot, contacts, mu, torsion),
         [momentum_task(lqr, angular_weight),
-         PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
-                     kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0),
+         posture_task(robot, base_orientation_weight, posture_gains),
          ForceRegularizer(name="force regularizer", weight=1e-4, contacts=contacts)],
     ])
 
@@ -145,7 +176,8 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
 def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
                  lqr: bool = False, full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
-                 base_orientation_weight: float | None = None, torsion: bool = TORSION) -> Stack:
+                 base_orientation_weight: float | None = None, torsion: bool = TORSION,
+                 posture_gains=POSTURE_GAINS, swing_gains=SWING_GAINS) -> Stack:
     """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
     acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
     regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks have no
@@ -154,33 +186,38 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
     The angular-momentum rows weigh ``angular_weight`` (default 1e-4; the paper: 1e4) and the
     posture holds the base, as in :func:`table2_stack`, whose docstring gives the reason:
     neither eq. 22 nor the LQR state has the trunk orientation. ``base_orientation_weight``: as
-    in :func:`table2_stack`; ``torsion``: as in :func:`table2_stack`."""
+    in :func:`table2_stack`; ``torsion``: as in :func:`table2_stack`; ``posture_gains``,
+    ``swing_gains``: the posture's and the swing-foot tasks' (kp, kd)."""
     stance = _contacts(robot, stance, "stance", default_all=False)
-    swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
     return Stack([
         _dynamics(full),
         _contact_conditions(robot, stance, mu, torsion),
         [momentum_task(lqr, angular_weight),
          ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
-        + swing + [PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
-                               kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0)],
+        + swing_tasks(swing_frames, swing_gains)
+        + [posture_task(robot, base_orientation_weight, posture_gains)],
         [ForceRegularizer(name="force regularizer", weight=1e-4, contacts=stance)],
     ])
 
 
 def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
-                 full: bool = False, mu: float | None = None, torsion: bool = TORSION) -> Stack:
+                 full: bool = False, mu: float | None = None, torsion: bool = TORSION,
+                 posture_gains=POSTURE_GAINS, swing_gains=SWING_GAINS,
+                 com_gains=COM_GAINS) -> Stack:
     """Table 1, the stepping benchmark: (1) dynamics + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) CoG PD + swing-foot PD; (4) posture (joints + base);
     (5) GRF regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks
-    have no rows). ``torsion``: as in :func:`table2_stack`."""
+    have no rows). ``torsion``: as in :func:`table2_stack`; ``posture_gains``, ``swing_gains``,
+    ``com_gains``: the posture's, the swing-foot tasks' and the CoG task's (kp, kd)."""
     stance = _contacts(robot, stance, "stance", default_all=False)
-    swing = [FrameTask(f, kp=400.0, kd=40.0, name=f"swing {f}", mask="6d") for f in swing_frames]
+    com_kp, com_kd = pd_gains(com_gains, "com_gains")
+    posture_kp, posture_kd = pd_gains(posture_gains, "posture_gains")
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=stance)]
         + _contact_conditions(robot, stance, mu, torsion),
-        [CoMTask(name="com", kp=100.0, kd=20.0)] + swing,
-        [PostureTask(name="posture", kp=50.0, kd=14.0, base_kp=50.0, base_kd=14.0)],
+        [CoMTask(name="com", kp=com_kp, kd=com_kd)] + swing_tasks(swing_frames, swing_gains),
+        [PostureTask(name="posture", kp=posture_kp, kd=posture_kd, base_kp=posture_kp,
+                     base_kd=posture_kd)],
         [ForceRegularizer(name="force regularizer", contacts=stance)],
     ])

@@ -27,7 +27,7 @@ from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
 from ..tasks import ForceRegularizer
 from ..variables import Variables
-from .stacks import TORSION, table1_stack
+from .stacks import COM_GAINS, POSTURE_GAINS, SWING_GAINS, TORSION, table1_stack
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,9 @@ class SteppingConfig:
     ``lift_time`` is the duration of the lift and, again, of the lowering; ``preload``: normal force
     ramped onto the touched-down sole during the reload, as a fraction of the weight; ``settle``:
     time after the final shift back to the middle; ``contact_kd``: damping of the contact
-    velocities in the contact constraint (1/s; 0: eq. 2 as is).
+    velocities in the contact constraint (1/s; 0: eq. 2 as is); ``posture_gains``,
+    ``swing_gains``, ``com_gains``: the posture's, the swing-foot task's and the CoG task's (kp,
+    kd) (:mod:`~wholebody.control.stacks`).
     """
 
     stance_order: tuple[str, str]
@@ -52,6 +54,9 @@ class SteppingConfig:
     touchdown_depth: float
     settle: float
     contact_kd: float
+    posture_gains: tuple[float, float] = POSTURE_GAINS
+    swing_gains: tuple[float, float] = SWING_GAINS
+    com_gains: tuple[float, float] = COM_GAINS
 
 
 @dataclass
@@ -100,7 +105,9 @@ class Stepping:
         self.formulation = Formulation(robot, reduced=reduced)
         full = not reduced
         contacts = tuple(robot.contact_names)
-        self.double = table1_stack(robot, contacts, full=full, torsion=torsion)
+        gains = {"posture_gains": config.posture_gains, "swing_gains": config.swing_gains,
+                 "com_gains": config.com_gains}
+        self.double = table1_stack(robot, contacts, full=full, torsion=torsion, **gains)
         self.double_vars = Variables(robot, contacts)
         # eq. 2 keeps whatever velocity a sole has at touch-down (J qdd + Jdot v = 0): with both
         # soles on the ground a residual landing velocity made the whole robot roll over in closed
@@ -117,7 +124,7 @@ class Stepping:
             swing = next(c for c in contacts if c != stance)
             frame = robot.contact(swing).frame
             self.single[stance] = table1_stack(robot, [stance], [frame], full=full,
-                                               torsion=torsion)
+                                               torsion=torsion, **gains)
             self.single[stance].find("contacts").kd = config.contact_kd
             self.single_vars[stance] = Variables(robot, [stance])
             self.swing_task[stance] = self.single[stance].find(f"swing {frame}")

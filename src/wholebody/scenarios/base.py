@@ -12,6 +12,7 @@ from typing import Any, Callable, ClassVar, Sequence
 
 import numpy as np
 
+from ..control.stacks import COM_GAINS, POSTURE_GAINS, SWING_GAINS
 from ..cycle import ENGINES
 from ..sim.incidents import IncidentLog
 from ..sim.simulator import SimulationDiverged
@@ -318,6 +319,32 @@ PD_DAMPING = Parameter("pd_damping", MOMENTUM_D_LINEAR, "PD only: eq. 22's D on 
 PD_ANGULAR_DAMPING = Parameter("pd_angular_damping", MOMENTUM_D_ANGULAR,
                                "PD only: eq. 22's D on the angular momentum error (1/s)", low=0.0)
 PD_PARAMETERS = (PD_STIFFNESS, PD_DAMPING, PD_ANGULAR_DAMPING)
+
+
+def _task_gain_parameters(task: str, gains: tuple[float, float], where: str) -> tuple:
+    """The (kp, kd) of a hierarchy task as the parameters ``<task>_stiffness`` and
+    ``<task>_damping`` (accelerations, the same on every robot)."""
+    return (Parameter(f"{task}_stiffness", gains[0], f"{where}: stiffness (1/s^2)", low=0.0,
+                      high=1e6),
+            Parameter(f"{task}_damping", gains[1], f"{where}: damping (1/s)", low=0.0, high=1e4))
+
+
+#: the posture task's PD (joints and base) of the humanoid hierarchies (Tables 1, 2 and 4)
+POSTURE_PARAMETERS = _task_gain_parameters("posture", POSTURE_GAINS,
+                                           "posture task (joints and base)")
+#: the swing-foot task's PD (Tables 1 and 4)
+SWING_FOOT_PARAMETERS = _task_gain_parameters("swing", SWING_GAINS, "swing-foot task")
+#: the CoG task's PD (Table 1)
+COM_PARAMETERS = _task_gain_parameters("com", COM_GAINS, "CoG task")
+
+
+def task_gains(params: dict) -> dict:
+    """The (kp, kd) pairs of the hierarchy tasks the scenario declares (:data:`POSTURE_PARAMETERS`,
+    :data:`SWING_FOOT_PARAMETERS`, :data:`COM_PARAMETERS`) as keyword arguments:
+    ``posture_gains``, ``swing_gains``, ``com_gains`` (only those in ``params``)."""
+    return {f"{task}_gains": (float(params[f"{task}_stiffness"]),
+                              float(params[f"{task}_damping"]))
+            for task in ("posture", "swing", "com") if f"{task}_stiffness" in params}
 
 
 def momentum_gains(controller: str, params: dict) -> dict:

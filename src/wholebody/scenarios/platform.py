@@ -60,8 +60,9 @@ from ..planning.blend import WaypointMotion
 from ..report.balance_figures import balance_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter, Scenario,
-                   ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes)
+from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter,
+                   Scenario, ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes,
+                   task_gains)
 from .loop import run_closed_loop
 from .measures import BalanceMonitor, limit_notes, sole_midpoint
 
@@ -83,6 +84,7 @@ PARAMETERS = (
                                     "hdot_ref = m a (not in the paper)"),
     Q_ANGULAR,
     *PD_PARAMETERS,
+    *POSTURE_PARAMETERS,
     Parameter("cop_margin", 0.0, "shrink the admissible CoP rectangle by this fraction (0: the "
                                  "whole sole)", low=0.0, high=1.0, high_open=True),
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)",
@@ -131,7 +133,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         support_acc = lambda t: np.r_[motion.acceleration(t)[:3]]  # noqa: E731
     reference = SoleFrameReference(robot, support_acceleration=support_acc)
     ctrl = MomentumBalance(robot, gains=controller, reference=reference,
-                           **momentum_gains(controller, params),
+                           **momentum_gains(controller, params), **task_gains(params),
                            cop_margin=params["cop_margin"], engine=params["engine"])
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=params["cop_margin"])
     duration = motion.end + params["settle"]

@@ -31,8 +31,9 @@ from ..report.balance_figures import fig11, single_support_figure
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..robots.roles import BIPED_ROLES, biped_soles, leg_joints, pitch_joints
 from ..sim.simulator import Simulator
-from .base import (PD_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter, Scenario, ScenarioResult,
-                   duration_parameter, momentum_gains, paper_q_notes)
+from .base import (PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, SWING_FOOT_PARAMETERS, TIME_SPAN,
+                   Parameter, Scenario, ScenarioResult, duration_parameter, momentum_gains,
+                   paper_q_notes, task_gains)
 from .loop import run_closed_loop
 from .measures import (COG_TOLERANCE_M, RECOVERY_WINDOW_S, cog_recovery, cop_in_sole,
                        feet_in_place, sole_slip, tilt_deg)
@@ -107,6 +108,8 @@ PARAMETERS = (
               **TIME_SPAN),
     Q_ANGULAR,
     *PD_PARAMETERS,
+    *POSTURE_PARAMETERS,
+    *SWING_FOOT_PARAMETERS,
     Parameter("lqr_blend", True, "LQR: blend the gains during the unloading (Sect. 3.2 remark); "
                                  "false: switch them at the contact switch"),
     Parameter("max_torque_jump", HumanoidScaled(10.0, "Nm", mass_power=1, height_power=1),
@@ -168,7 +171,8 @@ def config(robot, params: dict) -> ContactSwitchConfig:
         sine_kp=params["sine_kp"], sine_kd=params["sine_kd"],
         sine_push_force=params["sine_push_force"], sine_push_at=params["sine_push_at"],
         settle=params["settle"], q_angular=params["q_angular"], lqr_blend=params["lqr_blend"],
-        swing_bend=None if params["swing_bend"] < 0.0 else params["swing_bend"])
+        swing_bend=None if params["swing_bend"] < 0.0 else params["swing_bend"],
+        **task_gains(params))
 
 
 def timeline(robot, params: dict) -> Timeline:

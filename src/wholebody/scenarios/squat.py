@@ -48,8 +48,9 @@ import numpy as np
 from ..control.balance import CoMSineReference, MomentumBalance
 from ..report.balance_figures import squat_figure
 from ..sim.simulator import Simulator
-from .base import (ENGINE, PD_PARAMETERS, Q_ANGULAR, Parameter, Scenario, ScenarioResult,
-                   check_biped, format_mm, momentum_gains, paper_q_notes)
+from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter, Scenario,
+                   ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes,
+                   task_gains)
 from .loop import run_closed_loop
 from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
 
@@ -75,6 +76,7 @@ PARAMETERS = (
                                "stacks' default); false: the paper's friction pyramid only"),
     Q_ANGULAR,
     *PD_PARAMETERS,
+    *POSTURE_PARAMETERS,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
                                     "cop-active", low=0.0, high=Parameter.H),
     ENGINE,
@@ -145,7 +147,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
-                           **momentum_gains(controller, params),
+                           **momentum_gains(controller, params), **task_gains(params),
                            engine=params["engine"], torsion=params["torsion"])
     sim = Simulator(robot, observers=observers, label=controller)
     monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=margin)

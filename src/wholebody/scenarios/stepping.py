@@ -26,7 +26,8 @@ import numpy as np
 from ..control.stepping import Stepping, SteppingConfig
 from ..report.balance_figures import stepping_timing_figure
 from ..sim.simulator import Simulator
-from .base import ENGINE, TIME_SPAN, Parameter, Scenario, ScenarioResult, check_engine
+from .base import (COM_PARAMETERS, ENGINE, POSTURE_PARAMETERS, SWING_FOOT_PARAMETERS, TIME_SPAN,
+                   Parameter, Scenario, ScenarioResult, check_engine, task_gains)
 from .loop import run_closed_loop
 from .measures import MAX_BASE_DROP_M, feet_in_place, sole_slip, tilt_deg
 
@@ -53,6 +54,9 @@ PARAMETERS = (
               low=0.0, high=Parameter.MAX_TIME),
     Parameter("contact_kd", 20.0, "damping of the contact velocities in the contact constraint "
                                   "(1/s; 0: eq. 2 as is)", low=0.0),
+    *COM_PARAMETERS,
+    *SWING_FOOT_PARAMETERS,
+    *POSTURE_PARAMETERS,
     Parameter("formulations", "reduced,full", "formulations to run, in this order",
               choices=("reduced", "full"), items=str),
     ENGINE,
@@ -72,7 +76,7 @@ def config(robot, params: dict) -> SteppingConfig:
         unload_time=params["unload_time"], lift_time=params["lift_time"],
         reload_time=params["reload_time"], preload=params["preload"], lift=params["lift"],
         touchdown_depth=params["touchdown_depth"], settle=params["settle"],
-        contact_kd=params["contact_kd"])
+        contact_kd=params["contact_kd"], **task_gains(params))
 
 
 def _stats(x: np.ndarray) -> dict:
