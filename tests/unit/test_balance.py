@@ -245,15 +245,15 @@ HUMANOID_SCENARIOS = ("push", "push-series", "robust-push", "platform", "tilt-bo
 def test_humanoid_scenarios_take_the_task_gains(name):
     """Every humanoid scenario declares the posture task's PD; those with a swing foot (single
     support, stepping) its PD, stepping the CoG task's; the defaults are the stacks' own."""
-    from wholebody.control.stacks import COM_GAINS, POSTURE_GAINS, SWING_GAINS
+    from wholebody.control.stacks import COM_PD, POSTURE_PD, SWING_FOOT_PD
     from wholebody.scenarios import get_scenario
 
     params = {p.name: p.default for p in get_scenario(name).parameters}
-    expected = {"posture": POSTURE_GAINS}
+    expected = {"posture": POSTURE_PD}
     if name in ("single-support", "stepping"):
-        expected["swing"] = SWING_GAINS
+        expected["swing"] = SWING_FOOT_PD
     if name == "stepping":
-        expected["com"] = COM_GAINS
+        expected["com"] = COM_PD
     for task in ("posture", "swing", "com"):
         declared = (params.get(f"{task}_stiffness"), params.get(f"{task}_damping"))
         assert declared == expected.get(task, (None, None)), (name, task)
@@ -264,7 +264,7 @@ def test_task_gains_reach_every_hierarchy(robots):
     declared): the momentum balance of the push scenarios, every stack of the contact switch and
     of stepping hold exactly those gains (joints and base alike); the defaults are the stacks'."""
     from wholebody.control.contact_switch import ContactSwitch
-    from wholebody.control.stacks import POSTURE_GAINS
+    from wholebody.control.stacks import POSTURE_PD
     from wholebody.control.stepping import Stepping
     from wholebody.scenarios import get_scenario, single_support, stepping
     from wholebody.scenarios.pushes import controller_options
@@ -281,7 +281,7 @@ def test_task_gains_reach_every_hierarchy(robots):
     params = get_scenario("push").validate(robot, {k: v for k, v in sets.items()
                                                    if k.startswith("posture")})
     check(MomentumBalance(robot, "pd", **controller_options("pd", params)).stack)
-    check(MomentumBalance(robot, "pd", **controller_options("pd", {})).stack, POSTURE_GAINS)
+    check(MomentumBalance(robot, "pd", **controller_options("pd", {})).stack, POSTURE_PD)
 
     params = get_scenario("single-support").validate(
         robot, {k: v for k, v in sets.items() if not k.startswith("com")})

@@ -33,7 +33,7 @@ from ..tasks.base import contact_list
 from ..tasks.momentum import momentum_gain
 from ..validation import finite_array, nonnegative, number, positive
 from .lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_DIAG, MomentumLQR
-from .stacks import ANGULAR_MOMENTUM_WEIGHT, POSTURE_GAINS, TORSION, table2_stack
+from .stacks import ANGULAR_MOMENTUM_WEIGHT, POSTURE_PD, TORSION, table2_stack
 
 GAINS = ("lqr", "pd")
 
@@ -192,7 +192,7 @@ class MomentumBalance:
     :func:`~wholebody.control.stacks.table2_stack`; 1e4 = the paper's single weight).
     ``torsion`` (default True): the soles' yaw-moment rows in the friction task (False: the
     paper's pyramid only; :data:`~wholebody.control.stacks.TORSION`). ``posture_gains``: the
-    posture task's (kp, kd) (:data:`~wholebody.control.stacks.POSTURE_GAINS`).
+    posture task's (kp, kd) (:data:`~wholebody.control.stacks.POSTURE_PD`).
     ``q_integral`` (LQR only; None/0 = off, the default and the paper's controller): weight of the
     integral of the CoG error ``robot.com - com_ref`` in the augmented LQR cost — integral action,
     our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
@@ -226,7 +226,7 @@ class MomentumBalance:
                  cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT,
                  engine: str = "auto", torsion: bool = TORSION, q_orientation=None,
-                 posture_gains=POSTURE_GAINS):
+                 posture_gains=POSTURE_PD):
         if gains not in GAINS:
             raise ValueError(f"gains: expected one of {GAINS}, got '{gains}'")
         for arg, value in (("q_integral", q_integral), ("q_orientation", q_orientation)):

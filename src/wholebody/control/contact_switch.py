@@ -41,7 +41,7 @@ from ..tasks.motion import JointTrajectoryTask
 from ..variables import Variables
 from .balance import lqr_q
 from .lqr import MomentumLQR
-from .stacks import POSTURE_GAINS, SWING_GAINS, TORSION, table2_stack, table4_stack
+from .stacks import POSTURE_PD, SWING_FOOT_PD, TORSION, table2_stack, table4_stack
 
 GAINS = ("pd", "lqr")
 
@@ -73,8 +73,8 @@ class ContactSwitchConfig:
     its standing bend; 0: the CoG keeps its standing height); None (default): the fraction
     :func:`~wholebody.planning.support_shift.automatic_swing_bend` finds from the legs'
     joint-limit margins. ``posture_gains``, ``swing_gains``: the posture's and the swing-foot
-    task's (kp, kd) in every stack (:data:`~wholebody.control.stacks.POSTURE_GAINS`,
-    :data:`~wholebody.control.stacks.SWING_GAINS`).
+    task's (kp, kd) in every stack (:data:`~wholebody.control.stacks.POSTURE_PD`,
+    :data:`~wholebody.control.stacks.SWING_FOOT_PD`).
     """
 
     shift_time: float
@@ -98,8 +98,8 @@ class ContactSwitchConfig:
     q_angular: float
     lqr_blend: bool
     swing_bend: float | None = None
-    posture_gains: tuple[float, float] = POSTURE_GAINS
-    swing_gains: tuple[float, float] = SWING_GAINS
+    posture_gains: tuple[float, float] = POSTURE_PD
+    swing_gains: tuple[float, float] = SWING_FOOT_PD
 
 
 @dataclass

@@ -88,11 +88,11 @@ def momentum_task(lqr: bool, angular_weight: float = 1e4):
 POSTURE_WEIGHT = 1e-1
 
 #: (kp, kd) of the posture task, joints and base alike (1/s², 1/s): 7.1 rad/s, damping ratio 0.99
-POSTURE_GAINS = (50.0, 14.0)
+POSTURE_PD = (50.0, 14.0)
 #: (kp, kd) of the swing-foot task of Tables 1 and 4 (1/s², 1/s): 20 rad/s, damping ratio 1
-SWING_GAINS = (400.0, 40.0)
+SWING_FOOT_PD = (400.0, 40.0)
 #: (kp, kd) of the CoG task of Table 1 (1/s², 1/s): 10 rad/s, damping ratio 1
-COM_GAINS = (100.0, 20.0)
+COM_PD = (100.0, 20.0)
 
 
 def pd_gains(gains, name: str) -> tuple[float, float]:
@@ -105,14 +105,14 @@ def pd_gains(gains, name: str) -> tuple[float, float]:
 
 
 def posture_task(robot: Robot, base_orientation_weight: float | None = None,
-                 gains=POSTURE_GAINS) -> PostureTask:
+                 gains=POSTURE_PD) -> PostureTask:
     """The posture task (joints and base) with :func:`posture_weight` and the PD ``gains``."""
     kp, kd = pd_gains(gains, "posture_gains")
     return PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
                        kp=kp, kd=kd, base_kp=kp, base_kd=kd)
 
 
-def swing_tasks(swing_frames: Sequence[str], gains=SWING_GAINS) -> list[FrameTask]:
+def swing_tasks(swing_frames: Sequence[str], gains=SWING_FOOT_PD) -> list[FrameTask]:
     """One 6D swing-foot PD per frame of ``swing_frames``."""
     kp, kd = pd_gains(gains, "swing_gains")
     return [FrameTask(f, kp=kp, kd=kd, name=f"swing {f}", mask="6d") for f in swing_frames]
@@ -133,7 +133,7 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
                  full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  base_orientation_weight: float | None = None, torsion: bool = TORSION,
-                 posture_gains=POSTURE_GAINS) -> Stack:
+                 posture_gains=POSTURE_PD) -> Stack:
     """Table 2, double support: (1) Newton-Euler + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) momentum control, posture (joints + base), GRF
     regulariser.
@@ -161,7 +161,7 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     three base-orientation rows (:func:`posture_weight`). ``torsion`` (default :data:`TORSION`,
     True): the friction task's torsional rows on the rectangle contacts (the soles' yaw-moment
     bound, not in the paper); False gives the paper's friction pyramid only. ``posture_gains``:
-    the posture's (kp, kd), :data:`POSTURE_GAINS` by default."""
+    the posture's (kp, kd), :data:`POSTURE_PD` by default."""
     contacts = _contacts(robot, contacts, "contacts", default_all=True)
     return Stack([
         _dynamics(full),
@@ -177,7 +177,7 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
                  lqr: bool = False, full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  base_orientation_weight: float | None = None, torsion: bool = TORSION,
-                 posture_gains=POSTURE_GAINS, swing_gains=SWING_GAINS) -> Stack:
+                 posture_gains=POSTURE_PD, swing_gains=SWING_FOOT_PD) -> Stack:
     """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
     acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
     regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks have no
@@ -202,8 +202,8 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
 
 def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
                  full: bool = False, mu: float | None = None, torsion: bool = TORSION,
-                 posture_gains=POSTURE_GAINS, swing_gains=SWING_GAINS,
-                 com_gains=COM_GAINS) -> Stack:
+                 posture_gains=POSTURE_PD, swing_gains=SWING_FOOT_PD,
+                 com_gains=COM_PD) -> Stack:
     """Table 1, the stepping benchmark: (1) dynamics + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) CoG PD + swing-foot PD; (4) posture (joints + base);
     (5) GRF regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks

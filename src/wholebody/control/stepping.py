@@ -27,7 +27,7 @@ from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
 from ..tasks import ForceRegularizer
 from ..variables import Variables
-from .stacks import COM_GAINS, POSTURE_GAINS, SWING_GAINS, TORSION, table1_stack
+from .stacks import COM_PD, POSTURE_PD, SWING_FOOT_PD, TORSION, table1_stack
 
 
 @dataclass(frozen=True)
@@ -54,9 +54,9 @@ class SteppingConfig:
     touchdown_depth: float
     settle: float
     contact_kd: float
-    posture_gains: tuple[float, float] = POSTURE_GAINS
-    swing_gains: tuple[float, float] = SWING_GAINS
-    com_gains: tuple[float, float] = COM_GAINS
+    posture_gains: tuple[float, float] = POSTURE_PD
+    swing_gains: tuple[float, float] = SWING_FOOT_PD
+    com_gains: tuple[float, float] = COM_PD
 
 
 @dataclass

@@ -12,7 +12,7 @@ from typing import Any, Callable, ClassVar, Sequence
 
 import numpy as np
 
-from ..control.stacks import COM_GAINS, POSTURE_GAINS, SWING_GAINS
+from ..control.stacks import COM_PD, POSTURE_PD, SWING_FOOT_PD
 from ..cycle import ENGINES
 from ..sim.incidents import IncidentLog
 from ..sim.simulator import SimulationDiverged
@@ -330,12 +330,12 @@ def _task_gain_parameters(task: str, gains: tuple[float, float], where: str) -> 
 
 
 #: the posture task's PD (joints and base) of the humanoid hierarchies (Tables 1, 2 and 4)
-POSTURE_PARAMETERS = _task_gain_parameters("posture", POSTURE_GAINS,
+POSTURE_PARAMETERS = _task_gain_parameters("posture", POSTURE_PD,
                                            "posture task (joints and base)")
 #: the swing-foot task's PD (Tables 1 and 4)
-SWING_FOOT_PARAMETERS = _task_gain_parameters("swing", SWING_GAINS, "swing-foot task")
+SWING_FOOT_PARAMETERS = _task_gain_parameters("swing", SWING_FOOT_PD, "swing-foot task")
 #: the CoG task's PD (Table 1)
-COM_PARAMETERS = _task_gain_parameters("com", COM_GAINS, "CoG task")
+COM_PARAMETERS = _task_gain_parameters("com", COM_PD, "CoG task")
 
 
 def task_gains(params: dict) -> dict:

@@ -76,7 +76,7 @@ STANCE_GAINS = (
 )
 #: the posture regulariser of both controllers (ours): the joints no foot task determines pulled
 #: toward the standing posture (:class:`~wholebody.control.passive.PassiveConfig`)
-POSTURE_GAINS = (
+POSTURE_REGULARIZER_GAINS = (
     Parameter("posture_frequency", 0.0, "posture regulariser (both controllers): frequency (Hz) "
               "of the pull of the joints no foot task determines toward the standing posture (0: "
               "HyQ's 8 rad/s, Froude-scaled)", low=0.0, high=100.0),
@@ -84,7 +84,7 @@ POSTURE_GAINS = (
               "damping ratio", low=0.0, high=100.0),
 )
 #: every gain of the quadruped controllers a scenario takes (:func:`wbc_gains`)
-WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS, *STANCE_GAINS, *POSTURE_GAINS)
+WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS, *STANCE_GAINS, *POSTURE_REGULARIZER_GAINS)
 #: the quasi-static baseline's Cartesian swing PD (force-level), for the scenarios that run it
 BASELINE_GAINS = (
     Parameter("baseline_swing_stiffness", 0.0, "quasi-static baseline: swing legs' Cartesian "
