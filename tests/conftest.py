@@ -21,10 +21,11 @@ def robots():
     return {name: wb.load_robot(name) for name in PRESETS}
 
 
-def g1_description(armature: float = 0.0) -> dict:
+def g1_description(armature: float = 0.0, lock_arms: bool = True) -> dict:
     """Unitree G1 from example-robot-data as docs/robots.md describes it (no preset: its URDF has
     no sole frame, so the soles are rectangles on the ankle roll links with an ``offset``; legs
-    and waist, arms locked), with rotor inertia ``armature``."""
+    and waist, arms locked unless ``lock_arms`` is False: all 29 joints), with rotor inertia
+    ``armature``."""
     arms = [f"{side}_{joint}_joint" for side in ("left", "right")
             for joint in ("shoulder_pitch", "shoulder_roll", "shoulder_yaw", "elbow",
                           "wrist_roll", "wrist_pitch", "wrist_yaw")]
@@ -33,7 +34,7 @@ def g1_description(armature: float = 0.0) -> dict:
     posture.update(left_shoulder_roll_joint=0.2, right_shoulder_roll_joint=-0.2,
                    left_elbow_joint=0.9, right_elbow_joint=0.9)
     return {"name": "g1", "urdf": "erd:g1_description/urdf/g1_29dof_rev_1_0.urdf",
-            "posture": posture, "locked_joints": arms, "armature": armature,
+            "posture": posture, "locked_joints": arms if lock_arms else [], "armature": armature,
             "trunk_frame": "torso_link",
             "contacts": [{"name": f"{side}_sole", "frame": f"{side}_ankle_roll_link",
                           "type": "rectangle", "half_size": [0.085, 0.025],

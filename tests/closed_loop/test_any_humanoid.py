@@ -71,6 +71,24 @@ def test_robots_without_a_preset_recover_a_front_push_with_pd_gains(which):
     assert impulse / robot.mass == pytest.approx(0.1, rel=0.02)
 
 
+def test_a_cop_margin_keeps_the_soles_flat_on_a_g1_with_its_arms():
+    """The 29-DoF G1 (arms free) pushed from the left with dv = 0.1 under eq. 22's PD gains: with
+    the whole sole admissible the CoP sits on the unloaded sole's edge and the twin's sole tips
+    about it (its largest tilt above the 2 deg the push allows); ``--set cop_margin=0.1`` keeps
+    the CoP 10 % inside and the soles flat (tilt at most half of that, the push survived)."""
+    import wholebody as wb
+    from conftest import g1_description
+    robot = wb.load_robot(g1_description(armature=0.02, lock_arms=False))
+    tilts = {}
+    for margin in ("0", "0.1"):
+        result = get_scenario("push").run(robot, "pd", {"dv": "0.1", "location": "left",
+                                                         "cop_margin": margin})
+        tilts[margin] = result.metrics["max_foot_tilt_deg"]
+        assert result.metrics["failed_cycles"] == 0, result.metrics
+    assert result.success, result.metrics
+    assert tilts["0.1"] < 0.5 * tilts["0"], tilts
+
+
 @pytest.mark.parametrize("swing_bend", [0.0, -1.0])
 def test_alexander_single_support_at_any_bend(swing_bend):
     """Alexander (legs 40 % of its 49 kg) shifting its CoG over one sole at its standing height

@@ -230,7 +230,7 @@ def test_push_series_hands_every_controller_option_to_its_trials(monkeypatch):
     params = {"push_duration": 0.1, "duration": 3.5, "q_angular": 2.0, "angular_weight": 1e-3,
               "q_integral": 0.0, "integral_limit": 0.01, "q_orientation": 5.0, "pd_stiffness": 14.0,
               "pd_damping": 7.5, "pd_angular_damping": 2.0, "posture_stiffness": 30.0,
-              "posture_damping": 9.0, "engine": "python"}
+              "posture_damping": 9.0, "cop_margin": 0.05, "engine": "python"}
     push_series._one(None, "pd", "front", 100.0, params)
     (p,) = seen
     assert {o.name: p[o.name] for o in CONTROLLER_PARAMETERS} == {
@@ -278,9 +278,12 @@ def test_task_gains_reach_every_hierarchy(robots):
         assert (np.max(task.kp), task.kd, task.base_kp, task.base_kd) == (
             posture[0], posture[1], posture[0], posture[1])
 
-    params = get_scenario("push").validate(robot, {k: v for k, v in sets.items()
-                                                   if k.startswith("posture")})
-    check(MomentumBalance(robot, "pd", **controller_options("pd", params)).stack)
+    params = get_scenario("push").validate(robot, {**{k: v for k, v in sets.items()
+                                                      if k.startswith("posture")},
+                                                   "cop_margin": "0.2"})
+    balance = MomentumBalance(robot, "pd", **controller_options("pd", params))
+    check(balance.stack)
+    assert balance.stack.find("center of pressure").margin == 0.2
     check(MomentumBalance(robot, "pd", **controller_options("pd", {})).stack, POSTURE_PD)
 
     params = get_scenario("single-support").validate(

@@ -329,6 +329,12 @@ def _task_gain_parameters(task: str, gains: tuple[float, float], where: str) -> 
             Parameter(f"{task}_damping", gains[1], f"{where}: damping (1/s)", low=0.0, high=1e4))
 
 
+#: the CoP constraint's margin of the momentum-balance scenarios (Table 2's CoP task)
+COP_MARGIN = Parameter("cop_margin", 0.0, "shrink the admissible CoP rectangle of each sole by "
+                       "this fraction (0: the whole sole, the paper's)", low=0.0, high=1.0,
+                       high_open=True)
+
+
 #: the posture task's PD (joints and base) of the humanoid hierarchies (Tables 1, 2 and 4)
 POSTURE_PARAMETERS = _task_gain_parameters("posture", POSTURE_PD,
                                            "posture task (joints and base)")

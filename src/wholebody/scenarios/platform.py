@@ -60,9 +60,9 @@ from ..planning.blend import WaypointMotion
 from ..report.balance_figures import balance_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter,
-                   Scenario, ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes,
-                   task_gains)
+from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
+                   Parameter, Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
+                   paper_q_notes, task_gains)
 from .loop import run_closed_loop
 from .measures import BalanceMonitor, limit_notes, sole_midpoint
 
@@ -85,8 +85,7 @@ PARAMETERS = (
     Q_ANGULAR,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
-    Parameter("cop_margin", 0.0, "shrink the admissible CoP rectangle by this fraction (0: the "
-                                 "whole sole)", low=0.0, high=1.0, high_open=True),
+    COP_MARGIN,
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)",
               low=0.0, low_open=True, high=Parameter.H),
     ENGINE,

@@ -14,8 +14,8 @@ import math
 from pathlib import Path
 
 from ..report.balance_figures import push_figure
-from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter,
-                   Scenario, ScenarioResult, duration_parameter, paper_q_notes)
+from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
+                   Parameter, Scenario, ScenarioResult, duration_parameter, paper_q_notes)
 from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, Q_ORIENTATION,
                      check_push, ignored_option_notes, push_trial)
 
@@ -41,6 +41,7 @@ PARAMETERS = (
     Q_ORIENTATION,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
+    COP_MARGIN,
     ENGINE,
 )
 

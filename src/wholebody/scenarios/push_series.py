@@ -18,8 +18,8 @@ from ..report.balance_figures import push_series_figure
 from ..robot import Robot
 from ..robots import load_robot
 from ..sweep.executors import ordered, scenario_executor
-from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter,
-                   Scenario, ScenarioResult, duration_parameter, parse_list)
+from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
+                   Parameter, Scenario, ScenarioResult, duration_parameter, parse_list)
 from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS,
                      Q_INTEGRAL, Q_ORIENTATION, check_locations, check_push, push_trial)
 
@@ -38,6 +38,7 @@ PARAMETERS = (
     Q_ORIENTATION,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
+    COP_MARGIN,
     Parameter("bisection", False, "also find the largest survivable peak force per point"),
     Parameter("bisection_steps", 5, "bisection iterations (each one simulated push)",
               low=1, high=30),

@@ -19,8 +19,8 @@ from ..robots import reference
 from ..robots.roles import biped_soles
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
-from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter, RobotRelative,
-                   check_engine, momentum_gains, task_gains)
+from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter,
+                   RobotRelative, check_engine, momentum_gains, task_gains)
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, rotation_angle_deg, sole_slip, tilt_deg
 
@@ -92,7 +92,7 @@ Q_ORIENTATION = Parameter("q_orientation", 0.0, "LQR only: weight of the base or
                                                 "in the LQR state (ours, not the paper's; 0 = "
                                                 "off, the paper's controller)", low=0.0)
 CONTROLLER_PARAMETERS = (Q_ANGULAR, ANGULAR_WEIGHT, Q_INTEGRAL, INTEGRAL_LIMIT, Q_ORIENTATION,
-                         *PD_PARAMETERS, *POSTURE_PARAMETERS, ENGINE)
+                         *PD_PARAMETERS, *POSTURE_PARAMETERS, COP_MARGIN, ENGINE)
 
 #: the push parameters of one trial that push-series and robust-push do not vary
 FIXED_PUSH = {"angle": 0.0, "height": 0.1}
@@ -103,11 +103,13 @@ def controller_options(controller: str, params: dict) -> dict:
     ``angular_weight``, ``engine``, for LQR the integral action ``q_integral``/``integral_limit``
     and the orientation state ``q_orientation``,
     for PD eq. 22's gains ``pd_stiffness``/``pd_damping``/``pd_angular_damping``, the posture
-    task's ``posture_stiffness``/``posture_damping``; missing keys take the defaults of
+    task's ``posture_stiffness``/``posture_damping``, the soles' ``cop_margin``; missing keys
+    take the defaults of
     :data:`CONTROLLER_PARAMETERS`)."""
     defaults = {p.name: p.default for p in CONTROLLER_PARAMETERS}
     get = lambda key: params.get(key, defaults[key])  # noqa: E731
     opts = {"angular_weight": get("angular_weight"), "engine": get("engine"),
+            "cop_margin": get("cop_margin"),
             **momentum_gains(controller, params),
             **task_gains({p.name: get(p.name) for p in POSTURE_PARAMETERS})}
     if controller == "lqr" and get("q_integral") > 0:

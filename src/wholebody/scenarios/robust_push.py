@@ -36,8 +36,8 @@ from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
 from ..sweep.executors import ordered, scenario_executor
-from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, TIME_SPAN, Parameter, Scenario,
-                   ScenarioResult, duration_parameter, parse_list)
+from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, TIME_SPAN, Parameter,
+                   Scenario, ScenarioResult, duration_parameter, parse_list)
 from .loop import run_closed_loop
 from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
 from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
@@ -95,6 +95,7 @@ PARAMETERS = (
     INTEGRAL_LIMIT,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
+    COP_MARGIN,
     ENGINE,
     Parameter("workers", 1, "processes for the independent runs: 1 this process, N a local pool "
                             "of N, 0 one per core; same metrics", low=0, high=1024),
