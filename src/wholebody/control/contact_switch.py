@@ -158,15 +158,15 @@ class ContactSwitch:
         lqr = gains == "lqr"
         self.double_contacts = tuple(robot.contact_names)
         bw = BASE_ORIENTATION_WEIGHT
-        gains = {"posture_gains": config.posture_gains}
+        task_pd = {"posture_gains": config.posture_gains}
         self.double = table2_stack(robot, lqr=lqr, base_orientation_weight=bw, torsion=torsion,
-                                   **gains)
+                                   **task_pd)
         self.double_vars = Variables(robot)
         self.unload = self.double.insert(
             2, ForceRegularizer(name="unload", contacts=[swing_contact], weight=0.0))
-        gains["swing_gains"] = config.swing_gains
+        task_pd["swing_gains"] = config.swing_gains
         self.single = table4_stack(robot, [stance], [self.swing_frame], lqr=lqr,
-                                   base_orientation_weight=bw, torsion=torsion, **gains)
+                                   base_orientation_weight=bw, torsion=torsion, **task_pd)
         self.single_vars = Variables(robot, [stance])
         self.swing = self.single.find(f"swing {self.swing_frame}")
         # Sect. 5.4: the Cartesian swing-foot task swapped for a joint-space task
@@ -174,7 +174,7 @@ class ContactSwitch:
         self.joint_task = JointTrajectoryTask(self.joints, kp=config.sine_kp, kd=config.sine_kd,
                                               name="swing joints")
         self.swinging = table4_stack(robot, [stance], [], lqr=lqr, base_orientation_weight=bw,
-                                     torsion=torsion, **gains)
+                                     torsion=torsion, **task_pd)
         self.swinging.insert(2, self.joint_task, before="posture")
         self.swinging.insert(2, self.swing, before="posture")  # the foot task fades out (handover)
         self.swing_posture = self.swinging.find("posture")

@@ -30,8 +30,8 @@ from ..robots import reference
 from ..robots.roles import leg_joints
 from ..tasks.wrench import (TrunkImpedance, contact_wrench_map, force_bound, heading_weights,
                             trunk_weights)
-from .base import PlannedController
 from ..validation import nonnegative
+from .base import PlannedController
 from .passive import POSTURE_FREQUENCY, default_planner
 
 log = logging.getLogger(__name__)

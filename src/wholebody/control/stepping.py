@@ -105,9 +105,9 @@ class Stepping:
         self.formulation = Formulation(robot, reduced=reduced)
         full = not reduced
         contacts = tuple(robot.contact_names)
-        gains = {"posture_gains": config.posture_gains, "swing_gains": config.swing_gains,
+        task_pd = {"posture_gains": config.posture_gains, "swing_gains": config.swing_gains,
                  "com_gains": config.com_gains}
-        self.double = table1_stack(robot, contacts, full=full, torsion=torsion, **gains)
+        self.double = table1_stack(robot, contacts, full=full, torsion=torsion, **task_pd)
         self.double_vars = Variables(robot, contacts)
         # eq. 2 keeps whatever velocity a sole has at touch-down (J qdd + Jdot v = 0): with both
         # soles on the ground a residual landing velocity made the whole robot roll over in closed
@@ -124,7 +124,7 @@ class Stepping:
             swing = next(c for c in contacts if c != stance)
             frame = robot.contact(swing).frame
             self.single[stance] = table1_stack(robot, [stance], [frame], full=full,
-                                               torsion=torsion, **gains)
+                                               torsion=torsion, **task_pd)
             self.single[stance].find("contacts").kd = config.contact_kd
             self.single_vars[stance] = Variables(robot, [stance])
             self.swing_task[stance] = self.single[stance].find(f"swing {frame}")

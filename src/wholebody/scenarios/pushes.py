@@ -104,8 +104,7 @@ def controller_options(controller: str, params: dict) -> dict:
     and the orientation state ``q_orientation``,
     for PD eq. 22's gains ``pd_stiffness``/``pd_damping``/``pd_angular_damping``, the posture
     task's ``posture_stiffness``/``posture_damping``, the soles' ``cop_margin``; missing keys
-    take the defaults of
-    :data:`CONTROLLER_PARAMETERS`)."""
+    take the defaults of :data:`CONTROLLER_PARAMETERS`)."""
     defaults = {p.name: p.default for p in CONTROLLER_PARAMETERS}
     get = lambda key: params.get(key, defaults[key])  # noqa: E731
     opts = {"angular_weight": get("angular_weight"), "engine": get("engine"),
