@@ -181,3 +181,27 @@ def test_a_gait_run_stops_a_grace_period_after_the_fall():
     assert down[np.searchsorted(t, run.fell_at)] and not down[t < run.fell_at].any()
     assert run.fell_at + FALL_GRACE <= run.sim.t < run.fell_at + FALL_GRACE + 0.01
     assert run.sim.t < 5.0  # stopped well before the 6 s asked
+
+
+def test_the_gait_shape_parameters_reach_the_twin():
+    """``crawl --set clearance=0.07 --set period=1.2`` on go1: in the twin, the swing feet rise
+    to 7 cm above the floor (their spheres' bottoms, within 5 mm) instead of the default's
+    4.5 cm (HyQ's 0.1 m in proportion), and each foot lifts off once per 1.2 s (1.69 s by
+    default)."""
+    robot = wb.load_robot("go1")
+    params = get_scenario("crawl").validate(robot, {"clearance": "0.07", "period": "1.2"})
+    default = get_scenario("crawl").validate(robot, {})
+    radius = robot.contact(robot.contact_names[0]).spec.radius
+    heights, lifts = {}, {}
+    for label, p in (("set", params), ("default", default)):
+        run = run_gait(robot, "passive", "crawl", VelocityCommand.constant(0.05), 5.0,
+                       shape=p)
+        assert not run.fell and run.failures == 0, label
+        t, feet, stance = run.log["t"], run.log["feet"], run.log["stance"]
+        heights[label] = float(feet[:, :, 2].max()) - radius
+        first = np.flatnonzero(np.diff(stance[:, 0].astype(int)) == -1) + 1  # lift-offs, leg 0
+        lifts[label] = np.diff(t[first])
+    assert heights["set"] == pytest.approx(0.07, abs=5e-3), heights
+    assert heights["default"] == pytest.approx(default["clearance"], abs=5e-3), heights
+    np.testing.assert_allclose(lifts["set"], 1.2, atol=0.01)
+    assert abs(lifts["default"].mean() - 1.2) > 0.3, lifts

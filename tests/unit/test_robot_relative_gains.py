@@ -291,10 +291,12 @@ def test_quadruped_scenarios_take_the_trunk_gains(name):
     for key in ("trunk_frequency", "trunk_damping_ratio", "trunk_angular_frequency",
                 "trunk_angular_damping_ratio", "trunk_pitch_weight", "swing_stiffness",
                 "swing_damping", "stance_stiffness", "stance_damping", "posture_frequency",
-                "posture_damping_ratio"):
+                "posture_damping_ratio", "clearance", "period"):
         assert key in params, (name, key)
     assert params["trunk_frequency"].default == 0.0
     assert params["posture_frequency"].default == 0.0
+    assert params["period"].default == 0.0  # HyQ's, Froude-scaled
+    assert str(params["clearance"].default).endswith(" h")  # HyQ's 0.1 m in proportion
     # the defaults are the controllers' own
     assert (params["stance_stiffness"].default, params["stance_damping"].default) == (
         PassiveConfig.K_st, PassiveConfig.D_st)

@@ -23,9 +23,9 @@ from ..tasks.wrench import TrunkImpedance
 from ..report.locomotion_figures import crawl_tracking_figure
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (BASELINE_GAINS, GAIT, REGULARIZATION, SWAY_GAIN, WBC_GAINS, PaperSpeed,
-                         check_gait, check_quadruped, run_gait, sway_options, trunk_gains,
-                         wbc_gains)
+from .locomotion import (BASELINE_GAINS, GAIT, GAIT_SHAPE, REGULARIZATION, SWAY_GAIN, WBC_GAINS,
+                         PaperSpeed, check_gait, check_quadruped, run_gait, sway_options,
+                         trunk_gains, wbc_gains)
 
 PARAMETERS = (
     Parameter("speed_start", PaperSpeed(0.04), "forward speed at the start of the ramp (m/s)",
@@ -44,6 +44,7 @@ PARAMETERS = (
     SWAY_GAIN,
     REGULARIZATION,
     *WBC_GAINS,
+    *GAIT_SHAPE,
     *BASELINE_GAINS,
 )
 
@@ -78,7 +79,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     runs = {name: run_gait(robot, name, params["gait"], command, params["duration"],
                            progress=progress, observers=observers,
                            controller_options=options[name], gains=wbc_gains(params),
-                           planner_options=sway_options(params))
+                           planner_options=sway_options(params), shape=params)
             for name in names}
     expected = commanded_distance(params)
     metrics, notes, walked = {}, [], {}

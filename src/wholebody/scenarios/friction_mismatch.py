@@ -54,7 +54,7 @@ from ..report.locomotion_figures import friction_mismatch_figure
 from ..sim.environment import Environment
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import IMPACT_SKIP, outcome, settled_stance, slip_events
-from .locomotion import (CRAWL_SPEED, RUN_DURATION, SWAY_GAIN, WBC_GAINS, PaperSpeed,
+from .locomotion import (GAIT_SHAPE, CRAWL_SPEED, RUN_DURATION, SWAY_GAIN, WBC_GAINS, PaperSpeed,
                          check_positive, check_quadruped, paper_length, run_gait, steady_command,
                          sway_options, wbc_gains)
 
@@ -77,6 +77,7 @@ PARAMETERS = (
               low=0.0, low_open=True, high=Parameter.H),
     SWAY_GAIN,
     *WBC_GAINS,
+    *GAIT_SHAPE,
 )
 
 
@@ -111,18 +112,20 @@ def validate(robot, params: dict) -> None:
 
 def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, duration: float,
               K_st: float, D_st: float, progress: bool = False, gains: dict | None = None,
-              sway_gain: float = 1.0, regularization: str = "force-normal"):
+              sway_gain: float = 1.0, regularization: str = "force-normal",
+              shape: dict | None = None):
     """One passive-WBC crawl at constant ``speed`` on a floor of ``floor_mu`` (see module doc);
     ``gains``: the trunk and swing impedances' gains
     (:func:`~wholebody.scenarios.locomotion.wbc_gains`),
     ``sway_gain`` the crawl's lateral sway (:data:`~wholebody.scenarios.locomotion.SWAY_GAIN`),
-    ``regularization`` the passive WBC's force regulariser (default: the paper's)."""
+    ``regularization`` the passive WBC's force regulariser (default: the paper's), ``shape``
+    the gait's step height and period (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`)."""
     return run_gait(robot, "passive", "crawl", steady_command(speed), duration,
                     environment=Environment(floor_friction=floor_mu),
                     controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st,
                                         "regularization": regularization},
                     progress=progress, gains=gains,
-                    planner_options=sway_options({SWAY_GAIN.name: sway_gain}))
+                    planner_options=sway_options({SWAY_GAIN.name: sway_gain}), shape=shape)
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
@@ -146,7 +149,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                  name, mu, speed, K, regularization)
         floor = p["controller_mu"] if name.startswith("reference") else p["floor_mu"]
         runs[name] = crawl_run(robot, floor, mu, speed, p["duration"], K, D, progress,
-                               wbc_gains(p), p["sway_gain"], regularization)
+                               wbc_gains(p), p["sway_gain"], regularization, shape=p)
         metrics[name] = {"floor_mu": floor, "controller_mu": mu, "speed_m_s": speed, "K_st": K,
                          "D_st": D, "regularization": regularization,
                          **slip_metrics(runs[name], p, _commanded(speed, p["duration"]))}

@@ -59,8 +59,8 @@ from ..robot import FREE_FLYER_NQ
 from ..robots.roles import contact_roles, foot_of_joint, leg_joints
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
-from .locomotion import (CRAWL_SPEED, WBC_GAINS, check_joint, check_positive, check_quadruped,
-                         run_gait, steady_command, wbc_gains)
+from .locomotion import (CRAWL_SPEED, GAIT_SHAPE, WBC_GAINS, check_joint, check_positive,
+                         check_quadruped, run_gait, steady_command, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +87,7 @@ PARAMETERS = (
     Parameter("slack_active", 0.5, "swing residual (m/s^2) above which the slack is 'active' "
                                    "(figure shading, time counts)", low=0.0, low_open=True),
     *WBC_GAINS,
+    *GAIT_SHAPE,
 )
 
 
@@ -136,10 +137,12 @@ def validate(robot, params: dict) -> None:
 
 
 def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duration: float,
-              slack_weight: float = 1e4, progress: bool = False, gains: dict | None = None):
+              slack_weight: float = 1e4, progress: bool = False, gains: dict | None = None,
+              shape: dict | None = None):
     """One crawl with ``joint``'s limits replaced in the controller (None: real limits);
-    ``gains``: the trunk and swing impedances' gains
-    (:func:`~wholebody.scenarios.locomotion.wbc_gains`).
+    ``gains``: the controller's gains (:func:`~wholebody.scenarios.locomotion.wbc_gains`);
+    ``shape``: the gait's step height and period
+    (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`).
 
     Returns the :class:`GaitRun` with two extra per-cycle arrays in its log: ``foot_ref`` (legs, 3)
     the planner's foot references and ``swing_residual`` (legs,) the swing-task residuals."""
@@ -162,7 +165,7 @@ def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duratio
     with ctx:
         r = run_gait(robot, "passive", "crawl", command, duration,
                      controller_options={"swing_slack": slack, "slack_weight": slack_weight},
-                     on_cycle=record, progress=progress, gains=gains)
+                     on_cycle=record, progress=progress, gains=gains, shape=shape)
     r.log["foot_ref"] = np.array(refs)
     r.log["swing_residual"] = np.array(residuals)
     return r
@@ -212,14 +215,14 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     runs = {}
     for key, alpha in alphas.items():
         runs[(key, "nominal")] = limit_run(robot, joint, None, None, "per-direction", p["speed"],
-                                           p["duration"], alpha, progress, wbc_gains(p))
+                                           p["duration"], alpha, progress, wbc_gains(p), p)
         for mode in ("per-direction", "single"):
             log.info("joint-limit: %s limit changed, swing_slack=%s, alpha=%g", joint, mode, alpha)
             runs[(key, mode)] = limit_run(robot, joint, lower, upper, mode, p["speed"],
-                                          p["duration"], alpha, progress, wbc_gains(p))
+                                          p["duration"], alpha, progress, wbc_gains(p), p)
     runs[("hard", "none")] = limit_run(robot, joint, lower, upper, "none", p["speed"],
                                        p["duration"], alphas["high"], progress,
-                                       wbc_gains(p))
+                                       wbc_gains(p), p)
     some = runs[("high", "per-direction")]
     leg = list(some.controller.planner.legs).index(contact)
     sim_model = some.sim.model

@@ -154,6 +154,16 @@ def paper_length(metres: float) -> PaperLength:
     return PaperLength(metres / PAPER_BASE_HEIGHT, float(metres))
 
 
+#: the gait's step height and period: HyQ's, kept in proportion on any robot (:func:`gait_options`,
+#: :func:`make_schedule`)
+GAIT_SHAPE = (
+    Parameter("clearance", paper_length(0.1), "swing feet's highest point above the higher of "
+              "their lift-off and touchdown points (m)", low=0.0, high=0.5 * Parameter.H),
+    Parameter("period", 0.0, "gait period (s; 0: HyQ's crawl or trot period times "
+              "sqrt(h / 0.599))", low=0.0, high=Parameter.MAX_TIME),
+)
+
+
 @dataclass(frozen=True)
 class PaperSpeed(RobotRelative):
     """A speed of the paper's HyQ set-ups (``mps`` on HyQ) as a robot-relative default: scaled by
@@ -235,21 +245,24 @@ def ramped_command(speed: float) -> VelocityCommand:
     return VelocityCommand.speed_ramp(0.0, speed, 1.0, 3.0)
 
 
-def gait_options(robot) -> dict:
-    """The planner options that scale with the robot: the swing apex ``clearance`` (0.1 m on HyQ,
-    :func:`paper_length`)."""
-    return {"clearance": paper_length(0.1).value(robot)}
+def gait_options(robot, shape: dict | None = None) -> dict:
+    """The planner options that scale with the robot: the swing apex ``clearance``, the
+    :data:`GAIT_SHAPE` parameter in ``shape`` if given, else 0.1 m on HyQ (:func:`paper_length`)."""
+    clearance = (shape or {}).get("clearance")
+    return {"clearance": paper_length(0.1).value(robot) if clearance is None else clearance}
 
 
-def make_schedule(robot, gait: str, start: float = 1.0):
+def make_schedule(robot, gait: str, start: float = 1.0, shape: dict | None = None):
     """The ``gait`` schedule (crawl, trot or stand) of ``robot``'s four feet, addressed by role
-    (:func:`~wholebody.robots.roles.quadruped_legs`), starting at ``start`` s, its period HyQ's
-    times :func:`froude_ratio` (dynamically similar steps)."""
+    (:func:`~wholebody.robots.roles.quadruped_legs`), starting at ``start`` s, its period the
+    :data:`GAIT_SHAPE` parameter in ``shape`` if given and > 0, else HyQ's times
+    :func:`froude_ratio` (dynamically similar steps)."""
     legs = quadruped_legs(robot)
+    period = (shape or {}).get("period") or None
     if gait == "crawl":
-        return crawl(CRAWL_PERIOD * froude_ratio(robot), start=start, legs=legs)
+        return crawl(period or CRAWL_PERIOD * froude_ratio(robot), start=start, legs=legs)
     if gait == "trot":
-        return trot(TROT_PERIOD * froude_ratio(robot), start=start, legs=legs)
+        return trot(period or TROT_PERIOD * froude_ratio(robot), start=start, legs=legs)
     if gait == "stand":
         return stand(legs=legs)
     raise ValueError(f"gait: expected one of {GAITS}, got '{gait}'")
@@ -396,7 +409,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              control_period: float = 0.004, controller_options: dict | None = None,
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
              on_cycle=None, planner=None, observers=(), q0=None,
-             gains: dict | None = None, after_fall: float | None = FALL_GRACE) -> GaitRun:
+             gains: dict | None = None, after_fall: float | None = FALL_GRACE,
+             shape: dict | None = None) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
@@ -408,14 +422,15 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     the support surface; the planner starts from it. ``gains``: the controllers' gains
     (:func:`wbc_gains`; :func:`gain_options` says which each takes), unless ``controller_options``
     gives the same keyword. ``after_fall``: once the robot has fallen,
-    the run stops this many seconds later (None: it runs its whole ``duration``).
+    the run stops this many seconds later (None: it runs its whole ``duration``). ``shape``: the
+    :data:`GAIT_SHAPE` parameters (step height, period) for the planner built here.
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()
     if planner is None:
-        planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start), command, terrain,
-                                        q=q0, t0=0.0,
-                                        **{**gait_options(robot), **(planner_options or {})})
+        planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start, shape), command,
+                                        terrain, q=q0, t0=0.0,
+                                        **{**gait_options(robot, shape), **(planner_options or {})})
     options = gain_options(robot, controller, gains or {}, controller_options or {})
     if controller == "passive":
         options.setdefault("control_period", control_period)

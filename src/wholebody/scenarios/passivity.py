@@ -52,8 +52,9 @@ from ..report.locomotion_figures import passivity_figure
 from ..tasks.wrench import TrunkImpedance
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
-from .locomotion import (DURATION, GAIT, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
-                         gait_options, make_schedule, ramped_command, run_gait, wbc_gains)
+from .locomotion import (DURATION, GAIT, GAIT_SHAPE, WBC_GAINS, PaperSpeed, check_gait,
+                         check_quadruped, gait_options, make_schedule, ramped_command, run_gait,
+                         wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +67,7 @@ PARAMETERS = (
     DURATION,
     Parameter("feedforward", False, "keep the feed-forward terms on (Assumption 2 needs them off)"),
     *WBC_GAINS,
+    *GAIT_SHAPE,
 )
 
 
@@ -162,11 +164,13 @@ def validate(robot, params: dict) -> None:
 
 
 def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10.0,
-            feedforward: bool = False, progress: bool = False, gains: dict | None = None):
-    """Run the gait and return (run, storage arrays, energy balance); ``gains``: the trunk and
-    swing impedances' gains (:func:`~wholebody.scenarios.locomotion.wbc_gains`)."""
-    planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, 1.0), ramped_command(speed),
-                                    **gait_options(robot))
+            feedforward: bool = False, progress: bool = False, gains: dict | None = None,
+            shape: dict | None = None):
+    """Run the gait and return (run, storage arrays, energy balance); ``gains``: the controller's
+    gains (:func:`~wholebody.scenarios.locomotion.wbc_gains`); ``shape``: the gait's step height
+    and period (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`)."""
+    planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, 1.0, shape),
+                                    ramped_command(speed), **gait_options(robot, shape))
     if not feedforward:
         planner = SwingFeedForwardOff(planner)
     gains = gains or {}
@@ -185,7 +189,7 @@ def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
     gait_run, storage, balance = measure(robot, params["gait"], params["speed"],
                                          params["duration"], params["feedforward"], progress,
-                                         wbc_gains(params))
+                                         wbc_gains(params), params)
     stats = summarize(balance, t_from=0.5)
     we = storage["wrench_error"]
     metrics = {

@@ -32,8 +32,9 @@ from ..planning.courses import Course, CoursePlanner, gap_course, ramp_course
 from ..report.locomotion_figures import course_side_view, ramp_figure
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (WBC_GAINS, PaperSpeed, check_quadruped, course_environment, gait_options,
-                         make_schedule, paper_length, ramped_command, run_gait, wbc_gains)
+from .locomotion import (GAIT_SHAPE, WBC_GAINS, PaperSpeed, check_quadruped, course_environment,
+                         gait_options, make_schedule, paper_length, ramped_command, run_gait,
+                         wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +59,7 @@ PARAMETERS = (
     Parameter("duration", 0.0, "simulated time (s) (0: long enough to cross the course)",
               low=0.0, high=Parameter.MAX_TIME),
     *WBC_GAINS,
+    *GAIT_SHAPE,
 )
 
 
@@ -116,10 +118,10 @@ def crossing(robot, params: dict, progress: bool = False, observers=()):
     duration = p["duration"]
     if duration <= 0.0:  # the hind feet (~0.4 m behind the CoM) past the end, plus margin
         duration = 3.0 + (end + paper_length(0.6).value(robot)) / p["speed"] + 2.0
-    planner = CoursePlanner.on_course(robot, make_schedule(robot, p["gait"], 1.0),
+    planner = CoursePlanner.on_course(robot, make_schedule(robot, p["gait"], 1.0, p),
                                       ramped_command(p["speed"]), course,
                                       gap_margin=paper_length(0.06).value(robot),
-                                      **gait_options(robot))
+                                      **gait_options(robot, p))
     rec = _Recorder()
     run = run_gait(robot, "passive", duration=duration, environment=course_environment(course),
                    planner=planner, on_cycle=rec, progress=progress, observers=observers,

@@ -34,8 +34,8 @@ import pinocchio as pin
 from ..report.locomotion_figures import regularization_figure
 from ..robots.roles import joint_axis, leg_joints
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
-from .locomotion import (WBC_GAINS, PaperSpeed, check_gait, check_quadruped, parse_positive_floats,
-                         run_gait, steady_command, wbc_gains)
+from .locomotion import (GAIT_SHAPE, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
+                         parse_positive_floats, run_gait, steady_command, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,7 @@ PARAMETERS = (
     Parameter("window", 0.5, "averaging window at the end of each run (s)",
               **TIME_SPAN),
     *WBC_GAINS,
+    *GAIT_SHAPE,
 )
 
 
@@ -113,7 +114,8 @@ def regularization_run(robot, scheme: str, weights: np.ndarray | None, params: d
         options["torque_weights"] = weights
     command = steady_command(params["speed"]) if params["gait"] == "crawl" else None
     return run_gait(robot, "passive", params["gait"], command, params["duration"],
-                    controller_options=options, progress=progress, gains=wbc_gains(params))
+                    controller_options=options, progress=progress, gains=wbc_gains(params),
+                    shape=params)
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:

@@ -40,9 +40,9 @@ from ..report.locomotion_figures import unstable_foothold_figure
 from ..sim.environment import Box, Environment, Platform
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (DURATION, GAIT, WBC_GAINS, PaperSpeed, check_gait, check_quadruped,
-                         gait_options, make_schedule, paper_length, ramped_command, run_gait,
-                         wbc_gains)
+from .locomotion import (DURATION, GAIT, GAIT_SHAPE, WBC_GAINS, PaperSpeed, check_gait,
+                         check_quadruped, gait_options, make_schedule, paper_length, ramped_command,
+                         run_gait, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +67,7 @@ PARAMETERS = (
     DURATION,
     GAIT,
     *WBC_GAINS,
+    *GAIT_SHAPE,
 )
 
 
@@ -83,8 +84,8 @@ def stone_foot(robot) -> str:
 
 
 def _planner(robot, params):
-    return GaitPlanner.for_robot(robot, make_schedule(robot, params["gait"], 1.0),
-                                 ramped_command(params["speed"]), **gait_options(robot))
+    return GaitPlanner.for_robot(robot, make_schedule(robot, params["gait"], 1.0, params),
+                                 ramped_command(params["speed"]), **gait_options(robot, params))
 
 
 def stone_site(robot, params: dict) -> tuple[np.ndarray, float]:

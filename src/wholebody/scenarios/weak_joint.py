@@ -51,9 +51,9 @@ from ..report.locomotion_figures import weak_joint_figure
 from ..robots.roles import contact_roles, foot_of_joint, leg_joints, pitch_joints
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import intervals, outcome
-from .locomotion import (CRAWL_SPEED, RUN_DURATION, WBC_GAINS, check_joint, check_positive,
-                         check_quadruped, gait_options, make_schedule, parse_positive_floats,
-                         run_gait, steady_command, wbc_gains)
+from .locomotion import (CRAWL_SPEED, GAIT_SHAPE, RUN_DURATION, WBC_GAINS, check_joint,
+                         check_positive, check_quadruped, gait_options, make_schedule,
+                         parse_positive_floats, run_gait, steady_command, wbc_gains)
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +72,7 @@ PARAMETERS = (
     Parameter("trunk_tolerance", 0.005, "allowed increase of the trunk RMS errors (m, rad)",
               low=0.0, low_open=True, high=1.0),
     *WBC_GAINS,
+    *GAIT_SHAPE,
 )
 
 
@@ -196,13 +197,15 @@ def static_knee_torque(robot, q, joint: str, supports, mu: float | None = None) 
 
 
 def crawl_supports(robot, q, contact: str, speed: float, period_from: float = 2.0,
-                   step: float = 0.02) -> list[tuple[tuple[str, ...], np.ndarray]]:
+                   step: float = 0.02, shape: dict | None = None
+                   ) -> list[tuple[tuple[str, ...], np.ndarray]]:
     """The three-foot supports of the crawl planned from ``q`` that include ``contact``, sampled
     every ``step`` s over one gait period from ``period_from`` s: (stance contacts, the planned
     CoM's horizontal offset from the stance feet's centroid minus that offset at ``q``), for
     :func:`static_knee_torque`."""
-    planner = GaitPlanner.for_robot(robot, make_schedule(robot, "crawl", 1.0),
-                                    steady_command(speed), q=q, t0=0.0, **gait_options(robot))
+    planner = GaitPlanner.for_robot(robot, make_schedule(robot, "crawl", 1.0, shape),
+                                    steady_command(speed), q=q, t0=0.0,
+                                    **gait_options(robot, shape))
     legs = list(planner.legs)
     robot.update(q, np.zeros(robot.nv))
     at_q = {name: robot.contact_points[robot.contact_names.index(name)][:2] for name in legs}
@@ -242,7 +245,7 @@ def post_solve_clipped(solution) -> bool:
 
 def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
                     progress: bool = False, q0=None, controller_options: dict | None = None,
-                    gains: dict | None = None) -> dict:
+                    gains: dict | None = None, shape: dict | None = None) -> dict:
     """The nominal crawl and one crawl per torque limit of ``joint`` (see module docstring), from
     the configuration ``q0`` (default: the standing posture): name -> :class:`GaitRun`, each with
     ``post_solve_clips`` (cycles counted by :func:`post_solve_clipped`) and ``sim_saturation_max``
@@ -256,7 +259,7 @@ def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
         seen = []
         runs[name] = run_gait(robot, "passive", "crawl", command, duration,
                               controller_options={**(controller_options or {}), **options},
-                              progress=progress, q0=q0, gains=gains,
+                              progress=progress, q0=q0, gains=gains, shape=shape,
                               on_cycle=lambda t, res, ctrl, sim, c=seen: c.append(
                                   (post_solve_clipped(res), float(np.abs(sim.last_clipped).max()))))
         runs[name].post_solve_clips = int(sum(c for c, _ in seen))
@@ -296,14 +299,14 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     statics = {}
     for label, q in (("stance", q0), ("standing posture", robot.q_ref)):
         lp = [r["min_abs_tau_Nm"] for r in static_knee_torque(
-            robot, q, joint, crawl_supports(robot, q, contact, p["speed"]))]
+            robot, q, joint, crawl_supports(robot, q, contact, p["speed"], shape=p))]
         statics[label] = {"shank_from_vertical_deg": shank_angle_deg(robot, q, contact),
                           "base_height_m": float(q[2]),
                           "static_min_abs_tau_Nm": max((x for x in lp if x is not None),
                                                        default=None),
                           "infeasible_supports": sum(x is None for x in lp)}
     runs = weak_joint_runs(robot, joint, limits, p["speed"], p["duration"], progress, q0=q0,
-                           gains=wbc_gains(p))
+                           gains=wbc_gains(p), shape=p)
     j = robot.joint_names.index(joint)
     metrics = {"static_lp": statics}
     for name, r in runs.items():
