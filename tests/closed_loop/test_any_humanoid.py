@@ -71,6 +71,19 @@ def test_robots_without_a_preset_recover_a_front_push_with_pd_gains(which):
     assert impulse / robot.mass == pytest.approx(0.1, rel=0.02)
 
 
+def test_romeo_squats_on_its_defaults(robots):
+    """romeo stands with its knees bent 0.70 rad, short of talos14's stretch: the paper's 3 cm
+    vertical sine straightened its knees onto their limit (0 rad) in the twin; with the vertical
+    amplitude scaled to how far its legs can stretch, the squat keeps every joint inside its
+    range (the simulator's joint positions), the CoG within 1 cm of its reference and the feet
+    flat, every cycle solved."""
+    result = get_scenario("squat").run(robots["romeo"], "lqr", {})
+    m = result.metrics
+    assert result.success and m["failed_cycles"] == 0, m
+    assert m["min_joint_limit_margin_rad"] > 0.0, m
+    assert m["max_cog_error_m"] < 0.01 and m["max_foot_tilt_deg"] < 2.0, m
+
+
 def test_a_cop_margin_keeps_the_soles_flat_on_a_g1_with_its_arms():
     """The 29-DoF G1 (arms free) pushed from the left with dv = 0.1 under eq. 22's PD gains: with
     the whole sole admissible the CoP sits on the unloaded sole's edge and the twin's sole tips

@@ -47,3 +47,42 @@ def test_listing_shows_relative_defaults(capsys):
     assert gap["default"]["base_height"] == pytest.approx(0.22 / wb.load_robot("hyq").q_ref[2])
     assert main(["scenarios"]) == 0
     assert "--set gap=0.367" in capsys.readouterr().out
+
+
+def test_leg_stretch_is_the_law_of_cosines_on_talos14():
+    """talos14's legs are planar chains in the posture (hip roll and yaw at zero): thigh and
+    shin, the knee's and the ankle's joint offsets in the model, bent by the knee's angle. The
+    hip-to-ankle distance grows from sqrt(a² + b² + 2ab cos k) to a + b when the leg is straight;
+    that is its stretch, and the reference constant is talos14's."""
+    import numpy as np
+
+    from wholebody.robots.reference import HUMANOID_LEG_STRETCH, leg_stretch
+    from wholebody.robots.roles import leg_joints
+
+    robot = wb.load_robot("talos14")
+    model = robot.model
+    stretch = []
+    for contact in robot.contact_names:
+        joints = [model.getJointId(j) for j in leg_joints(robot, contact)]
+        lengths = [np.linalg.norm(model.jointPlacements[j].translation) for j in joints[1:]]
+        a, b = sorted(lengths)[-2:]  # the two long links: thigh and shin
+        bent = [abs(robot.q_ref[model.joints[j].idx_q]) for j in joints]
+        k = max(bent)  # the knee: the most bent joint of a standing leg
+        stretch.append(a + b - np.sqrt(a * a + b * b + 2 * a * b * np.cos(k)))
+    assert leg_stretch(robot) == pytest.approx(min(stretch), abs=1e-9)
+    assert HUMANOID_LEG_STRETCH == pytest.approx(leg_stretch(robot), rel=1e-12)
+
+
+def test_squat_amplitudes_keep_the_papers_on_talos14_and_scale_elsewhere():
+    """The squat's 2 cm forward and 3 cm vertical are talos14's; on romeo the forward one scales
+    with the standing height and the vertical one with how far the legs can stretch."""
+    from wholebody.robots.reference import leg_stretch
+
+    talos14, romeo = wb.load_robot("talos14"), wb.load_robot("romeo")
+    ref = get_scenario("squat").validate(talos14, {})
+    assert (ref["amplitude_x"], ref["amplitude_z"]) == (0.02, 0.03)
+    p = get_scenario("squat").validate(romeo, {})
+    assert p["amplitude_x"] == pytest.approx(0.02 * romeo.q_ref[2] / talos14.q_ref[2], rel=1e-12)
+    assert p["amplitude_z"] == pytest.approx(0.03 * leg_stretch(romeo) / leg_stretch(talos14),
+                                             rel=1e-12)
+    assert p["amplitude_z"] < leg_stretch(romeo)

@@ -14,6 +14,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+import pinocchio as pin
+
+from .roles import leg_joints
+
 MASS = 86.77400500000003  # kg
 INERTIA = 9.3599731892699  # kg m², trace(I_G) / 3 (wholebody.tasks.wrench.trunk_inertia)
 BASE_HEIGHT = 0.5992595750374548  # m, the base above the floor standing (robot.q_ref[2])
@@ -26,9 +31,39 @@ STANCE_ASPECT = 0.8740296557577911
 #: push forces scale
 HUMANOID_BASE_HEIGHT = 1.0193830429027237
 HUMANOID_MASS = 90.27219199999999
+#: talos14's :func:`leg_stretch` (m), from which the squat's vertical amplitude scales
+HUMANOID_LEG_STRETCH = 0.06368083348448195
 
 
 def froude_ratio(robot) -> float:
     """sqrt(h / BASE_HEIGHT) of ``robot`` (its standing base height h = ``robot.q_ref[2]``):
     speeds and times of HyQ's gaits times this, frequencies divided by it; exactly 1 on HyQ."""
     return math.sqrt(float(robot.q_ref[2]) / BASE_HEIGHT)
+
+
+def leg_stretch(robot) -> float:
+    """How far (m) the legs can stretch from the posture: for each contact's leg (its joints from
+    :func:`~wholebody.robots.roles.leg_joints`), the distance between its first and its last
+    joint (hip and ankle) with every leg joint at its value nearest zero within its limits (a
+    URDF's zero pose stands straight) minus that distance in the posture ``robot.q_ref``; the
+    smallest over the legs. A CoG rising by more than this straightens a leg onto its limits."""
+    model = robot.model
+    data = model.createData()
+
+    def span(q, first, last):
+        pin.forwardKinematics(model, data, q)
+        return float(np.linalg.norm(data.oMi[first].translation - data.oMi[last].translation))
+
+    stretch = []
+    for contact in robot.contact_names:
+        joints = [model.getJointId(j) for j in leg_joints(robot, contact)]
+        if len(joints) < 2:
+            continue
+        straight = robot.q_ref.copy()
+        for j in joints:
+            i = model.joints[j].idx_q
+            straight[i] = min(max(0.0, model.lowerPositionLimit[i]), model.upperPositionLimit[i])
+        stretch.append(span(straight, joints[0], joints[-1])
+                       - span(robot.q_ref, joints[0], joints[-1]))
+    return min(stretch) if stretch else 0.0
+

@@ -50,31 +50,40 @@ def push_point(robot, part: str, offset) -> tuple[str, np.ndarray]:
 @dataclass(frozen=True)
 class HumanoidScaled(RobotRelative):
     """A quantity of the humanoid set-ups, ``amount`` on talos14, as a robot-relative default:
-    times (m / m_talos14)^``mass_power`` (h / h_talos14)^``height_power`` — a force with mass
-    power 1 gives the same velocity change, a length with height power 1 the same proportion.
-    ``listed``: the value is the text of a one-item list parameter. Exactly ``amount`` on
-    talos14."""
+    times (m / m_talos14)^``mass_power`` (h / h_talos14)^``height_power``
+    (s / s_talos14)^``stretch_power`` — a force with mass power 1 gives the same velocity change,
+    a length with height power 1 the same proportion, a vertical CoG motion with stretch power 1
+    the same share of how far the legs can stretch (s, :func:`~wholebody.robots.reference.
+    leg_stretch`). ``listed``: the value is the text of a one-item list parameter. Exactly
+    ``amount`` on talos14."""
 
     amount: float
     unit: str
     mass_power: int = 0
     height_power: int = 0
     listed: bool = False
+    stretch_power: int = 0
 
     def value(self, robot):
         x = (self.amount * (robot.mass / reference.HUMANOID_MASS) ** self.mass_power
              * (float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT) ** self.height_power)
+        if self.stretch_power:
+            stretch = reference.leg_stretch(robot) / reference.HUMANOID_LEG_STRETCH
+            x *= stretch ** self.stretch_power
         return f"{x:.4g}" if self.listed else x
 
     def __str__(self) -> str:
-        factors = " ".join(f for f, p in (("m", self.mass_power), ("h", self.height_power)) if p)
+        factors = " ".join(f for f, p in (("m", self.mass_power), ("h", self.height_power),
+                                          ("s", self.stretch_power)) if p)
         reference = f"{factors}_talos14" if " " not in factors else f"({factors})_talos14"
         return f"{self.amount:g} {self.unit} x {factors} / {reference}"
 
     def as_data(self) -> dict[str, float]:
         return {"amount_on_reference": self.amount, "mass_power": self.mass_power,
-                "height_power": self.height_power, "reference_mass_kg": reference.HUMANOID_MASS,
-                "reference_base_height_m": reference.HUMANOID_BASE_HEIGHT}
+                "height_power": self.height_power, "stretch_power": self.stretch_power,
+                "reference_mass_kg": reference.HUMANOID_MASS,
+                "reference_base_height_m": reference.HUMANOID_BASE_HEIGHT,
+                "reference_leg_stretch_m": reference.HUMANOID_LEG_STRETCH}
 
 
 #: momentum-balance options of the push scenarios (see :func:`controller_options`)

@@ -1,10 +1,13 @@
 """``squat``: CoG sine tracking in double support with the Table 2 hierarchy (Herzog et al. 2016
 Sect. 5.3, Fig. 10).
 
-The CoG reference is x_ref(t) = x0 + e(t) [a_x sin(2 pi f t), 0, a_z sin(2 pi f t)] (2 cm forward and
-3 cm vertical, f = 0.3 or 0.5 Hz, both axes in phase; e rises from 0 to 1 over ``ramp`` s) with the
-feed-forward h_ref = m x_ref' and hdot_ref = [m x_ref''; 0]
-(:class:`~wholebody.control.balance.CoMSineReference`). Torques from the hierarchy only.
+The CoG reference is x_ref(t) = x0 + e(t) [a_x sin(2 pi f t), 0, a_z sin(2 pi f t)] (2 cm forward
+and 3 cm vertical on talos14, f = 0.3 or 0.5 Hz, both axes in phase; e rises from 0 to 1 over
+``ramp`` s) with the feed-forward h_ref = m x_ref' and hdot_ref = [m x_ref''; 0]
+(:class:`~wholebody.control.balance.CoMSineReference`). Torques from the hierarchy only. On
+another robot a_x scales with the standing height and a_z with how far its legs can stretch
+from the posture (:func:`~wholebody.robots.reference.leg_stretch`): a robot standing on nearly
+straight legs squats less rather than straightening them onto their limits.
 
 Variants:
 
@@ -52,6 +55,7 @@ from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Paramet
                    ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes,
                    task_gains)
 from .loop import run_closed_loop
+from .pushes import HumanoidScaled
 from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
 
 VARIANTS = ("tracking", "cop-active")
@@ -61,10 +65,12 @@ PARAMETERS = (
                                      "shrunk CoP region, constraints become active)",
               choices=VARIANTS),
     Parameter("frequency", 0.5, "sine frequency (Hz), 0.3 or 0.5 in the paper", low=0.1, high=5.0),
-    Parameter("amplitude_x", 0.02, "forward amplitude (m)",
+    Parameter("amplitude_x", HumanoidScaled(0.02, "m", height_power=1),
+              "forward amplitude (m; the paper's 2 cm in proportion to the height)",
               low=-0.3 * Parameter.H, high=0.3 * Parameter.H),
-    Parameter("amplitude_z", 0.03, "vertical amplitude (m)",
-              low=-0.3 * Parameter.H, high=0.3 * Parameter.H),
+    Parameter("amplitude_z", HumanoidScaled(0.03, "m", stretch_power=1),
+              "vertical amplitude (m; the paper's 3 cm as the same share of how far the legs "
+              "can stretch, s)", low=-0.3 * Parameter.H, high=0.3 * Parameter.H),
     Parameter("periods", 3.0, "number of sine periods after the ramp",
               low=0.0, low_open=True, high=60.0),
     Parameter("ramp", 1.0, "amplitude ramp-in time (s)", low=0.0, high=Parameter.MAX_TIME),
