@@ -31,14 +31,19 @@ def test_true_com_is_the_simulated_robots_com(robots):
     assert mismatch_for(params, 1).torque_delay == 2 and mismatch_for(params, 0).seed == 0
 
 
-def test_nominal_force_defaults_and_override():
+def test_nominal_force_defaults_and_override(robots):
+    """The nominal forces were measured on talos14 (exactly those there); on romeo the same
+    velocity change: the force times its mass over talos14's; ``--set nominal_force`` as given."""
+    talos14, romeo = robots["talos14"], robots["romeo"]
     params = get_scenario("robust-push").resolve({})
-    assert nominal_force("pd", "front", params) == NOMINAL["pd"]["front"] == 190.0
-    assert nominal_force("lqr", "back", params) == 180.0
-    assert nominal_force("pd", "front", {**params, "angular_weight": 1e4}) == 150.0
-    assert nominal_force("pd", "hip-left", {**params, "nominal_force": 90.0}) == 90.0
+    assert nominal_force("pd", "front", params, talos14) == NOMINAL["pd"]["front"] == 190.0
+    assert nominal_force("lqr", "back", params, talos14) == 180.0
+    assert nominal_force("pd", "front", {**params, "angular_weight": 1e4}, talos14) == 150.0
+    assert nominal_force("pd", "front", params, romeo) == pytest.approx(
+        190.0 * romeo.mass / talos14.mass, rel=1e-12)
+    assert nominal_force("pd", "hip-left", {**params, "nominal_force": 90.0}, romeo) == 90.0
     with pytest.raises(ValueError, match="nominal_force"):
-        nominal_force("pd", "hip-left", params)
+        nominal_force("pd", "hip-left", params, talos14)
 
 
 def test_push_at_70_percent_survives_a_mismatched_twin(robots, tmp_path):

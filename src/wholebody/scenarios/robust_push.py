@@ -7,7 +7,8 @@ eqs. 23-24, no joint PD) keeps the nominal Pinocchio model; the simulated robot 
 by a factor in [1 - mass_noise, 1 + mass_noise], every link CoM moved by ``com_offset`` in a random
 direction, the torques applied ``torque_delay`` steps (ms) late with Gaussian noise. Each seed is one
 draw of that robot. The push is ``fraction`` (70 %) of the nominal largest peak force survived on the
-exact twin, per location and controller (half-sine, 0.1 s, measured: ``NOMINAL``).
+exact twin, per location and controller (half-sine, 0.1 s, measured on talos14: ``NOMINAL``; on
+another robot the same velocity change, the force times m / m_talos14).
 
 Everything judged is measured on the simulator: the CoG is the simulated (mismatched) robot's own
 CoM (:class:`~wholebody.sim.true_com.TrueCoM`, from the MuJoCo model), not the controller's estimate, and the feet are the
@@ -31,7 +32,7 @@ from tqdm import tqdm
 from ..control.balance import MomentumBalance
 from ..report.balance_figures import robust_push_location_figure, robust_push_summary_figure
 from ..robot import Robot
-from ..robots import load_robot
+from ..robots import load_robot, reference
 from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
@@ -68,8 +69,8 @@ PARAMETERS = (
                                                     f"({', '.join(LOCATIONS)})",
               choices=tuple(LOCATIONS), items=str),
     Parameter("nominal_force", 0.0, "largest survived peak force on the exact twin (N); 0: the "
-                                    "measured default per location and controller (NOMINAL)",
-              low=0.0),
+                                    "default per location and controller measured on talos14 "
+                                    "(NOMINAL), times m / m_talos14", low=0.0),
     Parameter("fraction", 0.7, "the push is this fraction of the nominal force",
               low=0.0, low_open=True, high=10.0),
     Parameter("push_duration", 0.1, "push duration (s)",
@@ -101,14 +102,16 @@ PARAMETERS = (
                             "of N, 0 one per core; same metrics", low=0, high=1024),
 )
 
-def nominal_force(controller: str, location: str, params: dict) -> float:
-    """The nominal largest survived peak force: ``--set nominal_force`` or the measured default
-    (``NOMINAL``; ``NOMINAL_SINGLE_MOMENTUM_WEIGHT`` with ``angular_weight=1e4``)."""
+def nominal_force(controller: str, location: str, params: dict, robot) -> float:
+    """The nominal largest survived peak force on ``robot``: ``--set nominal_force`` or the
+    default measured on talos14 (``NOMINAL``; ``NOMINAL_SINGLE_MOMENTUM_WEIGHT`` with
+    ``angular_weight=1e4``) times m / m_talos14, the same velocity change on any robot (exactly
+    the measured force on talos14)."""
     if params["nominal_force"] > 0:
         return float(params["nominal_force"])
     table = (NOMINAL_SINGLE_MOMENTUM_WEIGHT if params.get("angular_weight") == 1e4 else NOMINAL)
     try:
-        return table[controller][location]
+        return table[controller][location] * (robot.mass / reference.HUMANOID_MASS)
     except KeyError:
         raise ValueError(f"no measured nominal force for {controller} at '{location}' (known: "
                          f"{', '.join(NOMINAL.get(controller, {}))}); pass --set nominal_force=N"
@@ -208,7 +211,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     locations = parse_list(params["locations"], str, "locations")
     seeds = range(int(params["seeds"]))
     shipped = robot if params["workers"] == 1 else robot.description
-    jobs = [(shipped, controller, loc, params["fraction"] * nominal_force(controller, loc, params),
+    jobs = [(shipped, controller, loc, params["fraction"] * nominal_force(controller, loc, params, robot),
              mismatch_for(params, i), params) for loc in locations for i in seeds]
     if params["baseline"]:  # the same draws, no push (a zero-force push keeps the timeline)
         jobs += [(shipped, controller, locations[0], 0.0, mismatch_for(params, i), params)
@@ -228,7 +231,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     for loc, rs in runs.items():
         ms = [r["metrics"] for r in rs]
         per_location[loc] = {
-            "nominal_force_N": nominal_force(controller, loc, params),
+            "nominal_force_N": nominal_force(controller, loc, params, robot),
             "peak_force_N": ms[0]["peak_force_N"],
             "impulse_Ns": ms[0]["impulse_Ns"],
             "success_rate": float(np.mean([m["survived"] for m in ms])),
