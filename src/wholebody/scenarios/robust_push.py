@@ -211,8 +211,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     locations = parse_list(params["locations"], str, "locations")
     seeds = range(int(params["seeds"]))
     shipped = robot if params["workers"] == 1 else robot.description
-    jobs = [(shipped, controller, loc, params["fraction"] * nominal_force(controller, loc, params, robot),
-             mismatch_for(params, i), params) for loc in locations for i in seeds]
+    nominal = {loc: nominal_force(controller, loc, params, robot) for loc in locations}
+    jobs = [(shipped, controller, loc, params["fraction"] * nominal[loc], mismatch_for(params, i),
+             params) for loc in locations for i in seeds]
     if params["baseline"]:  # the same draws, no push (a zero-force push keeps the timeline)
         jobs += [(shipped, controller, locations[0], 0.0, mismatch_for(params, i), params)
                  for i in seeds]
@@ -231,7 +232,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     for loc, rs in runs.items():
         ms = [r["metrics"] for r in rs]
         per_location[loc] = {
-            "nominal_force_N": nominal_force(controller, loc, params, robot),
+            "nominal_force_N": nominal[loc],
             "peak_force_N": ms[0]["peak_force_N"],
             "impulse_Ns": ms[0]["impulse_Ns"],
             "success_rate": float(np.mean([m["survived"] for m in ms])),
