@@ -86,3 +86,19 @@ def test_squat_amplitudes_keep_the_papers_on_talos14_and_scale_elsewhere():
     assert p["amplitude_z"] == pytest.approx(0.03 * leg_stretch(romeo) / leg_stretch(talos14),
                                              rel=1e-12)
     assert p["amplitude_z"] < leg_stretch(romeo)
+
+
+def test_push_default_is_talos14s_velocity_change():
+    """push's default 100 N (0.1 s half-sine) and the angle-mode push height 0.1 m are talos14's;
+    on romeo the force gives the same velocity change (impulse over mass, 2 F T / pi / m) and the
+    height the same proportion of the standing height."""
+    import math
+
+    talos14, romeo = wb.load_robot("talos14"), wb.load_robot("romeo")
+    ref = get_scenario("push").validate(talos14, {})
+    p = get_scenario("push").validate(romeo, {})
+    assert (ref["peak_force"], ref["height"]) == (100.0, 0.1)
+    dv = {name: 2 * q["peak_force"] * q["push_duration"] / math.pi / robot.mass
+          for name, q, robot in (("talos14", ref, talos14), ("romeo", p, romeo))}
+    assert dv["romeo"] == pytest.approx(dv["talos14"], rel=1e-12)
+    assert p["height"] == pytest.approx(0.1 * romeo.q_ref[2] / talos14.q_ref[2], rel=1e-12)

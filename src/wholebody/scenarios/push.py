@@ -17,16 +17,17 @@ from ..report.balance_figures import push_figure
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
                    Parameter, Scenario, ScenarioResult, duration_parameter, paper_q_notes)
 from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, Q_ORIENTATION,
-                     check_push, ignored_option_notes, push_trial)
+                     HumanoidScaled, check_push, ignored_option_notes, push_trial)
 
 PARAMETERS = (
     Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')",
               choices=(*LOCATIONS, "angle")),
     Parameter("angle", 0.0, "with location=angle: force direction in the horizontal plane (deg, "
                             "0 = pushing backwards from the front)", low=-180.0, high=180.0),
-    Parameter("height", 0.1, "with location=angle: height of the point above the base (m)",
-              low=-Parameter.H, high=Parameter.H),
-    Parameter("peak_force", 100.0, "peak of the half-sine force (N)", low=0.0),
+    Parameter("height", HumanoidScaled(0.1, "m", height_power=1), "with location=angle: height "
+              "of the point above the base (m)", low=-Parameter.H, high=Parameter.H),
+    Parameter("peak_force", HumanoidScaled(100.0, "N", mass_power=1), "peak of the half-sine "
+              "force (N; 100 N on talos14, the same velocity change on any robot)", low=0.0),
     Parameter("dv", 0.0, "the push as the velocity change it gives the robot (m/s): impulse "
                          "m dv, the peak force 0.5 pi m dv / push_duration (0: peak_force)",
               low=0.0, high=5.0),
