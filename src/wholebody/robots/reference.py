@@ -61,6 +61,8 @@ def leg_stretch(robot) -> float:
             continue
         straight = robot.q_ref.copy()
         for j in joints:
+            if model.joints[j].nq != 1:  # a continuous joint (cos, sin) keeps its posture
+                continue
             i = model.joints[j].idx_q
             straight[i] = min(max(0.0, model.lowerPositionLimit[i]), model.upperPositionLimit[i])
         stretch.append(span(straight, joints[0], joints[-1])
