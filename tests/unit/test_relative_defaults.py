@@ -102,3 +102,14 @@ def test_push_default_is_talos14s_velocity_change():
           for name, q, robot in (("talos14", ref, talos14), ("romeo", p, romeo))}
     assert dv["romeo"] == pytest.approx(dv["talos14"], rel=1e-12)
     assert p["height"] == pytest.approx(0.1 * romeo.q_ref[2] / talos14.q_ref[2], rel=1e-12)
+
+
+def test_push_series_forces_are_talos14s_velocity_changes():
+    """push-series' default forces 60, 100, 140, 180 N are talos14's; on romeo each gives the same
+    velocity change (times its mass over talos14's), still increasing."""
+    talos14, romeo = wb.load_robot("talos14"), wb.load_robot("romeo")
+    ref = get_scenario("push-series").validate(talos14, {})["forces"]
+    scaled = get_scenario("push-series").validate(romeo, {})["forces"]
+    assert [float(f) for f in ref.split(",")] == [60.0, 100.0, 140.0, 180.0]
+    expected = [f * romeo.mass / talos14.mass for f in (60.0, 100.0, 140.0, 180.0)]
+    assert [float(f) for f in scaled.split(",")] == pytest.approx(expected, rel=1e-3)

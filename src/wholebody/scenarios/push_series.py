@@ -21,13 +21,16 @@ from ..sweep.executors import ordered, scenario_executor
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
                    Parameter, Scenario, ScenarioResult, duration_parameter, parse_list)
 from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS,
-                     Q_INTEGRAL, Q_ORIENTATION, check_locations, check_push, push_trial)
+                     Q_INTEGRAL, Q_ORIENTATION, HumanoidScaled, check_locations, check_push,
+                     push_trial)
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points",
               choices=tuple(LOCATIONS), items=str),
-    Parameter("forces", "60,100,140,180", "comma-separated peak forces (N), increasing",
-              low=0.0, low_open=True, items=float),
+    Parameter("forces", HumanoidScaled((60.0, 100.0, 140.0, 180.0), "N", mass_power=1,
+                                       listed=True),
+              "comma-separated peak forces (N), increasing (talos14's, the same velocity changes "
+              "on any robot)", low=0.0, low_open=True, items=float),
     Parameter("push_duration", 0.1, "duration of each push (s)",
               **TIME_SPAN),
     duration_parameter(3.5, "simulated time per push (s)"),

@@ -54,10 +54,10 @@ class HumanoidScaled(RobotRelative):
     (s / s_talos14)^``stretch_power`` — a force with mass power 1 gives the same velocity change,
     a length with height power 1 the same proportion, a vertical CoG motion with stretch power 1
     the same share of how far the legs can stretch (s, :func:`~wholebody.robots.reference.
-    leg_stretch`). ``listed``: the value is the text of a one-item list parameter. Exactly
-    ``amount`` on talos14."""
+    leg_stretch`). ``listed``: the value is the text of a list parameter, ``amount`` one number
+    or a tuple of them (each scaled). Exactly ``amount`` on talos14."""
 
-    amount: float
+    amount: float | tuple[float, ...]
     unit: str
     mass_power: int = 0
     height_power: int = 0
@@ -65,21 +65,27 @@ class HumanoidScaled(RobotRelative):
     stretch_power: int = 0
 
     def value(self, robot):
-        x = (self.amount * (robot.mass / reference.HUMANOID_MASS) ** self.mass_power
-             * (float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT) ** self.height_power)
+        scale = ((robot.mass / reference.HUMANOID_MASS) ** self.mass_power
+                 * (float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT) ** self.height_power)
         if self.stretch_power:
             stretch = reference.leg_stretch(robot) / reference.HUMANOID_LEG_STRETCH
-            x *= stretch ** self.stretch_power
+            scale *= stretch ** self.stretch_power
+        if isinstance(self.amount, tuple):
+            return ",".join(f"{a * scale:.4g}" for a in self.amount)
+        x = self.amount * scale
         return f"{x:.4g}" if self.listed else x
 
     def __str__(self) -> str:
         factors = " ".join(f for f, p in (("m", self.mass_power), ("h", self.height_power),
                                           ("s", self.stretch_power)) if p)
         reference = f"{factors}_talos14" if " " not in factors else f"({factors})_talos14"
-        return f"{self.amount:g} {self.unit} x {factors} / {reference}"
+        amount = (",".join(f"{a:g}" for a in self.amount) if isinstance(self.amount, tuple)
+                  else f"{self.amount:g}")
+        return f"{amount} {self.unit} x {factors} / {reference}"
 
     def as_data(self) -> dict[str, float]:
-        return {"amount_on_reference": self.amount, "mass_power": self.mass_power,
+        amount = list(self.amount) if isinstance(self.amount, tuple) else self.amount
+        return {"amount_on_reference": amount, "mass_power": self.mass_power,
                 "height_power": self.height_power, "stretch_power": self.stretch_power,
                 "reference_mass_kg": reference.HUMANOID_MASS,
                 "reference_base_height_m": reference.HUMANOID_BASE_HEIGHT,
