@@ -105,11 +105,12 @@ def pd_gains(gains, name: str) -> tuple[float, float]:
 
 
 def posture_task(robot: Robot, base_orientation_weight: float | None = None,
-                 gains=POSTURE_PD) -> PostureTask:
-    """The posture task (joints and base) with :func:`posture_weight` and the PD ``gains``."""
+                 gains=POSTURE_PD, weight=None) -> PostureTask:
+    """The posture task (joints and base) with the PD ``gains``; its rows weigh ``weight``, or
+    (None) :func:`posture_weight`."""
     kp, kd = pd_gains(gains, "posture_gains")
-    return PostureTask(name="posture", weight=posture_weight(robot, base_orientation_weight),
-                       kp=kp, kd=kd, base_kp=kp, base_kd=kd)
+    weight = posture_weight(robot, base_orientation_weight) if weight is None else weight
+    return PostureTask(name="posture", weight=weight, kp=kp, kd=kd, base_kp=kp, base_kd=kd)
 
 
 def swing_tasks(swing_frames: Sequence[str], gains=SWING_FOOT_PD) -> list[FrameTask]:
@@ -211,13 +212,11 @@ def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
     ``com_gains``: the posture's, the swing-foot tasks' and the CoG task's (kp, kd)."""
     stance = _contacts(robot, stance, "stance", default_all=False)
     com_kp, com_kd = pd_gains(com_gains, "com_gains")
-    posture_kp, posture_kd = pd_gains(posture_gains, "posture_gains")
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=stance)]
         + _contact_conditions(robot, stance, mu, torsion),
         [CoMTask(name="com", kp=com_kp, kd=com_kd)] + swing_tasks(swing_frames, swing_gains),
-        [PostureTask(name="posture", kp=posture_kp, kd=posture_kd, base_kp=posture_kp,
-                     base_kd=posture_kd)],
+        [posture_task(robot, gains=posture_gains, weight=1.0)],  # alone on its level
         [ForceRegularizer(name="force regularizer", contacts=stance)],
     ])
