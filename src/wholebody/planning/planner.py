@@ -26,6 +26,7 @@ import pinocchio as pin
 from ..robots.roles import contact_roles
 from .footholds import Foothold, Footprint, raibert_foothold
 from .gait import GaitSchedule
+from .reach import foot_lift
 from .swing import SwingTrajectory
 from .terrain import Terrain
 from .trunk import CrawlSway, StartShift, TrunkReference, TrunkState, VelocityCommand
@@ -94,13 +95,17 @@ class GaitPlanner:
     ``clearance``: swing apex height above the higher endpoint [m]; ``feedback_gain``: Raibert
     feedback k in ``k (v - v_cmd)`` [s]; ``max_step``: clamp on the touchdown's horizontal distance
     from the hip (None: none); ``feet``: initial foot-frame positions (n, 3) (default: the nominal
-    footprint under the trunk reference at ``t``).
+    footprint under the trunk reference at ``t``); ``reach``: per leg, how far (m) its foot can
+    rise along the trunk's z axis from its standing position (:func:`~.reach.foot_lift`; None: no
+    limit). A swing's apex is then at most that far above where the standing foot would be at
+    mid-swing under the trunk reference, and never below the higher endpoint: on a slope or under
+    a lowered trunk the clearance shrinks rather than the leg folding onto its joint limits.
     """
 
     def __init__(self, schedule: GaitSchedule, trunk: TrunkReference, footprint: Footprint,
                  terrain: Terrain | None = None, clearance: float = 0.1,
                  feedback_gain: float = 0.0, max_step: float | None = None, feet=None,
-                 t: float | None = None):
+                 t: float | None = None, reach=None):
         if tuple(schedule.legs) != tuple(footprint.legs):
             raise ValueError(f"schedule.legs {schedule.legs} and footprint.legs {footprint.legs} "
                              "must list the same legs in the same order")
@@ -117,6 +122,9 @@ class GaitPlanner:
         n = len(self.legs)
         self._feet_from_com = footprint.feet_from_com()
         self._radius = np.asarray(footprint.foot_radius, dtype=float)
+        self.reach = np.full(n, np.inf) if reach is None else np.asarray(reach, dtype=float)
+        if self.reach.shape != (n,) or np.any(np.isnan(self.reach)) or np.any(self.reach < 0):
+            raise ValueError(f"reach: expected {n} lifts >= 0 (m), got {reach}")
         self._anchor = np.zeros((n, 3))
         self._anchor_normal = np.zeros((n, 3))
         self._swing: list[SwingTrajectory | None] = [None] * n
@@ -134,8 +142,8 @@ class GaitPlanner:
                   clearance: float = 0.1, sway: str | CrawlSway | None = "auto",
                   sway_gain=(0.0, 1.0), sway_blend: float | None = None,
                   feedback_gain: float = 0.0, max_step: float | None = None,
-                  align_to_terrain: bool = True, center_on_com: bool = True,
-                  start_shift: bool = True) -> "GaitPlanner":
+                  terrain_alignment: float = 1.0, center_on_com: bool = True,
+                  start_shift: bool = True, limit_swing: bool = True) -> "GaitPlanner":
         """A planner for ``robot`` starting at time ``t0`` from configuration ``q`` (default: the
         standing posture ``robot.q_ref``), the trunk at its current CoM height above ``terrain``.
 
@@ -144,6 +152,10 @@ class GaitPlanner:
         ``center_on_com``: place the feet around the CoM rather than around the standing posture's
         feet (see :meth:`Footprint.centered_on_com`). ``start_shift``: when the gait starts on two
         feet (a trot) and no sway is used, add the :meth:`start_shift` to the trunk reference.
+        ``terrain_alignment``: how far the trunk's orientation follows the terrain's inclination
+        (:class:`TrunkReference`; 1: along its normal, 0: level). ``limit_swing``: cap each swing's
+        apex by how far the leg can raise its foot within its joint limits (``reach``, from
+        :func:`~.reach.foot_lift` at ``q``).
         """
         q = robot.q_ref if q is None else np.asarray(q, dtype=float)
         roles = contact_roles(robot)
@@ -171,9 +183,12 @@ class GaitPlanner:
         # the command moves the trunk once the gait starts: before, the feet stand where they are
         # and a reference walking away from them tilts the robot when the first legs lift off
         start = max(t0, schedule.start)
-        trunk = TrunkReference(command, com0, yaw0, None, terrain, start, sway, align_to_terrain)
+        trunk = TrunkReference(command, com0, yaw0, None, terrain, start, sway, terrain_alignment)
+        reach = None
+        if limit_swing:  # no higher than the base: a foot above it is no use to a swing
+            reach = [foot_lift(robot, leg, q, up_to=footprint.base_height) for leg in legs]
         planner = cls(schedule, trunk, footprint, terrain, clearance, feedback_gain, max_step, feet,
-                      t0)
+                      t0, reach)
         if start_shift and sway is None:
             trunk.start_shift = planner.start_shift(t0)
         return planner
@@ -203,6 +218,19 @@ class GaitPlanner:
         return raibert_foothold(hip, v_hip, self.schedule.stance_duration(i), self.terrain,
                                 velocity, self.feedback_gain, float(self._radius[i]),
                                 self.max_step)
+
+    def swing_clearance(self, leg: str | int, p0, p1, swing) -> float:
+        """The clearance of ``swing`` of ``leg`` from ``p0`` to ``p1``: :attr:`clearance`, capped
+        so that the apex is at most ``reach`` above the standing foot's height at mid-swing (the
+        trunk reference there, the footprint's foot in the trunk's frame), and at least 0."""
+        i = self.schedule.index(leg)
+        if not np.isfinite(self.reach[i]):
+            return self.clearance
+        trunk = self.trunk.evaluate(0.5 * (swing.liftoff + swing.touchdown))
+        R = trunk.rotation
+        standing = trunk.position[2] + R[2] @ (self.footprint.feet[i] - self.footprint.com)
+        top = standing + self.reach[i] * R[2, 2]
+        return float(min(self.clearance, max(0.0, top - max(p0[2], p1[2]))))
 
     # ------------------------------------------------------------------ gait start
     def start_shift(self, t_begin: float | None = None) -> StartShift | None:
@@ -332,8 +360,9 @@ class GaitPlanner:
                 if self._swing_k[i] != swing.index:  # 3. a new swing: latch start and target
                     p0 = self._anchor[i] if feet is None else np.asarray(feet[i], dtype=float)
                     fh = self.touchdown_target(i, swing.touchdown, com_velocity, t)
+                    clearance = self.swing_clearance(i, p0, fh.position, swing)
                     self._swing[i] = SwingTrajectory(p0, fh.position, swing.touchdown -
-                                                     swing.liftoff, self.clearance, swing.liftoff)
+                                                     swing.liftoff, clearance, swing.liftoff)
                     self._swing_k[i] = swing.index
                     self._target[i] = fh.position
                     self._target_normal[i] = fh.normal

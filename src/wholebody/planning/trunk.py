@@ -263,14 +263,16 @@ class TrunkReference:
     with heading ``yaw0``; held still before ``t0``.
 
     ``height``: CoM height kept above the terrain under the CoM (default: ``com0``'s);
-    ``align_to_terrain``: roll/pitch follow the terrain normal under the CoM (else the trunk stays
-    level); ``sway``: optional :class:`CrawlSway` added to the horizontal CoM; ``start_shift``:
+    ``terrain_alignment``: how far roll and pitch follow the terrain under the CoM: the trunk's z
+    axis is the terrain normal with its horizontal part scaled by this share, so that the tangent
+    of the trunk's inclination is that share of the terrain's (1: along the normal, as on the
+    ramps of Figs. 4, 7, 8; 0: level); ``sway``: optional :class:`CrawlSway` added to the horizontal CoM; ``start_shift``:
     optional :class:`StartShift` added to it too.
     """
 
     def __init__(self, command: VelocityCommand | None, com0, yaw0: float = 0.0,
                  height: float | None = None, terrain: Terrain | None = None, t0: float = 0.0,
-                 sway: CrawlSway | None = None, align_to_terrain: bool = True,
+                 sway: CrawlSway | None = None, terrain_alignment: float = 1.0,
                  fd_step: float = 1e-3, start_shift: StartShift | None = None):
         self.command = VelocityCommand() if command is None else command
         self.com0 = np.array(com0, dtype=float).reshape(3)
@@ -281,7 +283,10 @@ class TrunkReference:
         self.t0 = float(t0)
         self.sway = sway
         self.start_shift = start_shift
-        self.align_to_terrain = bool(align_to_terrain)
+        self.terrain_alignment = float(terrain_alignment)
+        if not 0.0 <= self.terrain_alignment <= 1.0:
+            raise ValueError(f"terrain_alignment: expected a share in [0, 1], got "
+                             f"{terrain_alignment}")
         self.fd_step = float(fd_step)
 
     # ------------------------------------------------------------------ nominal path
@@ -339,9 +344,12 @@ class TrunkReference:
 
     def _rotation(self, xy, psi: float) -> np.ndarray:
         c, s = math.cos(psi), math.sin(psi)
-        if not self.align_to_terrain or self.terrain.is_flat:
+        if self.terrain_alignment == 0.0 or self.terrain.is_flat:
             return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         n = self.terrain.normal(xy[0], xy[1])
+        if self.terrain_alignment != 1.0:
+            n = np.array([self.terrain_alignment * n[0], self.terrain_alignment * n[1], n[2]])
+            n = n / math.sqrt(float(n @ n))
         # x axis: in the terrain plane and in the vertical plane of the heading, so that the yaw
         # (ZYX Euler) of the result is exactly psi; pitch and roll come from the terrain
         x0, x1, x2 = c, s, -(c * n[0] + s * n[1]) / n[2]
@@ -382,7 +390,7 @@ class TrunkReference:
             out.acceleration[2] = g @ a + ter.second_derivative(xy[0], xy[1], v)
         out.rotation[:] = self._rotation(xy, psi)
         out.yaw = psi
-        if not self.align_to_terrain or ter.is_flat:
+        if self.terrain_alignment == 0.0 or ter.is_flat:
             out.angular_velocity[:] = (0.0, 0.0, om if t >= self.t0 else 0.0)
             out.angular_acceleration[:] = 0.0
         else:

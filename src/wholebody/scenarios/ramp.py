@@ -23,12 +23,14 @@ surface it should stand on (simulator foot heights) — i.e. nothing stepped int
 from __future__ import annotations
 
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from ..planning.courses import Course, CoursePlanner, gap_course, ramp_course
+from ..planning.reach import terrain_alignment_for
 from ..report.locomotion_figures import course_side_view, ramp_figure
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
@@ -39,6 +41,7 @@ from .locomotion import (GAIT_SHAPE, WBC_GAINS, PaperSpeed, check_quadruped, cou
 log = logging.getLogger(__name__)
 
 COURSES = ("ramp", "gap")
+AUTO = -1.0  # terrain_alignment chosen from the legs' reach
 ERROR_LIMIT = 0.2  # rad, Sect. V-H
 DEFAULTS = {"ramp": {"gait": "trot", "speed": PaperSpeed(0.15)},
             "gap": {"gait": "crawl", "speed": PaperSpeed(0.1)}}
@@ -56,6 +59,10 @@ PARAMETERS = (
     Parameter("speed", 0.0, "forward speed (m/s) after a 2 s ramp-up (0: 0.15 ramp, 0.1 gap, "
               "times sqrt(h / 0.599))",
               low=0.01, high=5.0, special=(0.0,)),
+    Parameter("terrain_alignment", AUTO, "how far the trunk's roll and pitch follow the course's "
+              "inclination (1: parallel to the slope, as in Fig. 8; 0: level; -1: whichever of the "
+              "two moves the legs less from their posture on the ramp's slope)",
+              low=0.0, high=1.0, special=(AUTO,)),
     Parameter("duration", 0.0, "simulated time (s) (0: long enough to cross the course)",
               low=0.0, high=Parameter.MAX_TIME),
     *WBC_GAINS,
@@ -71,6 +78,14 @@ def resolve(params: dict, robot) -> dict:
         p["gait"] = d["gait"]
     if p["speed"] <= 0.0:
         p["speed"] = d["speed"].value(robot)
+    if p["terrain_alignment"] == AUTO:
+        p["terrain_alignment"] = 1.0
+        if p["course"] == "ramp":
+            p["terrain_alignment"], changes = terrain_alignment_for(robot,
+                                                                    math.radians(p["angle"]))
+            log.info("terrain_alignment %g: standing on %g deg up or down moves a leg joint by up "
+                     "to %.3f of its range with the trunk parallel, %.3f level",
+                     p["terrain_alignment"], p["angle"], changes[1.0], changes[0.0])
     return p
 
 
@@ -121,6 +136,7 @@ def crossing(robot, params: dict, progress: bool = False, observers=()):
     planner = CoursePlanner.on_course(robot, make_schedule(robot, p["gait"], 1.0, p),
                                       ramped_command(p["speed"]), course,
                                       gap_margin=paper_length(0.06).value(robot),
+                                      terrain_alignment=p["terrain_alignment"],
                                       **gait_options(robot, p))
     rec = _Recorder()
     run = run_gait(robot, "passive", duration=duration, environment=course_environment(course),
@@ -149,7 +165,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     crossed = bool(np.all(final_feet_x > end + 0.05))
     metrics = {
         "course": p["course"], "gait": p["gait"], "speed_mps": p["speed"],
-        "duration_s": duration, **outcome(gait_run), "course_end_x_m": end,
+        "terrain_alignment": p["terrain_alignment"], "duration_s": duration, **outcome(gait_run), "course_end_x_m": end,
         "final_feet_x_m": final_feet_x, "crossed": crossed,
         "roll_error_max_rad": float(np.abs(err[after, 0]).max()),
         "pitch_error_max_rad": float(np.abs(err[after, 1]).max()),
