@@ -87,6 +87,23 @@ def test_legs_of_five_joints_walk(gait):
     assert run.tracking(t_from=1.0)["linear_max_m"] < 0.1 * robot.q_ref[2]
 
 
+@pytest.mark.parametrize("angle", [12.0, 15.0])
+def test_legs_of_five_joints_trot_over_the_ramp(angle):
+    """IIT Centauro on the ramp, on its defaults: a level trunk (its splayed legs move less from
+    their posture than under a trunk parallel to the slope) and swings no higher than its legs
+    reach take it up, across and down without a fall or a failed cycle, roll and pitch within
+    the paper's 0.2 rad, every foot past the course's end."""
+    from conftest import centauro_description
+
+    robot = wb.load_robot(centauro_description())
+    result = get_scenario("ramp").run(robot, "passive", {"angle": angle})
+    m = result.metrics
+    assert result.success and not m["fell"] and m["failed_cycles"] == 0, m
+    assert m["terrain_alignment"] == 0.0
+    assert m["roll_error_max_rad"] < 0.2 and m["pitch_error_max_rad"] < 0.2, m
+    assert min(m["final_feet_x_m"]) > m["course_end_x_m"], m
+
+
 def _trot_mean_roll(robot, controller, command, duration, options):
     """(|mean roll| of the simulator's base after 3 s, its final yaw) of a trot that must neither
     fall nor fail a cycle."""
