@@ -40,6 +40,15 @@ _TRUST = 0.1
 _DRIFT_COST = 100.0
 
 
+def _leg_indices(robot, contact: str):
+    """(idx_q, idx_v) of ``contact``'s one-coordinate leg joints."""
+    model = robot.model
+    joints = [model.joints[model.getJointId(j)] for j in leg_joints(robot, contact)]
+    joints = [j for j in joints if j.nq == 1 and j.nv == 1]
+    return np.array([j.idx_q for j in joints], dtype=int), np.array([j.idx_v for j in joints],
+                                                                      dtype=int)
+
+
 def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
               up_to: float = np.inf, iterations: int = 60) -> float:
     """How far (m) ``contact``'s frame can rise along the base's z axis from where it is in ``q``
@@ -50,12 +59,9 @@ def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
     model = robot.model
     data = model.createData()
     q = robot.q_ref.copy() if q is None else np.array(q, dtype=float)
-    joints = [model.joints[model.getJointId(j)] for j in leg_joints(robot, contact)]
-    joints = [j for j in joints if j.nq == 1 and j.nv == 1]
-    if not joints:
+    iq, iv = _leg_indices(robot, contact)
+    if len(iq) == 0:
         return 0.0
-    iq = np.array([j.idx_q for j in joints])
-    iv = np.array([j.idx_v for j in joints])
     lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
     span = hi - lo
     lo = np.minimum(lo + margin * span, q[iq])
@@ -87,15 +93,6 @@ def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
             break
     rise = float(axes[:, 2] @ (data.oMf[frame].translation - start))
     return min(max(rise, 0.0), up_to)
-
-
-def _leg_indices(robot, contact: str):
-    """(idx_q, idx_v) of ``contact``'s one-coordinate leg joints."""
-    model = robot.model
-    joints = [model.joints[model.getJointId(j)] for j in leg_joints(robot, contact)]
-    joints = [j for j in joints if j.nq == 1 and j.nv == 1]
-    return np.array([j.idx_q for j in joints], dtype=int), np.array([j.idx_v for j in joints],
-                                                                      dtype=int)
 
 
 def slope_stance_change(robot, angle: float, alignment: float = 1.0, q=None,

@@ -266,8 +266,8 @@ class TrunkReference:
     ``terrain_alignment``: how far roll and pitch follow the terrain under the CoM: the trunk's z
     axis is the terrain normal with its horizontal part scaled by this share, so that the tangent
     of the trunk's inclination is that share of the terrain's (1: along the normal, as on the
-    ramps of Figs. 4, 7, 8; 0: level); ``sway``: optional :class:`CrawlSway` added to the horizontal CoM; ``start_shift``:
-    optional :class:`StartShift` added to it too.
+    ramps of Figs. 4, 7, 8; 0: level); ``sway``: optional :class:`CrawlSway` added to the
+    horizontal CoM; ``start_shift``: optional :class:`StartShift` added to it too.
     """
 
     def __init__(self, command: VelocityCommand | None, com0, yaw0: float = 0.0,

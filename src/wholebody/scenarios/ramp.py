@@ -41,7 +41,7 @@ from .locomotion import (GAIT_SHAPE, WBC_GAINS, PaperSpeed, check_quadruped, cou
 log = logging.getLogger(__name__)
 
 COURSES = ("ramp", "gap")
-AUTO = -1.0  # terrain_alignment chosen from the legs' reach
+AUTO = -1.0  # terrain_alignment: the one that moves the legs less (terrain_alignment_for)
 ERROR_LIMIT = 0.2  # rad, Sect. V-H
 DEFAULTS = {"ramp": {"gait": "trot", "speed": PaperSpeed(0.15)},
             "gap": {"gait": "crawl", "speed": PaperSpeed(0.1)}}
@@ -165,7 +165,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     crossed = bool(np.all(final_feet_x > end + 0.05))
     metrics = {
         "course": p["course"], "gait": p["gait"], "speed_mps": p["speed"],
-        "terrain_alignment": p["terrain_alignment"], "duration_s": duration, **outcome(gait_run), "course_end_x_m": end,
+        "terrain_alignment": p["terrain_alignment"], "duration_s": duration,
+        **outcome(gait_run), "course_end_x_m": end,
         "final_feet_x_m": final_feet_x, "crossed": crossed,
         "roll_error_max_rad": float(np.abs(err[after, 0]).max()),
         "pitch_error_max_rad": float(np.abs(err[after, 1]).max()),
