@@ -92,3 +92,17 @@ def test_stepping_with_the_native_cycle_matches_python_in_closed_loop(robots):
     assert failures == 0
     assert len(diffs) > 30 and max(diffs) < 1e-6, max(diffs)
     assert max(heights) > 0.8 * params["lift"]
+
+
+def test_stepping_on_romeo_lifts_its_soles_by_its_share_of_the_height():
+    """On romeo (0.84 m against talos14's 1.02 m) the default lift is Table 1's 3 cm in proportion:
+    the scenario succeeds and the simulator's soles rise by at least 80 % of that, less than 3 cm."""
+    import wholebody as wb
+
+    romeo, talos14 = wb.load_robot("romeo"), wb.load_robot("talos14")
+    lift = 0.03 * romeo.q_ref[2] / talos14.q_ref[2]
+    result = get_scenario("stepping").run(romeo, "pd", {"steps": 1, "formulations": "reduced"})
+    assert result.success, result.metrics
+    (step,) = result.metrics["reduced"]["steps"]
+    assert 0.8 * lift < step["lift_m"] < 0.03
+    assert step["max_normal_force_while_up_N"] == 0.0

@@ -113,3 +113,16 @@ def test_push_series_forces_are_talos14s_velocity_changes():
     assert [float(f) for f in ref.split(",")] == [60.0, 100.0, 140.0, 180.0]
     expected = [f * romeo.mass / talos14.mass for f in (60.0, 100.0, 140.0, 180.0)]
     assert [float(f) for f in scaled.split(",")] == pytest.approx(expected, rel=1e-3)
+
+
+def test_stepping_lift_is_the_papers_on_talos_and_in_proportion_elsewhere():
+    """Table 1's 3 cm lift and the 3 mm touchdown depth on talos (and talos14, the same legs);
+    on romeo the same share of its standing height."""
+    talos, talos14, romeo = (wb.load_robot(n) for n in ("talos", "talos14", "romeo"))
+    for robot in (talos, talos14):
+        params = get_scenario("stepping").validate(robot, {})
+        assert (params["lift"], params["touchdown_depth"]) == (0.03, 0.003)
+    params = get_scenario("stepping").validate(romeo, {})
+    ratio = romeo.q_ref[2] / talos14.q_ref[2]
+    assert params["lift"] == pytest.approx(0.03 * ratio, rel=1e-12)
+    assert params["touchdown_depth"] == pytest.approx(0.003 * ratio, rel=1e-12)

@@ -30,6 +30,7 @@ from .base import (COM_PARAMETERS, ENGINE, POSTURE_PARAMETERS, SWING_FOOT_PARAME
                    Parameter, Scenario, ScenarioResult, check_engine, task_gains)
 from .loop import run_closed_loop
 from .measures import MAX_BASE_DROP_M, feet_in_place, sole_slip, tilt_deg
+from .pushes import HumanoidScaled
 
 log = logging.getLogger(__name__)
 
@@ -46,10 +47,11 @@ PARAMETERS = (
               **TIME_SPAN),
     Parameter("preload", 0.1, "normal force ramped onto the touched-down sole during the reload, "
                               "as a fraction of the weight", low=0.0, high=1.0),
-    Parameter("lift", 0.03, "swing-foot lift height (m)",
+    Parameter("lift", HumanoidScaled(0.03, "m", height_power=1), "swing-foot lift height (m)",
               low=0.0, low_open=True, high=0.5 * Parameter.H),
-    Parameter("touchdown_depth", 0.003, "the lowered swing-foot target ends this far below its "
-                                        "lift-off height (m)", low=0.0, high=0.1 * Parameter.H),
+    Parameter("touchdown_depth", HumanoidScaled(0.003, "m", height_power=1),
+              "the lowered swing-foot target ends this far below its lift-off height (m)",
+              low=0.0, high=0.1 * Parameter.H),
     Parameter("settle", 0.5, "simulated time after the final shift back to the middle (s)",
               low=0.0, high=Parameter.MAX_TIME),
     Parameter("contact_kd", 20.0, "damping of the contact velocities in the contact constraint "
