@@ -173,3 +173,17 @@ def test_the_ramp_resolves_its_alignment_from_the_robot(hyq):
     defaults["speed"] = 0.0
     assert ramp.resolve(defaults, hyq)["terrain_alignment"] == 1.0
     assert ramp.resolve({**defaults, "terrain_alignment": 0.25}, hyq)["terrain_alignment"] == 0.25
+
+
+def test_a_leg_joint_without_limits_keeps_none(hyq):
+    """A knee whose URDF gives no limits (Pinocchio's +-max float) is not frozen by the margin:
+    the foot rises at least as far as with the knee's real limits."""
+    import copy
+
+    contact = hyq.contact_names[0]
+    limited = foot_lift(hyq, contact)
+    free = copy.deepcopy(hyq)
+    knee = _leg(free, contact)[-1]
+    free.model.lowerPositionLimit[knee] = -np.finfo(float).max
+    free.model.upperPositionLimit[knee] = np.finfo(float).max
+    assert foot_lift(free, contact) >= limited - 1e-9 > 0.0

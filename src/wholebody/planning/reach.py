@@ -63,9 +63,11 @@ def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
     if len(iq) == 0:
         return 0.0
     lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
-    span = hi - lo
-    lo = np.minimum(lo + margin * span, q[iq])
-    hi = np.maximum(hi - margin * span, q[iq])
+    with np.errstate(over="ignore", invalid="ignore"):
+        span = hi - lo
+    bounded = np.isfinite(span)  # a joint without limits (or with +-max float) keeps none
+    lo = np.where(bounded, np.minimum(lo + margin * np.where(bounded, span, 0.0), q[iq]), -np.inf)
+    hi = np.where(bounded, np.maximum(hi - margin * np.where(bounded, span, 0.0), q[iq]), np.inf)
     frame = robot.contact(contact).frame_id
     axes = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()  # base x, y, z in world
     pin.framesForwardKinematics(model, data, q)
@@ -137,7 +139,8 @@ def slope_stance_change(robot, angle: float, alignment: float = 1.0, q=None,
         pin.framesForwardKinematics(model, data, q)
         if np.linalg.norm(target - data.oMf[frame].translation) > 1e-3:
             return np.inf
-        change = max(change, float(np.max(np.abs(q[iq] - q0[iq]) / (hi - lo))))
+        with np.errstate(over="ignore"):  # a joint without limits moves no share of a range
+            change = max(change, float(np.max(np.abs(q[iq] - q0[iq]) / (hi - lo))))
     return change
 
 
