@@ -13,7 +13,9 @@
 The simulator sees the course as boxes (a real hole under the gap, no floor plane) and the planner
 the same course as a height map with exact per-strip normals for the friction cones (footnote 17);
 the trunk reference follows the course smoothed over the hip-to-hip length
-(:mod:`~wholebody.planning.courses`).
+(:mod:`~wholebody.planning.courses`), its attitude parallel to the slope (the paper's) or level,
+whichever moves the robot's legs less from their posture on the ramp's slope
+(:func:`~wholebody.planning.reach.terrain_alignment_for`; ``--set terrain_alignment`` to choose).
 
 Success: no fall, every WBC cycle solved, the whole robot past the course (simulator feet), and for
 the ramp, roll and pitch errors below 0.2 rad throughout; for the gap, no foot ever below the
