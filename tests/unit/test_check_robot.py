@@ -339,3 +339,27 @@ def test_leg_joints_that_do_not_move_their_foot_get_a_note():
     for preset in ("hyq", "anymal_c", "go1", "solo12"):
         assert not [f for f in check_robot(preset).findings
                     if "about the sphere's centre" in f.message], preset
+
+
+def test_a_quadrupeds_reach_and_ramp_attitude_are_reported():
+    """The legs' lift (what caps a swing) and the ramp's trunk attitude, as the planner will use
+    them: Centauro lifts its feet less than HyQ's clearance in proportion to its height and
+    stands a slope with a level trunk; HyQ keeps the paper's parallel one; legs of two joints
+    (no trot, so no ramp) get the lift only."""
+    from conftest import centauro_description, solo8_description
+    from wholebody.planning.reach import foot_lift
+    from wholebody.robots.check import check_robot
+    from wholebody.scenarios.locomotion import gait_options
+
+    for description, attitude, capped in ((centauro_description(), "level", True),
+                                          ("hyq", "parallel", False)):
+        report = check_robot(description)
+        notes = [f.message for f in report.findings if f.topic == "legs"]
+        assert len(notes) == 2 and notes[1].endswith(f"the ramp takes it {attitude}"), notes
+        robot = wb.load_robot(description)
+        lifts = [foot_lift(robot, c) for c in robot.contact_names]
+        assert report.facts["foot_lift_m"] == pytest.approx(lifts)
+        clearance = gait_options(robot)["clearance"]
+        assert (max(lifts) < clearance) if capped else (min(lifts) > clearance)
+    notes = [f for f in check_robot(solo8_description()).findings if f.topic == "legs"]
+    assert len(notes) == 1 and "rises at most" in notes[0].message

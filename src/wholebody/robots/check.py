@@ -107,6 +107,9 @@ def check_robot(name_or_path) -> RobotCheck:
     if report.ok and len(robot.contacts) == 2 and all(c.spec.type == "rectangle"
                                                       for c in robot.contacts):
         _single_support(robot, report)
+    if report.ok and len(robot.contacts) == 4 and all(c.spec.type == "point"
+                                                      for c in robot.contacts):
+        _legs_reach(robot, report)
     return report
 
 
@@ -145,6 +148,40 @@ def _single_support(robot, report: RobotCheck) -> None:
                        f"over {stance}, no pose inside the joint limits has the CoG at its "
                        f"standing height; one has it {1e3 * drop:.1f} mm lower (single-support "
                        f"lowers the CoG until such a pose exists)")
+
+
+#: the slope check-robot reports a quadruped's trunk attitude for (the ramp scenario's default)
+REPORTED_SLOPE_DEG = 15.0
+
+
+def _legs_reach(robot, report: RobotCheck) -> None:
+    """A quadruped's legs' reach, as the gait planner uses it: how high each foot can rise from
+    the posture within the joint limits (:func:`~wholebody.planning.reach.foot_lift`, each swing's
+    apex is capped by it) and, for legs a trot can use, which trunk attitude the ramp takes on a
+    15° slope (:func:`~wholebody.planning.reach.terrain_alignment_for`). Not part of
+    :func:`inspect_robot`: ``run`` computes what it needs itself."""
+    from ..planning.reach import REACH_MARGIN, foot_lift, terrain_alignment_for
+    moving = min(len(moving_leg_joints(robot, c.name)) for c in robot.contacts)
+    if moving < GAIT_LEG_JOINTS["crawl"]:  # no walking scenario takes it (noted elsewhere)
+        return
+    lifts = [foot_lift(robot, c.name, up_to=float(robot.q_ref[2])) for c in robot.contacts]
+    report.facts["foot_lift_m"] = lifts
+    span = f"{min(lifts):.3f}" + (f"-{max(lifts):.3f}" if max(lifts) > min(lifts) + 5e-4 else "")
+    report.add("note", "legs", f"each foot rises at most {span} m from its standing position with "
+               f"every leg joint {REACH_MARGIN:.0%} of its range inside its limits: no swing is "
+               f"planned higher")
+    if moving < GAIT_LEG_JOINTS["trot"]:  # the ramp trots: it refuses such legs
+        return
+    share, changes = terrain_alignment_for(robot, math.radians(REPORTED_SLOPE_DEG))
+    report.facts["ramp_terrain_alignment"] = share
+
+    def moved(change):
+        return "some foot out of reach" if not math.isfinite(change) else f"{change:.0%}"
+
+    report.add("note", "legs", f"standing on {REPORTED_SLOPE_DEG:g} deg up or down moves a leg "
+               f"joint by up to {moved(changes[1.0])} of its range with the trunk parallel to "
+               f"the slope, {moved(changes[0.0])} with it level: the ramp takes it "
+               f"{'level' if share == 0.0 else 'parallel'}")
 
 
 def _facts(robot, report: RobotCheck) -> None:
