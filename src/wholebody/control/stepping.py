@@ -106,7 +106,7 @@ class Stepping:
         full = not reduced
         contacts = tuple(robot.contact_names)
         task_pd = {"posture_gains": config.posture_gains, "swing_gains": config.swing_gains,
-                 "com_gains": config.com_gains}
+                   "com_gains": config.com_gains}
         self.double = table1_stack(robot, contacts, full=full, torsion=torsion, **task_pd)
         self.double_vars = Variables(robot, contacts)
         # eq. 2 keeps whatever velocity a sole has at touch-down (J qdd + Jdot v = 0): with both

@@ -31,6 +31,7 @@ from scipy.optimize import linprog, lsq_linear
 
 from ..robots.roles import leg_joints
 from .footholds import Footprint
+from .support_shift import joint_range, joint_step_bounds
 
 #: share of each joint's range the reach keeps clear of its limits
 REACH_MARGIN = 0.1
@@ -40,13 +41,15 @@ _TRUST = 0.1
 _DRIFT_COST = 100.0
 
 
-def _leg_indices(robot, contact: str):
-    """(idx_q, idx_v) of ``contact``'s one-coordinate leg joints."""
+def _leg(robot, contact: str):
+    """``contact``'s one-coordinate leg joints: (idx_q, idx_v, their ranges as (n, 2), None rows
+    as (-inf, inf) for a joint without limits)."""
     model = robot.model
     joints = [model.joints[model.getJointId(j)] for j in leg_joints(robot, contact)]
     joints = [j for j in joints if j.nq == 1 and j.nv == 1]
-    return np.array([j.idx_q for j in joints], dtype=int), np.array([j.idx_v for j in joints],
-                                                                      dtype=int)
+    ranges = [joint_range(model, j) or (-np.inf, np.inf) for j in joints]
+    return (np.array([j.idx_q for j in joints], dtype=int),
+            np.array([j.idx_v for j in joints], dtype=int), np.array(ranges).reshape(-1, 2))
 
 
 def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
@@ -54,20 +57,16 @@ def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
     """How far (m) ``contact``'s frame can rise along the base's z axis from where it is in ``q``
     (default: the posture ``robot.q_ref``), its position along the base's x and y held, with only
     its leg's joints moving and each kept ``margin`` times its range inside its limits (a joint
-    already closer in ``q`` keeps where it is as its bound); the search stops at ``up_to``. 0 when
-    the leg cannot raise it."""
+    already closer in ``q`` keeps where it is as its bound; :func:`~.support_shift.
+    joint_step_bounds`); the search stops at ``up_to``. 0 when the leg cannot raise it."""
     model = robot.model
     data = model.createData()
     q = robot.q_ref.copy() if q is None else np.array(q, dtype=float)
-    iq, iv = _leg_indices(robot, contact)
+    iq, iv, _ = _leg(robot, contact)
     if len(iq) == 0:
         return 0.0
-    lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
-    with np.errstate(over="ignore", invalid="ignore"):
-        span = hi - lo
-    bounded = np.isfinite(span)  # a joint without limits (or with +-max float) keeps none
-    lo = np.where(bounded, np.minimum(lo + margin * np.where(bounded, span, 0.0), q[iq]), -np.inf)
-    hi = np.where(bounded, np.maximum(hi - margin * np.where(bounded, span, 0.0), q[iq]), np.inf)
+    lower, upper = joint_step_bounds(robot, margin, q)
+    lo, hi = q[iq] + lower[iv], q[iq] + upper[iv]
     frame = robot.contact(contact).frame_id
     axes = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()  # base x, y, z in world
     pin.framesForwardKinematics(model, data, q)
@@ -120,10 +119,10 @@ def slope_stance_change(robot, angle: float, alignment: float = 1.0, q=None,
     normal = np.array([-np.sin(angle), 0.0, np.cos(angle)])
     change = 0.0
     for k, leg in enumerate(footprint.legs):
-        iq, iv = _leg_indices(robot, leg)
+        iq, iv, ranges = _leg(robot, leg)
         if len(iq) == 0:
             continue
-        lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
+        lo, hi = ranges[:, 0], ranges[:, 1]
         x, y = footprint.feet_from_com()[k]
         target = np.array([x, y, np.tan(angle) * x]) + footprint.foot_radius[k] * normal
         frame = robot.contact(leg).frame_id
@@ -139,8 +138,8 @@ def slope_stance_change(robot, angle: float, alignment: float = 1.0, q=None,
         pin.framesForwardKinematics(model, data, q)
         if np.linalg.norm(target - data.oMf[frame].translation) > 1e-3:
             return np.inf
-        with np.errstate(over="ignore"):  # a joint without limits moves no share of a range
-            change = max(change, float(np.max(np.abs(q[iq] - q0[iq]) / (hi - lo))))
+        # a joint without limits moves no share of a range
+        change = max(change, float(np.max(np.abs(q[iq] - q0[iq]) / (hi - lo))))
     return change
 
 

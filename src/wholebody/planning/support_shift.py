@@ -138,24 +138,28 @@ def support_posture(robot, stance: str, swing: str, drop: float, lift: float
     return _homotopy(robot, constraints)
 
 
-def _range(model, joint) -> tuple[float, float] | None:
+def joint_range(model, joint) -> tuple[float, float] | None:
     """(lower, upper) position limits of a single-coordinate joint with a finite range, else
-    None (continuous and multi-coordinate joints, the free flyer)."""
+    None (continuous and multi-coordinate joints, the free flyer, and a joint whose URDF gives
+    no limits, which Pinocchio stores as +-max float: a range that overflows)."""
     i = joint.idx_q
     low, high = model.lowerPositionLimit[i], model.upperPositionLimit[i]
-    if joint.nq != 1 or not (np.isfinite(low) and np.isfinite(high) and high > low):
+    with np.errstate(over="ignore", invalid="ignore"):
+        finite = np.isfinite(high - low)
+    if joint.nq != 1 or not (finite and high > low):
         return None
     return float(low), float(high)
 
 
-def _joint_bounds(robot, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds of a tangent step from the posture (nv): ``margin`` of each limited joint's range
-    inside its limits (no further than the posture itself is); the base and unlimited or
+def joint_step_bounds(robot, margin: float, q=None) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of a tangent step from ``q`` (default the posture; nv): ``margin`` of each limited
+    joint's range inside its limits (no further than ``q`` itself is); the base and unlimited or
     multi-coordinate joints free."""
-    model, q0 = robot.model, robot.q_ref
+    model = robot.model
+    q0 = robot.q_ref if q is None else np.asarray(q, dtype=float)
     lower, upper = np.full(model.nv, -np.inf), np.full(model.nv, np.inf)
     for joint in model.joints[1:]:
-        limits = _range(model, joint)
+        limits = joint_range(model, joint)
         if limits is None:
             continue
         (low, high), i, k = limits, joint.idx_q, joint.idx_v
@@ -208,7 +212,7 @@ def key_pose(robot, stance: str, swing: str, drop: float, lift: float = 0.0
     when it is below :data:`KEY_POSE_TOLERANCE`."""
     errors, jacobian = key_pose_problem(robot, stance, swing, drop, lift)
     fit = least_squares(errors, np.zeros(robot.model.nv), jac=jacobian,
-                        bounds=_joint_bounds(robot, KEY_POSE_MARGIN),
+                        bounds=joint_step_bounds(robot, KEY_POSE_MARGIN),
                         xtol=1e-12, ftol=1e-12, gtol=1e-12)
     residual = np.abs(fit.fun[:15] / np.r_[np.ones(12), np.full(3, KEY_POSE_COG_WEIGHT)]).max()
     return pin.integrate(robot.model, robot.q_ref, fit.x), float(residual)
@@ -248,7 +252,7 @@ def joint_limit_margin(robot, q, joints) -> float:
     margins = [np.inf]
     for name in joints:
         joint = model.joints[model.getJointId(name)]
-        limits = _range(model, joint)
+        limits = joint_range(model, joint)
         if limits is None:
             continue
         (low, high), i = limits, joint.idx_q

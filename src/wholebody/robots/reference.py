@@ -68,4 +68,3 @@ def leg_stretch(robot) -> float:
         stretch.append(span(straight, joints[0], joints[-1])
                        - span(robot.q_ref, joints[0], joints[-1]))
     return min(stretch) if stretch else 0.0
-

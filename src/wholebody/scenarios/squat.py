@@ -55,8 +55,8 @@ from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Paramet
                    ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes,
                    task_gains)
 from .loop import run_closed_loop
-from .pushes import HumanoidScaled
 from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
+from .pushes import HumanoidScaled
 
 VARIANTS = ("tracking", "cop-active")
 
