@@ -841,7 +841,9 @@ def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots):
     and the torques equal those of a cycle solved by quadprog alone to 1e-6 Nm (measured 9e-8).
     With DAQP's own sing_tol and the earlier primal_tol 1e-7 (``backend_options``, both engines)
     the same states leave QPs to quadprog on over a third of the cycles ("infeasible" on nearly
-    dependent active rows, or solutions refused on the raw rows): the case the settings are for."""
+    dependent active rows, or solutions refused on the raw rows): the case the settings are for.
+    The stack has the paper's CoP rows (the whole sole, ``cop_margin=0``), those these numbers
+    were measured on."""
     from wholebody.control.stacks import table1_stack
     from wholebody.cycle import HierarchyCycle
     from wholebody.variables import Variables
@@ -850,7 +852,8 @@ def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots):
     states = list(robot.smooth_motion(2000, 1e-3))[:600]
 
     def cycle(backend, engine="auto", **options):
-        return HierarchyCycle(robot, table1_stack(robot, robot.contact_names), backend=backend,
+        stack = table1_stack(robot, robot.contact_names, cop_margin=0.0)
+        return HierarchyCycle(robot, stack, backend=backend,
                               fallback_backend="quadprog" if backend == "daqp" else None,
                               engine=engine, backend_options=options)
 

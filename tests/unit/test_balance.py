@@ -264,7 +264,7 @@ def test_task_gains_reach_every_hierarchy(robots):
     declared): the momentum balance of the push scenarios, every stack of the contact switch and
     of stepping hold exactly those gains (joints and base alike); the defaults are the stacks'."""
     from wholebody.control.contact_switch import ContactSwitch
-    from wholebody.control.stacks import POSTURE_PD
+    from wholebody.control.stacks import COP_MARGIN, POSTURE_PD
     from wholebody.control.stepping import Stepping
     from wholebody.scenarios import get_scenario, single_support, stepping
     from wholebody.scenarios.pushes import controller_options
@@ -292,6 +292,7 @@ def test_task_gains_reach_every_hierarchy(robots):
     ctrl = ContactSwitch(robot, stance, single_support.config(robot, params), gains="lqr")
     for stack in (ctrl.double, ctrl.single, ctrl.swinging):
         check(stack)
+        assert stack.find("center of pressure").margin == COP_MARGIN
     assert (ctrl.swing.kp, ctrl.swing.kd) == (250.0, 31.0)
 
     params = get_scenario("stepping").validate(robot, sets)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from wholebody.control.balance import CoMSineReference, MomentumBalance, SoleFrameReference
-from wholebody.control.stacks import table1_stack, table2_stack, table4_stack
+from wholebody.control.stacks import COP_MARGIN, table1_stack, table2_stack, table4_stack
 from wholebody.control.standing import StandingController
 from wholebody.formulation import Formulation
 from wholebody.variables import Variables
@@ -110,6 +110,26 @@ def test_builders_check_mu(talos, builder, mu, shown):
     assert table2_stack(talos, mu=0.3).find("friction").mu == 0.3
 
 
+BUILDERS = [lambda r, **kw: table2_stack(r, **kw),
+            lambda r, **kw: table1_stack(r, r.contact_names, **kw),
+            lambda r, **kw: table4_stack(r, ["left_sole"], **kw)]
+
+
+@pytest.mark.parametrize("bad,shown", [(NAN, "nan"), (-0.1, "-0.1"), (1.0, "1.0")])
+@pytest.mark.parametrize("builder", BUILDERS, ids=["table2", "table1", "table4"])
+def test_builders_check_cop_margin(talos, builder, bad, shown):
+    raises_naming(lambda: builder(talos, cop_margin=bad), "cop_margin", shown)
+
+
+@pytest.mark.parametrize("builder", BUILDERS, ids=["table2", "table1", "table4"])
+def test_builders_keep_the_cop_inside_the_soles_by_default(talos, builder):
+    """Every hierarchy's CoP rows have the library's margin unless told otherwise (0: the
+    paper's whole sole), and it is a share strictly inside the sole."""
+    assert 0.0 < COP_MARGIN < 0.5
+    assert builder(talos).find("center of pressure").margin == COP_MARGIN
+    assert builder(talos, cop_margin=0.0).find("center of pressure").margin == 0.0
+
+
 @pytest.mark.parametrize("bad,shown", [(NAN, "nan"), (-1.0, "-1.0"), (INF, "inf")])
 def test_table2_stack_checks_angular_weight(talos, bad, shown):
     raises_naming(lambda: table2_stack(talos, angular_weight=bad), "angular_weight", shown)
@@ -150,15 +170,19 @@ def test_momentum_balance_valid_arguments(talos):
     ctrl = MomentumBalance(talos, gains="pd", P=np.full(6, 10.0), D=np.eye(6), cop_margin=0.2,
                            com_ref=[0.0, 0.0, 0.8])
     np.testing.assert_array_equal(ctrl.momentum.P, 10.0 * np.eye(6))
-    assert ctrl.stack.find("center of pressure").margin == 0.2
+    assert ctrl.stack.find("center of pressure").margin == ctrl.cop_margin == 0.2
+    assert MomentumBalance(talos, gains="pd").cop_margin == COP_MARGIN
 
 
 def test_cop_margin_needs_a_sole(robots):
-    """A CoP margin on a robot with point feet (no CoP task) is an error, not ignored."""
+    """A CoP margin given for a robot with point feet (no CoP task) is an error, not ignored;
+    the default margin (None) and 0 are not given margins."""
     hyq = robots["hyq"]
     try:
         raises_naming(lambda: MomentumBalance(hyq, gains="pd", cop_margin=0.1), "cop_margin",
                       "0.1")
+        for margin in (None, 0.0):
+            assert MomentumBalance(hyq, gains="pd", cop_margin=margin).cop_margin == 0.0
     finally:
         hyq.update(hyq.q_ref, np.zeros(hyq.nv))
 

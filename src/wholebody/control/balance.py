@@ -33,7 +33,7 @@ from ..tasks.base import contact_list
 from ..tasks.momentum import momentum_gain
 from ..validation import finite_array, nonnegative, number, positive
 from .lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_DIAG, MomentumLQR
-from .stacks import ANGULAR_MOMENTUM_WEIGHT, POSTURE_PD, TORSION, table2_stack
+from .stacks import ANGULAR_MOMENTUM_WEIGHT, COP_MARGIN, POSTURE_PD, TORSION, table2_stack
 
 GAINS = ("lqr", "pd")
 
@@ -187,7 +187,8 @@ class MomentumBalance:
     ``reference`` (optional) is called every cycle as ``reference(t, robot)`` after the robot
     update and returns a :class:`BalanceReference`; it sets ``com_ref``, ``h_ref``, ``hdot_ref`` and
     the posture task's base reference. ``cop_margin`` shrinks the admissible CoP region of every
-    sole (:class:`~wholebody.tasks.CenterOfPressure`'s margin; 0 = the whole sole).
+    sole (:class:`~wholebody.tasks.CenterOfPressure`'s margin; None: on soles
+    :data:`~wholebody.control.stacks.COP_MARGIN`; 0 = the whole sole, the paper's).
     ``angular_weight``: weight of the momentum task's angular rows (see
     :func:`~wholebody.control.stacks.table2_stack`; 1e4 = the paper's single weight).
     ``torsion`` (default True): the soles' yaw-moment rows in the friction task (False: the
@@ -215,15 +216,16 @@ class MomentumBalance:
     construction, each error naming the argument: ``com_ref`` a finite 3-vector; ``P``/``D``
     (PD only) 6x6 or their diagonals, finite with a positive semi-definite symmetric part;
     ``Q``/``R`` (LQR only, checked by :class:`~wholebody.control.lqr.MomentumLQR`); ``cop_margin``
-    in [0, 1); ``angular_weight`` finite >= 0; ``integral_limit`` finite > 0; ``reference`` None
-    or callable; ``engine`` one of :data:`~wholebody.cycle.ENGINES`. Gains given for the other law
-    (``P``/``D`` with "lqr", ``Q``/``R``/``q_integral`` with "pd") are errors, not ignored.
+    None or in [0, 1), not > 0 without a sole; ``angular_weight`` finite >= 0; ``integral_limit``
+    finite > 0; ``reference`` None or callable; ``engine`` one of
+    :data:`~wholebody.cycle.ENGINES`. Gains given for the other law (``P``/``D`` with "lqr",
+    ``Q``/``R``/``q_integral`` with "pd") are errors, not ignored.
     """
 
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
                  P=None, D=None, Q=None, R=None, backend: str = "daqp",
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
-                 cop_margin: float = 0.0, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
+                 cop_margin: float | None = None, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT,
                  engine: str = "auto", torsion: bool = TORSION, q_orientation=None,
                  posture_gains=POSTURE_PD):
@@ -242,25 +244,27 @@ class MomentumBalance:
         if reference is not None and not callable(reference):
             raise ValueError(f"reference: expected None or a callable (t, robot) -> "
                              f"BalanceReference, got {reference!r}")
-        cop_margin = number(cop_margin, "cop_margin", low=0.0, high=1.0, high_open=True)
+        if cop_margin is not None:
+            cop_margin = number(cop_margin, "cop_margin", low=0.0, high=1.0, high_open=True)
         angular_weight = nonnegative(angular_weight, "angular_weight")
         integral_limit = positive(integral_limit, "integral_limit")
         self.robot = robot
         self.gains = gains
         self.contacts = _balance_contacts(robot, contacts, "MomentumBalance")
         self.variables = Variables(robot, self.contacts)
+        if cop_margin and not any(robot.contact(c).spec.type == "rectangle"
+                                  for c in self.contacts):
+            raise ValueError(f"cop_margin: {cop_margin!r} given, but none of the contacts "
+                             f"{list(self.contacts)} is a sole (rectangle)")
         self.stack = table2_stack(robot, self.contacts, lqr=(gains == "lqr"),
                                   angular_weight=angular_weight, torsion=torsion,
-                                  posture_gains=posture_gains)
+                                  posture_gains=posture_gains,
+                                  cop_margin=COP_MARGIN if cop_margin is None else cop_margin)
         self.momentum = self.stack.find("momentum")
         if P is not None:
             self.momentum.P = P
         if D is not None:
             self.momentum.D = D
-        if cop_margin and not any(robot.contact(c).spec.type == "rectangle"
-                                  for c in self.contacts):
-            raise ValueError(f"cop_margin: {cop_margin!r} given, but none of the contacts "
-                             f"{list(self.contacts)} is a sole (rectangle)")
         self.formulation = Formulation(robot)
         self.backend = backend
         self.cycle = (None if engine == "python" else
@@ -273,8 +277,6 @@ class MomentumBalance:
         self.hdot_ref = np.zeros(6)
         self.reference = reference
         self.posture = self.stack.find("posture")
-        if cop_margin:
-            self.stack.find("center of pressure").margin = cop_margin
         self.lqr = (MomentumLQR(robot, self.contacts, Q=Q, R=R, q_integral=q_integral,
                                 integral_limit=integral_limit, q_orientation=q_orientation)
                     if gains == "lqr" else None)
@@ -283,6 +285,13 @@ class MomentumBalance:
         if self.lqr is not None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             self.lqr.gains(robot, self.contacts)  # gains at the reference pose (Sect. 3.2 remark)
+
+    @property
+    def cop_margin(self) -> float:
+        """The CoP rows' margin: the share of each sole's half-lengths kept inside its edges (0
+        without a sole)."""
+        return next((t.margin for t in self.stack.tasks() if t.name == "center of pressure"),
+                    0.0)
 
     def reset_integral(self) -> None:
         """Zero the CoG-error integral (integral action only) and forget the last call's time."""

@@ -41,7 +41,7 @@ from ..tasks.motion import JointTrajectoryTask
 from ..variables import Variables
 from .balance import lqr_q
 from .lqr import MomentumLQR
-from .stacks import POSTURE_PD, SWING_FOOT_PD, TORSION, table2_stack, table4_stack
+from .stacks import COP_MARGIN, POSTURE_PD, SWING_FOOT_PD, TORSION, table2_stack, table4_stack
 
 GAINS = ("pd", "lqr")
 
@@ -135,11 +135,11 @@ class ContactSwitch:
     """Double support -> unloading -> single support (Table 4) -> joint-space leg swinging, as a
     ``compute(q, v, t)`` controller. ``gains`` is "pd" (eq. 22) or "lqr" (eqs. 23-24, one gain set
     per contact configuration, blended during the unloading as in the Remark of Sect. 3.2).
-    ``torsion`` (default True): the soles' yaw-moment rows in the Table 2/4 stacks
-    (:func:`~wholebody.control.stacks.table2_stack`)."""
+    ``torsion`` (default True): the soles' yaw-moment rows in the Table 2/4 stacks, and
+    ``cop_margin`` their CoP rows' margin (:func:`~wholebody.control.stacks.table2_stack`)."""
 
     def __init__(self, robot, stance: str, config: ContactSwitchConfig, gains: str = "pd",
-                 torsion: bool = TORSION, P=None, D=None):
+                 torsion: bool = TORSION, P=None, D=None, cop_margin: float = COP_MARGIN):
         if gains not in GAINS:
             raise ValueError(f"gains: expected 'pd' or 'lqr', got '{gains}'")
         if gains != "pd" and (P is not None or D is not None):
@@ -158,7 +158,7 @@ class ContactSwitch:
         lqr = gains == "lqr"
         self.double_contacts = tuple(robot.contact_names)
         bw = BASE_ORIENTATION_WEIGHT
-        task_pd = {"posture_gains": config.posture_gains}
+        task_pd = {"posture_gains": config.posture_gains, "cop_margin": cop_margin}
         self.double = table2_stack(robot, lqr=lqr, base_orientation_weight=bw, torsion=torsion,
                                    **task_pd)
         self.double_vars = Variables(robot)

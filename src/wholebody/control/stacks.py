@@ -43,14 +43,18 @@ def _mu(robot: Robot, mu: float | None) -> float:
     return robot.friction if mu is None else number(mu, "mu", low=0.0, low_open=True)
 
 
-def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None, torsion: bool):
-    """CoP (weight 1e4, as the paper favours CoPs), friction pyramid (with the wrench cone's
-    yaw-moment rows on rectangle contacts if ``torsion``), joint acceleration limits."""
+def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None, torsion: bool,
+                        cop_margin: float):
+    """CoP (weight 1e4, as the paper favours CoPs; ``cop_margin`` of each sole's half-lengths
+    inside its edges), friction pyramid (with the wrench cone's yaw-moment rows on rectangle
+    contacts if ``torsion``), joint acceleration limits."""
     if not isinstance(torsion, (bool, np.bool_)):
         raise TypeError(f"torsion: expected a bool, got {torsion!r}")
+    cop_margin = number(cop_margin, "cop_margin", low=0.0, high=1.0, high_open=True)
     rows = []
     if any(robot.contact(c).spec.type == "rectangle" for c in contacts):
-        rows.append(CenterOfPressure(name="center of pressure", weight=1e4, contacts=contacts))
+        rows.append(CenterOfPressure(name="center of pressure", weight=1e4, contacts=contacts,
+                                     margin=cop_margin))
     rows.append(FrictionCone(_mu(robot, mu), name="friction", contacts=contacts,
                              torsion=bool(torsion)))
     rows.append(JointAccelerationLimits(name="joint acceleration limits"))
@@ -68,6 +72,15 @@ def _contact_conditions(robot: Robot, contacts: Sequence[str], mu: float | None,
 #: squeeze the feet sideways at their friction limit with the CoPs in the corners, which no sole
 #: carries (docs/results.md, other robots). ``torsion=False`` gives the papers' 4 rows per contact.
 TORSION = True
+
+#: The CoP rows' margin (:class:`~wholebody.tasks.CenterOfPressure`): the CoP of every sole is
+#: kept this share of its half-lengths inside its edges. Not in the paper's tables, whose CoP
+#: constraint admits the whole sole; the paper's CoPs stay "in the interior of the foot soles
+#: with a margin" (Sect. 5.2.3) and saturate "close to the heel" (Fig. 11). A CoP on an edge
+#: leaves the opposite edge unloaded, and a sole that complies at all (the twin's soft contacts,
+#: a real foot) then tips about it: narrow soles tipped in sideways pushes, on a rocking platform
+#: and under repeated pushes (docs/results.md). ``cop_margin=0`` gives the paper's whole sole.
+COP_MARGIN = 0.1
 
 #: Weight of the angular rows of Table 2's momentum task (see :func:`table2_stack`). The paper's
 #: single weight for the whole task is ``1e4`` (``angular_weight=1e4`` restores it).
@@ -134,7 +147,7 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
                  full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  base_orientation_weight: float | None = None, torsion: bool = TORSION,
-                 posture_gains=POSTURE_PD) -> Stack:
+                 posture_gains=POSTURE_PD, cop_margin: float = COP_MARGIN) -> Stack:
     """Table 2, double support: (1) Newton-Euler + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) momentum control, posture (joints + base), GRF
     regulariser.
@@ -162,12 +175,14 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     three base-orientation rows (:func:`posture_weight`). ``torsion`` (default :data:`TORSION`,
     True): the friction task's torsional rows on the rectangle contacts (the soles' yaw-moment
     bound, not in the paper); False gives the paper's friction pyramid only. ``posture_gains``:
-    the posture's (kp, kd), :data:`POSTURE_PD` by default."""
+    the posture's (kp, kd), :data:`POSTURE_PD` by default. ``cop_margin``: the share of each
+    sole's half-lengths the CoP keeps inside its edges, in [0, 1) (:data:`COP_MARGIN`; 0: the
+    paper's whole sole)."""
     contacts = _contacts(robot, contacts, "contacts", default_all=True)
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=contacts)]
-        + _contact_conditions(robot, contacts, mu, torsion),
+        + _contact_conditions(robot, contacts, mu, torsion, cop_margin),
         [momentum_task(lqr, angular_weight),
          posture_task(robot, base_orientation_weight, posture_gains),
          ForceRegularizer(name="force regularizer", weight=1e-4, contacts=contacts)],
@@ -178,7 +193,8 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
                  lqr: bool = False, full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  base_orientation_weight: float | None = None, torsion: bool = TORSION,
-                 posture_gains=POSTURE_PD, swing_gains=SWING_FOOT_PD) -> Stack:
+                 posture_gains=POSTURE_PD, swing_gains=SWING_FOOT_PD,
+                 cop_margin: float = COP_MARGIN) -> Stack:
     """Table 4, single support: (1) Newton-Euler + torque limits; (2) CoP, friction, joint
     acceleration limits; (3) momentum, contact constraints, swing-foot PD, posture; (4) GRF
     regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks have no
@@ -187,12 +203,12 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
     The angular-momentum rows weigh ``angular_weight`` (default 1e-4; the paper: 1e4) and the
     posture holds the base, as in :func:`table2_stack`, whose docstring gives the reason:
     neither eq. 22 nor the LQR state has the trunk orientation. ``base_orientation_weight``: as
-    in :func:`table2_stack`; ``torsion``: as in :func:`table2_stack`; ``posture_gains``,
-    ``swing_gains``: the posture's and the swing-foot tasks' (kp, kd)."""
+    in :func:`table2_stack`; ``torsion``, ``cop_margin``: as in :func:`table2_stack`;
+    ``posture_gains``, ``swing_gains``: the posture's and the swing-foot tasks' (kp, kd)."""
     stance = _contacts(robot, stance, "stance", default_all=False)
     return Stack([
         _dynamics(full),
-        _contact_conditions(robot, stance, mu, torsion),
+        _contact_conditions(robot, stance, mu, torsion, cop_margin),
         [momentum_task(lqr, angular_weight),
          ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
         + swing_tasks(swing_frames, swing_gains)
@@ -204,18 +220,19 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
 def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str] = (),
                  full: bool = False, mu: float | None = None, torsion: bool = TORSION,
                  posture_gains=POSTURE_PD, swing_gains=SWING_FOOT_PD,
-                 com_gains=COM_PD) -> Stack:
+                 com_gains=COM_PD, cop_margin: float = COP_MARGIN) -> Stack:
     """Table 1, the stepping benchmark: (1) dynamics + torque limits; (2) contact constraints, CoP,
     friction, joint acceleration limits; (3) CoG PD + swing-foot PD; (4) posture (joints + base);
     (5) GRF regulariser. ``stance``: the stance contacts (an empty list: none, the contact tasks
-    have no rows). ``torsion``: as in :func:`table2_stack`; ``posture_gains``, ``swing_gains``,
-    ``com_gains``: the posture's, the swing-foot tasks' and the CoG task's (kp, kd)."""
+    have no rows). ``torsion``, ``cop_margin``: as in :func:`table2_stack`; ``posture_gains``,
+    ``swing_gains``, ``com_gains``: the posture's, the swing-foot tasks' and the CoG task's
+    (kp, kd)."""
     stance = _contacts(robot, stance, "stance", default_all=False)
     com_kp, com_kd = pd_gains(com_gains, "com_gains")
     return Stack([
         _dynamics(full),
         [ContactConstraint(name="contacts", contacts=stance)]
-        + _contact_conditions(robot, stance, mu, torsion),
+        + _contact_conditions(robot, stance, mu, torsion, cop_margin),
         [CoMTask(name="com", kp=com_kp, kd=com_kd)] + swing_tasks(swing_frames, swing_gains),
         [posture_task(robot, gains=posture_gains, weight=1.0)],  # alone on its level
         [ForceRegularizer(name="force regularizer", contacts=stance)],

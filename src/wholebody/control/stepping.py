@@ -27,7 +27,7 @@ from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
 from ..tasks import ForceRegularizer
 from ..variables import Variables
-from .stacks import COM_PD, POSTURE_PD, SWING_FOOT_PD, TORSION, table1_stack
+from .stacks import COM_PD, COP_MARGIN, POSTURE_PD, SWING_FOOT_PD, TORSION, table1_stack
 
 
 @dataclass(frozen=True)
@@ -94,19 +94,19 @@ class Stepping:
     a :class:`~wholebody.cycle.HierarchyCycle` (its own compiled rigid-body pass and rows); the Python ``robot.update`` then runs only when a
     phase begins (the swing foot's lift-off placement), so ``robot``'s cached terms are those
     of that cycle — the scenario's records update it themselves, outside the cycle time.
-    ``torsion`` (default True): the soles' yaw-moment rows in the Table 1 stacks
-    (:func:`~wholebody.control.stacks.table1_stack`).
+    ``torsion`` (default True): the soles' yaw-moment rows in the Table 1 stacks, and
+    ``cop_margin`` their CoP rows' margin (:func:`~wholebody.control.stacks.table1_stack`).
     """
 
     def __init__(self, robot, config: SteppingConfig, reduced: bool = True,
-                 engine: str = "auto", torsion: bool = TORSION):
+                 engine: str = "auto", torsion: bool = TORSION, cop_margin: float = COP_MARGIN):
         self.robot, self.config, self.reduced = robot, config, reduced
         self.phases = timeline(config)
         self.formulation = Formulation(robot, reduced=reduced)
         full = not reduced
         contacts = tuple(robot.contact_names)
         task_pd = {"posture_gains": config.posture_gains, "swing_gains": config.swing_gains,
-                   "com_gains": config.com_gains}
+                   "com_gains": config.com_gains, "cop_margin": cop_margin}
         self.double = table1_stack(robot, contacts, full=full, torsion=torsion, **task_pd)
         self.double_vars = Variables(robot, contacts)
         # eq. 2 keeps whatever velocity a sole has at touch-down (J qdd + Jdot v = 0): with both

@@ -12,7 +12,7 @@ from typing import Any, Callable, ClassVar, Sequence
 
 import numpy as np
 
-from ..control.stacks import COM_PD, POSTURE_PD, SWING_FOOT_PD
+from ..control.stacks import COM_PD, COP_MARGIN as COP_MARGIN_DEFAULT, POSTURE_PD, SWING_FOOT_PD
 from ..cycle import ENGINES
 from ..sim.incidents import IncidentLog
 from ..sim.simulator import SimulationDiverged
@@ -329,10 +329,10 @@ def _task_gain_parameters(task: str, gains: tuple[float, float], where: str) -> 
             Parameter(f"{task}_damping", gains[1], f"{where}: damping (1/s)", low=0.0, high=1e4))
 
 
-#: the CoP constraint's margin of the momentum-balance scenarios (Table 2's CoP task)
-COP_MARGIN = Parameter("cop_margin", 0.0, "shrink the admissible CoP rectangle of each sole by "
-                       "this fraction (0: the whole sole, the paper's)", low=0.0, high=1.0,
-                       high_open=True)
+#: the CoP constraint's margin of the humanoid scenarios (the CoP task of Tables 1, 2 and 4)
+COP_MARGIN = Parameter("cop_margin", COP_MARGIN_DEFAULT, "keep each sole's CoP this share of its "
+                       "half-lengths inside its edges (0: the whole sole, the paper's)", low=0.0,
+                       high=1.0, high_open=True)
 
 
 #: the posture task's PD (joints and base) of the humanoid hierarchies (Tables 1, 2 and 4)

@@ -117,14 +117,15 @@ class BalanceMonitor:
 
     Called as ``on_result(t, solution)`` by :func:`run_closed_loop`, i.e. before the step that
     applies the solution; the simulator's contact wrenches are those of the step that just ended.
+    A predicted CoP counts as at its bound within the controller's ``cop_margin``.
     """
 
-    def __init__(self, robot, sim, ctrl, cop_margin: float = 0.0):
+    def __init__(self, robot, sim, ctrl):
         self.robot, self.sim, self.ctrl = robot, sim, ctrl
         self.names = robot.contact_names
         self.half = {n: np.asarray(robot.contact(n).spec.half_size, dtype=float)
                      for n in self.names}
-        self.bound = {n: (1.0 - cop_margin) * self.half[n] for n in self.names}
+        self.bound = {n: (1.0 - ctrl.cop_margin) * self.half[n] for n in self.names}
         p_s, R_s = sim.support_pose()
         poses = sim.contact_frame_poses()
         self.start = {n: R_s.T @ (poses[n][0] - p_s) for n in self.names}

@@ -134,7 +134,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     ctrl = MomentumBalance(robot, gains=controller, reference=reference,
                            **momentum_gains(controller, params), **task_gains(params),
                            cop_margin=params["cop_margin"], engine=params["engine"])
-    monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=params["cop_margin"])
+    monitor = BalanceMonitor(robot, sim, ctrl)
     duration = motion.end + params["settle"]
     failures = run_closed_loop(sim, ctrl, duration, progress=progress, on_result=monitor)
     metrics = monitor.metrics()

@@ -31,9 +31,9 @@ from ..report.balance_figures import fig11, single_support_figure
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from ..robots.roles import BIPED_ROLES, biped_soles, leg_joints, pitch_joints
 from ..sim.simulator import Simulator
-from .base import (PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, SWING_FOOT_PARAMETERS, TIME_SPAN,
-                   Parameter, Scenario, ScenarioResult, duration_parameter, momentum_gains,
-                   paper_q_notes, task_gains)
+from .base import (COP_MARGIN, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR,
+                   SWING_FOOT_PARAMETERS, TIME_SPAN, Parameter, Scenario, ScenarioResult,
+                   duration_parameter, momentum_gains, paper_q_notes, task_gains)
 from .loop import run_closed_loop
 from .measures import (COG_TOLERANCE_M, RECOVERY_WINDOW_S, cog_recovery, cop_in_sole,
                        feet_in_place, sole_slip, tilt_deg)
@@ -110,6 +110,7 @@ PARAMETERS = (
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
     *SWING_FOOT_PARAMETERS,
+    COP_MARGIN,
     Parameter("lqr_blend", True, "LQR: blend the gains during the unloading (Sect. 3.2 remark); "
                                  "false: switch them at the contact switch"),
     Parameter("max_torque_jump", HumanoidScaled(10.0, "Nm", mass_power=1, height_power=1),
@@ -203,7 +204,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         observers=()) -> ScenarioResult:
     stance, _ = stance_and_swing(robot, params)
     pd_gains = momentum_gains(controller, params) if controller == "pd" else {}
-    ctrl = ContactSwitch(robot, stance, config(robot, params), gains=controller, **pd_gains)
+    ctrl = ContactSwitch(robot, stance, config(robot, params), gains=controller,
+                         cop_margin=params["cop_margin"], **pd_gains)
     tl = ctrl.timeline
     duration = params["duration"] if params["duration"] > 0 else tl.end
     sim = Simulator(robot, observers=observers)

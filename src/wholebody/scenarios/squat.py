@@ -51,9 +51,9 @@ import numpy as np
 from ..control.balance import CoMSineReference, MomentumBalance
 from ..report.balance_figures import squat_figure
 from ..sim.simulator import Simulator
-from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter, Scenario,
-                   ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes,
-                   task_gains)
+from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter,
+                   Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
+                   paper_q_notes, task_gains)
 from .loop import run_closed_loop
 from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
 from .pushes import HumanoidScaled
@@ -83,6 +83,7 @@ PARAMETERS = (
     Q_ANGULAR,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
+    COP_MARGIN,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
                                     "cop-active", low=0.0, high=Parameter.H),
     ENGINE,
@@ -148,15 +149,16 @@ def validate(robot, params: dict) -> None:
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
         observers=()) -> ScenarioResult:
     f = params["frequency"]
-    margin = active_margin(robot, params) if params["variant"] == "cop-active" else 0.0
-    bound = params["max_cog_error"] or (0.02 if margin else 0.01)
+    margin = (active_margin(robot, params) if params["variant"] == "cop-active"
+              else params["cop_margin"])
+    bound = params["max_cog_error"] or (0.02 if params["variant"] == "cop-active" else 0.01)
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
                            **momentum_gains(controller, params), **task_gains(params),
                            engine=params["engine"], torsion=params["torsion"])
     sim = Simulator(robot, observers=observers, label=controller)
-    monitor = BalanceMonitor(robot, sim, ctrl, cop_margin=margin)
+    monitor = BalanceMonitor(robot, sim, ctrl)
     vel = []
 
     def observe(t, sol):

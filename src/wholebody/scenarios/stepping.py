@@ -26,8 +26,8 @@ import numpy as np
 from ..control.stepping import Stepping, SteppingConfig
 from ..report.balance_figures import stepping_timing_figure
 from ..sim.simulator import Simulator
-from .base import (COM_PARAMETERS, ENGINE, POSTURE_PARAMETERS, SWING_FOOT_PARAMETERS, TIME_SPAN,
-                   Parameter, Scenario, ScenarioResult, check_engine, task_gains)
+from .base import (COM_PARAMETERS, COP_MARGIN, ENGINE, POSTURE_PARAMETERS, SWING_FOOT_PARAMETERS,
+                   TIME_SPAN, Parameter, Scenario, ScenarioResult, check_engine, task_gains)
 from .loop import run_closed_loop
 from .measures import MAX_BASE_DROP_M, feet_in_place, sole_slip, tilt_deg
 from .pushes import HumanoidScaled
@@ -59,6 +59,7 @@ PARAMETERS = (
     *COM_PARAMETERS,
     *SWING_FOOT_PARAMETERS,
     *POSTURE_PARAMETERS,
+    COP_MARGIN,
     Parameter("formulations", "reduced,full", "formulations to run, in this order",
               choices=("reduced", "full"), items=str),
     ENGINE,
@@ -94,7 +95,8 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False,
              observers=()) -> dict:
     """One closed-loop stepping run; returns measurements (simulator-based) and timings.
     ``observers`` watch it, labelled with the formulation."""
-    ctrl = Stepping(robot, config(robot, params), reduced=reduced, engine=params["engine"])
+    ctrl = Stepping(robot, config(robot, params), reduced=reduced, engine=params["engine"],
+                    cop_margin=params["cop_margin"])
     duration = ctrl.phases[-1].end
     sim = Simulator(robot, observers=observers, label="reduced" if reduced else "full")
     names = list(robot.contact_names)

@@ -42,9 +42,9 @@ from ..report.balance_figures import balance_figure
 from ..robot import GRAVITY
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import (ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN, Parameter,
-                   Scenario, ScenarioResult, check_biped, format_mm, momentum_gains, paper_q_notes,
-                   task_gains)
+from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
+                   Parameter, Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
+                   paper_q_notes, task_gains)
 from .loop import run_closed_loop
 from .measures import (FINAL_ANG_MOM, FINAL_COG_LIMIT_M, FINAL_LIN_MOM, MAX_TILT_DEG,
                        BalanceMonitor, limit_notes, sole_midpoint)
@@ -77,6 +77,7 @@ PARAMETERS = (
     Q_ANGULAR,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
+    COP_MARGIN,
     Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)",
               low=0.0, low_open=True, high=Parameter.H),
     ENGINE,
@@ -152,7 +153,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     sim = Simulator(robot, env, observers=observers, label=controller)
     ctrl = MomentumBalance(robot, gains=controller, reference=SoleFrameReference(robot),
                            **momentum_gains(controller, params), **task_gains(params),
-                           engine=params["engine"])
+                           engine=params["engine"], cop_margin=params["cop_margin"])
     monitor = BalanceMonitor(robot, sim, ctrl)
     failures = run_closed_loop(sim, ctrl, board.end + params["settle"], progress=progress,
                                on_result=monitor)
