@@ -124,8 +124,8 @@ def trial(robot, location: str, dv: float, sole: float, lateral: float):
     params.update(location=location, dv=dv)
     balance = MomentumBalance(
         robot, gains="pd", P=np.diag([0.0, 0.0, 50.0, 0.0, 0.0, 0.0]),
-        D=np.diag([0.0, 0.0, 15.0, 0.0, 0.0, 5.0]), angular_weight=1.0,
-        reference=CaptureReference(robot, sole, lateral))
+        D=np.diag([0.0, 0.0, 15.0, 0.0, 0.0, 5.0]), angular_weight=1.0, cop_margin=0.0,
+        reference=CaptureReference(robot, sole, lateral))  # the plan holds its own CoP bound
     return push_trial(robot, "pd", with_peak_force(robot, params), balance=balance)
 
 
