@@ -11,7 +11,7 @@ straight legs squats less rather than straightening them onto their limits.
 
 Variants:
 
-- ``tracking``: the whole sole is admissible; the CoP constraints should stay inactive.
+- ``tracking``: the CoP rows' default margin (``cop_margin``); they should stay inactive.
 - ``cop-active`` (Fig. 10): the admissible CoP rectangle of each sole is shrunk by ``active_margin``
   so that the CoP constraints (level 2) become active during the motion and level 3 gives way.
   How the paper made its constraints active is not said; its Sarcos feet have a flexible toe that
@@ -61,8 +61,8 @@ from .pushes import HumanoidScaled
 VARIANTS = ("tracking", "cop-active")
 
 PARAMETERS = (
-    Parameter("variant", "tracking", "tracking (whole sole admissible) or cop-active (Fig. 10: "
-                                     "shrunk CoP region, constraints become active)",
+    Parameter("variant", "tracking", "tracking (the CoP region of cop_margin) or cop-active "
+                                     "(Fig. 10: shrunk CoP region, constraints become active)",
               choices=VARIANTS),
     Parameter("frequency", 0.5, "sine frequency (Hz), 0.3 or 0.5 in the paper", low=0.1, high=5.0),
     Parameter("amplitude_x", HumanoidScaled(0.02, "m", height_power=1),
