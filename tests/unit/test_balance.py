@@ -166,8 +166,7 @@ def test_measures_tilt_slip_and_recovery():
     """The shared measures: tilt of a rotation, horizontal slip, CoG recovery after a push."""
     import pinocchio as pin
 
-    from wholebody.scenarios.measures import (COG_TOLERANCE_M, cog_recovered, feet_in_place,
-                                              rotation_angle_deg, sole_slip, tilt_deg)
+    from wholebody.scenarios.measures import Thresholds, rotation_angle_deg, sole_slip, tilt_deg
     from scipy.spatial.transform import Rotation
 
     a, b = Rotation.from_rotvec([0.1, 0.2, -0.3]), Rotation.from_rotvec([0.0, 0.05, 0.02])
@@ -176,12 +175,42 @@ def test_measures_tilt_slip_and_recovery():
     assert rotation_angle_deg(a.as_quat(), -a.as_quat()) == pytest.approx(0.0, abs=1e-4)
     assert tilt_deg(pin.rpy.rpyToMatrix(0.0, np.radians(3.0), 0.0)) == pytest.approx(3.0)
     assert sole_slip(np.array([0.003, 0.004, 0.5]), np.zeros(3)) == pytest.approx(0.005)
-    assert feet_in_place(1.9, 0.009) and not feet_in_place(2.0, 0.0)
+    talos14 = Thresholds()  # 1 cm slip, 5 mm CoG
+    assert talos14.feet_in_place(1.9, 0.009) and not talos14.feet_in_place(2.0, 0.0)
+    assert not talos14.feet_in_place(0.0, 0.011)
     t = np.arange(0.0, 5.0, 0.001)
-    err = np.where((t > 0.6) & (t < 1.5), 2 * COG_TOLERANCE_M, 0.0)
-    recovered, recovery = cog_recovered(t, err, end=0.6)
+    err = np.where((t > 0.6) & (t < 1.5), 0.01, 0.0)
+    recovered, recovery = talos14.cog_recovered(t, err, end=0.6)
     assert recovered and recovery == pytest.approx(0.9, abs=2e-3)
-    assert not cog_recovered(t, np.full_like(t, 1.0), end=0.6)[0]
+    assert not talos14.cog_recovered(t, np.full_like(t, 1.0), end=0.6)[0]
+    assert not talos14.cog_recovered(t, np.full_like(t, 0.0051), end=0.6)[0]
+
+
+@pytest.mark.parametrize("name", ["romeo", "g1"])
+def test_thresholds_keep_talos14s_proportions(robots, name):
+    """The survival thresholds are talos14's (1 cm slip, 5 mm CoG, 10 cm fall) on talos14 and
+    the same dimensionless numbers on another humanoid: lengths over the standing base height,
+    momenta over m sqrt(g h) and m h sqrt(g h)."""
+    from wholebody.scenarios.measures import Thresholds
+
+    import wholebody as wb
+    from conftest import g1_description
+
+    talos14 = robots["talos14"]
+    other = wb.load_robot(g1_description()) if name == "g1" else robots[name]
+    assert Thresholds.for_robot(talos14) == Thresholds(max_slip=0.01, cog_tolerance=0.005,
+                                                       fall_cog_error=0.1)
+
+    def dimensionless(robot):
+        th, h, m, g = Thresholds.for_robot(robot), float(robot.q_ref[2]), robot.mass, 9.81
+        v = np.sqrt(g * h)
+        return np.array([th.max_slip / h, th.cog_tolerance / h, th.fall_cog_error / h,
+                         th.max_base_drop / h, th.step_cog_error / h,
+                         th.final_linear_momentum / (m * v),
+                         th.final_angular_momentum / (m * h * v)])
+
+    np.testing.assert_allclose(dimensionless(other), dimensionless(talos14), rtol=1e-12)
+    assert Thresholds.for_robot(other).max_slip != 0.01  # a robot of another height
 
 
 def test_quintic_blend_scalar_and_array_agree():

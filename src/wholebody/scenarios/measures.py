@@ -8,29 +8,85 @@ controller's model.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import numpy as np
 
-#: survival thresholds: the feet stay flat (tilt below MAX_TILT_DEG) and in place (slip below
-#: MAX_SLIP_M), and the CoG returns within COG_TOLERANCE_M of its reference within
-#: RECOVERY_WINDOW_S after a push
+from ..robots import reference
+
+#: the feet stay flat: tilt below MAX_TILT_DEG (an angle, the same on every robot); a push is
+#: recovered when the CoG is back within :class:`Thresholds`' ``cog_tolerance`` of its reference
+#: within RECOVERY_WINDOW_S after it
 MAX_TILT_DEG = 2.0
-MAX_SLIP_M = 0.01
-COG_TOLERANCE_M = 5e-3
 RECOVERY_WINDOW_S = 3.0
 
-#: a fall: the base tilts by more than FALL_BASE_TILT_DEG or sinks below FALL_HEIGHT_FRACTION of its
-#: standing height (stand), the base drops by MAX_BASE_DROP_M (stepping), or the CoG error exceeds
-#: FALL_COG_ERROR_M (balance scenarios)
+#: a fall (stand): the base tilts by more than FALL_BASE_TILT_DEG or sinks below
+#: FALL_HEIGHT_FRACTION of its standing height
 FALL_BASE_TILT_DEG = 30.0
 FALL_HEIGHT_FRACTION = 0.5
-MAX_BASE_DROP_M = 0.1
-FALL_COG_ERROR_M = 0.1
 
 COP_MIN_FORCE = 50.0  # N: a CoP (predicted or measured) is counted only while the sole carries this
 COP_ACTIVE_TOL = 5e-4  # m: a predicted CoP this close to its bound counts as an active constraint
 COP_SKIP = 0.2  # s: landing transient at the start, left out of the CoP statistics
-#: balance at the end of a run: CoG error and momentum deviations over the last window below these
-FINAL_COG_LIMIT_M, FINAL_LIN_MOM, FINAL_ANG_MOM = COG_TOLERANCE_M, 1.0, 1.0
+
+
+def length_scale(robot) -> float:
+    """h / h_talos14: the robot's standing base height over talos14's, the scale of the humanoid
+    set-ups' lengths (exactly 1 on talos14)."""
+    return float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The humanoid scenarios' survival and fall thresholds for one robot. The defaults are
+    talos14's, on which the set-ups of Herzog et al. 2016 Sects. 5.1-5.4 were made;
+    :meth:`for_robot` keeps their proportions: lengths times h / h_talos14 (h the standing base
+    height), linear momenta times m sqrt(h) and angular momenta times m h^1.5 over talos14's (a
+    robot of the same shape moving as fast in proportion, v ~ sqrt(g h)).
+
+    ``max_slip``: a sole's horizontal displacement for the feet to count as in place (m);
+    ``cog_tolerance``: the CoG back within this of its reference (a push recovered, a run ended
+    in balance; m); ``fall_cog_error``: a CoG error that counts as a fall (m); ``max_base_drop``:
+    stepping's base drop that counts as a fall (m); ``step_cog_error``: stepping's CoG back over
+    the soles' midpoint within this at the end (m); ``final_linear_momentum``,
+    ``final_angular_momentum``: the momenta damped at the end of a balance run (N s, N m s)."""
+
+    max_slip: float = 0.01
+    cog_tolerance: float = 5e-3
+    fall_cog_error: float = 0.1
+    max_base_drop: float = 0.1
+    step_cog_error: float = 0.02
+    final_linear_momentum: float = 1.0
+    final_angular_momentum: float = 1.0
+
+    @classmethod
+    def for_robot(cls, robot) -> Thresholds:
+        """talos14's thresholds in the proportions of ``robot`` (exactly the defaults on
+        talos14)."""
+        length = length_scale(robot)
+        mass = float(robot.mass) / reference.HUMANOID_MASS
+        scale = {"final_linear_momentum": mass * length ** 0.5,
+                 "final_angular_momentum": mass * length ** 1.5}
+        talos14 = cls()
+        return cls(**{f.name: getattr(talos14, f.name) * scale.get(f.name, length)
+                      for f in fields(cls)})
+
+    def feet_in_place(self, max_tilt: float, max_slip: float) -> bool:
+        """The feet stayed flat (tilt below MAX_TILT_DEG) and in place (slip below
+        ``max_slip``)."""
+        return bool(max_tilt < MAX_TILT_DEG and max_slip < self.max_slip)
+
+    def cog_recovered(self, t: np.ndarray, err: np.ndarray, end: float,
+                      window: float = RECOVERY_WINDOW_S) -> tuple[bool, float]:
+        """(recovered, recovery time) of a push ending at ``end``: the CoG error was last above
+        ``cog_tolerance`` before ``end + window`` and at least 0.2 s before the end of the
+        record."""
+        recovery, last = cog_recovery(t, err, end, tolerance=self.cog_tolerance)
+        return bool(last is None or last < min(end + window, t[-1] - 0.2)), recovery
+
+    def as_data(self) -> dict[str, float]:
+        """The thresholds by name (for a run's summary)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 def tilt_deg(rotation: np.ndarray) -> float:
@@ -51,13 +107,8 @@ def sole_slip(position: np.ndarray, start: np.ndarray) -> float:
     return np.linalg.norm((position - start)[:2])
 
 
-def feet_in_place(max_tilt: float, max_slip: float) -> bool:
-    """The feet stayed flat and in place (the survival thresholds)."""
-    return bool(max_tilt < MAX_TILT_DEG and max_slip < MAX_SLIP_M)
-
-
 def cog_recovery(t: np.ndarray, err: np.ndarray, end: float, window: np.ndarray | None = None,
-                 tolerance: float = COG_TOLERANCE_M) -> tuple[float, float | None]:
+                 tolerance: float = Thresholds.cog_tolerance) -> tuple[float, float | None]:
     """(recovery time after ``end``, time of the last sample with the CoG error ``err`` above
     ``tolerance``, or None if there is none) over the samples from ``end`` on (and in ``window``)."""
     after = t >= end
@@ -67,14 +118,6 @@ def cog_recovery(t: np.ndarray, err: np.ndarray, end: float, window: np.ndarray 
     if outside.size == 0:
         return 0.0, None
     return float(t[outside[-1]] - end), t[outside[-1]]
-
-
-def cog_recovered(t: np.ndarray, err: np.ndarray, end: float,
-                  window: float = RECOVERY_WINDOW_S) -> tuple[bool, float]:
-    """(recovered, recovery time) of a push ending at ``end``: the CoG error was last above
-    COG_TOLERANCE_M before ``end + window`` and at least 0.2 s before the end of the record."""
-    recovery, last = cog_recovery(t, err, end)
-    return bool(last is None or last < min(end + window, t[-1] - 0.2)), recovery
 
 
 def fallen(base_tilt_deg: float, base_height: float, standing_height: float) -> bool:
@@ -122,6 +165,7 @@ class BalanceMonitor:
 
     def __init__(self, robot, sim, ctrl):
         self.robot, self.sim, self.ctrl = robot, sim, ctrl
+        self.thresholds = Thresholds.for_robot(robot)
         self.names = robot.contact_names
         self.half = {n: np.asarray(robot.contact(n).spec.half_size, dtype=float)
                      for n in self.names}
@@ -233,9 +277,17 @@ class BalanceMonitor:
         }
 
     def success(self, metrics: dict, failures: int, max_cog_error: float) -> bool:
-        return bool(failures == 0 and metrics["max_foot_tilt_deg"] < MAX_TILT_DEG
-                    and metrics["max_foot_slip_m"] < MAX_SLIP_M
+        """No failed cycle, the feet flat and in place, the CoG error below ``max_cog_error``
+        and the run ended in balance (:meth:`balanced_at_end`)."""
+        th = self.thresholds
+        return bool(failures == 0
+                    and th.feet_in_place(metrics["max_foot_tilt_deg"], metrics["max_foot_slip_m"])
                     and metrics["max_cog_error_m"] < max_cog_error
-                    and metrics["final_cog_error_m"] < FINAL_COG_LIMIT_M
-                    and metrics["final_linear_momentum_Ns"] < FINAL_LIN_MOM
-                    and metrics["final_angular_momentum_Nms"] < FINAL_ANG_MOM)
+                    and self.balanced_at_end(metrics))
+
+    def balanced_at_end(self, metrics: dict) -> bool:
+        """The CoG back within the thresholds' ``cog_tolerance`` and the momenta damped."""
+        th = self.thresholds
+        return bool(metrics["final_cog_error_m"] < th.cog_tolerance
+                    and metrics["final_linear_momentum_Ns"] < th.final_linear_momentum
+                    and metrics["final_angular_momentum_Nms"] < th.final_angular_momentum)

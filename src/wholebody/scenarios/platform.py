@@ -65,6 +65,7 @@ from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGU
                    paper_q_notes, task_gains)
 from .loop import run_closed_loop
 from .measures import BalanceMonitor, limit_notes, sole_midpoint
+from .pushes import HumanoidScaled
 
 PARAMETERS = (
     Parameter("direction", "sagittal", "translation axis of the board: sagittal (robot's x, the "
@@ -86,7 +87,8 @@ PARAMETERS = (
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
     COP_MARGIN,
-    Parameter("max_cog_error", 0.05, "bound on the CoG error counted as 'bounded' (m)",
+    Parameter("max_cog_error", HumanoidScaled(0.05, "m", height_power=1),
+              "bound on the CoG error counted as 'bounded' (m)",
               low=0.0, low_open=True, high=Parameter.H),
     ENGINE,
 )

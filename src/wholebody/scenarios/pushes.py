@@ -22,7 +22,7 @@ from ..sim.simulator import Simulator
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter,
                    RobotRelative, check_engine, momentum_gains, task_gains)
 from .loop import run_closed_loop
-from .measures import cog_recovered, feet_in_place, rotation_angle_deg, sole_slip, tilt_deg
+from .measures import Thresholds, rotation_angle_deg, sole_slip, tilt_deg
 
 # location -> (the robot's frame, ``trunk_frame`` or ``base_frame``, direction of the force, point
 # of application in that frame, in m on talos14: scaled by the robot's standing height,
@@ -222,7 +222,8 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
     t = sim.log.arrays()["t"]
     com, momentum = np.array(com), np.array(momentum)
     err = np.linalg.norm(com, axis=1)
-    recovered, recovery = cog_recovered(t, err, push.start + push.duration)
+    thresholds = Thresholds.for_robot(robot)
+    recovered, recovery = thresholds.cog_recovered(t, err, push.start + push.duration)
     metrics = {
         "peak_force_N": push.peak_force,
         "impulse_Ns": push.impulse,
@@ -238,5 +239,6 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
         "final_trunk_rotation_deg": float(trunk[-1]),
         "failed_cycles": failures,
     }
-    success = recovered and feet_in_place(metrics["max_foot_tilt_deg"], metrics["max_foot_slip_m"])
+    success = recovered and thresholds.feet_in_place(metrics["max_foot_tilt_deg"],
+                                                     metrics["max_foot_slip_m"])
     return PushTrial(success, metrics, push, sim.log, com, momentum)

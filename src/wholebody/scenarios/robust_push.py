@@ -40,9 +40,9 @@ from ..sweep.executors import ordered, scenario_executor
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, TIME_SPAN, Parameter,
                    Scenario, ScenarioResult, duration_parameter, parse_list)
 from .loop import run_closed_loop
-from .measures import cog_recovered, feet_in_place, sole_slip, tilt_deg
+from .measures import Thresholds, sole_slip, tilt_deg
 from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
-                     check_locations, check_push, controller_options, make_push)
+                     HumanoidScaled, check_locations, check_push, controller_options, make_push)
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,8 @@ PARAMETERS = (
     Parameter("first_seed", 0, "seed of the first draw", low=0, high=2 ** 32 - 1),
     Parameter("mass_noise", 0.1, "link mass/inertia factor drawn in [1 - x, 1 + x]",
               low=0.0, high=1.0, high_open=True),
-    Parameter("com_offset", 0.01, "link CoM displacement (m), random direction",
+    Parameter("com_offset", HumanoidScaled(0.01, "m", height_power=1),
+              "link CoM displacement (m), random direction",
               low=0.0, high=0.1 * Parameter.H),
     Parameter("torque_delay", "1,2", "torque delay in steps of 1 ms, cycled over the seeds",
               low=0, high=1000, items=int),
@@ -169,7 +170,8 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
     before = (t >= push.start - 0.2) & (t < push.start)
     pre = com[before].mean(axis=0)
     err = np.linalg.norm(com - pre, axis=1)
-    recovered, recovery = cog_recovered(t, err, push.start + push.duration)
+    thresholds = Thresholds.for_robot(robot)  # the nominal robot's, as the controller's model
+    recovered, recovery = thresholds.cog_recovered(t, err, push.start + push.duration)
     metrics = {
         "seed": mismatch.seed,
         "torque_delay_ms": mismatch.torque_delay * sim.dt * 1e3,
@@ -193,8 +195,8 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
         "max_foot_slip_from_start_m": float(max(settle_slip)),
         "failed_cycles": failures,
     }
-    metrics["survived"] = bool(recovered and feet_in_place(metrics["max_foot_tilt_deg"],
-                                                           metrics["max_foot_slip_m"]))
+    metrics["survived"] = bool(recovered and thresholds.feet_in_place(
+        metrics["max_foot_tilt_deg"], metrics["max_foot_slip_m"]))
     return {"metrics": metrics, "t": t, "cog_error": com - pre, "push": np.array(force_log),
             "tilt": tilt}
 

@@ -35,8 +35,8 @@ from .base import (COP_MARGIN, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR,
                    SWING_FOOT_PARAMETERS, TIME_SPAN, Parameter, Scenario, ScenarioResult,
                    duration_parameter, momentum_gains, paper_q_notes, task_gains)
 from .loop import run_closed_loop
-from .measures import (COG_TOLERANCE_M, RECOVERY_WINDOW_S, cog_recovery, cop_in_sole,
-                       feet_in_place, sole_slip, tilt_deg)
+from .measures import (RECOVERY_WINDOW_S, Thresholds, cog_recovery, cop_in_sole, sole_slip,
+                       tilt_deg)
 from .pushes import LOCATIONS, HumanoidScaled, location_of, make_push
 
 log = logging.getLogger(__name__)
@@ -103,7 +103,8 @@ PARAMETERS = (
               low=0.0, high=Parameter.MAX_TIME),
     duration_parameter(0.0, "simulated time (s); 0: until the end of all phases",
                        low_open=False),
-    Parameter("recovery_time", RECOVERY_WINDOW_S, "a push is recovered if the CoG is back within 5 mm of its "
+    Parameter("recovery_time", RECOVERY_WINDOW_S, "a push is recovered if the CoG is back "
+                                    "within 5 mm (on talos14, times h / h_talos14) of its "
                                     "reference this long after it (s)",
               **TIME_SPAN),
     Q_ANGULAR,
@@ -254,7 +255,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         near = np.abs(t - t0) <= 0.02
         return float(jumps[near].max()) if near.any() else None
 
-    # every push: the CoG back within 5 mm within recovery_time
+    # every push: the CoG back within the thresholds' tolerance within recovery_time
+    thresholds = Thresholds.for_robot(robot)
     push_rows = []
     starts = sorted(p.start for p in pushes)
     for push in pushes:
@@ -265,7 +267,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         deadline = min([end + params["recovery_time"], t[-1]]
                        + [s for s in starts if s > push.start])
         window = (t >= push.start) & (t < deadline)
-        recovery, last = cog_recovery(t, err, end, window)
+        recovery, last = cog_recovery(t, err, end, window, thresholds.cog_tolerance)
         recovered = bool(last is None or (last < deadline - 0.05 and deadline - end > 0.5))
         push_rows.append({
             "time_s": push.start, "location": location_of(push, robot), "peak_force_N": push.peak_force,
@@ -327,8 +329,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
             }
     touched = bool(metrics["swing_sole_max_normal_force_after_lift_N"] or 0.0)
     success = (failures == 0 and metrics["swing_lift_m"] > 0.8 * params["lift"] and not touched
-               and metrics["final_cog_error_m"] < COG_TOLERANCE_M
-               and feet_in_place(metrics["max_stance_tilt_deg"], metrics["max_stance_slip_m"])
+               and metrics["final_cog_error_m"] < thresholds.cog_tolerance
+               and thresholds.feet_in_place(metrics["max_stance_tilt_deg"],
+                                            metrics["max_stance_slip_m"])
                and all(r["recovered"] for r in push_rows)
                and metrics["max_torque_jump_outside_pushes_Nm"] < params["max_torque_jump"])
     notes = []

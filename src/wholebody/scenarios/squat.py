@@ -55,7 +55,7 @@ from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGU
                    Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
                    paper_q_notes, task_gains)
 from .loop import run_closed_loop
-from .measures import COP_SKIP, FALL_COG_ERROR_M, BalanceMonitor, feet_in_place, limit_notes
+from .measures import COP_SKIP, BalanceMonitor, Thresholds, length_scale, limit_notes
 from .pushes import HumanoidScaled
 
 VARIANTS = ("tracking", "cop-active")
@@ -85,7 +85,8 @@ PARAMETERS = (
     *POSTURE_PARAMETERS,
     COP_MARGIN,
     Parameter("max_cog_error", 0.0, "bound on the CoG error (m); 0 = 0.01 tracking, 0.02 "
-                                    "cop-active", low=0.0, high=Parameter.H),
+                                    "cop-active on talos14, times h / h_talos14 on another "
+                                    "robot", low=0.0, high=Parameter.H),
     ENGINE,
 )
 
@@ -151,7 +152,9 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     f = params["frequency"]
     margin = (active_margin(robot, params) if params["variant"] == "cop-active"
               else params["cop_margin"])
-    bound = params["max_cog_error"] or (0.02 if params["variant"] == "cop-active" else 0.01)
+    thresholds = Thresholds.for_robot(robot)
+    bound = params["max_cog_error"] or (  # 1 / 2 cm on talos14, in proportion on another robot
+        (0.02 if params["variant"] == "cop-active" else 0.01) * length_scale(robot))
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
@@ -187,7 +190,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     metrics["failed_cycles"] = failures
     metrics["cop_margin"] = margin
     success = bool(failures == 0
-                   and feet_in_place(metrics["max_foot_tilt_deg"], metrics["max_foot_slip_m"])
+                   and thresholds.feet_in_place(metrics["max_foot_tilt_deg"],
+                                                metrics["max_foot_slip_m"])
                    and metrics["max_cog_error_m"] < bound)
     notes = [f"CoG error bound for success: {100 * bound:.1f} cm"]
     m = metrics
@@ -205,8 +209,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     else:
         notes.append("paper: the CoG tracks 0.3/0.5 Hz sines of 2 cm forward and 3 cm vertical "
                      "(video only); measured: " + measured)
-    if m["max_cog_error_m"] > FALL_COG_ERROR_M:
-        notes.append("the robot fell (CoG error > 10 cm)")
+    if m["max_cog_error_m"] > thresholds.fall_cog_error:
+        notes.append(f"the robot fell (CoG error > {100 * thresholds.fall_cog_error:.1f} cm)")
     notes += paper_q_notes(robot, controller, params)
     notes += limit_notes(metrics)
     result = ScenarioResult("squat", robot.name, controller, success, metrics, params, notes,

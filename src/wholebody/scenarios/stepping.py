@@ -29,7 +29,7 @@ from ..sim.simulator import Simulator
 from .base import (COM_PARAMETERS, COP_MARGIN, ENGINE, POSTURE_PARAMETERS, SWING_FOOT_PARAMETERS,
                    TIME_SPAN, Parameter, Scenario, ScenarioResult, check_engine, task_gains)
 from .loop import run_closed_loop
-from .measures import MAX_BASE_DROP_M, feet_in_place, sole_slip, tilt_deg
+from .measures import Thresholds, sole_slip, tilt_deg
 from .pushes import HumanoidScaled
 
 log = logging.getLogger(__name__)
@@ -161,8 +161,10 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False,
                                                         - parts["solve"])[keep]))}}
     lifted_ok = all(s["lift_m"] > 0.8 * params["lift"] and s["max_normal_force_while_up_N"] == 0.0
                     for s in steps)
-    success = bool(failures == 0 and lifted_ok and feet_in_place(max_tilt, max_slip)
-                   and base_drop < MAX_BASE_DROP_M and final_com_xy_err < 0.02 and len(steps) > 0)
+    th = Thresholds.for_robot(robot)
+    success = bool(failures == 0 and lifted_ok and th.feet_in_place(max_tilt, max_slip)
+                   and base_drop < th.max_base_drop and final_com_xy_err < th.step_cog_error
+                   and len(steps) > 0)
     return {"formulation": "reduced" if reduced else "full", "success": success,
             "failed_cycles": failures, "steps": steps, "max_sole_tilt_in_contact_deg": max_tilt,
             "max_sole_slip_in_contact_m": max_slip, "max_base_drop_m": base_drop,
