@@ -27,7 +27,7 @@ PARAMETERS = (
     Parameter("kd", -1.0, "joint damping of the PD, every joint (Nm s/rad) (-1: from "
               "frequency_hz and damping_ratio)", low=0.0, special=(-1.0,)),
     Parameter("friction", 1.0, "floor friction coefficient", low=0.0, low_open=True, high=10.0),
-    Parameter("drift_tolerance", 0.01, "largest base drift counted as success (m)",
+    Parameter("drift_tolerance", 0.01 * Parameter.H, "largest base drift counted as success (m)",
               low=0.0, low_open=True, high=Parameter.H),
 )
 
