@@ -81,12 +81,8 @@ class Thresholds:
         """(recovered, recovery time) of a push ending at ``end``: the CoG error was last above
         ``cog_tolerance`` before ``end + window`` and at least 0.2 s before the end of the
         record."""
-        recovery, last = cog_recovery(t, err, end, tolerance=self.cog_tolerance)
+        recovery, last = cog_recovery(t, err, end, None, self.cog_tolerance)
         return bool(last is None or last < min(end + window, t[-1] - 0.2)), recovery
-
-    def as_data(self) -> dict[str, float]:
-        """The thresholds by name (for a run's summary)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 def tilt_deg(rotation: np.ndarray) -> float:
@@ -107,8 +103,8 @@ def sole_slip(position: np.ndarray, start: np.ndarray) -> float:
     return np.linalg.norm((position - start)[:2])
 
 
-def cog_recovery(t: np.ndarray, err: np.ndarray, end: float, window: np.ndarray | None = None,
-                 tolerance: float = Thresholds.cog_tolerance) -> tuple[float, float | None]:
+def cog_recovery(t: np.ndarray, err: np.ndarray, end: float, window: np.ndarray | None,
+                 tolerance: float) -> tuple[float, float | None]:
     """(recovery time after ``end``, time of the last sample with the CoG error ``err`` above
     ``tolerance``, or None if there is none) over the samples from ``end`` on (and in ``window``)."""
     after = t >= end

@@ -55,7 +55,7 @@ from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGU
                    Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
                    paper_q_notes, task_gains)
 from .loop import run_closed_loop
-from .measures import COP_SKIP, BalanceMonitor, Thresholds, length_scale, limit_notes
+from .measures import COP_SKIP, BalanceMonitor, length_scale, limit_notes
 from .pushes import HumanoidScaled
 
 VARIANTS = ("tracking", "cop-active")
@@ -152,7 +152,6 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     f = params["frequency"]
     margin = (active_margin(robot, params) if params["variant"] == "cop-active"
               else params["cop_margin"])
-    thresholds = Thresholds.for_robot(robot)
     bound = params["max_cog_error"] or (  # 1 / 2 cm on talos14, in proportion on another robot
         (0.02 if params["variant"] == "cop-active" else 0.01) * length_scale(robot))
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
@@ -162,6 +161,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                            engine=params["engine"], torsion=params["torsion"])
     sim = Simulator(robot, observers=observers, label=controller)
     monitor = BalanceMonitor(robot, sim, ctrl)
+    thresholds = monitor.thresholds
     vel = []
 
     def observe(t, sol):
