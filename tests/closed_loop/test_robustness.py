@@ -23,7 +23,7 @@ def test_true_com_is_the_simulated_robots_com(robots):
     np.testing.assert_allclose(com(), robot.com, atol=1e-9)
     assert com.mass == pytest.approx(robot.mass, rel=1e-12)
     # a mismatched twin: same state, different mass distribution -> a different CoM and mass
-    params = get_scenario("robust-push").resolve({})
+    params = get_scenario("robust-push").validate(robot)
     wrong = Simulator(robot, mismatch=mismatch_for(params, 0), record=False)
     wrong_com = TrueCoM(wrong)
     assert np.linalg.norm(wrong_com() - robot.com) > 1e-3
@@ -93,7 +93,7 @@ def test_trunk_orientation_is_held_on_a_mismatched_twin(robots):
     from wholebody.scenarios.loop import run_closed_loop
 
     robot = robots["talos14"]
-    params = get_scenario("robust-push").resolve({})
+    params = get_scenario("robust-push").validate(robot)
     tilt = {}
     for weight in (1e4, None):
         kw = {} if weight is None else {"angular_weight": weight}
