@@ -184,6 +184,8 @@ def test_measures_tilt_slip_and_recovery():
     assert recovered and recovery == pytest.approx(0.9, abs=2e-3)
     assert not talos14.cog_recovered(t, np.full_like(t, 1.0), end=0.6)[0]
     assert not talos14.cog_recovered(t, np.full_like(t, 0.0051), end=0.6)[0]
+    assert "slip < 10.0 mm" in talos14.push_criteria()
+    assert "within 5.0 mm" in talos14.push_criteria()
 
 
 @pytest.mark.parametrize("name", ["romeo", "g1"])

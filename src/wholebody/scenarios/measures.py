@@ -76,6 +76,13 @@ class Thresholds:
         ``max_slip``)."""
         return bool(max_tilt < MAX_TILT_DEG and max_slip < self.max_slip)
 
+    def push_criteria(self) -> str:
+        """What a push must meet on this robot, in words (a run's note)."""
+        return (f"survived = feet tilt < {MAX_TILT_DEG:g} deg and slip < "
+                f"{1e3 * self.max_slip:.1f} mm, CoG back within {1e3 * self.cog_tolerance:.1f} mm "
+                f"of its reference within {RECOVERY_WINDOW_S:g} s (talos14's 10 / 5 mm in "
+                f"proportion to the standing height)")
+
     def cog_recovered(self, t: np.ndarray, err: np.ndarray, end: float,
                       window: float = RECOVERY_WINDOW_S) -> tuple[bool, float]:
         """(recovered, recovery time) of a push ending at ``end``: the CoG error was last above

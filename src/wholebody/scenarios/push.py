@@ -16,6 +16,7 @@ from pathlib import Path
 from ..report.balance_figures import push_figure
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
                    Parameter, Scenario, ScenarioResult, duration_parameter, paper_q_notes)
+from .measures import Thresholds
 from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, Q_ORIENTATION,
                      HumanoidScaled, check_push, ignored_option_notes, push_trial)
 
@@ -61,7 +62,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     params = with_peak_force(robot, params)
     trial = push_trial(robot, controller, params, progress, observers)
     push = trial.push
-    notes = ignored_option_notes(controller, params)
+    notes = [Thresholds.for_robot(robot).push_criteria()]
+    notes += ignored_option_notes(controller, params)
     notes += paper_q_notes(robot, controller, params)
     result = ScenarioResult("push", robot.name, controller, trial.success, trial.metrics, params,
                             notes, log=trial.log)
