@@ -118,12 +118,13 @@ def slope_stance_change(robot, angle: float, alignment: float = 1.0, q=None,
     q[3:7] = pin.Quaternion(R).coeffs()
     normal = np.array([-np.sin(angle), 0.0, np.cos(angle)])
     change = 0.0
+    feet = footprint.feet_from_com()
     for k, leg in enumerate(footprint.legs):
         iq, iv, ranges = _leg(robot, leg)
         if len(iq) == 0:
             continue
         lo, hi = ranges[:, 0], ranges[:, 1]
-        x, y = footprint.feet_from_com()[k]
+        x, y = feet[k]
         target = np.array([x, y, np.tan(angle) * x]) + footprint.foot_radius[k] * normal
         frame = robot.contact(leg).frame_id
         for _ in range(iterations):

@@ -35,6 +35,17 @@ HUMANOID_MASS = 90.27219199999999
 HUMANOID_LEG_STRETCH = 0.06368083348448195
 
 
+def humanoid_length_ratio(robot) -> float:
+    """h / h_talos14: ``robot``'s standing base height (``robot.q_ref[2]``) over talos14's, the
+    scale of the humanoid set-ups' lengths; exactly 1 on talos14."""
+    return float(robot.q_ref[2]) / HUMANOID_BASE_HEIGHT
+
+
+def humanoid_mass_ratio(robot) -> float:
+    """m / m_talos14, the scale of the humanoid set-ups' forces; exactly 1 on talos14."""
+    return float(robot.mass) / HUMANOID_MASS
+
+
 def froude_ratio(robot) -> float:
     """sqrt(h / BASE_HEIGHT) of ``robot`` (its standing base height h = ``robot.q_ref[2]``):
     speeds and times of HyQ's gaits times this, frequencies divided by it; exactly 1 on HyQ."""

@@ -30,12 +30,6 @@ COP_ACTIVE_TOL = 5e-4  # m: a predicted CoP this close to its bound counts as an
 COP_SKIP = 0.2  # s: landing transient at the start, left out of the CoP statistics
 
 
-def length_scale(robot) -> float:
-    """h / h_talos14: the robot's standing base height over talos14's, the scale of the humanoid
-    set-ups' lengths (exactly 1 on talos14)."""
-    return float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT
-
-
 @dataclass(frozen=True)
 class Thresholds:
     """The humanoid scenarios' survival and fall thresholds for one robot. The defaults are
@@ -63,8 +57,8 @@ class Thresholds:
     def for_robot(cls, robot) -> Thresholds:
         """talos14's thresholds in the proportions of ``robot`` (exactly the defaults on
         talos14)."""
-        length = length_scale(robot)
-        mass = float(robot.mass) / reference.HUMANOID_MASS
+        length = reference.humanoid_length_ratio(robot)
+        mass = reference.humanoid_mass_ratio(robot)
         scale = {"final_linear_momentum": mass * length ** 0.5,
                  "final_angular_momentum": mass * length ** 1.5}
         talos14 = cls()

@@ -44,7 +44,7 @@ def push_point(robot, part: str, offset) -> tuple[str, np.ndarray]:
     (``trunk_frame`` or ``base_frame``), ``offset`` in m on talos14, scaled by the robot's
     standing base height."""
     frame = getattr(robot, part)
-    scale = float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT
+    scale = reference.humanoid_length_ratio(robot)
     return frame, scale * np.asarray(offset, dtype=float)
 
 @dataclass(frozen=True)
@@ -65,8 +65,8 @@ class HumanoidScaled(RobotRelative):
     stretch_power: int = 0
 
     def value(self, robot):
-        scale = ((robot.mass / reference.HUMANOID_MASS) ** self.mass_power
-                 * (float(robot.q_ref[2]) / reference.HUMANOID_BASE_HEIGHT) ** self.height_power)
+        scale = (reference.humanoid_mass_ratio(robot) ** self.mass_power
+                 * reference.humanoid_length_ratio(robot) ** self.height_power)
         if self.stretch_power:
             stretch = reference.leg_stretch(robot) / reference.HUMANOID_LEG_STRETCH
             scale *= stretch ** self.stretch_power

@@ -112,7 +112,7 @@ def nominal_force(controller: str, location: str, params: dict, robot) -> float:
         return float(params["nominal_force"])
     table = (NOMINAL_SINGLE_MOMENTUM_WEIGHT if params.get("angular_weight") == 1e4 else NOMINAL)
     try:
-        return table[controller][location] * (robot.mass / reference.HUMANOID_MASS)
+        return table[controller][location] * reference.humanoid_mass_ratio(robot)
     except KeyError:
         raise ValueError(f"no measured nominal force for {controller} at '{location}' (known: "
                          f"{', '.join(NOMINAL.get(controller, {}))}); pass --set nominal_force=N"

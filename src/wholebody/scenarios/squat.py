@@ -50,12 +50,13 @@ import numpy as np
 
 from ..control.balance import CoMSineReference, MomentumBalance
 from ..report.balance_figures import squat_figure
+from ..robots.reference import humanoid_length_ratio
 from ..sim.simulator import Simulator
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter,
                    Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
                    paper_q_notes, task_gains)
 from .loop import run_closed_loop
-from .measures import COP_SKIP, BalanceMonitor, length_scale, limit_notes
+from .measures import COP_SKIP, BalanceMonitor, limit_notes
 from .pushes import HumanoidScaled
 
 VARIANTS = ("tracking", "cop-active")
@@ -153,7 +154,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     margin = (active_margin(robot, params) if params["variant"] == "cop-active"
               else params["cop_margin"])
     bound = params["max_cog_error"] or (  # 1 / 2 cm on talos14, in proportion on another robot
-        (0.02 if params["variant"] == "cop-active" else 0.01) * length_scale(robot))
+        (0.02 if params["variant"] == "cop-active" else 0.01)
+        * humanoid_length_ratio(robot))
     reference = CoMSineReference(robot, amplitude=(params["amplitude_x"], 0.0, params["amplitude_z"]),
                                  frequency=(f, f, f), ramp=params["ramp"])
     ctrl = MomentumBalance(robot, gains=controller, reference=reference, cop_margin=margin,
