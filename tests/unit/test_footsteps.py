@@ -1,0 +1,404 @@
+"""Footstep planning: the step limits measured from the legs' kinematics, the clamping of a step
+against the stance sole, and the footsteps of a velocity command or of a list.
+
+Evidence: scipy's SLSQP over a leg's joints on Pinocchio's forward kinematics for the soles'
+reach (a different solver from the module's linear programs); the soles' standing positions,
+sizes and the legs' lengths read from the model for the limits' plausibility; for the planner,
+the unicycle's own arithmetic (strides of v T, turns of yaw_rate T) and the bounds re-checked in
+each stance sole's heading frame computed here.
+"""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.optimize import minimize
+
+import wholebody as wb
+from wholebody.planning.footsteps import (Footstep, FootstepPlanner, StepLimits, clamp_step,
+                                          sole_reach)
+from wholebody.planning.reach import REACH_MARGIN
+from wholebody.robots.roles import biped_soles, leg_joints
+
+SHARE = 0.7  # the default share of the reach a step uses
+
+
+@pytest.fixture(scope="module")
+def talos14():
+    return wb.load_robot("talos14")
+
+
+@pytest.fixture(scope="module")
+def limits14(talos14):
+    return StepLimits.from_robot(talos14)
+
+
+@pytest.fixture(scope="module")
+def planner(talos14, limits14):
+    return FootstepPlanner(talos14, limits14)
+
+
+def _standing_feet(robot):
+    """{sole: (position, yaw)} in the posture, from Pinocchio's kinematics."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    out = {}
+    for sole in biped_soles(robot):
+        M = data.oMf[robot.contact(sole).frame_id]
+        out[sole] = (M.translation.copy(), float(math.atan2(M.rotation[1, 0], M.rotation[0, 0])))
+    return out
+
+
+def _relative(stance, step_xy, step_yaw, stance_side):
+    """(forward, outward lateral distance, outward yaw) of a step in the stance sole's heading
+    frame; outward yaw turns the swing sole away from the stance side."""
+    (p, yaw) = stance
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = np.asarray(step_xy)[:2] - np.asarray(p)[:2]
+    dx, dy = c * d[0] + s * d[1], -s * d[0] + c * d[1]
+    rel = (step_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
+    return dx, -stance_side * dy, -stance_side * rel
+
+
+# ------------------------------------------------------------------ limits from the kinematics
+def _slsqp_reach(robot, sole, axis, direction):
+    """Largest displacement of ``sole``'s frame along world ``axis`` (0: x, 1: y; the base is
+    level with yaw 0 in the posture) in ``direction`` (+1 / -1), the base as in the posture,
+    the frame's other horizontal coordinate, its height and its orientation (flat) held, its
+    leg's joints within the limits shrunk by REACH_MARGIN of their range."""
+    model = robot.model
+    data = model.createData()
+    iq = np.array([model.joints[model.getJointId(j)].idx_q for j in leg_joints(robot, sole)])
+    lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
+    q0 = robot.q_ref.copy()
+    bounds = list(zip(lo + REACH_MARGIN * (hi - lo), hi - REACH_MARGIN * (hi - lo)))
+    assert all(a <= x <= b for (a, b), x in zip(bounds, q0[iq]))  # the posture is inside
+    frame = robot.contact(sole).frame_id
+    pin.framesForwardKinematics(model, data, q0)
+    start = data.oMf[frame].copy()
+    flat = pin.rpy.rpyToMatrix(0.0, 0.0, pin.rpy.matrixToRpy(start.rotation)[2])
+    kept = [1 - axis, 2]
+
+    def placement(x):
+        q = q0.copy()
+        q[iq] = x
+        pin.framesForwardKinematics(model, data, q)
+        return data.oMf[frame]
+
+    def held(x):
+        M = placement(x)
+        return np.concatenate([M.translation[kept] - start.translation[kept],
+                               pin.log3(flat.T @ M.rotation)])
+
+    best = minimize(lambda x: -direction * placement(x).translation[axis], q0[iq],
+                    method="SLSQP", bounds=bounds, constraints={"type": "eq", "fun": held},
+                    options={"ftol": 1e-12, "maxiter": 500})
+    assert best.success, best.message
+    assert np.abs(held(best.x)).max() < 1e-7
+    return direction * (placement(best.x).translation[axis] - start.translation[axis])
+
+
+@pytest.fixture(scope="module")
+def oracle_reach(talos14):
+    """{sole: (front, back)} by SLSQP."""
+    return {sole: (_slsqp_reach(talos14, sole, 0, 1.0), _slsqp_reach(talos14, sole, 0, -1.0))
+            for sole in biped_soles(talos14)}
+
+
+def test_sole_reach_is_the_farthest_flat_sole_within_the_shrunk_limits(talos14, oracle_reach):
+    for k, sole in enumerate(biped_soles(talos14)):
+        front, back = oracle_reach[sole]
+        outward = 1.0 if k == 0 else -1.0  # the left sole's outward is +y
+        reach = sole_reach(talos14, sole)
+        assert reach.forward == pytest.approx(front, abs=1e-3)
+        assert reach.backward == pytest.approx(back, abs=1e-3)
+        assert reach.outward == pytest.approx(_slsqp_reach(talos14, sole, 1, outward), abs=1e-3)
+        assert reach.inward == pytest.approx(_slsqp_reach(talos14, sole, 1, -outward), abs=1e-3)
+
+
+def test_the_stride_is_a_share_of_one_legs_front_and_the_others_back_reach(limits14,
+                                                                           oracle_reach):
+    """At touchdown the swing leg reaches forward and the stance leg back (module docstring)."""
+    front = min(f for f, _ in oracle_reach.values())
+    back = min(b for _, b in oracle_reach.values())
+    assert limits14.forward == pytest.approx(SHARE * (front + back), abs=2e-3)
+    assert limits14.backward == pytest.approx(SHARE * (front + back), abs=2e-3)
+
+
+def test_the_widths_come_from_the_standing_soles(talos14, limits14):
+    feet = _standing_feet(talos14)
+    left, right = biped_soles(talos14)
+    nominal = abs(feet[left][0][1] - feet[right][0][1])  # the posture's base is level, yaw 0
+    half = sum(talos14.contact(s).spec.half_size[1] for s in (left, right))
+    assert limits14.nominal_width == pytest.approx(nominal, abs=1e-9)
+    assert half < limits14.width_min <= nominal < limits14.width_max
+
+
+@pytest.mark.parametrize("name", ["talos14", "talos", "romeo"])
+def test_limits_are_plausible_for_each_humanoid(name):
+    robot = wb.load_robot(name)
+    limits = StepLimits.from_robot(robot)
+    model = robot.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, robot.q_ref)
+    for sole in biped_soles(robot):
+        hip = data.oMi[model.getJointId(leg_joints(robot, sole)[0])].translation
+        leg = np.linalg.norm(hip - data.oMf[robot.contact(sole).frame_id].translation)
+        assert limits.forward > 0.1 * leg and limits.backward > 0.1 * leg
+        assert limits.width_min > 2.0 * robot.contact(sole).spec.half_size[1]  # no overlap
+    assert limits.width_min <= limits.nominal_width < limits.width_max
+    assert 0.0 < limits.yaw_in <= limits.yaw_out <= 0.4 + 1e-12
+
+
+def test_a_narrower_hip_yaw_range_turns_less(talos14, limits14):
+    """Romeo's hip-yaw joints (revolute about their frame's z, vertical in the posture) span
+    less than talos14's: its soles turn less per step."""
+    romeo = wb.load_robot("romeo")
+
+    def yaw_span(robot):
+        model, data = robot.model, robot.model.createData()
+        pin.forwardKinematics(model, data, robot.q_ref)
+        spans = []
+        for sole in biped_soles(robot):
+            for joint in leg_joints(robot, sole):
+                jid = model.getJointId(joint)
+                vertical = abs(data.oMi[jid].rotation[2, 2]) > 0.99  # the joint frame's z
+                if vertical and "RZ" in model.joints[jid].shortname():
+                    i = model.joints[jid].idx_q
+                    spans.append(model.upperPositionLimit[i] - model.lowerPositionLimit[i])
+        return min(spans)
+
+    assert yaw_span(romeo) < yaw_span(talos14)
+    assert StepLimits.from_robot(romeo).yaw_out < limits14.yaw_out
+
+
+def test_a_lower_com_reaches_further_forward(talos14, limits14):
+    """Bent knees leave the leg more to stretch: the stride grows, still within the limits."""
+    assert StepLimits.from_robot(talos14, com_height_drop=0.04).forward > limits14.forward
+
+
+# ------------------------------------------------------------------ clamp_step
+LIMITS = StepLimits(forward=0.3, backward=0.2, width_min=0.15, width_max=0.35,
+                    nominal_width=0.2, yaw_out=0.4, yaw_in=0.2)
+
+
+@pytest.mark.parametrize("side", [1, -1])
+def test_every_clamped_step_is_within_the_limits(side):
+    rng = np.random.default_rng(7)
+    for _ in range(400):
+        stance = (rng.uniform(-2, 2, 3), rng.uniform(-math.pi, math.pi))
+        target, target_yaw = rng.uniform(-3, 3, 2), rng.uniform(-4, 4)
+        xy, yaw = clamp_step(stance, side, target, target_yaw, LIMITS)
+        dx, width, turn = _relative(stance, xy, yaw, side)
+        assert -LIMITS.backward - 1e-12 <= dx <= LIMITS.forward + 1e-12
+        assert LIMITS.width_min - 1e-12 <= width <= LIMITS.width_max + 1e-12
+        assert -LIMITS.yaw_in - 1e-12 <= turn <= LIMITS.yaw_out + 1e-12
+        again = clamp_step(stance, side, xy, yaw, LIMITS)  # a clamped step is kept
+        assert again[0] == pytest.approx(xy, abs=1e-12) and again[1] == pytest.approx(yaw)
+
+
+@pytest.mark.parametrize("side", [1, -1])
+def test_a_step_within_the_limits_is_unchanged(side):
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        p, yaw0 = rng.uniform(-2, 2, 3), rng.uniform(-math.pi, math.pi)
+        dx = rng.uniform(-LIMITS.backward, LIMITS.forward)
+        width = rng.uniform(LIMITS.width_min, LIMITS.width_max)
+        turn = rng.uniform(-LIMITS.yaw_in, LIMITS.yaw_out)
+        c, s = math.cos(yaw0), math.sin(yaw0)
+        target = p[:2] + dx * np.array([c, s]) - side * width * np.array([-s, c])
+        target_yaw = yaw0 - side * turn
+        xy, yaw = clamp_step((p, yaw0), side, target, target_yaw, LIMITS)
+        assert xy == pytest.approx(target, abs=1e-12)
+        assert yaw == pytest.approx(target_yaw, abs=1e-12)
+
+
+def test_yaw_sign_convention():
+    """Left stance: the right sole turning right (negative yaw) turns outward, up to yaw_out;
+    turning left is inward, up to yaw_in. Mirrored for a right stance."""
+    left_stance, right_stance = (np.zeros(3), 0.0), (np.zeros(3), 0.0)
+    right_target, left_target = np.array([0.0, -0.2]), np.array([0.0, 0.2])
+    assert clamp_step(left_stance, 1, right_target, -0.3, LIMITS)[1] == pytest.approx(-0.3)
+    assert clamp_step(left_stance, 1, right_target, -0.9, LIMITS)[1] == pytest.approx(-0.4)
+    assert clamp_step(left_stance, 1, right_target, 0.3, LIMITS)[1] == pytest.approx(0.2)
+    assert clamp_step(right_stance, -1, left_target, 0.3, LIMITS)[1] == pytest.approx(0.3)
+    assert clamp_step(right_stance, -1, left_target, 0.9, LIMITS)[1] == pytest.approx(0.4)
+    assert clamp_step(right_stance, -1, left_target, -0.3, LIMITS)[1] == pytest.approx(-0.2)
+    # across +-pi: a stance heading of pi - 0.1 and a target of -pi + 0.1 are 0.2 apart
+    yaw = clamp_step((np.zeros(3), math.pi - 0.1), -1, np.array([0.0, -0.2]), -math.pi + 0.1,
+                     LIMITS)[1]
+    assert yaw == pytest.approx(math.pi + 0.1)
+
+
+def test_a_swing_sole_on_the_wrong_side_is_put_back_outside():
+    xy, _ = clamp_step((np.zeros(3), 0.0), 1, np.array([0.1, 0.3]), 0.0, LIMITS)
+    assert xy == pytest.approx([0.1, -LIMITS.width_min])
+
+
+# ------------------------------------------------------------------ from_velocity
+T = 0.8
+
+
+def _check_within(planner, feet, plan):
+    """Every step within the limits against the sole standing when it swings."""
+    feet = dict(feet)
+    lim = planner.limits
+    for step in plan:
+        other = next(s for s in planner.soles if s != step.contact)
+        side = 1 if other == planner.soles[0] else -1
+        dx, width, turn = _relative(feet[other], step.position, step.yaw, side)
+        assert -lim.backward - 1e-9 <= dx <= lim.forward + 1e-9
+        assert lim.width_min - 1e-9 <= width <= lim.width_max + 1e-9
+        assert -lim.yaw_in - 1e-9 <= turn <= lim.yaw_out + 1e-9
+        assert step.position[2] == pytest.approx(feet[other][0][2])
+        feet[step.contact] = (step.position, step.yaw)
+
+
+def test_walking_forward_strides_two_steps_of_path(talos14, planner):
+    """Each step the path moves v T; each sole lands on its side of it: a sole's stride is
+    2 v T after its first step, the lead of the swing sole over the stance sole v T."""
+    feet = _standing_feet(talos14)
+    left, right = planner.soles
+    plan = planner.from_velocity(feet, left, (0.3, 0.0, 0.0), T, 8)
+    assert [s.contact for s in plan] == [left, right] * 4
+    mid = 0.5 * (feet[left][0] + feet[right][0])
+    for k, step in enumerate(plan):
+        assert step.position[0] == pytest.approx(mid[0] + 0.3 * T * (k + 1), abs=1e-9)
+        assert step.yaw == pytest.approx(0.0, abs=1e-12)
+    for a, b in zip(plan, plan[2:]):
+        assert b.position[0] - a.position[0] == pytest.approx(2 * 0.3 * T, abs=1e-9)
+    _check_within(planner, feet, plan)
+
+
+def test_a_fast_command_saturates_at_the_longest_step(talos14, planner):
+    feet = _standing_feet(talos14)
+    plan = planner.from_velocity(feet, planner.soles[1], (3.0, 0.0, 0.0), T, 6)
+    _check_within(planner, feet, plan)
+    for a, b in zip(plan, plan[1:]):
+        assert b.position[0] - a.position[0] == pytest.approx(planner.limits.forward, abs=1e-9)
+
+
+def test_a_yaw_rate_turns_the_path_until_clamped(talos14, planner):
+    feet = _standing_feet(talos14)
+    rate = 0.2  # 0.16 rad a step: within yaw_in and yaw_out
+    assert rate * T < planner.limits.yaw_in
+    plan = planner.from_velocity(feet, planner.soles[0], (0.2, 0.0, rate), T, 6)
+    for k, step in enumerate(plan):
+        assert step.yaw == pytest.approx(rate * T * (k + 1), abs=1e-9)
+    _check_within(planner, feet, plan)
+    fast = planner.from_velocity(feet, planner.soles[0], (0.0, 0.0, 2.0), T, 6)
+    _check_within(planner, feet, fast)
+    turns = np.diff([0.0] + [s.yaw for s in fast])
+    assert np.all(turns > 0) and np.all(turns < 2.0 * T)  # turning left, slower than asked
+
+
+@pytest.mark.parametrize("vy", [0.3, -0.3, 1.0])
+def test_a_lateral_command_keeps_the_soles_apart(talos14, planner, vy):
+    feet = _standing_feet(talos14)
+    plan = planner.from_velocity(feet, planner.soles[0], (0.0, vy, 0.0), T, 8)
+    _check_within(planner, feet, plan)
+    mid = 0.5 * (plan[-1].position + plan[-2].position)
+    assert np.sign(mid[1]) == np.sign(vy) and abs(mid[1]) > 0.1
+
+
+def test_a_schedule_changes_the_steps_from_its_change_on(talos14, planner):
+    feet = _standing_feet(talos14)
+    steady = planner.from_velocity(feet, planner.soles[0], (0.2, 0.0, 0.0), T, 8)
+    changed = planner.from_velocity(
+        feet, planner.soles[0], lambda k: (0.2, 0.0, 0.0) if k < 4 else (0.2, 0.0, 0.15), T, 8)
+    for a, b in zip(steady[:4], changed[:4]):
+        assert a.position == pytest.approx(b.position) and a.yaw == pytest.approx(b.yaw)
+    for a, b in zip(steady[4:], changed[4:]):
+        assert b.yaw > a.yaw + 0.1
+
+
+def test_a_zero_command_ends_with_the_soles_side_by_side(talos14, planner):
+    feet = _standing_feet(talos14)
+    plan = planner.from_velocity(
+        feet, planner.soles[0], lambda k: (0.3, 0.1, 0.2) if k < 6 else (0.0, 0.0, 0.0), T, 8)
+    a, b = plan[-2], plan[-1]
+    assert a.yaw == pytest.approx(b.yaw, abs=1e-9)
+    side = 1 if a.contact == planner.soles[0] else -1
+    dx, width, _ = _relative((a.position, a.yaw), b.position, b.yaw, side)
+    assert dx == pytest.approx(0.0, abs=1e-9)
+    assert width == pytest.approx(planner.limits.nominal_width, abs=1e-9)
+    # standing still: steps in place
+    still = planner.from_velocity(feet, planner.soles[1], (0.0, 0.0, 0.0), T, 2)
+    for step in still:
+        assert step.position == pytest.approx(feet[step.contact][0], abs=1e-9)
+
+
+def test_no_steps_is_an_empty_plan(talos14, planner):
+    assert planner.from_velocity(_standing_feet(talos14), planner.soles[0], (0.1, 0, 0), T,
+                                 0) == []
+
+
+# ------------------------------------------------------------------ from_list
+def test_from_list_clamps_each_step_against_the_previous_stance(talos14, planner):
+    feet = _standing_feet(talos14)
+    left, right = planner.soles
+    lim = planner.limits
+    p_right = feet[right][0]
+    plan = planner.from_list(feet, [(left, (p_right[0] + 0.1, p_right[1] + 0.2), 0.0),
+                                    (right, (p_right[0] + 5.0, p_right[1] + 0.3), -0.1),
+                                    (left, (0.0, 0.0, 0.05), 0.0)])
+    assert all(isinstance(s, Footstep) for s in plan)
+    assert plan[0].position == pytest.approx([p_right[0] + 0.1, p_right[1] + 0.2, p_right[2]])
+    assert plan[0].yaw == pytest.approx(0.0)
+    dx, width, turn = _relative((plan[0].position, plan[0].yaw), plan[1].position, plan[1].yaw,
+                                1)
+    assert dx == pytest.approx(lim.forward) and width == pytest.approx(lim.width_min)
+    assert turn == pytest.approx(0.1)  # the right sole turned right of the left one: outward
+    assert plan[2].position[2] == pytest.approx(0.05)  # a given height is kept
+    _check_within(planner, feet, plan[:2])
+
+
+def test_from_list_refuses_a_sole_stepping_twice(talos14, planner):
+    feet = _standing_feet(talos14)
+    left, right = planner.soles
+    with pytest.raises(ValueError, match=r"steps\[2\]"):
+        planner.from_list(feet, [(left, (0.1, 0.1), 0.0), (right, (0.2, -0.1), 0.0),
+                                 (right, (0.3, -0.1), 0.0)])
+    with pytest.raises(ValueError, match=r"steps\[0\].*'foot'"):
+        planner.from_list(feet, [("foot", (0.1, 0.1), 0.0)])
+
+
+# ------------------------------------------------------------------ validation
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(command=(math.nan, 0.0, 0.0)), "command"),
+    (dict(command=(0.1, 0.0)), "command"),
+    (dict(command=lambda k: (0.1, 0.0, math.inf if k == 3 else 0.0)), "command"),
+    (dict(steps=-1), "steps"),
+    (dict(step_period=0.0), "step_period"),
+    (dict(step_period=math.nan), "step_period"),
+    (dict(swing_first="foot"), "swing_first"),
+])
+def test_from_velocity_validation(talos14, planner, kwargs, match):
+    args = dict(feet=_standing_feet(talos14), swing_first=planner.soles[0],
+                command=(0.1, 0.0, 0.0), step_period=T, steps=5)
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        planner.from_velocity(**args)
+
+
+def test_unknown_soles_in_feet_are_refused(talos14, planner):
+    feet = _standing_feet(talos14)
+    feet["foot"] = feet.pop(planner.soles[0])
+    with pytest.raises(ValueError, match="feet"):
+        planner.from_velocity(feet, planner.soles[1], (0.1, 0.0, 0.0), T, 2)
+    with pytest.raises(ValueError, match="feet"):
+        planner.from_list(feet, [])
+
+
+@pytest.mark.parametrize("kwargs, match", [(dict(share=1.5), "share"),
+                                           (dict(margin=-0.1), "margin"),
+                                           (dict(com_height_drop=math.nan), "com_height_drop")])
+def test_from_robot_validation(talos14, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        StepLimits.from_robot(talos14, **kwargs)
+
+
+def test_clamp_step_validation():
+    with pytest.raises(ValueError, match="stance_side"):
+        clamp_step((np.zeros(3), 0.0), 0, np.zeros(2), 0.0, LIMITS)
