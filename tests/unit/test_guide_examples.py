@@ -85,9 +85,16 @@ def check_own_loop(ns: dict) -> None:
     assert np.all(np.isfinite(data.qpos)) and abs(data.qpos[2] - ns["z0"]) < 0.01
 
 
+def check_walk(ns: dict) -> None:
+    walker, q = ns["walker"], ns["q"]
+    assert len(walker.steps) >= 4 and walker.phase.kind == "stand"
+    assert 0.2 < q[0] < 0.6  # about 2 s at 0.2 m/s
+    assert abs(q[2] - ns["robot"].q_ref[2]) < 0.1  # standing, not fallen
+
+
 EXAMPLES = {"own-stack": check_own_stack, "own-task": check_own_task,
-            "own-loop": check_own_loop}
-SLOW = {"own-loop"}  # simulates 1 s of the twin: seconds
+            "own-loop": check_own_loop, "walk": check_walk}
+SLOW = {"own-loop", "walk"}  # simulate the twin: seconds
 
 
 def test_guide_has_exactly_the_examples():

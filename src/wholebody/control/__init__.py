@@ -3,7 +3,8 @@
 
 - humanoid (Herzog et al. 2016): :class:`MomentumBalance` (Tables 1/2/4 with PD or LQR momentum
   gains), :class:`ContactSwitch` (double -> single support), :class:`Stepping`; ``stacks`` builds
-  the hierarchies, ``lqr`` and ``momentum_model`` the momentum gains;
+  the hierarchies, ``lqr`` and ``momentum_model`` the momentum gains; :class:`Walking` (walking
+  and push recovery by stepping on the same hierarchies, capture-point reference);
 - quadruped (Fahmi et al. 2019): :class:`PassiveWBC` and the :class:`QuasiStaticController`
   baseline;
 - any robot: :class:`StandingController`.
@@ -21,9 +22,10 @@ from .quasi_static import QuasiStaticController
 from .stacks import table1_stack, table2_stack, table4_stack
 from .standing import StandingController
 from .stepping import Stepping, SteppingConfig
+from .walking import Walking, WalkingConfig
 
 __all__ = ["ContactSwitch", "ContactSwitchConfig", "ControlResult", "MomentumBalance",
            "MomentumLQR", "MomentumObserver", "PassiveConfig", "PassiveWBC",
            "QuasiStaticController", "StandingController", "StorageMeter", "SwingFeedForwardOff", "Stepping", "SteppingConfig",
-           "SwingGains", "lqr_gains", "lqr_q", "momentum_model", "table1_stack", "table2_stack",
+           "SwingGains", "Walking", "WalkingConfig", "lqr_gains", "lqr_q", "momentum_model", "table1_stack", "table2_stack",
            "table4_stack"]

@@ -80,6 +80,8 @@ class WalkingConfig:
     the robot (talos14's numbers times h / h_talos14 for lengths, its square root for times).
 
     ``single_support``, ``double_support``: durations of a step's phases;
+    ``recovery_single_support``: of a recovery step's swing (short: the capture point diverges
+    by e^(omega T) over a swing of T);
     ``initial_double_support``: of the first weight shift from standing; ``recovery_double_support``:
     of a recovery step's weight shift; ``com_drop``: the walking CoM height below the standing one;
     ``clearance``: the swing apex above the higher end; ``touchdown_depth``: the swing target ends
@@ -92,6 +94,7 @@ class WalkingConfig:
     margin and yaw-moment rows; ``posture_gains``, ``swing_gains``: as in the Table 2/4 stacks."""
 
     single_support: float
+    recovery_single_support: float
     double_support: float
     initial_double_support: float
     recovery_double_support: float
@@ -112,6 +115,7 @@ class WalkingConfig:
     @classmethod
     def for_robot(cls, robot, **overrides) -> "WalkingConfig":
         base = cls(single_support=_scaled(robot, 0.6, 0.5),
+                   recovery_single_support=_scaled(robot, 0.3, 0.5),
                    double_support=_scaled(robot, 0.1, 0.5),
                    initial_double_support=_scaled(robot, 0.6, 0.5),
                    recovery_double_support=_scaled(robot, 0.05, 0.5),
@@ -121,7 +125,7 @@ class WalkingConfig:
         return replace(base, **overrides).checked()
 
     def checked(self) -> "WalkingConfig":
-        for name in ("single_support", "double_support", "initial_double_support",
+        for name in ("single_support", "recovery_single_support", "double_support", "initial_double_support",
                      "recovery_double_support", "dcm_gain"):
             positive(getattr(self, name), name)
         for name in ("com_drop", "clearance", "touchdown_depth", "capture_margin"):
@@ -325,6 +329,7 @@ class Walking:
         then ``footsteps`` (single support, double support each), then the last weight shift to
         the middle of the soles and standing."""
         c = self.config
+        single = c.recovery_single_support if self.recovering else c.single_support
         phases, times, zmp = [], [t], [self._support_center()]
         feet = dict(self.feet)
         ds, now, support = first_ds, t, stance
@@ -333,9 +338,8 @@ class Walking:
             now += ds
             times.append(now)
             zmp.append(feet[support][0][:2])
-            phases.append(Phase("single", now, now + c.single_support, support,
-                                footstep=step))
-            now += c.single_support
+            phases.append(Phase("single", now, now + single, support, footstep=step))
+            now += single
             times.append(now)
             zmp.append(feet[support][0][:2])
             feet[step.contact] = (step.position, step.yaw)
@@ -360,7 +364,7 @@ class Walking:
         yaws = [self.feet[s][1] for s in self.soles]
         if footsteps:
             yaws = [footsteps[0].yaw, self.feet[stance][1]]
-        self.base_yaw = (self._heading(), _mean_angle(yaws), t, t + first_ds + c.single_support)
+        self.base_yaw = (self._heading(), _mean_angle(yaws), t, t + first_ds + single)
 
     def _support_center(self) -> np.ndarray:
         return 0.5 * (self.feet[self.left][0][:2] + self.feet[self.right][0][:2])
@@ -533,6 +537,8 @@ class Walking:
         stance = self.phase.stance
         if self.queue and self.steps:
             self.queue.pop(0)
+        if self.recovering and not self._capture_point_outside(dcm):
+            self.recovering = False  # captured: the remaining steps at the walking pace
         if self._wants_to_walk():
             steps = self._next_footsteps(stance, c.step_horizon)
         elif self._feet_together(stance) and not self._capture_point_outside(dcm):

@@ -1,0 +1,87 @@
+"""The walking controller's geometry and feedback, against independent evidence: the support
+polygon's nearest point against SLSQP over convex combinations of the soles' corners, the DCM
+feedback against the DCM law it implements (Englsberger et al. 2015), the step adjustment against
+the LIPM's closed-form divergence of the capture point."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+import wholebody as wb
+from wholebody.control.walking import SupportPolygon, Walking
+
+
+@pytest.fixture(scope="module")
+def walking():
+    robot = wb.load_robot("talos14")
+    return Walking(robot, engine="python")
+
+
+def _nearest_by_slsqp(points, p):
+    n = len(points)
+    res = minimize(lambda w: np.sum((w @ points - p) ** 2), np.full(n, 1.0 / n), method="SLSQP",
+                   bounds=[(0.0, 1.0)] * n,
+                   constraints={"type": "eq", "fun": lambda w: np.sum(w) - 1.0},
+                   options={"ftol": 1e-14, "maxiter": 500})
+    return res.x @ points
+
+
+def test_support_polygon_projection_is_the_nearest_point_of_the_hull():
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        corners = rng.uniform(-0.3, 0.3, size=(8, 2))
+        poly = SupportPolygon(corners)
+        p = rng.uniform(-0.6, 0.6, size=2)
+        expected = _nearest_by_slsqp(corners, p)
+        assert np.allclose(poly.project(p), expected, atol=1e-6)
+        assert poly.contains(poly.project(p) + 1e-9 * (expected - p)) or poly.contains(expected)
+
+
+def test_feedback_is_the_dcm_law_inside_the_support(walking):
+    """Inside the support, c'' makes xi' = xi_ref' - k (xi - xi_ref) with xi = c + c'/omega."""
+    w, k = walking.omega, walking.config.dcm_gain * walking.omega
+    ph = walking.phase
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        c_ref = np.r_[rng.uniform(-0.01, 0.01, 2), 0.8]
+        v_ref, a_ref = np.r_[rng.uniform(-0.02, 0.02, 2), 0.0], np.r_[rng.uniform(-0.05, 0.05, 2), 0]
+        c = c_ref + np.r_[rng.uniform(-0.003, 0.003, 2), 0.0]
+        v = v_ref + np.r_[rng.uniform(-0.01, 0.01, 2), 0.0]
+        a = walking._horizontal_acceleration(ph, c_ref, v_ref, a_ref, c, v)
+        xi, xi_ref = c[:2] + v[:2] / w, c_ref[:2] + v_ref[:2] / w
+        xi_dot = v[:2] + a / w
+        xi_ref_dot = v_ref[:2] + a_ref[:2] / w
+        assert np.allclose(xi_dot, xi_ref_dot - k * (xi - xi_ref), atol=1e-12)
+
+
+def test_feedback_zmp_stays_in_the_support(walking):
+    ph = walking.phase
+    c = np.r_[walking.com_ref[:2], walking.com_ref[2]]
+    far = c + np.r_[1.0, 0.5, 0.0]  # a reference a metre away: a ZMP far outside the soles
+    a = walking._horizontal_acceleration(ph, far, np.zeros(3), np.zeros(3), c, np.zeros(3))
+    zmp = c[:2] - a / walking.omega ** 2
+    assert walking.support(walking.soles, walking.config.cop_margin).contains(zmp + 0.0)
+
+
+def test_step_adjustment_moves_the_footstep_by_the_predicted_dcm_error():
+    """A capture-point error e in single support, tau before touchdown, moves the footstep by
+    e^(omega tau) e (the LIPM with the ZMP on the stance sole), within the leg's reach."""
+    robot = wb.load_robot("talos14")
+    ctrl = Walking(robot, engine="python")
+    q, v = robot.q_ref.copy(), np.zeros(robot.nv)
+    ctrl.set_command(0.2, 0.0, 0.0)
+    t = 0.0
+    while ctrl.phase.kind != "single":
+        ctrl.compute(q, v, t)
+        t += 0.001
+    ph = ctrl.phase
+    t_adjust = ph.start + 0.1
+    xi_ref = ctrl.plan.dcm(t_adjust)[0]
+    error = np.array([0.004, -0.003])
+    ctrl._adjust_step(t_adjust, ph, xi_ref + error)
+    tau = ph.end - t_adjust
+    # the plan predicts its own DCM at touchdown: only the error moves the planned footstep
+    shift = ctrl.swing.p1[:2] - ph.footstep.position[:2]
+    assert np.allclose(shift, math.exp(ctrl.omega * tau) * error, atol=2e-4)
