@@ -28,7 +28,7 @@ def test_stands_five_seconds(robots, name):
 
 def test_naive_gravity_compensation_is_not_contact_consistent(robots):
     """Compensating only the joint rows (tau = h_u) is wrong for a robot on its feet: the contact-
-    consistent torques differ by J_{c,u}^T lambda, which carries the weight (DESIGN.md)."""
+    consistent torques differ by J_{c,u}^T lambda, which carries the weight (docs/architecture.md)."""
     robot = robots["talos14"]
     ctrl = StandingController(robot, kp=0.0, kd=0.0)
     q = robot.q_ref

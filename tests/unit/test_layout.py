@@ -1,4 +1,4 @@
-"""The package's layout rules (DESIGN.md, "Layout"), checked on the source: scenarios build a robot,
+"""The package's layout rules (docs/architecture.md, "Layout"), checked on the source: scenarios build a robot,
 a controller and a world, run and measure — no controller or planner is defined in them and no
 scenario imports another; every QP goes through ``solvers/`` (no ``daqp`` import elsewhere)."""
 

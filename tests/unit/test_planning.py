@@ -1,5 +1,5 @@
 """Planning: gait schedules, swing trajectories, footholds, trunk references and the gait planner
-(Fahmi et al. 2019, seed 001: crawl and trot on HyQ; swing task eqs. 5-6; trunk task eq. 4).
+(Fahmi et al. 2019: crawl and trot on HyQ; swing task eqs. 5-6; trunk task eq. 4).
 
 Evidence is independent of the code under test wherever possible: duty factors and diagonal pairs by
 sampling, derivatives by finite differences, the trunk path by numerically integrating the command

@@ -1,4 +1,4 @@
-"""Passive whole-body control for quadrupeds (Fahmi et al. 2019, seed 001, Sect. II and IV).
+"""Passive whole-body control for quadrupeds (Fahmi et al. 2019, Sect. II and IV).
 
 One QP per control cycle over u = [q̈, F_grf] (eq. 7), written into the preallocated arrays of
 :class:`~wholebody.control.passive_qp.PassiveQP` (the generic

@@ -1,5 +1,5 @@
 """Passivity analysis of the passive WBC: the controller-side pieces and the storage-function
-bookkeeping (Fahmi et al. 2019, seed 001, Sect. III, eqs. 20-31).
+bookkeeping (Fahmi et al. 2019, Sect. III, eqs. 20-31).
 
 * :class:`SwingFeedForwardOff` — a planner wrapper that drops the swing feed-forward acceleration
   (Assumption 2: no feed-forward terms in eqs. 4a and 5; with ``TrunkImpedance(feedforward=False)``

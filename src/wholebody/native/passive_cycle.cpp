@@ -1,5 +1,5 @@
-// The passive whole-body controller's per-cycle work in one compiled object (Fahmi et al. 2019,
-// seed 001): Pinocchio's rigid-body terms, the QP of eqs. 7-18 written into the arrays that
+// The passive whole-body controller's per-cycle work in one compiled object (Fahmi et al. 2019):
+// Pinocchio's rigid-body terms, the QP of eqs. 7-18 written into the arrays that
 // wholebody.control.passive.PassiveWBC hands to DAQP, and the torques of eq. 19.
 //
 // It mirrors PassiveWBC's Python assembly (the tested reference) row for row: same layout, same

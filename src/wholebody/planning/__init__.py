@@ -1,6 +1,6 @@
 """Planning: gait schedules (crawl, trot), swing trajectories, footholds and trunk references.
 
-The references consumed by the passive whole-body controller of Fahmi et al. 2019 (seed 001): the
+The references consumed by the passive whole-body controller of Fahmi et al. 2019: the
 contact schedule (which feet are in stance, eq. 10, and which swing, eqs. 11-12), the desired
 swing-foot position/velocity/acceleration (eqs. 5-6), touchdown targets and terrain normals (eq. 13,
 eq. 32), and the trunk reference -- CoM position/velocity/acceleration and trunk orientation/angular

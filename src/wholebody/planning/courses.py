@@ -1,5 +1,5 @@
 """Terrain courses for the quadruped experiments: one description -> the planner's terrain
-(Fahmi et al. 2019, seed 001, Sect. V-G, Figs. 7-8).
+(Fahmi et al. 2019, Sect. V-G, Figs. 7-8).
 
 A course is a sequence of segments along +x (the walking direction), starting at ``x_start`` on
 level ground at z = 0 and continuing level after the last segment:

@@ -1,6 +1,6 @@
 """Footholds: where a swinging foot should land (Raibert-style heuristic) and the nominal footprint.
 
-Fahmi et al. 2019 (seed 001, Fig. 1 and Sect. II) take the swing-foot targets from a planner
+Fahmi et al. 2019 (Fig. 1 and Sect. II) take the swing-foot targets from a planner
 ("Given high-level user velocity commands, the planner generates a reference motion online [20]").
 The heuristic planner of their ref. [20] places each foot, like Raibert's hoppers, relative to the
 hip: at touchdown the foot is put ahead of the hip by half the distance the hip will travel during

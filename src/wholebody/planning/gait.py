@@ -1,6 +1,6 @@
 """Periodic contact schedules for quadruped gaits: crawl, trot, stand.
 
-Fahmi et al. 2019 (seed 001) evaluate their passive whole-body controller on HyQ with two gaits
+Fahmi et al. 2019 evaluate their passive whole-body controller on HyQ with two gaits
 (Sect. V): a *crawl* -- one leg at a time, statically stable, used for the friction, torque-limit and
 speed-ramp experiments (Sects. V-B, V-C, V-E, Figs. 3, 5) -- and a *trot* -- diagonal pairs, "an
 under-actuated gait" (Sect. V-H, Fig. 8). The controller's equality constraints (eqs. 10-12) need to

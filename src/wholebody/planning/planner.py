@@ -1,6 +1,6 @@
 """The gait planner: schedule + trunk reference + footholds + swing trajectories, once per cycle.
 
-This is the "planner" box of Fahmi et al. 2019 (seed 001, Fig. 1): from a user velocity command it
+This is the "planner" box of Fahmi et al. 2019 (Fig. 1): from a user velocity command it
 produces, every control cycle, what the whole-body controller consumes -- which feet are in stance
 (eq. 10) and which swing (eqs. 11-12), the desired swing-foot position/velocity/acceleration (eqs.
 5-6), the stance anchors ``x̂_st`` of the stance task (eq. 32: "a sample of the foot position at the

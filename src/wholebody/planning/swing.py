@@ -1,6 +1,6 @@
 """Swing-foot trajectories: lift-off position to touchdown position with a clearance apex.
 
-The swing task of Fahmi et al. 2019 (seed 001, eqs. 5-6 and 11-12) tracks a desired swing-foot
+The swing task of Fahmi et al. 2019 (eqs. 5-6 and 11-12) tracks a desired swing-foot
 position ``x_sw,d``, velocity ``v_sw,d`` and feed-forward acceleration ``v̇_sw,ff``; this module
 produces all three.
 

@@ -1,6 +1,6 @@
 """Terrain for planning: a height map z = height(x, y) and its unit normal.
 
-Fahmi et al. 2019 (seed 001) describe the terrain to the controller by its inclination: the friction
+Fahmi et al. 2019 describe the terrain to the controller by its inclination: the friction
 cones use the terrain normal under each foot (Sect. V-G and footnote 17), and the planner places the
 footholds and the trunk on it (the robot climbs ramps in Figs. 4, 7, 8). A :class:`Terrain` is the
 planning view of that: a height callable and, optionally, an exact normal callable; without one the

@@ -1,7 +1,7 @@
 """Trunk reference: desired CoM position/velocity/acceleration and trunk orientation/angular
 velocity/acceleration from a velocity command.
 
-The trunk task of Fahmi et al. 2019 (seed 001, eq. 4) is a Cartesian impedance at the CoM with a
+The trunk task of Fahmi et al. 2019 (eq. 4) is a Cartesian impedance at the CoM with a
 feed-forward term: it needs ``x_com,d`` (CoM position and trunk orientation), ``v_com,d`` (CoM
 velocity and trunk angular velocity) and ``v̇_com,d`` (for ``W_ff = M_com v̇_com,d``). This module
 turns a high-level velocity command (Fig. 1: "Given high-level user velocity commands, the planner

@@ -1,4 +1,4 @@
-"""Figures of the quadruped scenarios in the style of Fahmi et al. 2019 (seed 001, Sect. V,
+"""Figures of the quadruped scenarios in the style of Fahmi et al. 2019 (Sect. V,
 Figs. 2-8): PNGs drawn from gait-run logs (headless pyplot of :mod:`wholebody.report.plots`).
 
 Each function takes what the scenario measured (runs, logs, series, shaded intervals) and a path,

@@ -1,5 +1,5 @@
 """Measures of legged locomotion runs, defined once for every quadruped scenario (Fahmi et al. 2019,
-seed 001, Sect. V).
+Sect. V).
 
 They read the per-cycle arrays of a :class:`~wholebody.scenarios.locomotion.GaitRun` log (``t``,
 ``stance`` flags of the planner, ``contact_speed`` of the simulator's contact points, ``ok``):

@@ -1,4 +1,4 @@
-"""Closed-loop quadruped locomotion runs shared by the scenarios of Fahmi et al. 2019 (seed 001, Sect. V).
+"""Closed-loop quadruped locomotion runs shared by the scenarios of Fahmi et al. 2019 (Sect. V).
 
 :func:`run_gait` builds a gait planner (crawl, trot or stand) with a velocity command, one of the
 two controllers (``passive``: :class:`~wholebody.control.passive.PassiveWBC`; ``quasi-static``: the

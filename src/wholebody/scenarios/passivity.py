@@ -1,5 +1,5 @@
 """``passivity``: the storage function of the passive WBC measured along a closed-loop run
-(Fahmi et al. 2019, seed 001, Sect. III, eqs. 20-31).
+(Fahmi et al. 2019, Sect. III, eqs. 20-31).
 
 The paper proves passivity of the controller under Assumption 1 (stance feet do not move) and
 Assumption 2 (the QP achieves the motion tasks; no feed-forward terms) by showing that the storage

@@ -1,4 +1,4 @@
-"""``ramp``: HyQ over terrain courses (Fahmi et al. 2019, seed 001, Sects. V-G and V-H, Figs. 7-8).
+"""``ramp``: HyQ over terrain courses (Fahmi et al. 2019, Sects. V-G and V-H, Figs. 7-8).
 
 * ``course=ramp`` (default): trot up a ramp (default 15°), along a plateau and down again. The
   paper's Fig. 8 shows roll and pitch tracking "while climbing up a ramp with a trotting gait" and

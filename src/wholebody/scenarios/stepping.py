@@ -202,7 +202,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None,
     notes = [
         f"controller engine '{params['engine']}'; wall times on a shared 2-core machine: noisy, "
         "especially the tails (p99/max) — compare medians; not asserted by any test",
-        "seed 000 (Sect. 5.1, Table 1, Fig. 5; C++/Eigen, Goldfarb-Idnani, i7-2600 3.4 GHz): "
+        "Herzog et al. 2016 (Sect. 5.1, Table 1, Fig. 5; C++/Eigen, Goldfarb-Idnani, i7-2600 3.4 GHz): "
         "peak ~1 ms for the 14-DoF biped, 5 ms (full) vs 3 ms (reduced) for the 25-DoF robot; the "
         "reduction is ~40 % faster; the maximum occurs in double support (c = 2)",
         f"robot {robot.name}: {robot.na} actuated DoF (the paper's Sarcos: 25); the reduction "

@@ -1,5 +1,5 @@
 """``unstable-foothold``: a stepping stone rolls away under HyQ's right-front foot mid-stance
-(Fahmi et al. 2019, seed 001, Sect. V-F, Fig. 6).
+(Fahmi et al. 2019, Sect. V-F, Fig. 6).
 
 In the paper (Fig. 6, real robot, experiment of their ref. [23]) "a stepping-stone rolled under the
 RF leg at t = 6.5 s. The controller lost tracking of the CoM height, however, the friction cone

@@ -32,7 +32,7 @@ PLATFORM_JOINTS = tuple((f"platform_{n}", kind, axis) for kind, names in
 
 @dataclass(frozen=True)
 class SimOptions:
-    """MuJoCo solver settings of the twin (see DESIGN.md, "The MuJoCo twin")."""
+    """MuJoCo solver settings of the twin (see docs/architecture.md, "The MuJoCo twin")."""
 
     timestep: float = 1e-3
     integrator: str = "implicitfast"

@@ -30,7 +30,7 @@ Methods
     described there (:func:`row_normalised`).
 
 ``weighted``: :mod:`.weighted`
-    One QP over ``levels = [hard, objective]`` (seed 001 eq. 7), the hard level's rows as
+    One QP over ``levels = [hard, objective]`` (Fahmi et al. 2019, eq. 7), the hard level's rows as
     constraints; if the hard level is infeasible or the QP fails, the cascade's result is
     returned, recorded in ``method`` and ``warnings``.
 

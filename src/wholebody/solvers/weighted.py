@@ -1,6 +1,6 @@
 """The ``weighted`` method of :func:`~wholebody.solvers.hierarchy.solve_hierarchy`.
 
-The single weighted QP (seed 001 eq. 7): ``levels = [hard, objective]`` as one QP with the
+The single weighted QP (Fahmi et al. 2019, eq. 7): ``levels = [hard, objective]`` as one QP with the
 hard level's rows as constraints — no nullspace. Equal to the two-level cascade whenever the
 hard level is feasible, up to the ε effect of the cascade's soft first level (it trades an
 O(ε) violation for norm; the hard rows do not), i.e. exactly equal as ε → 0. If the hard level
@@ -17,7 +17,7 @@ from .backends import solve_qp
 from .common import _finish, _rows, log
 
 def _solve_weighted(levels, n, backend, eps, feas_tol, opts, t0):
-    """One QP: rows of levels[0] as hard constraints, levels[-1] as weighted objective (seed 001, eq. 7)."""
+    """One QP: rows of levels[0] as hard constraints, levels[-1] as weighted objective (Fahmi et al. 2019, eq. 7)."""
     obj = levels[-1]
     hard = levels[0] if len(levels) == 2 else None
     Bo, Co = _rows(obj, n)

@@ -1,4 +1,4 @@
-"""The trunk task of Fahmi et al. 2019 (seed 001, Sect. II-B): a desired wrench at the CoM.
+"""The trunk task of Fahmi et al. 2019 (Sect. II-B): a desired wrench at the CoM.
 
 ``W_com,d = K Δx + D Δv + ∇V_g + W_ff − W_ext`` (eq. 4): a Cartesian impedance on the CoM position
 and the trunk orientation, gravity compensation, a feed-forward ``M_com v̇_com,d`` and an optional
