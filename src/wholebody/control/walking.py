@@ -41,6 +41,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial import ConvexHull
 
 from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation
@@ -472,7 +473,7 @@ class Walking:
 
     def _first_stance(self) -> str:
         """Walking starts with the sole toward which the command turns or moves as the swing."""
-        vx, vy, wz = self.command
+        _, vy, wz = self.command
         if self.queue:
             return self._other(self.queue[0].contact)
         lateral = vy if abs(vy) > 1e-9 else wz
@@ -683,7 +684,6 @@ class SupportPolygon:
     """The convex hull of soles' rectangles in the floor plane, and the nearest point in it."""
 
     def __init__(self, corners: np.ndarray):
-        from scipy.spatial import ConvexHull
         pts = np.asarray(corners, dtype=float).reshape(-1, 2)
         self.vertices = pts[ConvexHull(pts).vertices]  # counter-clockwise
         self.edges = np.roll(self.vertices, -1, axis=0) - self.vertices
