@@ -271,6 +271,23 @@ def test_walking_forward_strides_two_steps_of_path(talos14, planner):
     _check_within(planner, feet, plan)
 
 
+@pytest.mark.parametrize("command", [(0.3, 0.0, 0.0), (0.2, 0.05, 0.15), (0.0, -0.2, 0.0)])
+def test_re_planning_mid_walk_continues_the_same_steps(talos14, planner, command):
+    """A plan made from the soles as they stand after any of its own steps is the rest of it:
+    re-planning at every touchdown keeps the commanded pace."""
+    feet = _standing_feet(talos14)
+    plan = planner.from_velocity(feet, planner.soles[0], command, T, 8)
+    for k in range(1, 5):
+        now = dict(feet)
+        for step in plan[:k]:
+            now[step.contact] = (step.position, step.yaw)
+        rest = planner.from_velocity(now, plan[k].contact, command, T, 8 - k)
+        for a, b in zip(plan[k:], rest):
+            assert b.contact == a.contact
+            assert b.position == pytest.approx(a.position, abs=1e-9)
+            assert b.yaw == pytest.approx(a.yaw, abs=1e-12)
+
+
 def test_a_fast_command_saturates_at_the_longest_step(talos14, planner):
     feet = _standing_feet(talos14)
     plan = planner.from_velocity(feet, planner.soles[1], (3.0, 0.0, 0.0), T, 6)
@@ -300,6 +317,30 @@ def test_a_lateral_command_keeps_the_soles_apart(talos14, planner, vy):
     _check_within(planner, feet, plan)
     mid = 0.5 * (plan[-1].position + plan[-2].position)
     assert np.sign(mid[1]) == np.sign(vy) and abs(mid[1]) > 0.1
+
+
+@pytest.mark.parametrize("command", [(0.0, 0.12, 0.0), (0.0, -0.12, 0.0), (0.1, 0.0, 0.35),
+                                     (0.1, 0.0, -0.35)])
+def test_sideways_and_turning_the_leading_sole_takes_what_the_follower_cannot(
+        talos14, planner, command):
+    """Beyond what the following sole can close in (nominal - narrowest width, yaw_in) the
+    pair of steps still covers 2 v T sideways and 2 omega T of heading, inside the limits."""
+    lim = planner.limits
+    vy, rate = command[1], command[2]
+    assert abs(vy) * T > lim.nominal_width - lim.width_min or abs(rate) * T > lim.yaw_in
+    assert abs(vy) * 2 * T <= lim.width_max - lim.width_min
+    assert abs(rate) * 2 * T <= lim.yaw_in + lim.yaw_out
+    feet = _standing_feet(talos14)
+    plan = planner.from_velocity(feet, planner.soles[0], command, T, 8)
+    _check_within(planner, feet, plan)
+    for a, b in zip(plan[1:], plan[3:]):  # the same sole two steps apart
+        heading = np.array([math.cos(a.yaw), math.sin(a.yaw)])
+        lateral = np.array([-math.sin(a.yaw), math.cos(a.yaw)])
+        d = b.position[:2] - a.position[:2]
+        if rate == 0.0:
+            assert d @ lateral == pytest.approx(2 * vy * T, abs=1e-9)
+            assert d @ heading == pytest.approx(0.0, abs=1e-9)
+        assert b.yaw - a.yaw == pytest.approx(2 * rate * T, abs=1e-9)
 
 
 def test_a_schedule_changes_the_steps_from_its_change_on(talos14, planner):

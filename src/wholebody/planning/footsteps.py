@@ -363,11 +363,14 @@ class FootstepPlanner:
         (vx, vy, yaw_rate) in the path frame (m/s, m/s, rad/s), or a callable k -> that for step
         k. ``feet``: {sole: (position (3,), yaw)} now.
 
-        The path frame starts at the soles' midpoint with their mean heading; each step it turns
-        by yaw_rate T and moves by its velocity times T along its heading halfway through the
+        The path frame starts half the standing width inward of the stance sole (the other than
+        ``swing_first``), at its heading: the soles' midpoint when they stand side by side, and
+        where the previous plan's path was when re-planning mid-walk. Each step it turns by
+        yaw_rate T and moves by its velocity times T along its heading halfway through the
         turn (T = ``step_period``), and the swing sole is aimed half the standing width to its
         side of it, at its heading, then clamped (:func:`clamp_step`) against the stance sole, at
-        its height. The path frame then follows the sole as landed, so a command beyond the
+        its height; sideways and turning, the leading sole takes the share of the motion that
+        the following one cannot (:meth:`_lead_and_follow`). The path frame then follows the sole as landed, so a command beyond the
         limits saturates the steps instead of leaving the feet behind. A zero command steps in
         place: two steps bring the soles side by side at the standing width."""
         feet = self._feet(feet)
@@ -381,17 +384,18 @@ class FootstepPlanner:
             raise ValueError(f"steps: expected an integer >= 0, got {steps!r}")
         if not callable(command):
             _command_at(command, 0)
-        left, right = (feet[s] for s in self.soles)
-        yaw = right[1] + 0.5 * _wrap(left[1] - right[1])
-        path = 0.5 * (left[0][:2] + right[0][:2])
         half = 0.5 * self.limits.nominal_width
+        stance_position, yaw = feet[self._other(swing_first)]
+        path = stance_position[:2] - _yaw_matrix(yaw) @ np.array(
+            [0.0, self._side(self._other(swing_first)) * half])
         swing, plan = swing_first, []
         for k in range(int(steps)):
             vx, vy, rate = _command_at(command, k)
+            side = self._side(swing)
+            vy, rate = self._lead_and_follow(side, vy, rate, step_period)
             path = path + _yaw_matrix(yaw + 0.5 * rate * step_period) @ np.array([vx, vy]) \
                 * step_period
             yaw += rate * step_period
-            side = self._side(swing)
             step = self._place(feet, swing, path + _yaw_matrix(yaw) @ np.array([0.0, side * half]),
                                yaw)
             plan.append(step)
@@ -399,6 +403,23 @@ class FootstepPlanner:
             path = step.position[:2] - _yaw_matrix(yaw) @ np.array([0.0, side * half])
             swing = self._other(swing)
         return plan
+
+    def _lead_and_follow(self, side: int, vy: float, rate: float,
+                         step_period: float) -> tuple[float, float]:
+        """(lateral speed, yaw rate) of the path during a step of the sole on ``side``.
+
+        Sideways and turning, the sole on the side of the motion leads and the other follows;
+        the follower can close in only down to the narrowest width and turn in only by
+        ``yaw_in``. What it cannot take of its share (v T, omega T) the leader takes on top of
+        its own, so the pair still covers 2 v T and 2 omega T while both stay in reach."""
+        lim = self.limits
+        spare = {"vy": lim.nominal_width - lim.width_min, "rate": lim.yaw_in}
+        out = {"vy": vy, "rate": rate}
+        for key, value in out.items():
+            excess = max(0.0, abs(value) * step_period - spare[key]) / step_period
+            leads = np.sign(value) == side
+            out[key] = value + math.copysign(excess, value) * (1.0 if leads else -1.0)
+        return out["vy"], out["rate"]
 
     def from_list(self, feet, steps) -> list[Footstep]:
         """Explicit footsteps ``steps`` = [(sole, xy or xyz, yaw), ...], taken in order from
