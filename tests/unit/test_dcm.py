@@ -135,6 +135,32 @@ def test_at_rest_at_the_end():
     assert all(np.all(np.isfinite(x)) for x in c_far)
 
 
+@pytest.mark.parametrize("knot", [1, 2])
+def test_a_later_solved_knot_keeps_the_first_zmp(knot):
+    """solve_knot > 0: the first ZMP stays (continuous with the one commanded before), the
+    plan still starts at dcm0, and c, ξ follow the pendulum of the new ZMP (integration)."""
+    times, points = _walk()
+    com0, dcm0 = np.array([0.01, -0.02]), np.array([0.05, 0.03])
+    plan = DCMPlan(OMEGA, times, points, com0, dcm0=dcm0, solve_knot=knot)
+    np.testing.assert_allclose(plan.dcm(times[0])[0], dcm0, atol=1e-12)
+    np.testing.assert_array_equal(plan.zmp_knots[0], points[0])
+    moved = [k for k in range(len(points)) if not np.allclose(plan.zmp_knots[k], points[k])]
+    assert moved == [knot]
+    new = np.array(plan.zmp_knots)
+    v0 = OMEGA * (dcm0 - com0)
+
+    def rhs(t, y):
+        return np.concatenate([y[2:], OMEGA ** 2 * (y[:2] - _zmp(times, new, t))])
+
+    sol = solve_ivp(rhs, (times[0], times[2]), np.r_[com0, v0], method="DOP853",
+                    t_eval=np.linspace(times[0], times[2], 7), rtol=1e-12, atol=1e-14)
+    c, v, _ = plan.com(sol.t)
+    np.testing.assert_allclose(c, sol.y[:2].T, atol=1e-9)
+    np.testing.assert_allclose(v, sol.y[2:].T, atol=1e-8)
+    with pytest.raises(ValueError, match="solve_knot"):
+        DCMPlan(OMEGA, times, points, com0, dcm0=dcm0, solve_knot=len(points))
+
+
 def test_starting_at_the_dcm_of_a_robot_at_rest():
     """dcm0 = com0: the reference starts at rest (ċ(t_0) = 0, ξ(t_0) = c0) and is the pendulum
     from that state (numerical integration of c̈ = ω² (c - p) from rest with the new ZMP)."""
@@ -143,7 +169,7 @@ def test_starting_at_the_dcm_of_a_robot_at_rest():
     plan = DCMPlan(OMEGA, times, points, com0, dcm0=com0)
     c, v, _ = plan.com(times[0])
     xi, _ = plan.dcm(times[0])
-    np.testing.assert_array_equal(xi, com0)
+    np.testing.assert_allclose(xi, com0, atol=1e-14)
     np.testing.assert_allclose(c, com0, atol=1e-15)
     np.testing.assert_allclose(v, 0.0, atol=1e-14)
     assert not np.allclose(plan.zmp_knots[0], points[0])   # moved to start the DCM at c0

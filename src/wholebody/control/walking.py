@@ -8,9 +8,9 @@ sole over the double support) and the closed-form DCM and CoM trajectories of th
 pendulum (:mod:`~wholebody.planning.dcm`, Englsberger et al. 2015). The phases of one step:
 
 1. double support (Table 2): the ZMP moves from the old stance sole to the new one; a force
-   regulariser drives the leaving sole's wrench from its value at touchdown linearly to zero (the
-   same ramp as the ZMP: the sole forces split as the plan's CoP does), so that lift-off and
-   touchdown leave the torques continuous (Sect. 5.4's unloading);
+   regulariser gives the leaving sole the normal force that puts the CoP at the commanded ZMP
+   (all the weight at touchdown, none at lift-off), so that lift-off and touchdown leave the
+   torques continuous (Sect. 5.4's unloading);
 2. single support (Table 4): the swing sole follows a swing trajectory with a clearance apex to its
    footstep, its yaw turning from the lift-off heading to the footstep's, and lands
    ``touchdown_depth`` below the floor so that it surely touches.
@@ -22,12 +22,13 @@ hierarchy's CoP rows keep the CoP inside the supports. When the CoP cannot follo
 point drifts from the plan; while the swing is early enough (``adjust_until``), the footstep moves
 by the predicted DCM error at touchdown, xi_T - xi_ref(T) with xi_T = p + e^(omega tau) (xi - p)
 (step adjustment), clamped to the leg's reach (:class:`~wholebody.planning.footsteps.StepLimits`).
-Every touchdown re-plans from the measured CoM and DCM (the ZMP of the first knot chosen so that
-the plan starts at the measured DCM, clipped to the new support).
+Every touchdown re-plans from the measured CoM and DCM: the ZMP starts where it was commanded
+(the forces stay continuous) and a knot halfway through the double support is solved so that the
+plan starts at the measured DCM (kept inside the soles; beyond them the feedback takes the rest).
 
 Standing, the capture point is watched: when it leaves the soles' support polygon (shrunk by
 ``capture_margin``), a recovery starts: steps in place with the short ``recovery_double_support``,
-the first with the sole on the side the capture point went, each moved by the step adjustment,
+the first with the sole farther from the capture point (the nearer one stands), each moved by the step adjustment,
 until the robot stands again (N-step capturability, Pratt et al. 2012). With ``stepping=False``
 the robot never steps by itself (the feet-flat ankle/hip strategy of :class:`MomentumBalance`).
 """
@@ -83,8 +84,10 @@ class WalkingConfig:
     ``single_support``, ``double_support``: durations of a step's phases;
     ``recovery_single_support``: of a recovery step's swing (short: the capture point diverges
     by e^(omega T) over a swing of T);
-    ``initial_double_support``: of the first weight shift from standing; ``recovery_double_support``:
-    of a recovery step's weight shift; ``com_drop``: the walking CoM height below the standing one;
+    ``initial_double_support``: of the first weight shift from standing; ``final_double_support``:
+    of the last one, to the middle of the soles before standing (the capture point comes from a
+    sole's centre to between the soles); ``recovery_double_support``: of a recovery step's
+    weight shift; ``com_drop``: the walking CoM height below the standing one;
     ``clearance``: the swing apex above the higher end; ``touchdown_depth``: the swing target ends
     this far below the floor; ``dcm_gain``: k / omega of the DCM feedback; ``height_gains``: (kp,
     kd) of the CoM height; ``adjust_until``: share of the single support after which the footstep
@@ -98,6 +101,7 @@ class WalkingConfig:
     recovery_single_support: float
     double_support: float
     initial_double_support: float
+    final_double_support: float
     recovery_double_support: float
     com_drop: float
     clearance: float
@@ -119,6 +123,7 @@ class WalkingConfig:
                    recovery_single_support=_scaled(robot, 0.3, 0.5),
                    double_support=_scaled(robot, 0.1, 0.5),
                    initial_double_support=_scaled(robot, 0.6, 0.5),
+                   final_double_support=_scaled(robot, 0.6, 0.5),
                    recovery_double_support=_scaled(robot, 0.05, 0.5),
                    com_drop=_scaled(robot, 0.04, 1.0),
                    clearance=_scaled(robot, 0.05, 1.0),
@@ -126,8 +131,9 @@ class WalkingConfig:
         return replace(base, **overrides).checked()
 
     def checked(self) -> "WalkingConfig":
-        for name in ("single_support", "recovery_single_support", "double_support", "initial_double_support",
-                     "recovery_double_support", "dcm_gain"):
+        for name in ("single_support", "recovery_single_support", "double_support",
+                     "initial_double_support", "final_double_support", "recovery_double_support",
+                     "dcm_gain"):
             positive(getattr(self, name), name)
         for name in ("com_drop", "clearance", "touchdown_depth", "capture_margin"):
             nonnegative(getattr(self, name), name)
@@ -149,7 +155,6 @@ class Phase:
     stance: str | None = None
     leaving: str | None = None
     footstep: Footstep | None = None
-    unload_to: float = 0.0
 
 
 @dataclass
@@ -194,6 +199,7 @@ class Walking:
                                            for f in self.frames.values()]) - c.com_drop)
         self.omega = lipm_frequency(self.com_height, GRAVITY)
         self.base_offset = robot.q_ref[:3] - self.com_standing  # base from CoM, standing
+        self.base_rotation = pin.Quaternion(robot.q_ref[3:7]).toRotationMatrix()  # standing
         self.formulation = Formulation(robot)
         task = {"posture_gains": c.posture_gains, "cop_margin": c.cop_margin,
                 "torsion": c.torsion, "base_orientation_weight": 1.0}
@@ -233,7 +239,9 @@ class Walking:
                      for s, f in self.frames.items()}
         self.standing_offset = self.com_standing[:2] - 0.5 * (self.feet[self.left][0][:2]
                                                               + self.feet[self.right][0][:2])
-        self.base_yaw = (0.0, 0.0, 0.0, 1.0)  # (from, to, start, end) of the heading reference
+        self.standing_heading = self._heading()  # the soles', which need not be the base's
+        # (from, to, start, end) of the heading reference
+        self.base_yaw = (self.standing_heading, self.standing_heading, 0.0, 1.0)
         self.com_ref = self._standing_com()
         self.dcm_ref = self.com_ref[:2].copy()
         self._support_phase: Phase | None = None
@@ -270,11 +278,13 @@ class Walking:
                 kp[idx] = 0.0
             posture.weight, posture.kp = w, kp
 
-    def _standing_com(self) -> np.ndarray:
+    def _standing_com(self, feet=None) -> np.ndarray:
         """The standing CoM reference over the soles' midpoint: the posture's offset from it,
-        turned with the heading, at the walking height."""
-        mid = 0.5 * (self.feet[self.left][0] + self.feet[self.right][0])
-        yaw = self._heading()
+        turned with the heading, at the walking height (``feet``: the soles' placements, default
+        the measured)."""
+        feet = self.feet if feet is None else feet
+        mid = 0.5 * (feet[self.left][0] + feet[self.right][0])
+        yaw = _mean_angle([feet[s][1] for s in self.soles]) - self.standing_heading
         offset = np.array([[math.cos(yaw), -math.sin(yaw)],
                            [math.sin(yaw), math.cos(yaw)]]) @ self.standing_offset
         return np.array([mid[0] + offset[0], mid[1] + offset[1], mid[2] + self.com_height])
@@ -346,21 +356,24 @@ class Walking:
             feet[step.contact] = (step.position, step.yaw)
             support = step.contact
             ds = c.double_support
-        end_ds = c.double_support
-        mid = 0.5 * (feet[self.left][0][:2] + feet[self.right][0][:2])
-        # the sole that carried the last single support keeps half of its wrench (standing)
-        phases.append(Phase("double", now, now + end_ds, None, self._other(support),
-                            unload_to=0.5))
+        end_ds = c.final_double_support
+        standing = self._standing_com(feet)[:2]
+        phases.append(Phase("double", now, now + end_ds, None, self._other(support)))
         now += end_ds
         times.append(now)
-        zmp.append(mid)
+        zmp.append(standing)
         phases.append(Phase("stand", now, math.inf))
-        zmp = np.array(zmp)
-        plan = DCMPlan(self.omega, np.array(times), zmp, com[:2], dcm0=dcm[:2])
-        p0 = self.support(self.soles, self.config.cop_margin).project(plan.zmp_knots[0])
-        if np.linalg.norm(p0 - plan.zmp_knots[0]) > 1e-9:
-            zmp[0] = p0
-            plan = DCMPlan(self.omega, np.array(times), zmp, com[:2])
+        # the ZMP starts where it was commanded; a knot halfway through the first double
+        # support is solved to start the plan at the measured DCM, kept inside the soles
+        times.insert(1, t + 0.5 * first_ds)
+        zmp.insert(1, zmp[0])
+        zmp[0] = self.zmp_command
+        times, zmp = np.array(times), np.array(zmp)
+        plan = DCMPlan(self.omega, times, zmp, com[:2], dcm0=dcm[:2], solve_knot=1)
+        inside = self.support(self.soles, self.config.cop_margin).project(plan.zmp_knots[1])
+        if np.linalg.norm(inside - plan.zmp_knots[1]) > 1e-9:
+            zmp[1] = inside
+            plan = DCMPlan(self.omega, times, zmp, com[:2])
         self.plan, self.phases, self.phase_index = plan, phases, 0
         yaws = [self.feet[s][1] for s in self.soles]
         if footsteps:
@@ -386,11 +399,13 @@ class Walking:
         return _mean_angle([self.feet[s][1] for s in self.soles])
 
     def _stand(self, t: float) -> None:
+        """Standing: after a walk the plan's tail brings the CoM over the soles (its last ZMP
+        knot), else the standing CoM is the reference."""
         self.phases = [Phase("stand", t, math.inf)]
         self.phase_index = 0
-        self.plan = None
         self.recovering = False
-        self.com_ref = self._standing_com()
+        if self.plan is None:
+            self.com_ref = self._standing_com()
         for s in self.soles:
             self.unload[s].weight = 0.0
 
@@ -480,11 +495,12 @@ class Walking:
         return self.left if lateral < 0 else self.right
 
     def _recovery_swing(self, dcm) -> str:
-        """The sole on the side the capture point went (in the heading frame)."""
-        yaw = self._heading()
-        mid = self._support_center()
-        lateral = -math.sin(yaw) * (dcm[0] - mid[0]) + math.cos(yaw) * (dcm[1] - mid[1])
-        return self.left if lateral >= 0 else self.right
+        """The sole farther from the capture point: the other, nearer one stands, where the
+        capture point diverges the least from the CoP during the swing (after a sideways push
+        the loaded outer sole stands, the inner one closes in, then the outer one steps out)."""
+        distance = {s: float(np.linalg.norm(dcm - self.support((s,), self.config.cop_margin)
+                                             .project(dcm))) for s in self.soles}
+        return max(self.soles, key=lambda s: distance[s])
 
     def _capture_point_outside(self, dcm) -> bool:
         return not self.support(self.soles, self.config.capture_margin).contains(dcm)
@@ -516,18 +532,25 @@ class Walking:
             self._stand(t)
 
     def _setup_unload(self, ph: Phase) -> None:
-        """The leaving sole's regulariser: its wrench at the start of the double support, ramped
-        to ``ph.unload_to`` of it."""
+        """The leaving sole's regulariser on (its target: :meth:`_leaving_wrench`)."""
         for s in self.soles:
             self.unload[s].weight = 0.0
-        if ph.leaving is None:
-            return
-        self.unload[ph.leaving].weight = UNLOAD_ROWS
-        start = self.last.forces.get(ph.leaving) if self.last is not None else None
-        if start is None:
-            start = np.zeros(6)
-            start[2] = 0.5 * self.robot.mass * GRAVITY
-        self._unload_start = np.array(start, dtype=float)
+        if ph.leaving is not None:
+            self.unload[ph.leaving].weight = UNLOAD_ROWS
+
+    def _leaving_wrench(self, ph: Phase, com, vcom) -> np.ndarray:
+        """The leaving sole's share of the normal force: the commanded ZMP's position between
+        the soles' centres (1 at the leaving sole, 0 at the other), times the vertical force of
+        the momentum task's height law. The soles' forces then split as the ZMP asks, which
+        carries the weight over continuously at touchdown (all of it on the stance sole) and at
+        lift-off (none on the leaving sole)."""
+        a = self.feet[ph.leaving][0][:2]
+        b = self.feet[self._other(ph.leaving)][0][:2]
+        d = a - b
+        share = float(np.clip((self.zmp_command - b) @ d / max(d @ d, 1e-12), 0.0, 1.0))
+        kp_z, kd_z = self.config.height_gains
+        vertical = self.robot.mass * (GRAVITY + kp_z * (self.com_ref[2] - com[2]) - kd_z * vcom[2])
+        return np.array([0.0, 0.0, share * max(vertical, 0.0), 0.0, 0.0, 0.0])
 
     def _touchdown(self, t, com, dcm, cycle) -> None:
         """Re-plan from the measured state at a touchdown: keep walking while there is a command
@@ -595,22 +618,20 @@ class Walking:
             self._swing_references(t, ph, dcm)
         else:
             stack, variables = self.double, self.variables[None]
-            if ph.kind == "double" and ph.leaving is not None:
-                s = min(max((t - ph.start) / (ph.end - ph.start), 0.0), 1.0)
-                share = 1.0 - s * (1.0 - ph.unload_to)
-                self.unload[ph.leaving].targets[ph.leaving] = share * self._unload_start
         m = robot.mass
         momentum = stack.find("momentum")
         momentum.com_ref = com_ref
         momentum.h_ref = np.r_[m * vel, 0.0, 0.0, 0.0]
         momentum.hdot_ref = np.r_[m * self._horizontal_acceleration(ph, com_ref, vel, acc, com,
                                                                     vcom), 0.0, 0.0, 0.0, 0.0]
+        if ph.kind == "double" and ph.leaving is not None:
+            self.unload[ph.leaving].targets[ph.leaving] = self._leaving_wrench(ph, com, vcom)
         posture = stack.find("posture")
         q_ref = robot.q_ref.copy()
-        yaw = self._base_yaw(t)
-        Rz = pin.rpy.rpyToMatrix(0.0, 0.0, yaw)
+        # the standing base pose relative to the soles, turned with the heading
+        Rz = pin.rpy.rpyToMatrix(0.0, 0.0, self._base_yaw(t) - self.standing_heading)
         q_ref[:3] = com_ref + Rz @ self.base_offset
-        q_ref[3:7] = pin.Quaternion(Rz).coeffs()
+        q_ref[3:7] = pin.Quaternion(Rz @ self.base_rotation).coeffs()
         posture.q_ref = q_ref
         return stack, variables
 

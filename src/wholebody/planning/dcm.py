@@ -71,14 +71,17 @@ class DCMPlan:
 
     ``knot_times`` (K+1,) strictly increasing (K = 0: one knot, a constant ZMP), ``zmp_knots``
     (K+1, 2), ``com0`` (2,) the CoM at ``knot_times[0]``; ``dcm0`` (2,), optional, the DCM to
-    start from (replaces ``zmp_knots[0]``). Times before the first knot give the values at it.
+    start from: it replaces ``zmp_knots[solve_knot]`` (default the first; a later knot keeps the
+    first ZMP where it is, e.g. continuous with the ZMP commanded before a re-plan). Times before
+    the first knot give the values at it.
 
     Evaluation (:meth:`zmp`, :meth:`dcm`, :meth:`com`) takes a scalar time, giving (2,) arrays, or
     N times, giving (N, 2) arrays; each segment's constants are computed here, so a call is one
     search and a few operations on 2-vectors.
     """
 
-    def __init__(self, omega: float, knot_times, zmp_knots, com0, dcm0=None):
+    def __init__(self, omega: float, knot_times, zmp_knots, com0, dcm0=None,
+                 solve_knot: int = 0):
         self.omega = w = positive(omega, "omega")
         times = finite_array(knot_times, "knot_times")
         if times.ndim != 1 or times.size == 0:
@@ -94,24 +97,35 @@ class DCMPlan:
         c0 = finite_array(com0, "com0", shape=(2,))
         K = n - 1
 
-        # Backward pass: DCM at the knots, rest at the end (ξ_K = p_K).
         slope = np.zeros((n, 2))          # row K: the constant tail after t_K
-        slope[:K] = np.diff(zmp, axis=0) / steps[:, None]
         decay = np.exp(-w * steps)        # exp(-ω (t_{i+1} - t_i)), in (0, 1)
-        xi = np.empty((n, 2))
-        xi[K] = zmp[K]
-        for i in range(K - 1, -1, -1):
-            xi[i] = zmp[i] + slope[i] / w + decay[i] * (xi[i + 1] - zmp[i + 1] - slope[i] / w)
+
+        def backward(z):
+            """DCM at the knots of ZMP knots ``z``, at rest at the end (ξ_K = p_K), and the
+            segments' slopes."""
+            s = np.zeros((n, 2))
+            s[:K] = np.diff(z, axis=0) / steps[:, None]
+            x = np.empty((n, 2))
+            x[K] = z[K]
+            for i in range(K - 1, -1, -1):
+                x[i] = z[i] + s[i] / w + decay[i] * (x[i + 1] - z[i + 1] - s[i] / w)
+            return x, s
+
         if dcm0 is not None:
             target = finite_array(dcm0, "dcm0", shape=(2,))
-            if K == 0:
-                zmp[0] = target
-            else:
-                # ξ_0 = α p_0 + β p_1 + decay_0 (ξ_1 - p_1), α = 1 - β, β = (1 - decay_0) / (ω T_0)
-                beta = -math.expm1(-w * steps[0]) / (w * steps[0])
-                zmp[0] = (target - beta * zmp[1] - decay[0] * (xi[1] - zmp[1])) / (1.0 - beta)
-                slope[0] = (zmp[1] - zmp[0]) / steps[0]
-            xi[0] = target
+            if isinstance(solve_knot, bool) or not isinstance(solve_knot, (int, np.integer)) \
+                    or not 0 <= solve_knot <= K:
+                raise ValueError(f"solve_knot: expected an integer in [0, {K}], got "
+                                 f"{solve_knot!r}")
+            # ξ_0 is affine in the solved knot, with the same coefficient on x and y
+            zmp[solve_knot] = 0.0
+            base = backward(zmp)[0][0]
+            zmp[solve_knot] = 1.0
+            coefficient = backward(zmp)[0][0] - base
+            zmp[solve_knot] = (target - base) / coefficient
+        xi, slope = backward(zmp)
+        if dcm0 is not None:
+            xi[0] = target  # the same up to rounding
 
         # Per-segment constants; segment K is the tail [t_K, inf) with s = E = 0.
         gain = np.zeros((n, 2))

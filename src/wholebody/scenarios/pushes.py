@@ -92,6 +92,16 @@ class HumanoidScaled(RobotRelative):
                 "reference_leg_stretch_m": reference.HUMANOID_LEG_STRETCH}
 
 
+@dataclass(frozen=True)
+class FroudeScaled(HumanoidScaled):
+    """A speed (``height_power`` 0.5) or a rate (-0.5) at talos14's Froude number: ``amount``
+    times (h / h_talos14) ** height_power."""
+
+    def __str__(self) -> str:
+        ratio = "h / h_talos14" if self.height_power > 0 else "h_talos14 / h"
+        return f"{self.amount:g} {self.unit} x sqrt({ratio})"
+
+
 #: momentum-balance options of the push scenarios (see :func:`controller_options`)
 ANGULAR_WEIGHT = Parameter(
     "angular_weight", ANGULAR_MOMENTUM_WEIGHT,
