@@ -227,6 +227,51 @@ def _single_support_lift(s: Summary) -> tuple[str, str]:
     return text, REPRODUCED if ok else NOT_REPRODUCED
 
 
+def _walk(s: Summary) -> tuple[str, str]:
+    """The walk's targets: no fall, every cycle solved, no sole slipping by 1 cm while it stands,
+    80 % of the commanded displacement (the scenario's success), standing at the end."""
+    m = s["metrics"]
+    cycle = m["controller_cycle"]
+    text = (f"{m['steps']} steps, {'fell at ' + format(m['fell_at_s'], '.1f') + ' s' if m['fallen'] else 'no fall'}; "
+            f"forward {m['mean_forward_speed_mps'] or 0.0:.2f} m/s "
+            f"({m['commanded_forward_speed_mps'] or 0.0:.2f} asked); turn "
+            f"{m['heading_change_deg']:.0f}° ({m['commanded_heading_change_deg']:.0f}° asked); "
+            f"side-step {m['side_step_displacement_m'] or 0.0:.2f} m "
+            f"({m['commanded_side_step_m']:.2f} m asked); net displacement "
+            f"{100 * (m['displacement_ratio'] or 0.0):.0f} % of the commanded; sole slip ≤ "
+            f"{mm(m['max_sole_slip_per_stance_m'])} per stance; largest torque step at a contact "
+            f"switch {m['max_torque_step_at_contact_switch_Nm'] or 0.0:.1f} Nm (anywhere "
+            f"{m['max_torque_step_Nm']:.1f} Nm); {m['failed_cycles']} failed cycles; "
+            f"{'standing' if m['standing_at_end'] else 'not standing'} at the end; cycle "
+            f"median {cycle['median_ms'] or 0.0:.2f} ms, p99 {cycle['p99_ms'] or 0.0:.2f} ms")
+    return text, OURS if s["success"] and m["standing_at_end"] else NOT_REPRODUCED
+
+
+def _push_step(s: Summary) -> tuple[str, str]:
+    """Every direction's strongest survived push (bisection) at least ``dv`` (the target)."""
+    m, p = s["metrics"], s["parameters"]
+    target = float(p["dv"])
+    rows = m["angles"]
+    best = {a: r["strongest_survived_dv_mps"] for a, r in rows.items()}
+    text = "strongest survived Δv by stepping: " + ", ".join(
+        f"{a}°: {'none' if v is None else format(v, '.2f')} m/s" for a, v in best.items()) + (
+        f" (target {target:.2f} m/s from every side; bisection between "
+        f"{float(p['bisect_low']):.2f} and {float(p['bisect_high']):.2f} m/s)")
+    ok = all(v is not None and v >= target for v in best.values())
+    return text, OURS if ok else NOT_REPRODUCED
+
+
+def _walk_push(s: Summary) -> tuple[str, str]:
+    """Every push direction recovered while walking on."""
+    m, p = s["metrics"], s["parameters"]
+    rows = m["angles"]
+    text = (f"Δv {float(p['dv']):.2f} m/s mid single support of step {p['push_step']}: " + ", ".join(
+        f"{a}°: {'walks on' if r['recovered'] else ('falls' if r['fallen'] else 'not recovered')}"
+        f" ({r['steps']} steps, {100 * (r['displacement_ratio'] or 0.0):.0f} % of the "
+        f"distance)" for a, r in rows.items()))
+    return text, OURS if s["success"] else NOT_REPRODUCED
+
+
 def _single_support_pushes(s: Summary) -> tuple[str, str]:
     """Every push on one foot recovered (the scenario's criterion: the CoG back within 5 mm of its
     reference): the one with the foot held up and the one at the hip during the leg swinging."""
@@ -337,6 +382,17 @@ HERZOG = (
     Claim("single-support-pushes-lqr", "herzog2016", "Sect. 5.4",
           "Pushes on one foot, LQR", "survives",
           run("single-support", "lqr"), _single_support_pushes),
+    Claim("walk", "herzog2016", "Sect. 5.2.2, Sect. 6 (the next step)",
+          "Walking on the hierarchy (DCM reference, Tables 2/4): 20 steps forward at 0.4 m/s, a "
+          "90° turn, 1 m sideways, stop", "— (named as future work)",
+          run("walk"), _walk),
+    Claim("push-step", "herzog2016", "Sect. 5.2.2 (the next step)",
+          "Pushes beyond the feet-flat limit recovered by stepping: Δv ≥ 0.6 m/s at the hip from "
+          "front, left, back and right", "— (named as future work)",
+          run("push-step", angles="0,90,180,270", bisect="true"), _push_step),
+    Claim("walk-push", "herzog2016", "Sect. 5.2.2 (the next step)",
+          "Pushes of Δv 0.2 m/s mid single support while walking, from four sides: walks on",
+          "— (named as future work)", run("walk-push"), _walk_push),
     Claim("fig11-sines", "herzog2016", "Fig. 11",
           "Hip/knee sines tracked on one foot while pushed at the hip (PD)", "tracked",
           run("single-support", "pd"), _single_support_sines),

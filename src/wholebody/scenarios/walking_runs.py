@@ -202,17 +202,22 @@ def timing_ms(cycle_times) -> dict:
 
 
 def step_rows(run: WalkRun) -> list[dict]:
-    """Each step taken: sole, lift-off, touchdown, recovery or not, landing point relative to
-    where that sole started."""
+    """Each step taken: sole, lift-off and touchdown times, recovery or not, the planned footstep
+    and the adjusted target (world x, y and yaw), where the sole landed in the twin (world x, y)
+    and that relative to where it started."""
     t, rows = run.a["t"], []
     for s in run.ctrl.steps:
         row = {"contact": s.contact, "lift_off_s": float(s.lift_off),
                "touchdown_s": float(s.touchdown) if np.isfinite(s.touchdown) else None,
-               "recovery": bool(s.recovery), "landing_from_start_xy_m": None}
+               "recovery": bool(s.recovery),
+               "planned_xy_m": [float(x) for x in s.planned[:2]],
+               "target_xy_m": [float(x) for x in s.target[:2]], "yaw_rad": float(s.yaw),
+               "landed_xy_m": None, "landing_from_start_xy_m": None}
         if np.isfinite(s.touchdown):
             k = min(int(np.searchsorted(t, s.touchdown)), len(t) - 1)
-            row["landing_from_start_xy_m"] = (run.poses[s.contact][0][k, :2]
-                                              - run.poses[s.contact][0][0, :2]).tolist()
+            landed = run.poses[s.contact][0][k, :2]
+            row["landed_xy_m"] = landed.tolist()
+            row["landing_from_start_xy_m"] = (landed - run.poses[s.contact][0][0, :2]).tolist()
         rows.append(row)
     return rows
 
@@ -395,6 +400,7 @@ def walk_metrics(robot, params: dict, parts: list[Part], run: WalkRun) -> dict:
         "max_torque_step_at_contact_switch_Nm": jump_switch,
         "standing_at_end": run.ctrl.phase.kind == "stand",
         "controller_cycle": timing_ms(run.ctrl.cycle_times),
+        "footsteps": step_rows(run),
     }
 
 
