@@ -1,102 +1,105 @@
-"""Closed-loop walking and push-recovery runs of :class:`~wholebody.control.Walking` in the MuJoCo
-twin, printed as the table of docs/results.md ("Walking and stepping").
+"""Ten steps forward on every humanoid we have, on the walking controller's defaults: which walk,
+how far, and the controller's time per cycle. Prints the table of docs/results.md ("Walking and
+stepping").
 
-Each case is one deterministic simulation on the controller's defaults
-(``WalkingConfig.for_robot``): a velocity command (forward, lateral, yaw rate, speeds in m/s on
-talos14 times sqrt(h / h_talos14)) held from 0.5 s, then zero for the last 3 s; or a 0.1 s
-half-sine push at the base (hip height) from 1 s along ``angle`` (the ``push`` scenario's
-convention: 0 pushes the front toward -x, 90 the left side toward -y), 5 s in all. Fallen: the
-base below 60 % of its standing height. The controller's wall time per cycle (native engine when
-built) is timed here too: run with ``OPENBLAS_NUM_THREADS=1`` on an otherwise idle machine for
-timings worth quoting.
+Each robot: :class:`~wholebody.control.Walking` with ``WalkingConfig.for_robot`` in the MuJoCo twin
+(one deterministic run); standing 0.5 s, then forward at 0.4 m/s x sqrt(h / h_talos14) (the
+speed ramped in over 1 s) until ten steps have touched down, then a zero command and 3 s to stop
+(40 s at most). Fallen: :func:`~wholebody.scenarios.measures.fallen`. The robots: the presets
+talos14, talos, romeo and G1, iCub, Alexander as docs/robots.md describes them (the descriptions
+of tests/conftest.py). Times per cycle are the controller's wall time (native engine when built):
+run with ``OPENBLAS_NUM_THREADS=1`` on an otherwise idle machine and ``--jobs 1`` for timings worth
+quoting.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/walking.py [--jobs 2]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/walking.py [--jobs 2] [--robots talos14,g1]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 import wholebody as wb
-from wholebody.control import Walking, WalkingConfig
+from wholebody.control import Walking
 from wholebody.robots.reference import humanoid_length_ratio
-from wholebody.sim.disturbance import Push
-from wholebody.sim.simulator import Simulator
+from wholebody.scenarios.walking_runs import simulate, timing_ms, torque_steps
 
-WALKS = [("talos14", (0.4, 0.0, 0.0), 15.0), ("talos14", (0.1, 0.0, 0.3), 10.0),
-         ("talos14", (0.0, 0.1, 0.0), 10.0), ("talos", (0.3, 0.0, 0.0), 10.0),
-         ("romeo", (0.2, 0.0, 0.0), 10.0)]
-PUSHES = [("talos14", dv, angle, True) for dv in (0.4, 0.5, 0.6) for angle in (0, 90, 180, 270)]
-PUSHES += [("talos14", 0.5, 0, False), ("talos14", 0.5, 180, False)]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from conftest import (ICUB_RIGHT_LEG_INERTIAS, alexander_description,  # noqa: E402
+                      g1_description, icub_description)
 
-
-def _fallen(robot, q) -> bool:
-    return q[2] < 0.6 * robot.q_ref[2]
-
-
-def walk(case) -> dict:
-    name, command, duration = case
-    robot = wb.load_robot(name)
-    scale = math.sqrt(humanoid_length_ratio(robot))
-    ctrl, sim = Walking(robot), Simulator(robot)
-    fails, fell = 0, False
-    while sim.t < duration:
-        q, v = sim.state()
-        on = 0.5 < sim.t < duration - 3.0
-        ramp = min(1.0, max(sim.t - 0.5, 0.0))  # 1 s ramp of the forward speed
-        ctrl.set_command(*((ramp * command[0] * scale, command[1] * scale, command[2])
-                           if on else (0.0, 0.0, 0.0)))
-        sol = ctrl.compute(q, v, sim.t)
-        fails += not sol.ok
-        if _fallen(robot, q):
-            fell = True
-            break
-        sim.step(sol.tau)
-    yaw = pin.rpy.matrixToRpy(pin.Quaternion(q[3:7]).toRotationMatrix())[2]
-    times = 1e3 * np.array(ctrl.cycle_times[50:])
-    return {"case": f"walk {name} cmd {tuple(round(c * (scale if i < 2 else 1), 3) for i, c in enumerate(command))}",
-            "fell": fell, "t_end": round(sim.t, 2), "steps": len(ctrl.steps),
-            "base_xy": q[:2].round(3).tolist(), "yaw_deg": round(math.degrees(yaw), 1),
-            "failed_cycles": fails, "standing": ctrl.phase.kind == "stand",
-            "cycle_ms_median": round(float(np.median(times)), 3),
-            "cycle_ms_p99": round(float(np.percentile(times, 99)), 3)}
+ROBOTS = {"talos14": "talos14", "talos": "talos", "romeo": "romeo",
+          "g1": lambda: g1_description(armature=0.02),
+          "icub": lambda: icub_description(inertia_overrides=ICUB_RIGHT_LEG_INERTIAS),
+          "alexander": alexander_description}
+STEPS, SETTLE, LONGEST = 10, 3.0, 40.0
 
 
-def push(case) -> dict:
-    name, dv, angle, stepping = case
-    robot = wb.load_robot(name)
-    ctrl = Walking(robot, WalkingConfig.for_robot(robot, stepping=stepping))
-    sim = Simulator(robot)
-    a, duration = math.radians(angle), 0.1
-    peak = dv * robot.mass / (2.0 / math.pi * duration)
-    sim.add_push(Push(robot.base_frame, (-math.cos(a), -math.sin(a), 0.0), peak, 1.0, duration))
-    fell = False
-    while sim.t < 5.0:
-        q, v = sim.state()
-        sol = ctrl.compute(q, v, sim.t)
-        if _fallen(robot, q):
-            fell = True
-            break
-        sim.step(sol.tau)
-    return {"case": f"push {name} dv {dv} angle {angle} stepping {stepping}", "fell": fell,
-            "t_end": round(sim.t, 2), "steps": len(ctrl.steps),
-            "standing": ctrl.phase.kind == "stand",
-            "landed": [s.target[:2].round(3).tolist() for s in ctrl.steps]}
+def walk(name: str) -> dict:
+    source = ROBOTS[name]
+    robot = wb.load_robot(source() if callable(source) else source)
+    speed = 0.4 * math.sqrt(humanoid_length_ratio(robot))
+    ctrl = Walking(robot)
+    stop = {"at": None, "now": 0.0}
+
+    def landed() -> int:
+        return sum(1 for s in ctrl.steps if np.isfinite(s.touchdown))
+
+    def command(t: float):
+        stop["now"] = t
+        if stop["at"] is None and landed() >= STEPS:
+            stop["at"] = t
+        if t < 0.5 or stop["at"] is not None:
+            return (0.0, 0.0, 0.0)
+        return (min(1.0, t - 0.5) * speed, 0.0, 0.0)
+
+    run = simulate(robot, ctrl, LONGEST, command=command,
+                   until=lambda: stop["at"] is not None and stop["now"] > stop["at"] + SETTLE)
+    base = run.a["base_position"]
+    k = len(base) - 1
+    first = next((s.lift_off for s in ctrl.steps), None)
+    distance = float(base[k, 0] - base[0, 0])
+    moving = (stop["at"] - first) if stop["at"] is not None and first is not None else None
+    _, at_switch = torque_steps(run)
+    cycle = timing_ms(ctrl.cycle_times)
+    return {"robot": name, "mass_kg": round(robot.mass, 1), "command_mps": round(speed, 3),
+            "fell_at_s": run.fell_at, "steps": landed(), "distance_m": round(distance, 3),
+            "speed_mps": round(distance / moving, 3) if moving else None,
+            "failed_cycles": run.failed_cycles,
+            "standing_at_end": ctrl.phase.kind == "stand" and not run.fallen,
+            "torque_step_at_switch_Nm": round(at_switch or 0.0, 1),
+            "step_limit_m": round(ctrl.limits.forward, 3),
+            "cycle_median_ms": round(cycle["median_ms"], 3),
+            "cycle_p99_ms": round(cycle["p99_ms"], 3)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--robots", default=",".join(ROBOTS))
     args = parser.parse_args()
+    names = [n.strip() for n in args.robots.split(",") if n.strip()]
+    unknown = sorted(set(names) - set(ROBOTS))
+    if unknown:
+        parser.error(f"--robots: unknown {unknown}; known: {', '.join(ROBOTS)}")
     with ProcessPoolExecutor(args.jobs) as pool:
-        rows = list(pool.map(walk, WALKS)) + list(pool.map(push, PUSHES))
-    for row in rows:
-        print(row)
+        rows = list(pool.map(walk, names))
+    print("| robot | command | walks 10 steps | distance, speed | failed cycles | stands at the end "
+          "| largest torque step at a switch | step limit | cycle median / p99 |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        walked = r["steps"] >= STEPS and r["fell_at_s"] is None
+        fell = "" if r["fell_at_s"] is None else f"falls at {r['fell_at_s']:.2f} s after "
+        print(f"| {r['robot']} ({r['mass_kg']} kg) | {r['command_mps']} m/s | "
+              f"{'yes' if walked else 'no: ' + fell + str(r['steps']) + ' steps'} | "
+              f"{r['distance_m']} m, {r['speed_mps']} m/s | {r['failed_cycles']} | "
+              f"{'yes' if r['standing_at_end'] else 'no'} | {r['torque_step_at_switch_Nm']} Nm | "
+              f"{r['step_limit_m']} m | {r['cycle_median_ms']} / {r['cycle_p99_ms']} ms |")
 
 
 if __name__ == "__main__":

@@ -69,11 +69,11 @@ def relative_joint_gains(robot: Robot, frequency_hz: float = DEFAULT_FREQUENCY_H
     return omega ** 2 * inertia, 2.0 * float(damping_ratio) * omega * inertia
 
 
-def gravity_compensation(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+def gravity_compensation(robot: Robot, contacts=None) -> tuple[np.ndarray, np.ndarray]:
     """(τ_g, λ) at the robot's cached state (module docstring): the least-norm contact forces λ
     balancing the floating-base rows, J_bᵀ λ = h_b (Herzog et al. 2016, eq. 13), and the joint
-    torques τ_g = h_u − J_uᵀ λ (eq. 14)."""
-    J = robot.stacked_contact_jacobian()
+    torques τ_g = h_u − J_uᵀ λ (eq. 14); on ``contacts`` (names; default all of them)."""
+    J = robot.stacked_contact_jacobian(contacts)
     n = FREE_FLYER_NV
     lam, *_ = np.linalg.lstsq(J[:, :n].T, robot.h[:n], rcond=None)
     return robot.h[n:] - J[:, n:].T @ lam, lam

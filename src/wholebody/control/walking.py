@@ -66,6 +66,9 @@ GRAVITY = 9.81
 #: the yaw moment stay free (holding the touchdown's tangential force while the normal force
 #: ramps down squeezes the soles against each other up to their friction limit)
 UNLOAD_ROWS = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+#: weight of the posture task's base-orientation rows (as the Table 2/4 stacks of
+#: :class:`ContactSwitch`)
+BASE_ORIENTATION_WEIGHT = 1.0
 #: weight of the legs' posture rows while walking: the soles and the base fix the legs, and a
 #: posture row pulling a walking leg toward its standing angles only fights the swing task
 LEG_POSTURE_WEIGHT = 1e-3
@@ -202,7 +205,7 @@ class Walking:
         self.base_rotation = pin.Quaternion(robot.q_ref[3:7]).toRotationMatrix()  # standing
         self.formulation = Formulation(robot)
         task = {"posture_gains": c.posture_gains, "cop_margin": c.cop_margin,
-                "torsion": c.torsion, "base_orientation_weight": 1.0}
+                "torsion": c.torsion, "base_orientation_weight": BASE_ORIENTATION_WEIGHT}
         self.double = table2_stack(robot, self.soles, **task)
         self.unload = {s: ForceRegularizer(name=f"unload {s}", contacts=[s], weight=0.0)
                        for s in self.soles}

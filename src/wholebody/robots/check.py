@@ -107,6 +107,7 @@ def check_robot(name_or_path) -> RobotCheck:
     if report.ok and len(robot.contacts) == 2 and all(c.spec.type == "rectangle"
                                                       for c in robot.contacts):
         _single_support(robot, report)
+        _walking(robot, report)
     if report.ok and len(robot.contacts) == 4 and all(c.spec.type == "point"
                                                       for c in robot.contacts):
         _legs_reach(robot, report)
@@ -148,6 +149,59 @@ def _single_support(robot, report: RobotCheck) -> None:
                        f"over {stance}, no pose inside the joint limits has the CoG at its "
                        f"standing height; one has it {1e3 * drop:.1f} mm lower (single-support "
                        f"lowers the CoG until such a pose exists)")
+
+
+#: the share of a joint's torque limit that holding still on one sole may take before
+#: check-robot warns that walking leaves it too little for the motion
+WALKING_TORQUE_SHARE = 0.8
+
+
+def _walking(robot, report: RobotCheck) -> None:
+    """A biped's walking on the defaults of :class:`~wholebody.control.walking.Walking`: the
+    torques that hold it still on one sole at the walking height (the CoG over that sole,
+    :func:`~wholebody.planning.support_shift.shift_key_pose`; eq. 14 with that sole alone)
+    against the limits, and the step length the legs' reach allows
+    (:class:`~wholebody.planning.footsteps.StepLimits`) against what the ``walk`` scenario's
+    default speed asks. Not part of :func:`inspect_robot` (a few least squares and LPs)."""
+    from ..control.standing import gravity_compensation
+    from ..control.walking import WalkingConfig
+    from ..planning.footsteps import StepLimits
+    from ..planning.support_shift import KEY_POSE_TOLERANCE, shift_key_pose
+    from ..scenarios.walk import PARAMETERS
+
+    config = WalkingConfig.for_robot(robot)
+    worst = (0.0, "", 0.0, 0.0, "")
+    for stance, swing in (robot.contact_names, robot.contact_names[::-1]):
+        _, q, residual = shift_key_pose(robot, stance, swing, config.com_drop)
+        if residual > KEY_POSE_TOLERANCE:
+            return  # _single_support has said it
+        robot.update(q, np.zeros(robot.nv))
+        need, _ = gravity_compensation(robot, [stance])
+        lo, hi = robot.torque_bounds(q)
+        ratio = np.maximum(need / np.maximum(hi, 1e-12), need / np.minimum(lo, -1e-12))
+        k = int(np.argmax(ratio))
+        if ratio[k] > worst[0]:
+            worst = (float(ratio[k]), robot.joint_names[k], float(need[k]),
+                     float(hi[k] if need[k] > 0 else lo[k]), stance)
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    share, joint, need, limit, stance = worst
+    report.facts["walking_single_support_torque_max_fraction_of_limit"] = share
+    if share > WALKING_TORQUE_SHARE:
+        report.add("warning", "walking",
+                   f"standing still on {stance} at the walking height ({1e3 * config.com_drop:.0f} "
+                   f"mm below standing, the CoG over the sole) takes {need:.1f} Nm on '{joint}', "
+                   f"{share:.0%} of its {limit:.1f} Nm limit: walking on the defaults has too little "
+                   f"torque left to move and will fall",
+                   "stronger joints (torque_limits) or a walking config with a smaller com_drop")
+    limits = StepLimits.from_robot(robot, com_height_drop=config.com_drop)
+    period = config.single_support + config.double_support
+    speed = next(p.default for p in PARAMETERS if p.name == "speed").value(robot)
+    asked = speed * period
+    report.facts["walking_step_limit_m"] = limits.forward
+    if limits.forward < asked:
+        report.add("note", "walking",
+                   f"the legs' reach bounds a step to {limits.forward:.3f} m; the walk "
+                   f"scenario's default speed asks {asked:.3f} m per step: it walks slower")
 
 
 #: the slope check-robot reports a quadruped's trunk attitude for (the ramp scenario's default)

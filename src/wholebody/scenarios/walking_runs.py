@@ -84,10 +84,11 @@ def sole_outline(robot, sole: str, p, R) -> np.ndarray:
 def simulate(robot, ctrl: Walking, duration: float,
              command: Callable[[float], np.ndarray] | None = None,
              push: Callable[[WalkRun, float], Push | None] | None = None, progress: bool = False,
-             observers=(), label: str = "") -> WalkRun:
+             observers=(), label: str = "", until: Callable[[], bool] | None = None) -> WalkRun:
     """Run ``ctrl`` for ``duration`` s in the twin, fed ``command(t)`` (forward, lateral, yaw
     rate) when given; ``push(run, t)`` may return a push to apply from then on (asked each cycle
-    until it does). Stops at a fall (:func:`~wholebody.scenarios.measures.fallen`)."""
+    until it does). Stops at a fall (:func:`~wholebody.scenarios.measures.fallen`) or when
+    ``until()`` says so."""
     sim = Simulator(robot, observers=observers, label=label)
     run = WalkRun(ctrl, sim)
     rec = {k: [] for k in RECORDED}
@@ -132,9 +133,11 @@ def simulate(robot, ctrl: Walking, duration: float,
         if run.fell_at is None and fallen(tilt, q[2], h0):
             run.fell_at = t
 
+    def stop() -> bool:
+        return run.fallen or (until is not None and until())
+
     run.failed_cycles = run_closed_loop(sim, SimpleNamespace(compute=compute), duration,
-                                        progress=progress,
-                                        on_result=observe, until=lambda: run.fallen)
+                                        progress=progress, on_result=observe, until=stop)
     run.a = {k: np.asarray(v, dtype=float) for k, v in rec.items()}
     run.poses = {s: (np.asarray(p), np.asarray(R)) for s, (p, R) in run.poses.items()}
     return run
