@@ -210,7 +210,7 @@ def _cmd_run(args) -> int:
     print(f"wrote {out_dir / 'summary.json'}" +
           (f" and {len(result.figures)} figure(s)" if result.figures else ""))
     _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): {status}", out_dir,
-                  result.incidents)
+                  result.incidents, result.summary())
     return EXIT_OK if result.success else EXIT_SCENARIO_FAILED
 
 
@@ -265,14 +265,18 @@ def _observers(args, out_dir: Path):
     return (ReplayRecorder() if args.replay else None), (LiveView() if args.view else None)
 
 
-def _write_replay(recorder, title: str, out_dir: Path, incidents=None) -> None:
+def _write_replay(recorder, title: str, out_dir: Path, incidents=None, summary=None) -> None:
     """Write ``out_dir/replay.html`` from what ``recorder`` (``--replay``) saw, if anything, with
-    the run's ``incidents``."""
+    the run's ``incidents`` and the footsteps its ``summary`` records (one list per recording)."""
     if recorder is None or not any(r.frames for r in recorder.recordings):
         return
-    from .report.replay import write_replay
+    from .report.replay import summary_footsteps, write_replay
 
-    path = write_replay(out_dir / "replay.html", recorder.recordings, title, incidents)
+    footsteps = summary_footsteps(summary) if summary is not None else []
+    if len(footsteps) != len(recorder.recordings):
+        footsteps = None
+    path = write_replay(out_dir / "replay.html", recorder.recordings, title, incidents,
+                        footsteps)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
 
 

@@ -1,6 +1,7 @@
 """The replay page without a browser: self-contained (nothing fetched from the network), its frames
-are the simulator's log subsampled, its robot poses are Pinocchio's forward kinematics; and the
-command line refuses --replay/--view where they cannot work, before anything is simulated."""
+are the simulator's log subsampled, its robot poses are Pinocchio's forward kinematics, its capture
+point is CoM + v / omega, a walking run's footsteps come from its summary.json; and the command
+line refuses --replay/--view where they cannot work, before anything is simulated."""
 
 from __future__ import annotations
 
@@ -17,12 +18,14 @@ import pytest
 
 from wholebody.cli import main
 from wholebody.control.standing import StandingController
-from wholebody.report.replay import collada_drawable, replay_html, robot_visuals, unpack
+from wholebody.report.replay import (COLORS, build_commands, capture_points, collada_drawable,
+                                     pack, replay_html, robot_visuals, summary_footsteps, unpack,
+                                     write_replay)
 from wholebody.robots.locate import resolve_model_path
 from wholebody.scenarios import SCENARIOS, get_scenario
 from wholebody.scenarios.base import Scenario
 from wholebody.scenarios.loop import run_closed_loop
-from wholebody.sim.recorder import ReplayRecorder
+from wholebody.sim.recorder import Recording, ReplayRecorder
 from wholebody.sim.simulator import Simulator
 
 #: XML namespace names (three.js createElementNS, Collada meshes): identifiers, never fetched
@@ -343,3 +346,153 @@ def test_the_live_views_skeleton_leaves_the_dynamics_alone(name, robots, rng):
     np.testing.assert_array_equal(matrices[0][0], matrices[1][0])
     np.testing.assert_array_equal(matrices[0][1], matrices[1][1])
     assert matrices[0][2] == matrices[1][2]
+
+
+def _synthetic(robot, t, com, loaded, contact_z) -> Recording:
+    """A recording of ``robot`` at its reference posture whose CoM follows ``com`` (frames, 3) at
+    times ``t``; contact ``i`` at height ``contact_z[i]``, loaded where ``loaded`` (frames,
+    contacts) says."""
+    n = len(robot.contact_names)
+    rec = Recording(robot, "synthetic", float(t[1] - t[0]), [])
+    for k, tk in enumerate(t):
+        points = np.column_stack([0.1 * np.arange(n), np.zeros(n), contact_z])
+        rec.t.append(float(tk))
+        rec.q.append(robot.q_ref.copy())
+        rec.com.append(np.asarray(com[k], float))
+        rec.contact_points.append(points)
+        rec.contact_forces.append(np.zeros((n, 3)))
+        rec.loaded.append(np.asarray(loaded[k], bool))
+        rec.cop.append(points[np.asarray(loaded[k], bool)].mean(axis=0) if np.any(loaded[k])
+                       else np.full(3, np.nan))
+        rec.pushes.append([])
+        rec.body_poses.append([])
+    return rec
+
+
+def _tracks(commands: list[dict]) -> dict[str, dict[str, list]]:
+    """The animation's keys: node path -> track name -> [(frame, value)]."""
+    (animate,) = [c for c in commands if c["type"] == "set_animation"]
+    return {e["path"]: {t["name"]: [(k["time"], k["value"]) for k in t["keys"]]
+                        for t in e["clip"]["tracks"]} for e in animate["animations"]}
+
+
+def _at(keys: list, frame: int):
+    """A discrete track's value at ``frame``: its last key at or before it."""
+    return [v for k, v in keys if k <= frame][-1]
+
+
+def test_the_capture_point_is_com_plus_velocity_over_omega(robots):
+    """A CoM moving along a parabola (central differences are exact there): the capture point is
+    CoM_xy + v_xy / omega, omega = sqrt(g / z_c), z_c the CoM's height above the lowest loaded
+    contact, on that contact's height; hidden while nothing is loaded. The page animates its
+    marker there."""
+    robot = robots["hyq"]
+    t = 0.025 * np.arange(12)
+    com = np.column_stack([0.1 + 0.3 * t + 0.8 * t**2, -0.05 + 0.2 * t - 0.5 * t**2,
+                           0.55 + 0.1 * t])
+    velocity = np.column_stack([0.3 + 1.6 * t, 0.2 - 1.0 * t, np.full_like(t, 0.1)])
+    contact_z = 0.05 + 0.02 * np.arange(4)  # the lowest is contact 0
+    loaded = np.ones((12, 4), bool)
+    loaded[5:8, 0] = False  # then contact 1 is the lowest loaded
+    loaded[9] = False  # nothing loaded
+    rec = _synthetic(robot, t, com, loaded, contact_z)
+    support = np.where(loaded[:, 0], contact_z[0], contact_z[1])
+    omega = np.sqrt(9.81 / (com[:, 2] - support))
+    expected = np.column_stack([com[:, :2] + velocity[:, :2] / omega[:, None], support])
+    got = capture_points(rec)
+    assert np.isnan(got[9]).all()
+    shown = np.arange(12) != 9
+    np.testing.assert_allclose(got[shown], expected[shown], rtol=1e-9, atol=1e-12)
+    tracks = _tracks(unpack(pack(build_commands([rec])[0])))["/meshcat/run0/capture_point"]
+    h = float(robot.q_ref[2])
+    assert [v for _, v in tracks[".visible"]] == shown.tolist()
+    position = np.array([v for _, v in tracks[".position"]])
+    np.testing.assert_allclose(position[shown], expected[shown] + [0.0, 0.0, 0.004 * h],
+                               atol=1e-6)  # single precision
+
+
+#: footsteps as the walking scenarios' summary.json rows (more keys than the page draws)
+FOOTSTEPS = [
+    {"contact": "left_sole", "lift_off_s": 0.1, "touchdown_s": 0.3, "recovery": False,
+     "planned_xy_m": [0.18, 0.1], "target_xy_m": [0.2, 0.1], "yaw_rad": 0.3,
+     "landed_xy_m": [0.21, 0.1], "landing_from_start_xy_m": [0.2, 0.0]},
+    {"contact": "right_sole", "lift_off_s": 0.35, "touchdown_s": None, "recovery": True,
+     "planned_xy_m": [0.25, -0.1], "target_xy_m": [0.3, -0.12], "yaw_rad": -0.2,
+     "landed_xy_m": None, "landing_from_start_xy_m": None},
+    {"contact": "left_sole", "lift_off_s": 0.9, "touchdown_s": 1.5, "recovery": False,
+     "planned_xy_m": [0.5, 0.1], "target_xy_m": [0.5, 0.1], "yaw_rad": 0.0,
+     "landed_xy_m": [0.5, 0.1], "landing_from_start_xy_m": [0.5, 0.0]},  # after the last frame
+]
+
+
+@pytest.fixture(scope="module")
+def standing_talos(robots):
+    """talos14 standing still on a floor at z = 0.02 for 0.5 s (21 frames), without simulating."""
+    robot = robots["talos14"]
+    t = 0.025 * np.arange(21)
+    com = np.tile(np.r_[0.0, 0.0, 0.9], (21, 1))
+    return _synthetic(robot, t, com, np.ones((21, 2), bool), np.full(2, 0.02))
+
+
+def test_a_walking_summary_draws_its_footsteps(standing_talos, robots, tmp_path):
+    """The footsteps of a walking run's summary (as `wholebody run` passes them) are in the
+    page's settings and drawn: each target as its sole's rectangle on the support, at its
+    yaw, shown from its lift-off, filled from its touchdown, a recovery step in its own colour;
+    one planned after the last frame is left out."""
+    robot = robots["talos14"]
+    summary = {"scenario": "walk", "robot": "talos14", "metrics": {"steps": 3,
+                                                                 "footsteps": FOOTSTEPS}}
+    html = write_replay(tmp_path / "replay.html", [standing_talos],
+                        footsteps=summary_footsteps(summary)).read_text()
+    settings = json.loads(_element(html, "wb-settings"))
+    keys = ("contact", "lift_off_s", "touchdown_s", "recovery", "target_xy_m", "yaw_rad")
+    assert settings["footsteps"] == [[{k: s[k] for k in keys} for s in FOOTSTEPS[:2]]]
+    commands = _commands(html)
+    objects = {c["path"]: c for c in commands if c["type"] == "set_object"}
+    objects.update({c["path"]: objects[c["source"]] for c in commands if c["type"] == "clone"})
+    placed = {c["path"]: np.asarray(c["matrix"], float).reshape(4, 4).T for c in commands
+              if c["type"] == "set_transform"}
+    tracks = _tracks(commands)
+    assert not any(p.startswith("/meshcat/run0/footsteps/2") for p in objects)
+    lift, land = {0: 4, 1: 14}, {0: 12, 1: None}  # first frames at or after the times
+    for j, step in enumerate(FOOTSTEPS[:2]):
+        node = f"/meshcat/run0/footsteps/{j}"
+        yaw = step["yaw_rad"]
+        np.testing.assert_allclose(placed[node][:3, 3], [*step["target_xy_m"], 0.02], atol=1e-9)
+        np.testing.assert_allclose(placed[node][:2, :2], [[np.cos(yaw), -np.sin(yaw)],
+                                                          [np.sin(yaw), np.cos(yaw)]], atol=1e-9)
+        fill = objects[f"{node}/fill"]["object"]
+        vertices = np.frombuffer(fill["geometries"][0]["data"]["attributes"]["position"]["array"]
+                                 .data, np.float32).reshape(-1, 3)
+        half = robot.contact(step["contact"]).spec.half_size
+        np.testing.assert_allclose(np.abs(vertices[:, :2]), np.tile(half, (4, 1)), rtol=1e-6)
+        color = COLORS["recovery" if step["recovery"] else "footstep"]
+        for part in ("outline", "fill"):
+            assert objects[f"{node}/{part}"]["object"]["materials"][0]["color"] == color
+        shown = [_at(tracks[node][".visible"], k) for k in range(21)]
+        assert shown == [k >= lift[j] for k in range(21)], j
+        filled = [_at(tracks[f"{node}/fill"][".visible"], k) for k in range(21)]
+        assert filled == [land[j] is not None and k >= land[j] for k in range(21)], j
+
+
+def test_footsteps_for_another_number_of_runs_are_refused(standing_talos, tmp_path):
+    """No footsteps, no footstep drawn; footsteps for a different number of recordings are
+    refused."""
+    html = write_replay(tmp_path / "replay.html", [standing_talos]).read_text()
+    assert json.loads(_element(html, "wb-settings"))["footsteps"] == [[]]
+    assert not any("/footsteps/" in c.get("path", "") for c in _commands(html))
+    with pytest.raises(ValueError, match="2 footstep lists for 1 recordings"):
+        build_commands([standing_talos], [FOOTSTEPS, FOOTSTEPS])
+
+
+@pytest.mark.parametrize(("metrics", "expected"), [
+    ({"steps": 8, "footsteps": [{"contact": "a"}]}, [[{"contact": "a"}]]),  # walk
+    ({"steps_taken": 1, "steps": [{"contact": "b"}]}, [[{"contact": "b"}]]),  # push-step
+    ({"angles": {"0": {"footsteps": [{"contact": "a"}]}, "90": {"footsteps": []}}},
+     [[{"contact": "a"}], []]),  # walk-push: one run per angle, in order
+    ({"angles": {"0": {"steps": [{"contact": "b"}]}}}, [[{"contact": "b"}]]),  # push-step angles
+    ({"angles": {"0": {"strongest_survived_dv_mps": 0.5, "trials": []}}}, []),  # a bisection
+    ({"duration": 4.0}, []),
+])
+def test_summary_footsteps(metrics, expected):
+    assert summary_footsteps({"metrics": metrics}) == expected

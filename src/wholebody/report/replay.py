@@ -3,14 +3,18 @@
 The scene is built with meshcat (its three.js viewer and animation player, ``main.min.js``, are
 embedded in the page): the robot's URDF visual meshes loaded by Pinocchio's ``MeshcatVisualizer``,
 the twin's environment geoms (floor, boxes, ramps, platform, board), contact forces and pushes as
-arrows, CoM and CoP markers, all animated by one meshcat ``Animation``. No meshcat server runs: the
-viewer's commands are recorded by :class:`_CommandLog`, packed with msgpack, gzipped and embedded in
-base64; the page unpacks them with the browser's ``DecompressionStream`` and feeds them to
+arrows, CoM, CoP and capture-point markers, the footsteps of a walking run as sole outlines on the
+floor, all animated by one meshcat ``Animation``. No meshcat server runs: the viewer's commands are
+recorded by :class:`_CommandLog`, packed with msgpack, gzipped and embedded in base64; the page
+unpacks them with the browser's ``DecompressionStream`` and feeds them to
 ``viewer.handle_command_bytearray``. Opens from disk, no network.
 
 Sizes are robot-relative: ``h`` is the robot's standing base height (``robot.q_ref[2]``), ``W`` its
 weight; a contact force of ``W`` is drawn ``FORCE_LENGTH h`` long, a push ``PUSH_GAIN`` times
 longer.
+The capture point is CoM_xy + v_xy / omega, omega = sqrt(g / z_c), z_c the CoM's height above the
+lowest loaded contact point, v the CoM velocity from central differences of the recorded frames.
+The footsteps come from ``summary.json`` (:func:`summary_footsteps`).
 Several recordings (a comparison of two controllers) are laid out side by side along y.
 """
 
@@ -47,7 +51,12 @@ FLOOR_SIZE = 20.0  # side of the drawn floor, in h
 GRID_CELL = 0.5  # side of the grid cells drawn on the floor and the scene's boxes, in h
 SHOWN_INCIDENTS = 8  # incidents listed on the page (summary.json has them all)
 COLORS = {"contact": 0x2f6fdf, "push": 0xd02090, "com": 0xe02020, "cop": 0x10a040,
+          "capture_point": 0x8a2be2, "footstep": 0x0097a7, "recovery": 0xf57c00,
           "floor": 0xd8d8dc}
+SOLE_LINE = 0.008  # width of a footstep's outline, in h
+LANDED_OPACITY = 0.45  # of a landed footstep's fill
+#: what the page draws of each footstep (summary.json's rows carry more)
+FOOTSTEP_KEYS = ("contact", "lift_off_s", "touchdown_s", "recovery", "target_xy_m", "yaw_rad")
 
 
 COMMAND, CLONE = b"\x00", b"\x01"  # record kinds of the page's data
@@ -328,15 +337,139 @@ def _robot_bounds(model: pin.Model, visual: pin.GeometryModel, q) -> tuple[np.nd
     return points.min(axis=0), points.max(axis=0)
 
 
-def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
+def support_heights(arrays: dict) -> np.ndarray:
+    """Per frame of :meth:`Recording.arrays`, the height of the lowest loaded contact point (NaN
+    while nothing is loaded)."""
+    z = np.where(arrays["loaded"], arrays["contact_points"][..., 2], np.inf)
+    low = z.min(axis=1) if z.shape[1] else np.full(len(z), np.inf)
+    return np.where(np.isfinite(low), low, np.nan)
+
+
+def capture_points(recording: Recording) -> np.ndarray:
+    """Per frame, the instantaneous capture point (x, y, z): CoM_xy + v_xy / omega with omega =
+    sqrt(g / z_c), z_c the CoM's height above the lowest loaded contact point (z: that point's
+    height), v the CoM's velocity from central differences of the frames (second order, also at
+    the ends); NaN while nothing is loaded or the CoM is not above the support."""
+    arrays = recording.arrays()
+    t, com = arrays["t"], arrays["com"]
+    if len(t) > 2:
+        velocity = np.gradient(com, t, axis=0, edge_order=2)
+    elif len(t) == 2:
+        velocity = np.gradient(com, t, axis=0)
+    else:
+        velocity = np.zeros_like(com)
+    g = float(np.linalg.norm(recording.robot.model.gravity.linear))
+    support = support_heights(arrays)
+    height = com[:, 2] - support
+    with np.errstate(invalid="ignore", divide="ignore"):
+        omega = np.sqrt(g / np.where(height > 0, height, np.nan))
+    out = np.empty_like(com)
+    out[:, :2] = com[:, :2] + velocity[:, :2] / omega[:, None]
+    out[:, 2] = support
+    out[~np.isfinite(omega)] = np.nan
+    return out
+
+
+def summary_footsteps(summary: dict) -> list[list[dict]]:
+    """The footsteps of each run that a ``summary.json`` records, in the order of the runs:
+    ``metrics["footsteps"]`` (``walk``), ``metrics["steps"]`` (``push-step``, one angle), or
+    those of each entry of ``metrics["angles"]`` (``walk-push``, ``push-step`` over angles);
+    ``[]`` if it records none."""
+    def steps(metrics) -> list[dict] | None:
+        if not isinstance(metrics, dict):
+            return None
+        for key in ("footsteps", "steps"):  # walk's "steps" is a count
+            if isinstance(metrics.get(key), list):
+                return metrics[key]
+        return None
+
+    metrics = summary.get("metrics") or {}
+    own = steps(metrics)
+    if own is not None:
+        return [own]
+    per_angle = [steps(m) for m in (metrics.get("angles") or {}).values()]
+    return per_angle if per_angle and all(s is not None for s in per_angle) else []
+
+
+def _footstep_shapes(robot, contact: str, h: float):
+    """The meshcat geometries of a footstep of ``contact`` (a sole): its outline (a flat frame
+    SOLE_LINE h wide along the rectangle's edge) and its fill, in the sole's frame."""
+    import meshcat.geometry as mg
+
+    hx, hy = (float(x) for x in robot.contact(contact).spec.half_size)
+    w = 0.5 * SOLE_LINE * h
+    outer = [[hx + w, hy + w], [-hx - w, hy + w], [-hx - w, -hy - w], [hx + w, -hy - w]]
+    inner = [[max(hx - w, 0.0), max(hy - w, 0.0)], [-max(hx - w, 0.0), max(hy - w, 0.0)],
+             [-max(hx - w, 0.0), -max(hy - w, 0.0)], [max(hx - w, 0.0), -max(hy - w, 0.0)]]
+    vertices = np.array([[x, y, 0.0] for x, y in outer + inner])
+    faces = [f for i in range(4) for f in ([i, (i + 1) % 4, 4 + i],
+                                           [(i + 1) % 4, 4 + (i + 1) % 4, 4 + i])]
+    fill = np.array([[hx, hy, 0.0], [-hx, hy, 0.0], [-hx, -hy, 0.0], [hx, -hy, 0.0]])
+    return (mg.TriangularMeshGeometry(vertices, faces),
+            mg.TriangularMeshGeometry(fill, [[0, 1, 2], [0, 2, 3]]))
+
+
+def _draw_footsteps(vis, animation, root: str, robot, footsteps: Sequence[dict],
+                    t: np.ndarray, support: np.ndarray, h: float) -> list[dict]:
+    """Each footstep's target as an outline of its sole on the floor (at the height of the
+    support when it lifted off), shown from its lift-off (planned) and filled from its
+    touchdown (landed); recovery steps in their own colour. Animated by visibility keys at the
+    first frame, the frames where it changes and the last frame. Returns the footsteps drawn (the
+    page's settings: FOOTSTEP_KEYS of each)."""
+    import meshcat.geometry as mg
+
+    last, drawn = len(t) - 1, []
+    known = np.flatnonzero(np.isfinite(support))
+    for j, step in enumerate(footsteps):
+        if step.get("contact") not in robot.contact_names or step.get("lift_off_s") is None:
+            continue
+        if robot.contact(step["contact"]).spec.type == "point":
+            continue  # footsteps are of soles
+        lift = int(np.searchsorted(t, float(step["lift_off_s"]) - 1e-9))
+        if lift > last:
+            continue  # planned after the last frame
+        touchdown = step.get("touchdown_s")
+        land = (int(np.searchsorted(t, float(touchdown) - 1e-9)) if touchdown is not None
+                else last + 1)
+        before = known[known <= lift]
+        z = (support[before[-1]] if len(before) else support[known[0]] if len(known) else 0.0)
+        x, y = (float(v) for v in step["target_xy_m"])
+        yaw = float(step.get("yaw_rad") or 0.0)
+        rotation = np.array([[math.cos(yaw), -math.sin(yaw), 0.0],
+                             [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+        color = COLORS["recovery" if step.get("recovery") else "footstep"]
+        outline, fill = _footstep_shapes(robot, step["contact"], h)
+        path = f"{root}/footsteps/{j}"
+        vis[f"{path}/outline"].set_object(outline, mg.MeshBasicMaterial(color=color))
+        vis[f"{path}/fill"].set_object(fill, mg.MeshBasicMaterial(
+            color=color, opacity=LANDED_OPACITY, depthWrite=False))
+        vis[f"{path}/outline"].set_transform(_homogeneous([0.0, 0.0, 0.003 * h]))
+        vis[f"{path}/fill"].set_transform(_homogeneous([0.0, 0.0, 0.002 * h]))
+        vis[path].set_transform(_homogeneous([x, y, float(z)], rotation=rotation))
+        for node, start in ((path, lift), (f"{path}/fill", land)):
+            for k in sorted({0, min(start, last), last}):
+                animation.at_frame(vis, k)[node].set_property("visible", "bool", k >= start)
+        drawn.append({key: step.get(key) for key in FOOTSTEP_KEYS})
+    return drawn
+
+
+def build_commands(recordings: Sequence[Recording],
+                   footsteps: Sequence[Sequence[dict]] | None = None
+                   ) -> tuple[list[bytes], dict]:
     """The records (packed meshcat commands, clones) that build and animate the scene of
     ``recordings`` (all of one robot), and the page's settings (time span, frame rate, camera,
-    legend)."""
+    legend, footsteps). ``footsteps``: one list per recording (``summary.json``'s rows, see
+    :func:`summary_footsteps`), or None."""
     import meshcat
     import meshcat.animation
     import meshcat.geometry as mg
     from pinocchio.visualize import MeshcatVisualizer
 
+    footsteps = list(footsteps or [])
+    if footsteps and len(footsteps) != len(recordings):
+        raise ValueError(f"replay: {len(footsteps)} footstep lists for {len(recordings)} "
+                         f"recordings")
+    footsteps = [f for r, f in zip(recordings, footsteps or [()] * len(recordings)) if r.frames]
     recordings = [r for r in recordings if r.frames]
     if not recordings:
         raise ValueError("replay: nothing was recorded (no simulation step)")
@@ -361,6 +494,7 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
     half = np.maximum(0.5 * (hi - lo), 0.5 * FLOOR_SIZE * h)
     lo, hi = centre - half, centre + half
     animation = meshcat.animation.Animation(default_framerate=1.0 / period)
+    drawn_steps = []
     for i, (rec, offset) in enumerate(zip(recordings, offsets)):
         root = f"run{i}"
         vis[root].set_transform(_homogeneous(offset))
@@ -399,9 +533,16 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
         pushes = [_Arrow(vis, f"{root}/pushes/{j}", 1.3 * r, COLORS["push"])
                   for j in range(arrays["push_forces"].shape[1])]
         _marker(vis, f"{root}/com", mg.Sphere(0.035 * h), COLORS["com"])
-        _marker(vis, f"{root}/com_ground", mg.Cylinder(0.004 * h, 0.022 * h), COLORS["com"], 12)
+        _marker(vis, f"{root}/com_ground", mg.Cylinder(0.004 * h, 0.022 * h), COLORS["com"], 13)
         _marker(vis, f"{root}/cop", mg.Cylinder(0.006 * h, 0.04 * h), COLORS["cop"])
+        # between the CoP (larger, under) and the CoM's projection (smaller, over): all three
+        # stay visible where they coincide
+        _marker(vis, f"{root}/capture_point", mg.Cylinder(0.005 * h, 0.03 * h),
+                COLORS["capture_point"], 12)
         flat = _homogeneous(np.zeros(3), rotation=_turn_to(np.array([0.0, 0.0, 1.0])))
+        capture = capture_points(rec)
+        drawn_steps.append(_draw_footsteps(vis, animation, root, robot, footsteps[i],
+                                           arrays["t"], support_heights(arrays), h))
         force_scale = FORCE_LENGTH * h / weight
         for k in range(rec.frames):
             frame = animation.at_frame(vis, k)
@@ -427,6 +568,10 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
                 point = point + [0.0, 0.0, 0.004 * h] if ground else com
                 frame[f"{root}/{name}"].set_property("visible", "bool", ground)
                 frame[f"{root}/{name}"].set_transform(_homogeneous(point) @ flat)
+            shown = bool(np.isfinite(capture[k]).all())  # hidden (at the CoM) without support
+            point = capture[k] + [0.0, 0.0, 0.004 * h] if shown else com
+            frame[f"{root}/capture_point"].set_property("visible", "bool", shown)
+            frame[f"{root}/capture_point"].set_transform(_homogeneous(point) @ flat)
     vis.set_animation(animation, play=False, repetitions=1)
     t0 = float(recordings[0].t[0])
     frames = max(r.frames for r in recordings)
@@ -439,6 +584,7 @@ def build_commands(recordings: Sequence[Recording]) -> tuple[list[bytes], dict]:
                  for i, (r, o) in enumerate(zip(recordings, offsets))],
         "scale": {"weight_N": weight, "weight_length_m": FORCE_LENGTH * h, "push_gain": PUSH_GAIN},
         "colors": {k: f"#{v:06x}" for k, v in COLORS.items() if k != "floor"},
+        "footsteps": drawn_steps,
     }
     return window.records, settings
 
@@ -502,10 +648,12 @@ def unpack(text: str) -> list[dict]:
 
 
 def replay_html(recordings: Sequence[Recording], title: str = "",
-                incidents: Sequence[dict] | None = None) -> str:
+                incidents: Sequence[dict] | None = None,
+                footsteps: Sequence[Sequence[dict]] | None = None) -> str:
     """The self-contained replay page of ``recordings``; ``incidents`` (``summary.json``'s, see
-    :mod:`wholebody.sim.incidents`) are listed on it as links to their times."""
-    commands, settings = build_commands(recordings)
+    :mod:`wholebody.sim.incidents`) are listed on it as links to their times; ``footsteps`` (one
+    list per recording, see :func:`summary_footsteps`) are drawn on the floor."""
+    commands, settings = build_commands(recordings, footsteps)
     settings["title"] = title or recordings[0].robot.name
     settings["incidents"] = list(incidents or ())
     settings["shown_incidents"] = SHOWN_INCIDENTS
@@ -515,9 +663,11 @@ def replay_html(recordings: Sequence[Recording], title: str = "",
 
 
 def write_replay(path, recordings: Sequence[Recording], title: str = "",
-                 incidents: Sequence[dict] | None = None) -> Path:
-    """Write :func:`replay_html` to ``path``; returns the path."""
+                 incidents: Sequence[dict] | None = None,
+                 footsteps: Sequence[Sequence[dict]] | None = None) -> Path:
+    """Write :func:`replay_html` to ``path``; returns the path. ``footsteps``: one list per
+    recording (:func:`summary_footsteps` of the run's summary), or None."""
     path = Path(path)
-    path.write_text(replay_html(recordings, title, incidents), encoding="utf-8")
+    path.write_text(replay_html(recordings, title, incidents, footsteps), encoding="utf-8")
     log.info("replay: wrote %s (%.1f MB)", path, path.stat().st_size / 1e6)
     return path

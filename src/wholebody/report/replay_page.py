@@ -62,7 +62,12 @@ _SCRIPT = r"""
     let out = item(c.contact, `contact forces (weight ${s.weight_N.toFixed(0)} N = ` +
                    `${s.weight_length_m.toFixed(2)} m)`) +
               item(c.push, `push (&times;${s.push_gain})`) +
-              item(c.com, "CoM") + item(c.cop, "CoP");
+              item(c.com, "CoM") + item(c.cop, "CoP") + item(c.capture_point, "capture point");
+    const steps = (settings.footsteps || []).flat();
+    if (steps.length) {
+      out += "<br>" + item(c.footstep, "footstep targets (outline: planned, filled: landed)");
+      if (steps.some((x) => x.recovery)) out += item(c.recovery, "recovery steps");
+    }
     if (settings.runs.length > 1) {
       out += "<br>" + settings.runs.map((r) =>
         `<span class="item">${r.label}: y = ${r.offset_y.toFixed(2)} m</span>`).join("");
@@ -196,7 +201,7 @@ def _script_safe(text: str) -> str:
 
 def page(viewer_js: str, settings: dict, data: str) -> str:
     """The page: ``viewer_js`` (meshcat's main.min.js), ``settings`` (JSON: title, time span,
-    frame period, camera, legend, incidents) and ``data`` (the packed commands, base64)."""
+    frame period, camera, legend, incidents, footsteps) and ``data`` (the packed commands, base64)."""
     if "</script" in viewer_js.lower():
         raise ValueError("meshcat's main.min.js contains '</script': cannot embed it")
     title = html.escape(settings.get("title", "replay"))
