@@ -2,20 +2,27 @@
 against the stance sole, and the footsteps of a velocity command or of a list.
 
 Evidence: scipy's SLSQP over a leg's joints on Pinocchio's forward kinematics for the soles'
-reach (a different solver from the module's linear programs); the soles' standing positions,
-sizes and the legs' lengths read from the model for the limits' plausibility; for the planner,
-the unicycle's own arithmetic (strides of v T, turns of yaw_rate T) and the bounds re-checked in
-each stance sole's heading frame computed here.
+reach and turn (a different solver from the module's linear programs), from a lowered stance and
+within joint bounds both written out here; scipy's bounded least squares for whether a leg holds
+its sole at a given step (the stride model against the legs themselves); the soles' standing
+positions and headings, sizes and the legs' lengths and joint axes read from the model; a copy of
+iCub turned about the vertical; for the planner, the unicycle's own arithmetic (strides of v T,
+turns of yaw_rate T) and the bounds re-checked in each stance sole's heading frame computed here.
+Robots: the talos14, talos and romeo presets, and G1, iCub and Alexander as tests/conftest.py
+describes them.
 """
 
+import copy
+import functools
 import math
 
 import numpy as np
 import pinocchio as pin
 import pytest
-from scipy.optimize import minimize
+from scipy.optimize import least_squares, minimize
 
 import wholebody as wb
+from wholebody.control import WalkingConfig
 from wholebody.planning.footsteps import (Footstep, FootstepPlanner, StepLimits, clamp_step,
                                           sole_reach)
 from wholebody.planning.reach import REACH_MARGIN
@@ -62,23 +69,108 @@ def _relative(stance, step_xy, step_yaw, stance_side):
 
 
 # ------------------------------------------------------------------ limits from the kinematics
-def _slsqp_reach(robot, sole, axis, direction):
-    """Largest displacement of ``sole``'s frame along world ``axis`` (0: x, 1: y; the base is
-    level with yaw 0 in the posture) in ``direction`` (+1 / -1), the base as in the posture,
-    the frame's other horizontal coordinate, its height and its orientation (flat) held, its
-    leg's joints within the limits shrunk by REACH_MARGIN of their range."""
+@functools.cache
+def _humanoid(name):
+    """A humanoid by name: a preset, or G1, iCub, Alexander as tests/conftest.py describes them."""
+    from conftest import (ICUB_RIGHT_LEG_INERTIAS, alexander_description, g1_description,
+                          icub_description)
+    described = {"g1": lambda: g1_description(armature=0.02),
+                 "icub": lambda: icub_description(inertia_overrides=ICUB_RIGHT_LEG_INERTIAS),
+                 "alexander": alexander_description}
+    return wb.load_robot(described[name]() if name in described else name)
+
+
+def _walking_drop(robot):
+    return WalkingConfig.for_robot(robot).com_drop
+
+
+def _leg_iq(robot, sole):
+    model = robot.model
+    return np.array([model.joints[model.getJointId(j)].idx_q for j in leg_joints(robot, sole)])
+
+
+def _bounds(robot, iq, q, margin=REACH_MARGIN):
+    """The reach's joint bounds written out: ``margin`` of each range inside the limits, or halfway
+    from where ``q`` has the joint to the limit where that leaves it more room."""
+    lo, hi = robot.model.lowerPositionLimit[iq], robot.model.upperPositionLimit[iq]
+    return (np.minimum(lo + margin * (hi - lo), 0.5 * (q[iq] + lo)),
+            np.maximum(hi - margin * (hi - lo), 0.5 * (q[iq] + hi)))
+
+
+def _yaw(R):
+    return math.atan2(R[1, 0], R[0, 0])
+
+
+def _posture_soles(robot):
+    """{sole: SE3} where each sole stands in the posture, made flat (its yaw kept)."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
+    out = {}
+    for sole in biped_soles(robot):
+        M = data.oMf[robot.contact(sole).frame_id]
+        out[sole] = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, _yaw(M.rotation)), M.translation.copy())
+    return out
+
+
+def _heading(robot):
+    """(x, y): the soles' mean heading in the posture and its left, world (2,) each."""
+    yaws = [_yaw(M.rotation) for M in _posture_soles(robot).values()]
+    yaw = yaws[0] + 0.5 * ((yaws[1] - yaws[0] + math.pi) % (2 * math.pi) - math.pi)
+    return np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
+
+
+def _solve_leg(robot, q, sole, target, bounds=None):
+    """``q`` with ``sole``'s leg solved by scipy's bounded least squares (trust region, within
+    ``bounds``, default the joint limits) toward the placement ``target`` → (q, the remaining
+    log6 error's max)."""
     model = robot.model
     data = model.createData()
-    iq = np.array([model.joints[model.getJointId(j)].idx_q for j in leg_joints(robot, sole)])
-    lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
-    q0 = robot.q_ref.copy()
-    bounds = list(zip(lo + REACH_MARGIN * (hi - lo), hi - REACH_MARGIN * (hi - lo)))
-    assert all(a <= x <= b for (a, b), x in zip(bounds, q0[iq]))  # the posture is inside
+    iq = _leg_iq(robot, sole)
+    frame = robot.contact(sole).frame_id
+    lo, hi = (model.lowerPositionLimit[iq], model.upperPositionLimit[iq]) if bounds is None \
+        else bounds
+
+    def error(x):
+        q1 = q.copy()
+        q1[iq] = x
+        pin.framesForwardKinematics(model, data, q1)
+        return pin.log6(target.actInv(data.oMf[frame])).vector
+
+    x0 = np.clip(q[iq], lo + 1e-9, hi - 1e-9)
+    best = least_squares(error, x0, bounds=(lo, hi), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    out = q.copy()
+    out[iq] = best.x
+    return out, float(np.abs(error(best.x)).max())
+
+
+@functools.cache
+def _lowered_stance(name, drop):
+    """The base level (its yaw kept) ``drop`` below the posture's height, each leg solved so that
+    its sole is flat where it stands in the posture."""
+    robot = _humanoid(name)
+    q = robot.q_ref.copy()
+    q[2] -= drop
+    yaw = _yaw(pin.Quaternion(robot.q_ref[3:7]).normalized().toRotationMatrix())
+    q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, 0.0, yaw)).coeffs()
+    for sole, target in _posture_soles(robot).items():
+        q, error = _solve_leg(robot, q, sole, target)
+        assert error < 1e-9
+    return q
+
+
+def _slsqp_reach(robot, sole, direction, q0, bounds=None):
+    """Largest displacement of ``sole``'s frame along the horizontal unit ``direction`` (world)
+    from where it stands in ``q0`` (flat), its displacement across ``direction``, its height and
+    its orientation held, its leg's joints within ``bounds`` (default :func:`_bounds`)."""
+    model = robot.model
+    data = model.createData()
+    iq = _leg_iq(robot, sole)
+    lo, hi = _bounds(robot, iq, q0) if bounds is None else bounds
     frame = robot.contact(sole).frame_id
     pin.framesForwardKinematics(model, data, q0)
     start = data.oMf[frame].copy()
-    flat = pin.rpy.rpyToMatrix(0.0, 0.0, pin.rpy.matrixToRpy(start.rotation)[2])
-    kept = [1 - axis, 2]
+    d = np.array([direction[0], direction[1], 0.0])
+    across = np.array([[-direction[1], direction[0], 0.0], [0.0, 0.0, 1.0]])
 
     def placement(x):
         q = q0.copy()
@@ -88,42 +180,172 @@ def _slsqp_reach(robot, sole, axis, direction):
 
     def held(x):
         M = placement(x)
-        return np.concatenate([M.translation[kept] - start.translation[kept],
-                               pin.log3(flat.T @ M.rotation)])
+        return np.concatenate([across @ (M.translation - start.translation),
+                               pin.log3(start.rotation.T @ M.rotation)])
 
-    best = minimize(lambda x: -direction * placement(x).translation[axis], q0[iq],
-                    method="SLSQP", bounds=bounds, constraints={"type": "eq", "fun": held},
+    best = minimize(lambda x: -d @ placement(x).translation, q0[iq], method="SLSQP",
+                    bounds=list(zip(lo, hi)), constraints={"type": "eq", "fun": held},
                     options={"ftol": 1e-12, "maxiter": 500})
     assert best.success, best.message
     assert np.abs(held(best.x)).max() < 1e-7
-    return direction * (placement(best.x).translation[axis] - start.translation[axis])
+    return float(d @ (placement(best.x).translation - start.translation))
+
+
+def _oracle(name, drop):
+    """{sole: (forward, backward, outward, inward)} by SLSQP along and across the soles' heading
+    from the lowered stance."""
+    robot = _humanoid(name)
+    q = _lowered_stance(name, drop)
+    x, y = _heading(robot)
+    out = {}
+    for k, sole in enumerate(biped_soles(robot)):
+        side = 1.0 if k == 0 else -1.0
+        out[sole] = tuple(_slsqp_reach(robot, sole, d, q)
+                          for d in (x, -x, side * y, -side * y))
+    return out
 
 
 @pytest.fixture(scope="module")
-def oracle_reach(talos14):
-    """{sole: (front, back)} by SLSQP."""
-    return {sole: (_slsqp_reach(talos14, sole, 0, 1.0), _slsqp_reach(talos14, sole, 0, -1.0))
-            for sole in biped_soles(talos14)}
+def oracle_reach():
+    """talos14's {sole: (forward, backward, outward, inward)} in the posture, by SLSQP."""
+    return _oracle("talos14", 0.0)
 
 
 def test_sole_reach_is_the_farthest_flat_sole_within_the_shrunk_limits(talos14, oracle_reach):
-    for k, sole in enumerate(biped_soles(talos14)):
-        front, back = oracle_reach[sole]
-        outward = 1.0 if k == 0 else -1.0  # the left sole's outward is +y
-        reach = sole_reach(talos14, sole)
-        assert reach.forward == pytest.approx(front, abs=1e-3)
-        assert reach.backward == pytest.approx(back, abs=1e-3)
-        assert reach.outward == pytest.approx(_slsqp_reach(talos14, sole, 1, outward), abs=1e-3)
-        assert reach.inward == pytest.approx(_slsqp_reach(talos14, sole, 1, -outward), abs=1e-3)
+    for sole in biped_soles(talos14):
+        assert tuple(sole_reach(talos14, sole)) == pytest.approx(oracle_reach[sole], abs=1e-3)
 
 
-def test_the_stride_is_a_share_of_one_legs_front_and_the_others_back_reach(limits14,
-                                                                           oracle_reach):
-    """At touchdown the swing leg reaches forward and the stance leg back (module docstring)."""
-    front = min(f for f, _ in oracle_reach.values())
-    back = min(b for _, b in oracle_reach.values())
-    assert limits14.forward == pytest.approx(SHARE * (front + back), abs=2e-3)
-    assert limits14.backward == pytest.approx(SHARE * (front + back), abs=2e-3)
+def test_the_stride_is_bounded_by_the_trailing_legs_back_and_the_leading_legs_front_reach(
+        limits14, oracle_reach):
+    """A step of L: the trailing leg reaches about L behind the pelvis, the leading one L/2 ahead
+    (module docstring): L <= b and L <= 2 f, times the share; backward steps mirrored."""
+    front = min(r[0] for r in oracle_reach.values())
+    back = min(r[1] for r in oracle_reach.values())
+    assert limits14.forward == pytest.approx(SHARE * min(back, 2 * front), abs=2e-3)
+    assert limits14.backward == pytest.approx(SHARE * min(front, 2 * back), abs=2e-3)
+
+
+WALKERS = ["talos14", "g1", "icub", "alexander"]
+
+
+@pytest.mark.parametrize("name", WALKERS)
+def test_a_step_of_the_stride_is_held_by_both_legs_and_a_longer_one_is_not(name):
+    """The stride model against the legs themselves at the walking CoM drop: with the pelvis
+    where the lowered stance has it, the trailing leg holds its sole flat ``forward`` behind its
+    standing place and the leading leg ``forward / 2`` ahead of its own, both within the joint
+    bounds (bounded least squares); 5 % beyond the unscaled stride (``forward / share``) the leg
+    that bounds it cannot. Mirrored for ``backward``."""
+    robot = _humanoid(name)
+    drop = _walking_drop(robot)
+    limits = StepLimits.from_robot(robot, com_height_drop=drop)
+    q = _lowered_stance(name, drop)
+    x, _ = _heading(robot)
+    standing = _posture_soles(robot)
+
+    def error(sole, along):
+        target = standing[sole].copy()
+        target.translation = target.translation + along * np.r_[x, 0.0]
+        return _solve_leg(robot, q, sole, target, _bounds(robot, _leg_iq(robot, sole), q))[1]
+
+    reach = _oracle(name, drop)
+    front = min(r[0] for r in reach.values())
+    back = min(r[1] for r in reach.values())
+    for sole in biped_soles(robot):
+        assert error(sole, -limits.forward) < 1e-8  # trailing
+        assert error(sole, 0.5 * limits.forward) < 1e-8  # leading
+        assert error(sole, limits.backward) < 1e-8  # trailing, stepping backward
+        assert error(sole, -0.5 * limits.backward) < 1e-8  # leading, stepping backward
+        longer = 1.05 * limits.forward / SHARE
+        if back < 2 * front:  # the trailing leg bounds the step
+            assert error(sole, -longer) > 1e-4
+        else:
+            assert error(sole, 0.5 * longer) > 1e-4
+        longer = 1.05 * limits.backward / SHARE
+        if front < 2 * back:
+            assert error(sole, longer) > 1e-4
+        else:
+            assert error(sole, -0.5 * longer) > 1e-4
+
+
+def test_alexanders_stride_is_one_it_walks():
+    """Closed loop (Walking, 10 steps forward at its scaled 0.4 m/s, the step limit forced):
+    Alexander walks with steps up to 0.22 m and falls with 0.24 m (after 4 steps with 0.27 m,
+    its trailing knee straightened onto its limit); the pelvis-midway model gave it 0.385 m. Its
+    backward reach (0.25 m at the walking drop) bounds it."""
+    robot = _humanoid("alexander")
+    limits = StepLimits.from_robot(robot, com_height_drop=_walking_drop(robot))
+    assert 0.1 < limits.forward < 0.22
+
+
+def test_icub_reaches_along_its_soles_heading_not_its_backward_facing_base():
+    """iCub's base frame faces backwards (yaw pi) while its soles face +x: its reaches are along
+    and across the soles' heading (SLSQP along world +x, -x, and the sole's outward side), the
+    forward one much shorter than the backward one, so a swap would show."""
+    robot = _humanoid("icub")
+    base_yaw = _yaw(pin.Quaternion(robot.q_ref[3:7]).normalized().toRotationMatrix())
+    assert abs(abs(base_yaw) - math.pi) < 1e-6
+    x, _ = _heading(robot)
+    assert x[0] > 0.99
+    drop = _walking_drop(robot)
+    oracle = _oracle("icub", drop)
+    for sole in biped_soles(robot):
+        reach = sole_reach(robot, sole, drop)
+        assert tuple(reach) == pytest.approx(oracle[sole], abs=1e-3)
+    assert reach.backward > reach.forward + 0.05
+
+
+def test_icubs_widths_straddle_its_standing_width():
+    """Outward and inward now come from the soles' own sides (they were swapped: width_min was
+    the standing width), and the hip roll that iCub's posture holds within its margin is not
+    pinned there, so the sole reaches outward: width_min < nominal < width_max, each off the
+    standing width by the share of the SLSQP reach."""
+    robot = _humanoid("icub")
+    drop = _walking_drop(robot)
+    limits = StepLimits.from_robot(robot, com_height_drop=drop)
+    left, right = biped_soles(robot)
+    standing = _posture_soles(robot)
+    _, y = _heading(robot)
+    nominal = abs(y @ (standing[left].translation - standing[right].translation)[:2])
+    assert limits.nominal_width == pytest.approx(nominal, abs=1e-9)
+    assert limits.width_min < limits.nominal_width < limits.width_max
+    oracle = _oracle("icub", drop)
+    outward = min(r[2] for r in oracle.values())
+    inward = min(r[3] for r in oracle.values())
+    assert limits.width_max == pytest.approx(nominal + SHARE * outward, abs=1e-3)
+    half = [robot.contact(s).spec.half_size[1] for s in (left, right)]
+    apart = sum(half) + 0.1 * 2 * max(half)  # the soles' edges a tenth of a sole's width apart
+    assert limits.width_min == pytest.approx(max(nominal - SHARE * inward, apart), abs=1e-3)
+    # the hip roll stands within its margin in the posture: bounded there (the margin, or where
+    # the stance has the joint if nearer) the sole would not go outward at all
+    model = robot.model
+    i = model.joints[model.getJointId("l_hip_roll")].idx_q
+    lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+    assert hi - robot.q_ref[i] < REACH_MARGIN * (hi - lo)
+    q = _lowered_stance("icub", drop)
+    iq = _leg_iq(robot, left)
+    lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
+    pinned = (np.minimum(lo + REACH_MARGIN * (hi - lo), q[iq]),
+              np.maximum(hi - REACH_MARGIN * (hi - lo), q[iq]))
+    assert _slsqp_reach(robot, left, y, q, bounds=pinned) < 1e-6
+    assert outward > 0.02
+
+
+def test_the_limits_do_not_depend_on_where_the_robot_faces():
+    """iCub turned by 90 deg about the vertical (a copy whose posture's base is turned): the same
+    limits, the soles' heading turned with it."""
+    robot = _humanoid("icub")
+    turned = copy.copy(robot)
+    R = pin.rpy.rpyToMatrix(0.0, 0.0, 0.5 * math.pi)
+    q = robot.q_ref.copy()
+    q[:3] = R @ q[:3]
+    q[3:7] = pin.Quaternion(R @ pin.Quaternion(q[3:7]).normalized().toRotationMatrix()).coeffs()
+    turned.q_ref = q
+    drop = _walking_drop(robot)
+    a = StepLimits.from_robot(robot, com_height_drop=drop)
+    b = StepLimits.from_robot(turned, com_height_drop=drop)
+    for name in a.__dataclass_fields__:
+        assert getattr(b, name) == pytest.approx(getattr(a, name), abs=1e-6), name
 
 
 def test_the_widths_come_from_the_standing_soles(talos14, limits14):
@@ -145,10 +367,97 @@ def test_limits_are_plausible_for_each_humanoid(name):
     for sole in biped_soles(robot):
         hip = data.oMi[model.getJointId(leg_joints(robot, sole)[0])].translation
         leg = np.linalg.norm(hip - data.oMf[robot.contact(sole).frame_id].translation)
-        assert limits.forward > 0.1 * leg and limits.backward > 0.1 * leg
+        if name != "romeo":  # romeo's stride is its ankle's: the next test
+            assert limits.forward > 0.1 * leg and limits.backward > 0.1 * leg
         assert limits.width_min > 2.0 * robot.contact(sole).spec.half_size[1]  # no overlap
     assert limits.width_min <= limits.nominal_width < limits.width_max
     assert 0.0 < limits.yaw_in <= limits.yaw_out <= 0.4 + 1e-12
+
+
+def test_romeos_stride_is_short_as_its_ankle_has_little_room_left():
+    """romeo's posture bends its ankles to 0.35 rad of dorsiflexion, its limit 0.52: a flat sole
+    hardly goes behind the pelvis (the shank would lean further forward), so its stride, the share
+    of its backward reach (SLSQP), is short; at the walking drop, which bends the ankle to within
+    0.04 rad of its stop, shorter still, though not zero. Freeing the ankle to its stop lengthens
+    the reach: the ankle bounds it."""
+    robot = _humanoid("romeo")
+    model = robot.model
+    sole = biped_soles(robot)[0]
+    iq = _leg_iq(robot, sole)
+    ankle = list(iq).index(model.joints[model.getJointId("LAnklePitch")].idx_q)
+    stop = model.lowerPositionLimit[iq][ankle]
+    x, _ = _heading(robot)
+    for drop in (0.0, _walking_drop(robot)):
+        limits = StepLimits.from_robot(robot, com_height_drop=drop)
+        back = min(r[1] for r in _oracle("romeo", drop).values())
+        assert limits.forward == pytest.approx(SHARE * back, abs=2e-3)
+        assert 0.0 < limits.forward < 0.05
+        q = _lowered_stance("romeo", drop)
+        lo, hi = _bounds(robot, iq, q)
+        lo[ankle] = stop
+        assert _slsqp_reach(robot, sole, -x, q, bounds=(lo, hi)) > back + 0.005
+    assert q[iq][ankle] - stop < 0.04  # at the walking drop
+
+
+def test_g1_turns_its_soles_at_the_walking_drop():
+    """G1's hip-yaw axes run along its thighs, 27 deg off the vertical in the posture and past 30
+    deg at the walking drop (where the yaw limits were 0: no leg joint passed a 30 deg test
+    there). Found in the posture, they turn the soles: yaw_out and yaw_in at their caps. SLSQP:
+    each leg holds its sole flat where it stands in the lowered stance, turned half of yaw_out
+    outward and half of yaw_in inward (a relative yaw turns both hips by half), within the joint
+    bounds, and further: outward 2.1 rad (its hip-yaw joint spans +-2.76 rad), inward 0.49."""
+    robot = _humanoid("g1")
+    model = robot.model
+    drop = _walking_drop(robot)
+    limits = StepLimits.from_robot(robot, com_height_drop=drop)
+    assert limits.yaw_out == pytest.approx(0.4) and limits.yaw_in == pytest.approx(0.2)
+    assert StepLimits.from_robot(robot).yaw_out == pytest.approx(0.4)
+    q = _lowered_stance("g1", drop)
+    data = model.createData()
+    for posture, tilt in ((robot.q_ref, (25.0, 30.0)), (q, (30.0, 40.0))):
+        pin.forwardKinematics(model, data, posture)
+        jid = model.getJointId("left_hip_yaw_joint")
+        assert model.joints[jid].shortname() == "JointModelRZ"
+        angle = math.degrees(math.acos(abs(data.oMi[jid].rotation[2, 2])))
+        assert tilt[0] < angle < tilt[1]
+    for k, sole in enumerate(biped_soles(robot)):
+        outward = 1.0 if k == 0 else -1.0  # the left sole turns outward to the left
+        assert _slsqp_turn(robot, sole, q, outward) > max(0.5 * limits.yaw_out, 1.0)  # 2.1
+        assert _slsqp_turn(robot, sole, q, -outward) > 2.0 * 0.5 * limits.yaw_in  # 0.49
+
+
+def _slsqp_turn(robot, sole, q0, direction):
+    """Largest turn (rad) of ``sole``'s frame about the vertical, ``direction`` +1 to the left,
+    from where it stands flat in ``q0``, its position held and its sole flat, its leg's joints
+    within :func:`_bounds`."""
+    model = robot.model
+    data = model.createData()
+    iq = _leg_iq(robot, sole)
+    lo, hi = _bounds(robot, iq, q0)
+    frame = robot.contact(sole).frame_id
+    pin.framesForwardKinematics(model, data, q0)
+    start = data.oMf[frame].copy()
+
+    def placement(x):
+        q = q0.copy()
+        q[iq] = x
+        pin.framesForwardKinematics(model, data, q)
+        return data.oMf[frame]
+
+    def turn(x):
+        R = start.rotation.T @ placement(x).rotation
+        return direction * math.atan2(R[1, 0], R[0, 0])
+
+    def held(x):
+        M = placement(x)
+        return np.concatenate([M.translation - start.translation, M.rotation[:2, 2]])
+
+    best = minimize(lambda x: -turn(x), q0[iq], method="SLSQP", bounds=list(zip(lo, hi)),
+                    constraints={"type": "eq", "fun": held},
+                    options={"ftol": 1e-12, "maxiter": 500})
+    assert best.success, best.message
+    assert np.abs(held(best.x)).max() < 1e-7
+    return turn(best.x)
 
 
 def test_a_narrower_hip_yaw_range_turns_less(talos14, limits14):
@@ -260,14 +569,16 @@ def test_walking_forward_strides_two_steps_of_path(talos14, planner):
     2 v T after its first step, the lead of the swing sole over the stance sole v T."""
     feet = _standing_feet(talos14)
     left, right = planner.soles
-    plan = planner.from_velocity(feet, left, (0.3, 0.0, 0.0), T, 8)
+    v = 0.2
+    assert v * T < planner.limits.forward  # a step within the limits: not clamped
+    plan = planner.from_velocity(feet, left, (v, 0.0, 0.0), T, 8)
     assert [s.contact for s in plan] == [left, right] * 4
     mid = 0.5 * (feet[left][0] + feet[right][0])
     for k, step in enumerate(plan):
-        assert step.position[0] == pytest.approx(mid[0] + 0.3 * T * (k + 1), abs=1e-9)
+        assert step.position[0] == pytest.approx(mid[0] + v * T * (k + 1), abs=1e-9)
         assert step.yaw == pytest.approx(0.0, abs=1e-12)
     for a, b in zip(plan, plan[2:]):
-        assert b.position[0] - a.position[0] == pytest.approx(2 * 0.3 * T, abs=1e-9)
+        assert b.position[0] - a.position[0] == pytest.approx(2 * v * T, abs=1e-9)
     _check_within(planner, feet, plan)
 
 

@@ -85,3 +85,39 @@ def test_step_adjustment_moves_the_footstep_by_the_predicted_dcm_error():
     # the plan predicts its own DCM at touchdown: only the error moves the planned footstep
     shift = ctrl.swing.p1[:2] - ph.footstep.position[:2]
     assert np.allclose(shift, math.exp(ctrl.omega * tau) * error, atol=2e-4)
+
+
+def test_in_double_support_the_soles_forces_put_the_cop_at_the_commanded_zmp():
+    """The weight shifts of a walk's start in the twin (1.3 s): the CoP of the soles' solved
+    wrenches (from the solution's forces and moments, about the soles' frames) lies where the
+    commanded ZMP does along the line between the soles, to 2 cm of the 17-28 cm between them
+    (the regulariser splits the normal forces; the soles' tilting moments, which the hierarchy
+    leaves to its lighter rows, move the CoP by the rest), and the leaving sole carries less than 2 % of the weight at the double support's
+    end (lift-off)."""
+    from wholebody.sim.simulator import Simulator
+
+    robot = wb.load_robot("talos14")
+    ctrl, sim = Walking(robot), Simulator(robot)
+    ctrl.set_command(0.2, 0.0, 0.0)
+    weight = robot.mass * 9.81
+    checked = 0
+    while sim.t < 1.3:
+        q, v = sim.state()
+        sol = ctrl.compute(q, v, sim.t)
+        ph = ctrl.phase
+        if ph.kind == "double" and ph.leaving is not None:
+            if sim.t + sim.dt >= ph.end:
+                assert sol.forces[ph.leaving][2] < 0.02 * weight, sim.t
+            robot.update(q, v)
+            fz, cop = 0.0, np.zeros(2)
+            for sole, w in sol.forces.items():
+                p = robot.frame_placement(robot.contact(sole).frame)[0]
+                fz += w[2]
+                cop += p[:2] * w[2] + np.array([-w[4], w[3]])
+            cop /= fz
+            a, b = ctrl.feet[ph.leaving][0][:2], ctrl.feet[ctrl._other(ph.leaving)][0][:2]
+            d = (a - b) / np.linalg.norm(a - b)
+            assert (cop - b) @ d == pytest.approx((ctrl.zmp_command - b) @ d, abs=2e-2), sim.t
+            checked += 1
+        sim.step(sol.tau)
+    assert checked > 500

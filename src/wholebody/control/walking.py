@@ -38,7 +38,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -49,7 +49,7 @@ from ..formulation import Formulation
 from ..planning.dcm import DCMPlan, lipm_frequency, predicted_dcm
 from ..planning.footsteps import Footstep, FootstepPlanner, StepLimits, clamp_step
 from ..planning.swing import SwingTrajectory
-from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
+from ..robot import FREE_FLYER_NV
 from ..robots.reference import humanoid_length_ratio
 from ..robots.roles import biped_soles, leg_joints
 from ..tasks import ForceRegularizer
@@ -92,11 +92,17 @@ class WalkingConfig:
     sole's centre to between the soles); ``recovery_double_support``: of a recovery step's
     weight shift; ``com_drop``: the walking CoM height below the standing one;
     ``clearance``: the swing apex above the higher end; ``touchdown_depth``: the swing target ends
-    this far below the floor; ``dcm_gain``: k / omega of the DCM feedback; ``height_gains``: (kp,
-    kd) of the CoM height; ``adjust_until``: share of the single support after which the footstep
-    is no longer adjusted; ``capture_margin``: share of each sole's half-lengths the standing
-    capture point may leave the support polygon by... inward (0: the soles' edges) before a
-    recovery step; ``step_horizon``: footsteps planned ahead (the plan ends at rest);
+    this far below the floor; ``dcm_gain``: k / omega of the DCM feedback;
+    ``height_gains``: (kp, kd) of the CoM height; ``adjust_until``: share of the single support
+    after which the footstep is no longer adjusted; ``capture_margin``: share of each sole's half-lengths the standing
+    capture point may be inside the support polygon's edges (0: the soles' edges) before a
+    recovery step; ``recovery_reach``: the share of the legs' reach a recovery step's adjustment
+    may use (walking steps use :data:`~wholebody.planning.footsteps.STEP_SHARE` of it);
+    ``swing_weight``, ``recovery_swing_weight``: the swing sole task's weight in the level of
+    the momentum task (whose linear rows weigh 1e4) while walking and in a recovery (from the
+    push until the robot stands again): with the CoP at a sole's edge, a light swing task lets
+    the hierarchy swing the leg to make the momentum the CoP cannot, a leg strategy that helps
+    a recovery, while a walking step pushed that way lands late and off its footstep; ``step_horizon``: footsteps planned ahead (the plan ends at rest);
     ``stepping``: recover pushes by stepping; ``cop_margin``, ``torsion``: the hierarchies' CoP
     margin and yaw-moment rows; ``posture_gains``, ``swing_gains``: as in the Table 2/4 stacks."""
 
@@ -113,6 +119,9 @@ class WalkingConfig:
     height_gains: tuple[float, float] = (50.0, 15.0)
     adjust_until: float = 0.7
     capture_margin: float = 0.2
+    recovery_reach: float = 1.0
+    swing_weight: float = 10.0
+    recovery_swing_weight: float = 1.0
     step_horizon: int = 3
     stepping: bool = True
     cop_margin: float = COP_MARGIN
@@ -141,6 +150,9 @@ class WalkingConfig:
         for name in ("com_drop", "clearance", "touchdown_depth", "capture_margin"):
             nonnegative(getattr(self, name), name)
         number(self.adjust_until, "adjust_until", low=0.0, high=1.0)
+        number(self.recovery_reach, "recovery_reach", low=0.0, low_open=True, high=1.0)
+        for name in ("swing_weight", "recovery_swing_weight"):
+            positive(getattr(self, name), name)
         number(self.cop_margin, "cop_margin", low=0.0, high=1.0, high_open=True)
         if int(self.step_horizon) != self.step_horizon or self.step_horizon < 1:
             raise ValueError(f"step_horizon: expected an integer >= 1, got {self.step_horizon!r}")
@@ -194,6 +206,10 @@ class Walking:
         self.frames = {s: robot.contact(s).frame for s in self.soles}
         self.limits = StepLimits.from_robot(robot, com_height_drop=c.com_drop) \
             if limits is None else limits
+        # a recovery step may use the legs' whole reach (their joints' margins kept)
+        self.recovery_limits = StepLimits.from_robot(robot, com_height_drop=c.com_drop,
+                                                     share=c.recovery_reach) \
+            if limits is None else limits
         self.planner = FootstepPlanner(robot, self.limits)
         robot.update(robot.q_ref, np.zeros(robot.nv))
         self.com_standing = robot.com.copy()
@@ -236,6 +252,7 @@ class Walking:
         self.swing_yaw = (0.0, 0.0)
         self.steps: list[StepRecord] = []
         self.recovering = False
+        self.recovery_walk = False
         self.last = None
         self.last_cycle = None
         self.feet = {s: (robot.frame_placement(f)[0].copy(), _yaw(robot.frame_placement(f)[1]))
@@ -433,7 +450,7 @@ class Walking:
     # ------------------------------------------------------------------ the cycle
     def compute(self, q, v, t: float):
         t0 = time.perf_counter()
-        robot, c = self.robot, self.config
+        robot = self.robot
         cycle = self.last_cycle
         if self.cycles is None or cycle is None:
             robot.update(q, v)
@@ -474,6 +491,7 @@ class Walking:
         c = self.config
         for s in self.soles:
             self.feet[s] = self._sole_pose(s, cycle)
+        self.recovery_walk = recovery  # steps until standing again are a recovery's
         if recovery:
             swing = self._recovery_swing(dcm)
             self.recovering = True
@@ -528,6 +546,8 @@ class Walking:
             self.swing = SwingTrajectory(pos, target, ph.end - ph.start, c.clearance, t0=ph.start)
             self.swing_yaw = (yaw, ph.footstep.yaw)
             self.swing_planned = ph.footstep
+            self.swing_task[ph.stance].weight = (c.recovery_swing_weight if self.recovery_walk
+                                                 else c.swing_weight)
             self.steps.append(StepRecord(sole, t, math.nan, ph.footstep.position.copy(),
                                          ph.footstep.position.copy(), ph.footstep.yaw,
                                          self.recovering))
@@ -605,10 +625,9 @@ class Walking:
 
     # ------------------------------------------------------------------ references
     def _references(self, t: float, ph: Phase, dcm, com, vcom):
-        robot, c = self.robot, self.config
+        robot = self.robot
         if self.plan is None:
             com_ref, vel, acc = self.com_ref, np.zeros(3), np.zeros(3)
-            zmp = com_ref[:2]
         else:
             cxy, dcxy, ddcxy = self.plan.com(t)
             z = self.com_ref[2]
@@ -683,7 +702,8 @@ class Walking:
         planned = ph.footstep
         target = planned.position[:2] + (xi_T - xi_ref_T)
         side = 1 if ph.stance == self.left else -1
-        xy, yaw = clamp_step(self.feet[ph.stance], side, target, planned.yaw, self.limits)
+        limits = self.recovery_limits if self.recovering else self.limits
+        xy, yaw = clamp_step(self.feet[ph.stance], side, target, planned.yaw, limits)
         new = np.array([xy[0], xy[1], self.swing.p1[2]])
         if np.linalg.norm(new[:2] - self.swing.p1[:2]) > 1e-4:
             self.swing = SwingTrajectory(self.swing.p0, new, self.swing.duration,

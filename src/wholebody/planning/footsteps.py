@@ -10,22 +10,38 @@ right) and "inward" when it turns toward it, its toes toward the stance sole.
 Limits (:class:`StepLimits`) come from the robot's own kinematics and soles. The base stands
 level at the posture's height (lowered by the walking CoM drop), the soles flat on the floor
 where they stand in the posture; :func:`sole_reach` measures how far each sole frame can slide on
-the floor from there, forward, backward, outward and inward, its orientation held and its leg's
-joints ``margin`` of their range inside their limits (a sequence of linear programs over the
-leg's joint steps, as :func:`~.reach.foot_lift`). Then:
+the floor from there (a sequence of linear programs over the leg's joint steps, as
+:func:`~.reach.foot_lift`), forward and backward along the soles' heading (the mean of their
+yaws: the base's own axes need not point forward, iCub's faces backwards) and outward and inward
+across it, its orientation held and its leg's joints ``margin`` of their range inside their
+limits, or halfway to a limit from where the lowered stance has them if that leaves them more
+room (:func:`_joint_bounds`: a joint the stance already holds within its margin is not pinned
+there). With f and b the smaller of the two legs' reaches forward and backward:
 
-* stride: at touchdown the pelvis lies between the soles, the swing leg reaching forward of its
-  hip and the stance leg back from its own, so a step can be as long as one leg's front reach
-  plus the other's back reach; a backward step swaps the legs' roles and is bounded alike;
+* stride: a step of length L forward is bounded by both legs. The trailing leg: the double
+  support carries the pelvis toward the leading sole and the swing sole leaves slowly while the
+  pelvis moves on, so the trailing sole ends up about a whole step behind the pelvis (measured
+  on talos14 and iCub: 0.6-0.7 L behind at lift-off, up to 0.85 L within 0.1 s after it), hence
+  L <= b. The leading leg: it lands about half a step ahead of the pelvis (0.5-0.65 L measured),
+  hence L <= 2 f. So ``forward = share * min(b, 2 f)``; a backward step swaps the legs' roles,
+  ``backward = share * min(f, 2 b)``. Closed loop (capture-point walking of
+  :class:`~wholebody.control.Walking`, 10 steps), Alexander (b < 2 f) walks with steps up to
+  0.22 m (0.87 b) and falls with 0.24 m (0.95 b), with 0.27 m after 4 steps, its trailing knee
+  straightened onto its limit; iCub (2 f < b) still walks with steps of 2 f, its ankles at their
+  limits, and with share * 2 f no joint reaches a limit. A robot whose lowered stance holds a
+  joint near its limit (romeo's ankle pitch, 0.03 rad from its stop at the walking drop) has
+  almost no reach that way, so almost no stride: flat soles cannot step further at that height;
 * width: the stance leg's sideways reach carries the pelvis over the stance sole, so only the
   swing leg's widens the step: at most the standing width plus its outward reach; at least the
   standing width minus its inward reach, and never so narrow that the soles' edges come closer
   than :data:`SOLE_GAP` of a sole's width (nor, whatever the soles, above the standing width);
+  the standing width is the soles' distance across their heading;
 * yaw: with the pelvis heading between the soles, a relative yaw turns both hip-yaw joints (the
-  leg joint whose axis is within 30 deg of the base's vertical) by half of it, the same way
-  (both outward or both inward): at most twice the smaller hip's range that way, capped at
-  :data:`YAW_CAP`; turning inward is also at most :data:`YAW_IN_SHARE` of turning outward, as
-  the toes would collide. A leg without a hip-yaw joint does not turn its sole.
+  leg joint whose axis is nearest the base's vertical in the posture, within
+  :data:`_YAW_AXIS_ANGLE`) by half of it, the same way (both outward or both inward): at most
+  twice the smaller hip's range that way, capped at :data:`YAW_CAP`; turning inward is also at
+  most :data:`YAW_IN_SHARE` of turning outward, as the toes would collide. A leg without a
+  hip-yaw joint does not turn its sole.
 
 The reaches are scaled by ``share`` (< 1): a leg at its full reach has a straight knee, a
 singularity, and no margin left to balance with.
@@ -48,7 +64,7 @@ from scipy.optimize import linprog, lsq_linear
 
 from ..robots.roles import biped_soles, joint_axis
 from .reach import REACH_MARGIN, _leg
-from .support_shift import joint_step_bounds
+from .support_shift import joint_range
 
 __all__ = ["Footstep", "FootstepPlanner", "SoleReach", "StepLimits", "clamp_step", "sole_reach"]
 
@@ -64,9 +80,10 @@ YAW_IN_SHARE = 0.5
 _TRUST = 0.1
 #: cost of a metre (or radian) of drift of the held coordinates against a metre of reach
 _DRIFT_COST = 100.0
-#: a hip-yaw joint's axis is within this angle of the base's vertical (as
-#: :func:`~wholebody.robots.roles.pitch_joints` finds the pitch joints)
-_YAW_AXIS_ANGLE = np.radians(30.0)
+#: a hip-yaw joint's axis is within this angle of the base's vertical in the posture: more of
+#: its turn is a yaw than a tilt (G1's, along the thigh, is 27 deg from it in the posture, 34 deg
+#: at the walking CoM drop)
+_YAW_AXIS_ANGLE = np.radians(45.0)
 
 
 @dataclass(frozen=True)
@@ -80,7 +97,7 @@ class Footstep:
 
 class SoleReach(NamedTuple):
     """How far (m, >= 0) a sole frame slides on the floor from its standing place: forward and
-    backward along the base's x, outward (away from the other sole) and inward along its y."""
+    backward along the soles' heading, outward (away from the other sole) and inward across it."""
 
     forward: float
     backward: float
@@ -100,9 +117,8 @@ def _wrap(angle: float) -> float:
 def _stance_configuration(robot, com_height_drop: float, margin: float):
     """The base level at the posture's height lowered by ``com_height_drop``, each leg solved
     (within its joint limits) so that its sole frame is where it stands in the posture, flat:
-    ``(q, the joints' bounds (lo, hi) over q[7:], the soles' placements)``. The bounds are
-    ``margin`` of each range inside the limits, or where ``q`` has the joint if nearer
-    (:func:`~.support_shift.joint_step_bounds`). ValueError when a sole cannot be held."""
+    ``(q, the joints' bounds (lo, hi) over q[7:] (:func:`_joint_bounds`), the soles' placements
+    in the posture, flat)``. ValueError when a sole cannot be held."""
     model = robot.model
     data = model.createData()
     q_ref = robot.q_ref
@@ -133,8 +149,27 @@ def _stance_configuration(robot, com_height_drop: float, margin: float):
         if np.max(np.abs(pin.log6(data.oMf[frame].actInv(target)).vector)) > 1e-6:
             raise ValueError(f"com_height_drop: {com_height_drop} m lower, {contact} cannot stand "
                              f"flat where it stands in the posture within its joint limits")
-    lower, upper = joint_step_bounds(robot, margin, q)
-    return q, (q[7:] + lower[6:], q[7:] + upper[6:]), soles
+    return q, _joint_bounds(robot, margin, q), soles
+
+
+def _joint_bounds(robot, margin: float, q) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) over q[7:]: each limited joint ``margin`` of its range inside its limits, or
+    halfway from where ``q`` has it to the limit when that leaves it more room; the others
+    unbounded. The half keeps a joint that the stance already holds within its margin from being
+    pinned where it stands (its leg would then reach nowhere that way, although the joint has
+    room left: iCub's hip roll stands within its margin in the posture) and is continuous in
+    ``q``: a joint beyond twice the margin from a limit keeps the margin."""
+    model = robot.model
+    lo, hi = np.full(model.nv - 6, -np.inf), np.full(model.nv - 6, np.inf)
+    for joint in model.joints[1:]:
+        limits = joint_range(model, joint)
+        if limits is None:
+            continue
+        (low, high), i, k = limits, joint.idx_q, joint.idx_v - 6
+        inset = margin * (high - low)
+        lo[k] = min(low + inset, 0.5 * (q[i] + low))
+        hi[k] = max(high - inset, 0.5 * (q[i] + high))
+    return lo, hi
 
 
 def _slide(robot, contact: str, q, bounds, direction, iterations: int = 100) -> float:
@@ -178,44 +213,66 @@ def _slide(robot, contact: str, q, bounds, direction, iterations: int = 100) -> 
 def sole_reach(robot, contact: str, com_height_drop: float = 0.0,
                margin: float = REACH_MARGIN) -> SoleReach:
     """How far ``contact``'s sole frame slides on the floor from where it stands in the posture,
-    the base level and ``com_height_drop`` lower than in the posture, the sole flat, each of its
-    leg's joints ``margin`` of its range inside its limits (or where the lowered stance has it,
-    if nearer; :func:`~.support_shift.joint_step_bounds`)."""
-    q, bounds, _ = _stance_configuration(robot, com_height_drop, margin)
-    return _reach(robot, contact, q, bounds)
+    along the soles' heading (:func:`_heading`) and across it, the base level and
+    ``com_height_drop`` lower than in the posture, the sole flat, each of its leg's joints
+    ``margin`` of its range inside its limits or, when that leaves it more room, halfway from
+    where the lowered stance has it to the limit (:func:`_joint_bounds`)."""
+    q, bounds, soles = _stance_configuration(robot, com_height_drop, margin)
+    return _reach(robot, contact, q, bounds, _heading(robot, soles))
 
 
-def _reach(robot, contact: str, q, bounds) -> SoleReach:
-    R = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()
-    x, y = R[:2, 0] / np.linalg.norm(R[:2, 0]), R[:2, 1] / np.linalg.norm(R[:2, 1])
+def _heading(robot, soles) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y): the unit horizontal vectors (world) of the soles' heading, the mean of the two
+    soles' yaws as they stand (``soles``: their placements), and of its left. The base's own axes
+    need not be these: iCub's base frame faces backwards."""
+    yaws = [math.atan2(soles[c].rotation[1, 0], soles[c].rotation[0, 0])
+            for c in biped_soles(robot)]
+    yaw = yaws[0] + 0.5 * _wrap(yaws[1] - yaws[0])
+    return np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
+
+
+def _reach(robot, contact: str, q, bounds, heading) -> SoleReach:
+    """:func:`sole_reach` from the stance ``q`` within ``bounds`` along ``heading`` = (x, y)."""
+    x, y = heading
     side = 1.0 if contact == biped_soles(robot)[0] else -1.0
     return SoleReach(*(_slide(robot, contact, q, bounds, d)
                        for d in (x, -x, side * y, -side * y)))
 
 
+def _hip_yaw_joint(robot, contact: str):
+    """``contact``'s hip-yaw joint: its leg's joint whose axis is nearest the base's vertical in
+    the posture, if within :data:`_YAW_AXIS_ANGLE` of it → its Pinocchio joint id, else None.
+    Found in the posture, as :func:`~wholebody.robots.roles.pitch_joints` finds the pitch joints:
+    lowering the stance tilts an axis along the thigh (G1's) further from the vertical."""
+    model = robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, robot.q_ref)
+    base = data.oMi[1].rotation
+    best, best_z = None, math.cos(_YAW_AXIS_ANGLE)
+    for i in _leg(robot, contact)[0]:
+        jid = next(j for j in range(1, model.njoints) if model.joints[j].idx_q == i)
+        z = abs((base.T @ data.oMi[jid].rotation @ joint_axis(robot, model.names[jid], data))[2])
+        if z >= best_z:
+            best, best_z = jid, z
+    return best
+
+
 def _hip_yaw_ranges(robot, q, bounds) -> tuple[float, float]:
     """(outward, inward): the smaller over the legs of how far (rad) each leg's hip-yaw joint
-    (its first joint whose axis is within :data:`_YAW_AXIS_ANGLE` of the base's z axis) turns
-    its sole away from and toward the other sole from ``q`` within ``bounds``, its range times
-    the axis's vertical component (a tilted axis turns the sole less); (0, 0) when a leg has
-    none."""
+    (:func:`_hip_yaw_joint`) turns its sole away from and toward the other sole from ``q`` within
+    ``bounds``, its range times its axis's vertical component in ``q`` (a tilted axis turns the
+    sole less); (0, 0) when a leg has none."""
     model = robot.model
     data = model.createData()
     pin.forwardKinematics(model, data, q)
     base = data.oMi[1].rotation
     outward, inward = np.inf, np.inf
     for side, contact in zip((1.0, -1.0), biped_soles(robot)):
-        iq, iv, _ = _leg(robot, contact)
-        found = None
-        for i, k in zip(iq, iv):
-            jid = next(j for j in range(1, model.njoints) if model.joints[j].idx_q == i)
-            axis = base.T @ data.oMi[jid].rotation @ joint_axis(robot, model.names[jid], data)
-            if axis[2] ** 2 >= np.cos(_YAW_AXIS_ANGLE) ** 2:
-                found = (i, k, axis[2])
-                break
-        if found is None:
+        jid = _hip_yaw_joint(robot, contact)
+        if jid is None:
             return 0.0, 0.0
-        i, k, vertical = found
+        i, k = model.joints[jid].idx_q, model.joints[jid].idx_v
+        vertical = (base.T @ data.oMi[jid].rotation @ joint_axis(robot, model.names[jid], data))[2]
         up, down = (abs(vertical) * (bounds[1][k - 6] - q[i]),
                     abs(vertical) * (q[i] - bounds[0][k - 6]))
         out, inn = (up, down) if side * vertical > 0 else (down, up)
@@ -228,9 +285,12 @@ class StepLimits:
     """Where a swing sole may land relative to the stance sole, in the stance sole's heading
     frame (x forward, y toward the swing side = outward positive); lengths in m, angles in rad.
 
-    ``forward``/``backward``: largest displacement along x; ``width_min``/``width_max``: lateral
-    distance between the sole frames; ``nominal_width``: that distance standing in the posture;
-    ``yaw_out``/``yaw_in``: largest relative yaw turning away from / toward the stance side."""
+    ``forward``/``backward``: largest displacement along x (:meth:`from_robot`: share * min(b,
+    2 f) and share * min(f, 2 b), f and b the legs' reaches forward and backward: a step's
+    trailing leg reaches about the whole step behind the pelvis, its leading leg about half of
+    it ahead; module docstring); ``width_min``/``width_max``: lateral distance between the sole
+    frames; ``nominal_width``: that distance standing in the posture; ``yaw_out``/``yaw_in``:
+    largest relative yaw turning away from / toward the stance side."""
 
     forward: float
     backward: float
@@ -254,7 +314,9 @@ class StepLimits:
     def from_robot(cls, robot, com_height_drop: float = 0.0, margin: float = REACH_MARGIN,
                    share: float = STEP_SHARE) -> "StepLimits":
         """The limits of ``robot``'s steps from its kinematics and soles (module docstring): the
-        reaches of :func:`sole_reach` (the smaller of the two legs'), times ``share``."""
+        reaches of :func:`sole_reach` along and across the soles' heading (the smaller of the two
+        legs'), the stride from the trailing leg's reach back and the leading leg's forward,
+        times ``share``."""
         if not (math.isfinite(com_height_drop) and 0.0 <= com_height_drop < robot.q_ref[2]):
             raise ValueError(f"com_height_drop: expected 0 <= drop < the standing base height "
                              f"{robot.q_ref[2]:.3f} m, got {com_height_drop!r}")
@@ -264,19 +326,20 @@ class StepLimits:
             raise ValueError(f"share: expected 0 < share <= 1, got {share!r}")
         left, right = biped_soles(robot)
         q, bounds, soles = _stance_configuration(robot, com_height_drop, margin)
-        reach = [_reach(robot, c, q, bounds) for c in (left, right)]
+        heading = _heading(robot, soles)
+        reach = [_reach(robot, c, q, bounds, heading) for c in (left, right)]
         least = SoleReach(*np.min(np.array(reach), axis=0))
-        R = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()
-        y = R[:2, 1] / np.linalg.norm(R[:2, 1])
+        y = heading[1]
         nominal = abs(float(y @ (soles[left].translation - soles[right].translation)[:2]))
         half_widths = [robot.contact(c).spec.half_size[1] for c in (left, right)]
         # the sole frames are the soles' centres: their edges touch at the sum of half widths
         apart = sum(half_widths) + SOLE_GAP * 2.0 * max(half_widths)
         width_min = min(max(nominal - share * least.inward, apart), nominal)
-        stride = share * (least.forward + least.backward)
+        forward = share * min(least.backward, 2.0 * least.forward)
+        backward = share * min(least.forward, 2.0 * least.backward)
         out, inn = _hip_yaw_ranges(robot, q, bounds)
         yaw_out = min(YAW_CAP, share * 2.0 * out)
-        limits = dict(forward=stride, backward=stride, width_min=width_min,
+        limits = dict(forward=forward, backward=backward, width_min=width_min,
                       width_max=nominal + share * least.outward, nominal_width=nominal,
                       yaw_out=yaw_out, yaw_in=min(YAW_IN_SHARE * yaw_out, share * 2.0 * inn))
         return cls(**{name: float(value) for name, value in limits.items()})
