@@ -288,3 +288,17 @@ def test_invalid_function_arguments():
         capture_point([0, 0], [0, 0], -1.0)
     with pytest.raises(ValueError, match="^horizon:"):
         predicted_dcm([0, 0], [0, 0], OMEGA, -0.1)
+
+
+def test_one_time_and_many_times_give_the_same_values():
+    """The scalar path (the control loop's) and the array path agree, before the first knot, on
+    the knots, inside segments and on the tail."""
+    times, points = _walk()
+    plan = DCMPlan(OMEGA, times, points, np.array([0.01, 0.02]), dcm0=np.array([0.03, -0.01]))
+    ts = np.concatenate([[times[0] - 0.3], times, times[:-1] + 0.37 * np.diff(times),
+                         [times[-1] + 0.8]])
+    many_com, many_dcm = plan.com(ts), plan.dcm(ts)
+    for k, t in enumerate(ts):
+        for one, many in zip((*plan.com(float(t)), *plan.dcm(float(t))),
+                             (*many_com, *many_dcm)):
+            np.testing.assert_allclose(one, many[k], rtol=0, atol=1e-12)

@@ -265,6 +265,8 @@ class Walking:
         self.com_ref = self._standing_com()
         self.dcm_ref = self.com_ref[:2].copy()
         self._support_phase: Phase | None = None
+        self._touchdown_dcm: tuple = (None, None)
+        self._capture_polygon: tuple = (None, None)  # (the feet it is of, the polygon)
         self._support_polygon: SupportPolygon | None = None
         self.zmp_command = self.com_ref[:2].copy()
         self.cycle_times: list[float] = []
@@ -524,7 +526,10 @@ class Walking:
         return max(self.soles, key=lambda s: distance[s])
 
     def _capture_point_outside(self, dcm) -> bool:
-        return not self.support(self.soles, self.config.capture_margin).contains(dcm)
+        feet = tuple((tuple(p), y) for p, y in (self.feet[s] for s in self.soles))
+        if self._capture_polygon[0] != feet:  # the soles moved: a new polygon
+            self._capture_polygon = (feet, self.support(self.soles, self.config.capture_margin))
+        return not self._capture_polygon[1].contains(dcm)
 
     def _leave(self, ph: Phase, t: float, cycle) -> None:
         if ph.kind == "single":
@@ -630,9 +635,8 @@ class Walking:
             com_ref, vel, acc = self.com_ref, np.zeros(3), np.zeros(3)
         else:
             cxy, dcxy, ddcxy = self.plan.com(t)
-            z = self.com_ref[2]
-            com_ref = np.array([cxy[0], cxy[1], z])
-            vel, acc = np.r_[dcxy, 0.0], np.r_[ddcxy, 0.0]
+            com_ref = np.array([cxy[0], cxy[1], self.com_ref[2]])
+            vel, acc = np.array([dcxy[0], dcxy[1], 0.0]), np.array([ddcxy[0], ddcxy[1], 0.0])
             self.com_ref = com_ref
             self.dcm_ref = self.plan.dcm(t)[0]
         if ph.kind == "single":
@@ -643,15 +647,15 @@ class Walking:
         m = robot.mass
         momentum = stack.find("momentum")
         momentum.com_ref = com_ref
-        momentum.h_ref = np.r_[m * vel, 0.0, 0.0, 0.0]
-        momentum.hdot_ref = np.r_[m * self._horizontal_acceleration(ph, com_ref, vel, acc, com,
-                                                                    vcom), 0.0, 0.0, 0.0, 0.0]
+        a = self._horizontal_acceleration(ph, com_ref, vel, acc, com, vcom)
+        momentum.h_ref = np.array([m * vel[0], m * vel[1], m * vel[2], 0.0, 0.0, 0.0])
+        momentum.hdot_ref = np.array([m * a[0], m * a[1], 0.0, 0.0, 0.0, 0.0])
         if ph.kind == "double" and ph.leaving is not None:
             self.unload[ph.leaving].targets[ph.leaving] = self._leaving_wrench(ph, com, vcom)
         posture = stack.find("posture")
         q_ref = robot.q_ref.copy()
         # the standing base pose relative to the soles, turned with the heading
-        Rz = pin.rpy.rpyToMatrix(0.0, 0.0, self._base_yaw(t) - self.standing_heading)
+        Rz = _yaw_matrix(self._base_yaw(t) - self.standing_heading)
         q_ref[:3] = com_ref + Rz @ self.base_offset
         q_ref[3:7] = pin.Quaternion(Rz @ self.base_rotation).coeffs()
         posture.q_ref = q_ref
@@ -683,22 +687,25 @@ class Walking:
         task = self.swing_task[ph.stance]
         if c.adjust_until > 0 and t - ph.start <= c.adjust_until * (ph.end - ph.start):
             self._adjust_step(t, ph, dcm)
-        pos, vel, acc = self.swing.evaluate(t)
+        pos, vel, acc = np.empty(3), np.empty(3), np.empty(3)
+        self.swing.evaluate_into(t, pos, vel, acc)
         u = min(max((t - ph.start) / (ph.end - ph.start), 0.0), 1.0)
         s = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
         ds = 30.0 * u * u * (1.0 - u) ** 2 / (ph.end - ph.start)
         y0, y1 = self.swing_yaw
         dyaw = _wrap(y1 - y0)
         task.position = pos
-        task.rotation = pin.rpy.rpyToMatrix(0.0, 0.0, y0 + s * dyaw)
-        task.velocity = np.r_[vel, 0.0, 0.0, ds * dyaw]
-        task.acceleration = np.r_[acc, 0.0, 0.0, 0.0]
+        task.rotation = _yaw_matrix(y0 + s * dyaw)
+        task.velocity = np.array([vel[0], vel[1], vel[2], 0.0, 0.0, ds * dyaw])
+        task.acceleration = np.array([acc[0], acc[1], acc[2], 0.0, 0.0, 0.0])
 
     def _adjust_step(self, t: float, ph: Phase, dcm) -> None:
         """Step adjustment: the footstep moves by the predicted DCM error at touchdown."""
         stance_pos, stance_yaw = self.feet[ph.stance]
         xi_T = predicted_dcm(dcm, stance_pos[:2], self.omega, ph.end - t)
-        xi_ref_T = self.plan.dcm(ph.end)[0]
+        if self._touchdown_dcm[0] is not ph:  # the reference at touchdown: once per swing
+            self._touchdown_dcm = (ph, self.plan.dcm(ph.end)[0])
+        xi_ref_T = self._touchdown_dcm[1]
         planned = ph.footstep
         target = planned.position[:2] + (xi_T - xi_ref_T)
         side = 1 if ph.stance == self.left else -1
@@ -709,6 +716,12 @@ class Walking:
             self.swing = SwingTrajectory(self.swing.p0, new, self.swing.duration,
                                          self.config.clearance, t0=self.swing.t0)
             self.steps[-1].target = np.array([xy[0], xy[1], planned.position[2]])
+
+
+def _yaw_matrix(yaw: float) -> np.ndarray:
+    """The rotation by ``yaw`` about z."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def _yaw(R) -> float:

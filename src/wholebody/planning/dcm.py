@@ -156,6 +156,18 @@ class DCMPlan:
         """t_0, the first knot."""
         return float(self.knot_times[0])
 
+    def _scalar(self, t: float):
+        """Segment index, ZMP, exp(ω (t - t_{i+1})) and exp(-ω (t - t_i)) at one time (the
+        control loop's case: no array machinery)."""
+        t = max(float(t), float(self._start[0]))
+        i = int(np.searchsorted(self._start, t, side="right")) - 1
+        start = float(self._start[i])
+        p = self.zmp_knots[i] + self._slope[i] * (t - start)
+        stop = float(self._stop[i])
+        rise = math.exp(self.omega * (t - stop)) if stop != math.inf else 0.0
+        fall = math.exp(-self.omega * (t - start))
+        return i, p, rise, fall
+
     def _locate(self, t):
         """Segment index and, per time, the ZMP, exp(ω (t - t_{i+1})) and exp(-ω (t - t_i))."""
         t = np.maximum(np.asarray(t, dtype=float), self._start[0])
@@ -174,14 +186,14 @@ class DCMPlan:
 
     def dcm(self, t) -> tuple[np.ndarray, np.ndarray]:
         """(ξ, ξ̇) at time ``t``: ξ = p + s_i / ω + E_i exp(ω (t - t_{i+1})), ξ̇ = ω (ξ - p)."""
-        i, p, rise, _ = self._locate(t)
+        i, p, rise, _ = self._scalar(t) if np.ndim(t) == 0 else self._locate(t)
         away = self._dcm_shift[i] + self._gain[i] * rise
         return p + away, self.omega * away
 
     def com(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(c, ċ, c̈) at time ``t``: c = p + (E_i / 2) exp(ω (t - t_{i+1})) + D_i exp(-ω (t - t_i)),
         c̈ = ω² (c - p)."""
-        i, p, rise, fall = self._locate(t)
+        i, p, rise, fall = self._scalar(t) if np.ndim(t) == 0 else self._locate(t)
         half, off = 0.5 * self._gain[i] * rise, self._offset[i] * fall
         w = self.omega
         return p + half + off, self._slope[i] + w * (half - off), w * w * (half + off)
