@@ -15,13 +15,27 @@ import argparse
 import json
 import logging
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
 from . import __version__
 
 EXIT_OK, EXIT_SCENARIO_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: a run ended by SIGTERM (128 + 15, as the shell reports it), its summary marked interrupted
+EXIT_TERMINATED = 143
+
+log = logging.getLogger("wholebody.cli")
+
+
+class Terminated(Exception):
+    """SIGTERM arrived during a run."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
 
 
 def _usage_error(exc: Exception) -> int:
@@ -174,18 +188,21 @@ def _cmd_run(args) -> int:
     recorder, view = _observers(args, out_dir)
     observers = [o for o in (recorder, view) if o is not None]
     start = time.perf_counter()
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous_sigterm = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         result = scenario.run(robot, controller, overrides, out_dir,
                               progress=not args.no_progress and sys.stderr.isatty(),
                               **({"observers": observers} if observers else {}))
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Terminated) as exc:
         elapsed = time.perf_counter() - start
+        how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
         cut = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
-                             [f"interrupted (Ctrl-C) after {elapsed:.1f} s of wall time; no "
+                             [f"interrupted ({how}) after {elapsed:.1f} s of wall time; no "
                               f"metrics or figures"], wall_time_s=elapsed, interrupted=True)
-        _report_cut_short(cut, out_dir, f"INTERRUPTED after {elapsed:.1f} s",
+        _report_cut_short(cut, out_dir, f"INTERRUPTED ({how}) after {elapsed:.1f} s",
                           " (interrupted: true)")
-        return EXIT_INTERRUPTED
+        return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     except SimulationDiverged as exc:
         failed = ScenarioResult(scenario.name, robot.name, controller, False,
                                 {"diverged_at_s": exc.t}, params, [str(exc)],
@@ -196,7 +213,18 @@ def _cmd_run(args) -> int:
         _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): diverged",
                       out_dir, failed.incidents)
         return EXIT_SCENARIO_FAILED
+    except Exception as exc:  # an error in the scenario: the run still ends with its summary
+        log.debug("the scenario raised", exc_info=True)
+        error = f"{type(exc).__name__}: {exc}"
+        failed = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
+                                [f"the run ended with an error, no metrics: {error} (run with -v "
+                                 f"for the traceback)"],
+                                wall_time_s=time.perf_counter() - start, error=error)
+        _report_cut_short(failed, out_dir, f"ERROR: {error}", " (completed: false)")
+        return EXIT_SCENARIO_FAILED
     finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous_sigterm)
         if view is not None:
             view.close()
     status = "SUCCESS" if result.success else "FAILED"

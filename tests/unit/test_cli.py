@@ -175,6 +175,15 @@ def no_simulation(monkeypatch):
      "(h = 1.02 m), got 0.6"),
     (["run", "ramp", "--set", "step=0.3"],
      "--set step: expected a finite number in (-0.25 h, 0.25 h) = (-0.15, 0.15) for robot 'hyq'"),
+    # in range, but not together: each crashed after simulating or reported a push that never came
+    (["run", "crawl", "--controller", "passive", "--set", "duration=1.0"],
+     "--set duration: 1 s ends before the gait starts (at 1 s)"),
+    (["run", "stand", "--set", "duration=0.0001"], "--set duration: 0.0001 s is shorter than"),
+    (["run", "push", "--set", "duration=0.0001"], "--set duration: 0.0001 s is shorter than"),
+    (["run", "crawl", "--controller", "passive", "--set", "period=1e-300", "--set",
+      "duration=1.5"], "--set period: 1e-300 s is shorter than 0.1 s"),
+    (["run", "push", "--set", "start=600", "--set", "duration=0.3"],
+     "--set start: the push ends at 600.1 s, less than 0.2 s before the run does"),
 ])
 def test_out_of_range_exit_2_before_simulating(argv, needle, capsys, no_simulation, tmp_path):
     assert main([*argv, "--out", str(tmp_path / "out")]) == 2

@@ -76,13 +76,13 @@ def test_parse_sets():
 def test_expand_is_the_product_in_grid_order(robots):
     push = get_scenario("push")
     runs = expand(push, robots["talos14"], "talos14", "lqr",
-                  {"peak_force": ["100", "150"], "location": ["front", "back"]},
+                  {"peak_force": ["1.0", "1.0"], "location": ["front", "back"]},
                   {"duration": "1.0"}, repeat=2)
     assert [r.index for r in runs] == list(range(8))
     assert [(r.grid["peak_force"], r.grid["location"], r.repeat) for r in runs[:4]] == [
-        ("100", "front", 0), ("100", "front", 1), ("100", "back", 0), ("100", "back", 1)]
+        ("1.0", "front", 0), ("1.0", "front", 1), ("1.0", "back", 0), ("1.0", "back", 1)]
     assert all(r.overrides["duration"] == "1.0" and r.controller == "lqr" for r in runs)
-    assert runs[5].overrides == {"duration": "1.0", "peak_force": "150", "location": "front"}
+    assert runs[5].overrides == {"duration": "1.0", "peak_force": "1.0", "location": "front"}
     assert expand(push, robots["talos14"], "talos14", "lqr", {}, {}, 3)[2].repeat == 2
 
 

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
+import os
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -379,6 +382,9 @@ def paper_q_notes(robot, controller: str, params: dict) -> list[str]:
 
 #: the range of a phase duration or a time span: ``Parameter(name, 1.0, help, **TIME_SPAN)``
 TIME_SPAN = {"low": 0.0, "low_open": True, "high": Parameter.MAX_TIME}
+#: the shortest simulated time a run takes (s; a ``duration`` of 0, where a scenario allows it,
+#: means until the end of its phases)
+MIN_DURATION = 0.1
 
 
 def duration_parameter(default: float, help: str = "simulated time (s)",
@@ -421,6 +427,8 @@ class ScenarioResult:
     #: what first went wrong in the twin (:class:`~wholebody.sim.incidents.Incident` dicts), when
     #: the run was watched by an :class:`~wholebody.sim.incidents.IncidentLog`; None otherwise
     incidents: list[dict] | None = None
+    #: why the run ended without its result (an error in the scenario), None if it did not
+    error: str | None = None
 
     def summary(self) -> dict[str, Any]:
         out = {
@@ -428,6 +436,7 @@ class ScenarioResult:
             "robot": self.robot,
             "controller": self.controller,
             "success": bool(self.success),
+            "completed": bool(not self.interrupted and self.error is None),
             "interrupted": bool(self.interrupted),
             "metrics": _jsonable(self.metrics),
             "parameters": _jsonable(self.parameters),
@@ -437,12 +446,29 @@ class ScenarioResult:
         }
         if self.incidents is not None:
             out["incidents"] = self.incidents
+        if self.error is not None:
+            out["error"] = self.error
         return out
 
     def write(self, out_dir: Path) -> Path:
+        """``out_dir/summary.json``, written atomically: a reader sees the previous file or this
+        one whole, never a part (a temporary file in the same folder, then renamed over it)."""
+        out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         path = out_dir / "summary.json"
-        path.write_text(json.dumps(self.summary(), indent=2) + "\n")
+        text = json.dumps(self.summary(), indent=2) + "\n"
+        handle, temporary = tempfile.mkstemp(prefix=".summary-", suffix=".json", dir=out_dir)
+        try:
+            with os.fdopen(handle, "w", encoding="utf-8") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            os.chmod(temporary, 0o644)  # as a plain write would leave it (mkstemp: 0o600)
+            os.replace(temporary, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(temporary)
+            raise
         return path
 
 
@@ -510,6 +536,11 @@ class Scenario:
         params = self.resolve(overrides or {})
         for p in self.parameters:
             params[p.name] = p.check(params[p.name], robot)
+        duration = params.get("duration")
+        if isinstance(duration, (int, float)) and 0.0 < duration < MIN_DURATION:
+            raise ValueError(f"--set duration: {duration:g} s is shorter than {MIN_DURATION:g} s "
+                             f"(fewer than {MIN_DURATION / 1e-3:.0f} cycles of the 1 kHz twin "
+                             f"measure nothing)")
         if self.validate_function is not None:
             self.validate_function(robot, params)
         return params

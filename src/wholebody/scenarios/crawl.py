@@ -51,14 +51,21 @@ PARAMETERS = (
 CONTROLLER_CHOICES = ("passive+quasi-static", "passive", "quasi-static")
 
 
+#: the robot stands this long before its gait starts (s)
+GAIT_START = 1.0
+
+
 def commanded_distance(params: dict) -> float:
     v0, v1, T, D = params["speed_start"], params["speed_end"], params["ramp_time"], params["duration"]
-    ramp = min(max(D - 1.0, 0.0), T)
-    return 0.5 * (v0 + v0 + (v1 - v0) * ramp / T) * ramp + v1 * max(D - 1.0 - T, 0.0)
+    ramp = min(max(D - GAIT_START, 0.0), T)
+    return 0.5 * (v0 + v0 + (v1 - v0) * ramp / T) * ramp + v1 * max(D - GAIT_START - T, 0.0)
 
 
 def validate(robot, params: dict) -> None:
     check_gait(params)
+    if params["duration"] <= GAIT_START:
+        raise ValueError(f"--set duration: {params['duration']:g} s ends before the gait starts "
+                         f"(at {GAIT_START:g} s)")
     check_quadruped(robot, "the crawl scenario", params["gait"])
     if params["engine"] not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
@@ -71,8 +78,8 @@ def validate(robot, params: dict) -> None:
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
         observers=()) -> ScenarioResult:
     names = controller.split("+")
-    command = VelocityCommand.speed_ramp(params["speed_start"], params["speed_end"], 1.0,
-                                         1.0 + params["ramp_time"])
+    command = VelocityCommand.speed_ramp(params["speed_start"], params["speed_end"], GAIT_START,
+                                         GAIT_START + params["ramp_time"])
     options = {"passive": {"engine": params["engine"], "regularization": params["regularization"]},
                "quasi-static": {"impedance": TrunkImpedance.for_robot(
                    robot, feedforward=params["baseline_feedforward"], **trunk_gains(params))}}

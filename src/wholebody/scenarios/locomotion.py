@@ -211,10 +211,19 @@ def check_joint(robot, joint: str) -> None:
                          f"{', '.join(robot.joint_names)}")
 
 
+#: the shortest gait period (s) taken: each phase must last a few cycles of the 250 Hz WBC
+MIN_GAIT_PERIOD = 0.1
+
+
 def check_gait(params: dict, gaits=("crawl", "trot")) -> None:
-    """ValueError naming ``--set gait`` unless it is one of ``gaits``."""
+    """ValueError naming ``--set gait`` unless it is one of ``gaits``, or ``--set period`` if it
+    is set (not 0) below :data:`MIN_GAIT_PERIOD`."""
     if params["gait"] not in gaits:
         raise ValueError(f"--set gait: expected {' or '.join(gaits)}, got '{params['gait']}'")
+    period = params.get("period", 0.0)
+    if 0.0 < period < MIN_GAIT_PERIOD:
+        raise ValueError(f"--set period: {period:g} s is shorter than {MIN_GAIT_PERIOD:g} s (0: "
+                         f"the default period)")
 
 
 def check_positive(params: dict, keys) -> None:

@@ -19,6 +19,9 @@ from ..robots import reference
 #: within RECOVERY_WINDOW_S after it
 MAX_TILT_DEG = 2.0
 RECOVERY_WINDOW_S = 3.0
+#: a recovery counts only if the CoG error was last above its tolerance this long before the
+#: record ends (s)
+RECORD_TAIL_S = 0.2
 
 #: a fall (stand): the base tilts by more than FALL_BASE_TILT_DEG or sinks below
 #: FALL_HEIGHT_FRACTION of its standing height
@@ -80,10 +83,10 @@ class Thresholds:
     def cog_recovered(self, t: np.ndarray, err: np.ndarray, end: float,
                       window: float = RECOVERY_WINDOW_S) -> tuple[bool, float]:
         """(recovered, recovery time) of a push ending at ``end``: the CoG error was last above
-        ``cog_tolerance`` before ``end + window`` and at least 0.2 s before the end of the
-        record."""
+        ``cog_tolerance`` before ``end + window`` and at least RECORD_TAIL_S before the end of
+        the record."""
         recovery, last = cog_recovery(t, err, end, None, self.cog_tolerance)
-        return bool(last is None or last < min(end + window, t[-1] - 0.2)), recovery
+        return bool(last is None or last < min(end + window, t[-1] - RECORD_TAIL_S)), recovery
 
 
 def tilt_deg(rotation: np.ndarray) -> float:

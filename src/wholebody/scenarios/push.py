@@ -16,7 +16,7 @@ from pathlib import Path
 from ..report.balance_figures import push_figure
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
                    Parameter, Scenario, ScenarioResult, duration_parameter, paper_q_notes)
-from .measures import Thresholds
+from .measures import RECORD_TAIL_S, Thresholds
 from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, Q_ORIENTATION,
                      HumanoidScaled, check_push, ignored_option_notes, push_trial)
 
@@ -46,6 +46,16 @@ PARAMETERS = (
     COP_MARGIN,
     ENGINE,
 )
+
+
+def validate(robot, params: dict) -> None:
+    """:func:`check_push`, and the push over :data:`~.measures.RECORD_TAIL_S` before the run
+    ends (else a push that never came would count as a push survived)."""
+    check_push(robot, params)
+    end = params["start"] + params["push_duration"]
+    if end + RECORD_TAIL_S > params["duration"]:
+        raise ValueError(f"--set start: the push ends at {end:g} s, less than {RECORD_TAIL_S:g} s "
+                         f"before the run does (duration {params['duration']:g} s)")
 
 
 def with_peak_force(robot, params: dict) -> dict:
@@ -85,6 +95,6 @@ SCENARIO = Scenario(
     controllers=("lqr", "pd"),
     default_robot="talos14",
     run_function=run,
-    validate_function=check_push,
+    validate_function=validate,
     simulations=1,
 )

@@ -1,0 +1,79 @@
+"""A run's result is never lost or false: summary.json is written whole or not at all, and a run
+that ends with an error still leaves its summary, marked incomplete, with the reason."""
+
+import json
+import threading
+
+from wholebody.cli import main
+from wholebody.scenarios.base import Scenario, ScenarioResult
+
+
+def _result(tag: str, size: int) -> ScenarioResult:
+    return ScenarioResult("stand", "talos14", "standing", True,
+                          {"tag": tag, "padding": [tag] * size}, {"duration": 1.0})
+
+
+def test_concurrent_writers_never_leave_a_torn_summary(tmp_path):
+    """Two writers of summaries of different sizes and a reader polling the file: every read
+    that finds the file parses, as one writer's whole summary."""
+    stop = threading.Event()
+    bad, reads = [], [0]
+
+    def writer(tag, size):
+        result = _result(tag, size)
+        while not stop.is_set():
+            result.write(tmp_path)
+
+    def reader():
+        path = tmp_path / "summary.json"
+        while not stop.is_set():
+            try:
+                text = path.read_text()
+            except FileNotFoundError:
+                continue
+            reads[0] += 1
+            try:
+                summary = json.loads(text)
+            except ValueError:
+                bad.append(text[:80])
+                continue
+            if summary["metrics"]["padding"] != [summary["metrics"]["tag"]] * {
+                    "a": 5000, "b": 50}[summary["metrics"]["tag"]]:
+                bad.append("mixed")
+
+    threads = [threading.Thread(target=writer, args=("a", 5000)),
+               threading.Thread(target=writer, args=("b", 50)), threading.Thread(target=reader)]
+    for t in threads:
+        t.start()
+    threading.Event().wait(3.0)
+    stop.set()
+    for t in threads:
+        t.join()
+    assert reads[0] > 100
+    assert not bad, bad[:3]
+    assert [p.name for p in tmp_path.iterdir()] == ["summary.json"]  # no temporary left
+
+
+def test_a_scenario_error_leaves_a_summary_marked_incomplete(tmp_path, capsys, monkeypatch):
+    """An error raised by the scenario (here after the robot was built and checked) ends the run
+    with exit 1, one line on stderr, and summary.json with completed false and the reason."""
+    def broken(self, *args, **kwargs):
+        raise RuntimeError("the figure writer failed")
+
+    monkeypatch.setattr(Scenario, "run", broken)
+    out = tmp_path / "out"
+    assert main(["run", "stand", "--robot", "talos14", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "ERROR: RuntimeError: the figure writer failed" in err and "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["completed"] is False and summary["success"] is False
+    assert summary["error"] == "RuntimeError: the figure writer failed"
+    assert summary["parameters"]["duration"] == 5.0
+
+
+def test_a_run_that_ends_normally_is_complete(tmp_path):
+    out = tmp_path / "out"
+    assert main(["run", "stand", "--robot", "talos14", "--set", "duration=0.2", "--out",
+                 str(out)]) in (0, 1)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["completed"] is True and "error" not in summary
