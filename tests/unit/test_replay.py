@@ -76,6 +76,20 @@ def test_incidents_are_in_the_settings_and_cannot_close_the_script(replay):
     assert settings["incidents"] == incidents
 
 
+def test_text_that_html_would_read_is_escaped_in_the_settings(replay):
+    """A title or an incident holding '<!--', '<script>', '&' or a line separator is embedded
+    with those characters as JSON escapes: no '<' or '>' reaches the settings element (a '<!--'
+    there left the page on "loading..."), and the JSON reads back the same."""
+    _, recorder, _ = replay
+    title = "<!--<script> & \u2028 \u2029 -->"
+    incidents = [{"t": 0.1, "what": "<!-- x", "run": "r"}]
+    html = replay_html(recorder.recordings, title, incidents)
+    raw = _element(html, "wb-settings")
+    assert not set("<>&\u2028\u2029") & set(raw)
+    settings = json.loads(raw)
+    assert settings["title"] == title and settings["incidents"] == incidents
+
+
 def test_frames_are_the_log_subsampled(replay):
     sim, recorder, html = replay
     stride = recorder.stride

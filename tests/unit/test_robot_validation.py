@@ -442,3 +442,20 @@ def test_a_group_state_outside_the_joint_limits_is_named():
     assert all(f"'{name}' at" in str(err.value) for name in outside)
     robot = wb.load_robot({**description, "posture_overrides": outside})
     assert robot.na == model.nv
+
+
+@pytest.mark.parametrize("path,value", [
+    (("name",), "../../../../x"), (("name",), "$\\nocommand$"), (("name",), "<!--<script>"),
+    (("name",), ".hidden"), (("name",), "a/b"), (("contacts", 0, "name"), "left$sole$"),
+    (("contacts", 1, "name"), "../right"),
+])
+def test_names_that_are_not_names_are_refused(path, value):
+    """A robot's or a contact's name becomes a folder, figure text and page text: a path, math
+    markup or HTML in it is refused at load, the field and the value named."""
+    field = ".".join(str(p) for p in path).replace(".0.", "[0].").replace(".1.", "[1].")
+    raises_naming(patched("talos14", path, value), field, repr(value), "is not a name")
+
+
+def test_ordinary_names_load():
+    for name in ("talos14", "g1 with arms", "b1-z1", "anymal_c (arm)", "robot.v2"):
+        RobotDescription.from_dict(patched("talos14", ("name",), name))

@@ -194,9 +194,18 @@ _SCRIPT = r"""
 """
 
 
+#: characters of JSON text that HTML could read inside a <script> element (``</script>``,
+#: ``<!--``), written as the JSON escapes of the same characters
+_SCRIPT_ESCAPES = (("&", "\\u0026"), ("<", "\\u003c"), (">", "\\u003e"),
+                   ("\u2028", "\\u2028"), ("\u2029", "\\u2029"))
+
+
 def _script_safe(text: str) -> str:
-    """Text that cannot close the <script> element it is embedded in."""
-    return text.replace("</", "<\\/")
+    """JSON text that cannot end, or open a comment in, the <script> element it is embedded in:
+    the same JSON value, its &, <, > and line separators escaped."""
+    for character, escape in _SCRIPT_ESCAPES:
+        text = text.replace(character, escape)
+    return text
 
 
 def page(viewer_js: str, settings: dict, data: str) -> str:

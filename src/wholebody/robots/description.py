@@ -35,6 +35,7 @@ URDF's effort limits and link inertias, are checked against the model by :class:
 
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -116,6 +117,20 @@ def _list(value: Any, path: str, where: str, expected: str) -> list:
 def _name(value: Any, path: str, where: str) -> str:
     if not isinstance(value, str) or not value:
         raise DescriptionError(f"{where}: {path}: expected a non-empty string, got {value!r}")
+    return value
+
+
+#: what a robot's or a contact's own name may hold: it becomes a folder's name, figure text and
+#: page text, so no path separators, no leading dot, nothing a plot or a page would interpret
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9 _.+()-]*")
+
+
+def _label(value: Any, path: str, where: str) -> str:
+    """A name given in the description (the robot's, a contact's): :data:`NAME_PATTERN`."""
+    value = _name(value, path, where)
+    if not NAME_PATTERN.fullmatch(value) or ".." in value:
+        raise DescriptionError(f"{where}: {path}: {value!r} is not a name: use letters, digits, "
+                               f"spaces and _ . + ( ) -, starting with a letter or a digit")
     return value
 
 
@@ -225,7 +240,7 @@ class RobotDescription:
         unknown = sorted(str(k) for k in set(data) - known)
         if unknown:
             raise DescriptionError(f"{where}: unknown field(s) {unknown}; known: {sorted(known)}")
-        name = str(need("name"))
+        name = _label(need("name"), "name", where)
         urdf = _name(need("urdf"), "urdf", where)
         posture = need("posture")
         if isinstance(posture, Mapping):
@@ -297,7 +312,7 @@ def _parse_contact(raw: Any, index: int, where: str) -> ContactSpec:
         raise DescriptionError(
             f"{where}: field '{path}.type' is {kind!r}, expected one of {CONTACT_TYPES}")
     _no_unknown_keys(raw, CONTACT_KEYS[kind], path, where, f" for a {kind} contact")
-    name = _name(raw["name"], f"{path}.name", where)
+    name = _label(raw["name"], f"{path}.name", where)
     frame = _name(raw["frame"], f"{path}.frame", where)
     role = raw.get("role")
     if role is not None and role not in ROLES[kind]:
