@@ -244,6 +244,7 @@ class Robot:
                                           description.torque_limits, where)
         self._warn_placeholder_limits(description.torque_limits)
         self.q_ref = self.rest_on_ground(self._reduce_posture(full, model, q_posture))
+        self._check_contact_sizes(where)
 
         selection = np.zeros((self.na, self.nv))
         selection[:, FREE_FLYER_NV:] = np.eye(self.na)
@@ -329,6 +330,22 @@ class Robot:
             dst = model.joints[jid]
             q[dst.idx_q:dst.idx_q + dst.nq] = q_full[src.idx_q:src.idx_q + src.nq]
         return q
+
+    def _check_contact_sizes(self, where: str) -> None:
+        """Each contact's size (a sphere's radius, a sole's half lengths) below the height of
+        the base above that contact's frame in the posture: a foot larger than the leg it ends
+        is a typo (a radius of 1e6 m made a robot standing 1000 km tall, whose thresholds,
+        relative to that height, passed anything)."""
+        pin.framesForwardKinematics(self.model, self.data, self.q_ref)
+        for i, c in enumerate(self.contacts):
+            leg = float(self.q_ref[2] - self.data.oMf[c.frame_id].translation[2])
+            size = (("radius", c.spec.radius) if c.spec.type == "point" else
+                    ("half_size", max(c.spec.half_size)))
+            if not size[1] < leg:
+                raise DescriptionError(
+                    f"{where}: field 'contacts[{i}].{size[0]}' = {size[1]!r} m: the contact "
+                    f"'{c.name}' is larger than the {leg:.3f} m from its frame up to the base in "
+                    f"the posture")
 
     def _check_joint_types(self) -> None:
         root = self.model.joints[1]

@@ -184,6 +184,8 @@ def no_simulation(monkeypatch):
       "duration=1.5"], "--set period: 1e-300 s is shorter than 0.1 s"),
     (["run", "push", "--set", "start=600", "--set", "duration=0.3"],
      "--set start: the push ends at 600.1 s, less than 0.2 s before the run does"),
+    (["run", "stand", "--set", "duration=1", "--set", "duration=2"],
+     "--set duration: given twice ('1' and '2')"),
 ])
 def test_out_of_range_exit_2_before_simulating(argv, needle, capsys, no_simulation, tmp_path):
     assert main([*argv, "--out", str(tmp_path / "out")]) == 2
@@ -396,3 +398,14 @@ def test_diverging_simulation_is_reported_with_its_time(tmp_path, capsys, monkey
     incidents = summary["incidents"]
     assert incidents and all(x["t"] <= summary["metrics"]["diverged_at_s"] for x in incidents)
     assert "first incidents in the twin:" in printed.out and incidents[0]["what"] in printed.out
+
+
+def test_a_robot_path_that_is_no_file_is_named(tmp_path, capsys):
+    folder = tmp_path / "robot.toml"
+    folder.mkdir()
+    for path, needle in ((folder, "is a folder, not a .toml file"),
+                         ("/dev/null", "is not a regular file"),
+                         (tmp_path / "missing.toml", "robot file not found")):
+        assert main(["run", "stand", "--robot", str(path), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and len(err.strip().splitlines()) == 1, err

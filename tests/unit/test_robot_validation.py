@@ -459,3 +459,36 @@ def test_names_that_are_not_names_are_refused(path, value):
 def test_ordinary_names_load():
     for name in ("talos14", "g1 with arms", "b1-z1", "anymal_c (arm)", "robot.v2"):
         RobotDescription.from_dict(patched("talos14", ("name",), name))
+
+
+@pytest.mark.parametrize("config,needles", [
+    ({"scale": 1e308}, ("'j1'", "inf", "scale 1e+308")),
+    ({"linkage": {"j2": {"a": 1e200, "b": 2e200, "force": 1e-100, "q_peak": -1.5}}},
+     ("'j2'", "nan")),
+    ({"overrides": {"j1": 1e9}}, ("'j1'", "1000000000.0")),
+])
+def test_derived_torque_limits_are_checked_by_value(config, needles):
+    """Numbers each fine alone that multiply out to bounds no joint has (infinite, NaN, beyond
+    1e5 N m) are refused at load, naming the joint; the bounds themselves are
+    evaluated here over the joint's whole turn."""
+    with pytest.raises(DescriptionError) as info:
+        TorqueProfile(("j1", "j2"), np.array([10.0, 10.0]), config)
+    for needle in needles:
+        assert needle in str(info.value), str(info.value)
+    a, b, force, q_peak = 0.1, 0.2, 3000.0, 0.5  # a plausible linkage loads
+    profile = TorqueProfile(("j1", "j2"), np.array([10.0, 10.0]),
+                            {"linkage": {"j2": {"a": a, "b": b, "force": force,
+                                                "q_peak": q_peak}}})
+    q = np.linspace(-3.0, 3.0, 7)
+    t = q + np.pi / 2 - q_peak
+    expected = force * a * b * np.abs(np.sin(t)) / np.sqrt(a * a + b * b - 2 * a * b * np.cos(t))
+    np.testing.assert_allclose([profile.upper(np.array([0.0, x]))[1] for x in q], expected)
+
+
+def test_a_contact_larger_than_its_leg_is_refused():
+    """A foot of 1e6 m radius stood the robot 1000 km tall (and its thresholds scaled with it)."""
+    raises_naming(lambda: wb.load_robot(patched("hyq", ("contacts", 0, "radius"), 1e6)),
+                  "contacts[0].radius", "1000000.0", "larger than")
+    raises_naming(lambda: wb.load_robot(patched("talos14", ("contacts", 1, "half_size"),
+                                                [5.0, 0.1])), "contacts[1].half_size",
+                  "larger than")

@@ -43,8 +43,12 @@ def load_robot(name_or_path: str | Path | Mapping[str, Any] | RobotDescription):
     if text in preset_names():
         return Robot(preset_description(text))
     path = Path(text).expanduser()
-    if path.suffix == ".toml" or path.is_file():
-        if not path.is_file():
+    if path.suffix == ".toml" or path.exists():
+        if path.is_dir():
+            raise UnknownRobotError(f"robot file: {path} is a folder, not a .toml file")
+        if path.exists() and not path.is_file():
+            raise UnknownRobotError(f"robot file: {path} is not a regular file (a device?)")
+        if not path.exists():
             raise UnknownRobotError(f"robot file not found: {path}")
         return Robot(RobotDescription.from_toml(path))
     raise UnknownRobotError(

@@ -20,6 +20,10 @@ import numpy as np
 from .description import DescriptionError, check_torque_limits
 
 
+#: the largest joint torque bound taken as plausible for a legged robot (N m)
+MAX_JOINT_TORQUE = 1e5
+
+
 class TorqueProfile:
     """Joint-dependent symmetric torque bounds for the actuated joints, in model joint order."""
 
@@ -63,8 +67,25 @@ class TorqueProfile:
         self._linkage_rows = np.asarray(rows, dtype=int)
         self._linkage = np.asarray(params, dtype=float).reshape(-1, 4)
         a, b, force, q_peak = self._linkage.T  # constants of the profile, evaluated every cycle
-        self._ab, self._a2b2, self._force_ab = a * b, a * a + b * b, force * a * b
+        with np.errstate(all="ignore"):
+            self._ab, self._a2b2, self._force_ab = a * b, a * a + b * b, force * a * b
         self._angle_offset = np.pi / 2 - q_peak
+        self._check_derived(where)
+
+    def _check_derived(self, where: str) -> None:
+        """Every bound the table gives (the constants times ``scale``, each linkage profile over
+        a full turn of its joint) finite and at most :data:`MAX_JOINT_TORQUE`: numbers each fine
+        alone can multiply out to bounds no joint has."""
+        angles = np.linspace(-np.pi, np.pi, 361)
+        with np.errstate(all="ignore"):
+            samples = np.array([self.upper(np.full(len(self.joint_names), q)) for q in angles])
+        worst = np.where(np.isfinite(samples), samples, np.inf).max(axis=0)
+        for i in np.flatnonzero(~(worst <= MAX_JOINT_TORQUE)):
+            k = int(np.argmax(~np.isfinite(samples[:, i]) | (samples[:, i] > MAX_JOINT_TORQUE)))
+            raise DescriptionError(
+                f"{where}: torque_limits give joint '{self.joint_names[i]}' a bound of "
+                f"{float(samples[k, i])!r} Nm (at q = {angles[k]:.2f} rad; scale {self.scale:g}): "
+                f"expected finite torques up to {MAX_JOINT_TORQUE:g} Nm")
 
     @property
     def linkage(self) -> tuple[np.ndarray, np.ndarray]:

@@ -279,6 +279,9 @@ def parse_sets(pairs: list[str]) -> dict[str, str]:
         key, sep, value = pair.partition("=")
         if not sep or not key.strip():
             raise ValueError(f"--set expects key=value, got '{pair}'")
+        if key.strip() in out:
+            raise ValueError(f"--set {key.strip()}: given twice ('{out[key.strip()]}' and "
+                             f"'{value.strip()}')")
         out[key.strip()] = value.strip()
     return out
 
