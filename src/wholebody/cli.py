@@ -15,27 +15,16 @@ import argparse
 import json
 import logging
 import os
-import signal
 import sys
-import threading
 import time
 from pathlib import Path
 
 from . import __version__
+from .interrupts import EXIT_TERMINATED, Terminated, sigterm_raises
 
 EXIT_OK, EXIT_SCENARIO_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
-#: a run ended by SIGTERM (128 + 15, as the shell reports it), its summary marked interrupted
-EXIT_TERMINATED = 143
 
 log = logging.getLogger("wholebody.cli")
-
-
-class Terminated(Exception):
-    """SIGTERM arrived during a run."""
-
-
-def _terminate(signum, frame):
-    raise Terminated()
 
 
 def _usage_error(exc: Exception) -> int:
@@ -188,12 +177,11 @@ def _cmd_run(args) -> int:
     recorder, view = _observers(args, out_dir)
     observers = [o for o in (recorder, view) if o is not None]
     start = time.perf_counter()
-    main_thread = threading.current_thread() is threading.main_thread()
-    previous_sigterm = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
-        result = scenario.run(robot, controller, overrides, out_dir,
-                              progress=not args.no_progress and sys.stderr.isatty(),
-                              **({"observers": observers} if observers else {}))
+        with sigterm_raises():
+            result = scenario.run(robot, controller, overrides, out_dir,
+                                  progress=not args.no_progress and sys.stderr.isatty(),
+                                  **({"observers": observers} if observers else {}))
     except (KeyboardInterrupt, Terminated) as exc:
         elapsed = time.perf_counter() - start
         how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
@@ -223,8 +211,6 @@ def _cmd_run(args) -> int:
         _report_cut_short(failed, out_dir, f"ERROR: {error}", " (completed: false)")
         return EXIT_SCENARIO_FAILED
     finally:
-        if main_thread:
-            signal.signal(signal.SIGTERM, previous_sigterm)
         if view is not None:
             view.close()
     status = "SUCCESS" if result.success else "FAILED"

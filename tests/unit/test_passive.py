@@ -181,6 +181,21 @@ def test_swing_gains_checked():
 
 
 @pytest.mark.parametrize("engine", ["python", "native"])
+def test_one_absurd_velocity_sample_does_not_wind_up_the_stance_anchors(robots, engine):
+    """Standing still, one state sample with every velocity at 300 (a sensor glitch) moves the
+    stance anchors by at most the feet's radius, so the cycles after it solve again without
+    reset() (it once wound the slip up by 1.2 m and every later cycle was held)."""
+    robot = robots["hyq"]
+    wbc = PassiveWBC(robot, engine=engine)
+    q, v = robot.q_ref, np.zeros(robot.nv)
+    for k in range(10):
+        assert wbc.compute(q, v, 0.004 * k).ok
+    wbc.compute(q, np.full(robot.nv, 300.0), 0.04)
+    after = [wbc.compute(q, v, 0.044 + 0.004 * k).ok for k in range(50)]
+    assert all(after[5:]), after
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_torques_within_limits_under_an_impossible_wrench(robots, rng, plan_for, engine):
     """A 3000 N downward external wrench estimate on a weak knee: whatever the QP does, the torque
     that leaves the controller is finite and within the limits it enforces (the robot's, lowered on

@@ -409,12 +409,19 @@ class PassiveWBC(PlannedController):
     def _stance_anchors(self, stance, points, velocity) -> None:
         """Writes x̂_st of eq. 32 into ``_anchors``, consistent with a rolling foot: the contact
         point minus the slip, the material contact point's velocity J v integrated since touchdown
-        (one control period per cycle). The sphere's lowest point moves as the foot rolls without slipping; anchoring it at
+        (one control period per cycle), at most the foot's radius (a foot rolls by less than a
+        radian; an absurd velocity sample would otherwise move the anchor for good). The
+        sphere's lowest point moves as the foot rolls without slipping; anchoring it at
         touchdown would demand foot acceleration from rolling alone (Fahmi et al. 2019 make the
         task active only when the foot slips)."""
         held = stance & self._was_stance
         self._slip[held] += self.control_period * velocity[held]
         self._slip[~held] = 0.0
+        norm = np.linalg.norm(self._slip, axis=1)
+        over = norm > self._radii
+        if over.any():  # one absurd velocity sample must not wind the anchor up for good
+            scale = np.divide(self._radii, norm, out=np.zeros_like(norm), where=norm > 0.0)
+            self._slip[over] *= scale[over, None]
         self._was_stance[:] = stance
         np.subtract(points, self._slip, out=self._anchors)
 

@@ -179,12 +179,18 @@ public:
     joint_acceleration_bounds(lo, up);
 
     // stance feet, eq. 10 / 32 (rows of swing feet freed or overwritten below); x̂_st is the
-    // contact point minus the slip, J v integrated since touchdown (PassiveWBC._stance_anchors)
+    // contact point minus the slip, J v integrated since touchdown and at most the foot's radius
+    // (PassiveWBC._stance_anchors)
     contact_velocity_.noalias() = J_ * v_;
     for (Index i = 0; i < nc_; ++i)
     {
       if (stance_[i] && was_stance_[i])
+      {
         slip_.row(i) += control_period_ * contact_velocity_.segment<3>(3 * i).transpose();
+        const double norm = slip_.row(i).norm();  // at most the foot's radius (a rolling foot)
+        if (norm > radii_[i])
+          slip_.row(i) *= norm > 0.0 ? radii_[i] / norm : 0.0;
+      }
       else
         slip_.row(i).setZero();
       was_stance_[i] = stance_[i];

@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..interrupts import EXIT_TERMINATED, Terminated, sigterm_raises
 from .executors import add_executor_options
 
 EXIT_OK, EXIT_RUN_RAISED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -126,13 +127,14 @@ def command(args) -> int:
     rows: list[dict] = []
     start = time.perf_counter()
     interrupted = False
+    terminated = False
     try:
-        with executor:
+        with sigterm_raises(), executor:  # stopping, the executor stops its workers
             for _, row in executor.map(run_one, runs):
                 rows.append(row)
                 progress.update(row)
-    except KeyboardInterrupt:
-        interrupted = True
+    except (KeyboardInterrupt, Terminated) as exc:
+        interrupted, terminated = True, isinstance(exc, Terminated)
     finally:
         progress.close()
     elapsed = time.perf_counter() - start
@@ -145,16 +147,18 @@ def command(args) -> int:
     except OSError as exc:
         print(f"wholebody: could not write the table in {out_dir}: {exc.strerror or exc}",
               file=sys.stderr)
-        return EXIT_INTERRUPTED if interrupted else EXIT_RUN_RAISED
+        return (EXIT_TERMINATED if terminated else EXIT_INTERRUPTED) if interrupted \
+            else EXIT_RUN_RAISED
     written = ", ".join(str(p) for p in paths)
     if args.metric is not None and rows and args.metric not in metric_names(rows):
         print(f"wholebody: note: --metric {args.metric}: no run has that metric; metrics: "
               f"{', '.join(metric_names(rows))}", file=sys.stderr)
     if interrupted:
-        print(f"sweep {scenario.name} on {robot.name}: INTERRUPTED after {elapsed:.1f} s, "
-              f"{len(rows)} of {len(runs)} runs done; wrote {written} (interrupted: true)",
+        how = "SIGTERM" if terminated else "Ctrl-C"
+        print(f"sweep {scenario.name} on {robot.name}: INTERRUPTED ({how}) after {elapsed:.1f} "
+              f"s, {len(rows)} of {len(runs)} runs done; wrote {written} (interrupted: true)",
               file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
     print(f"sweep {scenario.name} on {robot.name} ({controller}): {len(runs)} runs in "
           f"{elapsed:.1f} s ({executor.describe()}): {header['succeeded']} succeeded, "
           f"{len(rows) - header['succeeded'] - len(raised)} failed the criterion, "
