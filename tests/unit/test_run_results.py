@@ -77,3 +77,24 @@ def test_a_run_that_ends_normally_is_complete(tmp_path):
                  str(out)]) in (0, 1)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["completed"] is True and "error" not in summary
+
+
+def test_a_figure_that_cannot_be_written_loses_nothing_else(tmp_path, monkeypatch):
+    """A full disk when the figure is saved: the run keeps its verdict and metrics, its summary
+    lists no figure and says which one was not written."""
+    import errno
+
+    from matplotlib.figure import Figure
+
+    def full(self, *args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", full)
+    out = tmp_path / "out"
+    assert main(["run", "stand", "--robot", "talos14", "--set", "duration=0.3", "--out",
+                 str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["completed"] is True and summary["success"] is True
+    assert summary["metrics"] and summary["figures"] == []
+    assert any("not written" in note and "stand.png" in note for note in summary["notes"])
+    assert not list(out.glob("*.png"))

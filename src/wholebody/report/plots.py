@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import logging
 from pathlib import Path
 from typing import Sequence
 
@@ -11,14 +13,24 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+log = logging.getLogger(__name__)
+
 
 def save_figure(fig, path) -> Path:
-    """Lay out ``fig``, save it as a PNG at ``path`` (parents created), close it; the path."""
+    """Lay out ``fig``, save it as a PNG at ``path`` (parents created), close it; the path. A
+    figure that cannot be written (a full disk, a folder gone) is logged and left out: the
+    path is returned all the same, and a run's summary lists only the figures that exist."""
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=110)
+    except OSError as exc:
+        log.warning("could not write the figure %s: %s", path, exc.strerror or exc)
+        with contextlib.suppress(OSError):
+            path.unlink()  # no half-written file
+    finally:
+        plt.close(fig)
     return path
 
 

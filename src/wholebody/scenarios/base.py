@@ -586,6 +586,10 @@ class Scenario:
             exc.incidents = None if incidents is None else incidents.as_dicts()
             raise
         result.wall_time_s = time.perf_counter() - start
+        missing = [f for f in result.figures if not Path(f).is_file()]
+        if missing:  # save_figure logged why
+            result.figures = [f for f in result.figures if f not in missing]
+            result.notes.append(f"figure(s) not written: {', '.join(missing)}")
         if incidents is not None:
             result.incidents = incidents.as_dicts()
         if out_dir is not None:
