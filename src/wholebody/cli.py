@@ -12,6 +12,7 @@ simulation that diverges ends the run with exit 1 and a summary naming the time
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import os
@@ -150,7 +151,12 @@ def _report_cut_short(result, out_dir: Path, what: str, mark: str = "") -> None:
 
 
 def _cmd_run(args) -> int:
-    from .outputs import prepare_output
+    with contextlib.ExitStack() as held:  # the output directory's lock, until the run is over
+        return _run(args, held)
+
+
+def _run(args, held: contextlib.ExitStack) -> int:
+    from .outputs import OutputInUse, claim_output, prepare_output
     from .robots.check import load_fit_robot
     from .scenarios import get_scenario
     from .scenarios.base import ScenarioResult, parse_sets
@@ -170,7 +176,12 @@ def _cmd_run(args) -> int:
         return _usage_error(exc)
     out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"
     try:
+        if out_dir.exists() and not out_dir.is_dir():
+            raise NotADirectoryError(0, "not a directory")
+        held.enter_context(claim_output(out_dir))
         prepare_output(out_dir, stale=("summary.json",))
+    except OutputInUse as exc:
+        return _usage_error(f"--out {out_dir}: {exc.strerror}")
     except OSError as exc:
         return _usage_error(f"--out {out_dir}: cannot write there ({exc.strerror or exc})")
     controller = args.controller or scenario.controllers[0]

@@ -98,3 +98,17 @@ def test_a_figure_that_cannot_be_written_loses_nothing_else(tmp_path, monkeypatc
     assert summary["metrics"] and summary["figures"] == []
     assert any("not written" in note and "stand.png" in note for note in summary["notes"])
     assert not list(out.glob("*.png"))
+
+
+def test_a_second_run_on_a_busy_output_folder_is_refused(tmp_path, capsys):
+    """While one command holds the output folder (here this test, as a second process would),
+    a run there exits 2 before simulating, naming the holder; once it is free, it runs."""
+    from wholebody.outputs import claim_output
+
+    out = tmp_path / "out"
+    with claim_output(out):
+        assert main(["run", "stand", "--set", "duration=0.2", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "in use by another wholebody command (pid" in err
+        assert not (out / "summary.json").exists()
+    assert main(["run", "stand", "--set", "duration=0.2", "--out", str(out)]) in (0, 1)
