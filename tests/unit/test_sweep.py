@@ -280,3 +280,21 @@ def test_unreachable_ray_address_exit_2(tmp_path, capsys, no_simulation):
                  "--out", str(tmp_path / "out")]) == 2
     assert "--ray 127.0.0.1:1: no Ray head node answers there" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_sweep_of_more_runs_than_it_can_list_is_refused(capsys, tmp_path):
+    """--repeat 1e9 grew memory without bound before the first run: refused, exit 2."""
+    assert main(["sweep", "stand", "--grid", "duration=1,2", "--repeat", "1000000000",
+                 "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert "--grid/--repeat: 2000000000 runs, more than 100000" in err
+
+
+def test_a_sweep_on_a_busy_output_folder_is_refused(capsys, tmp_path):
+    from wholebody.outputs import claim_output
+
+    out = tmp_path / "s"
+    with claim_output(out):
+        assert main(["sweep", "stand", "--grid", "duration=0.2", "--serial", "--out",
+                     str(out)]) == 2
+    assert "in use by another wholebody command (pid" in capsys.readouterr().err

@@ -87,14 +87,13 @@ def _write(out_dir: Path, header: dict, rows: list[dict], grid_keys: list[str],
 
 def command(args) -> int:
     """``wholebody sweep``: validate everything, run, write the table."""
-    from ..outputs import prepare_output
+    from ..outputs import OutputInUse, claim_output, prepare_output
     from ..robots.check import load_fit_robot
     from ..scenarios import get_scenario
     from .executors import make_executor
     from ..scenarios.base import parse_sets
     from .grid import expand, parse_grid, robot_reference
-    from .table import FILES, metric_names
-    from .worker import run_one
+    from .table import FILES
 
     try:  # every usage error surfaces here, before anything runs
         scenario = get_scenario(args.scenario)
@@ -115,10 +114,24 @@ def command(args) -> int:
     out_dir = (Path(args.out) if args.out else
                Path("results") / f"sweep-{scenario.name}-{robot.name}")
     try:
+        if out_dir.exists() and not out_dir.is_dir():
+            raise NotADirectoryError(0, "not a directory")
+        lock = claim_output(out_dir)
         prepare_output(out_dir, stale=FILES)
+    except OutputInUse as exc:
+        executor.close()
+        return _usage_error(f"--out {out_dir}: {exc.strerror}")
     except OSError as exc:
         executor.close()
         return _usage_error(f"--out {out_dir}: cannot write there ({exc.strerror or exc})")
+    with lock:  # the output folder is this sweep's until it is over
+        return _sweep(args, scenario, robot, controller, grid, sets, runs, executor, out_dir)
+
+
+def _sweep(args, scenario, robot, controller, grid, sets, runs, executor, out_dir) -> int:
+    """Run the sweep's ``runs`` on ``executor`` and write the table in ``out_dir``."""
+    from .table import metric_names
+    from .worker import run_one
 
     header = {"scenario": scenario.name, "robot": robot.name, "controller": controller,
               "grid": grid, "set": sets, "repeat": args.repeat, "runs": len(runs),

@@ -7,6 +7,7 @@ anything is simulated; each error names the ``--grid``/``--set`` field and the v
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,6 +59,10 @@ def robot_reference(name_or_path: str) -> str:
     return str(path.resolve()) if path.is_file() else str(name_or_path)
 
 
+#: the most runs one sweep takes (the runs are listed before the first starts)
+MAX_RUNS = 100_000
+
+
 def expand(scenario, robot, robot_ref: str, controller: str, grid: dict[str, list[str]],
            sets: dict[str, str] | None = None, repeat: int = 1) -> list[SweepRun]:
     """The runs of ``grid`` (first key outermost, repeats innermost) on top of ``sets``, each
@@ -66,6 +71,10 @@ def expand(scenario, robot, robot_ref: str, controller: str, grid: dict[str, lis
     sets = dict(sets or {})
     if repeat < 1:
         raise ValueError(f"--repeat: expected a whole number >= 1, got {repeat}")
+    count = repeat * math.prod(len(values) for values in grid.values())
+    if count > MAX_RUNS:
+        raise ValueError(f"--grid/--repeat: {count} runs, more than {MAX_RUNS} (each is a "
+                         f"simulation; split the sweep)")
     if controller not in scenario.controllers:
         raise ValueError(f"scenario '{scenario.name}' has no controller '{controller}'; "
                          f"controllers: {', '.join(scenario.controllers)}")
