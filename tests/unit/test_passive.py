@@ -139,6 +139,9 @@ def test_failure_is_a_value(robots, rng, plan_for):
     robot.update(*standing_state(robot, rng))
     sol = wbc.solve(plan_for(robot, rng, (True, True, True, True)))
     assert not sol.ok and "daqp" in sol.status
+    assert "(1 failed cycle(s) in a row)" in sol.status
+    again = wbc.solve(plan_for(robot, rng, (True, True, True, True)))
+    assert not again.ok and "(2 failed cycle(s) in a row)" in again.status
     lo, hi = robot.torque_bounds()
     hi[robot.joint_names.index("lf_kfe_joint")] = 1.0
     assert np.all(np.isfinite(sol.tau)) and np.all(sol.tau <= hi) and np.all(sol.tau >= lo)

@@ -515,6 +515,8 @@ class PassiveWBC(PlannedController):
         """The Solution of one cycle (both engines; ``ok``: the QP was solved): the torque
         through the guard, failure streaks, the observer's input, task reports (trunk wrench; swing
         feet when the solve succeeded)."""
+        if not ok:  # the caller sees a streak in the status, not only in the log
+            status = f"{status} ({self._failing + 1} failed cycle(s) in a row)"
         tau, outcome, status = guard_torque(tau, *self._tau_bounds,
                                             Outcome.SOLVED if ok else Outcome.HELD, status)
         if ok and self._failing:
