@@ -48,13 +48,7 @@ def planner(talos14, limits14):
 
 def _standing_feet(robot):
     """{sole: (position, yaw)} in the posture, from Pinocchio's kinematics."""
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, robot.q_ref)
-    out = {}
-    for sole in biped_soles(robot):
-        M = data.oMf[robot.contact(sole).frame_id]
-        out[sole] = (M.translation.copy(), float(math.atan2(M.rotation[1, 0], M.rotation[0, 0])))
-    return out
+    return {sole: (M.translation, _yaw(M.rotation)) for sole, M in _posture_soles(robot).items()}
 
 
 def _relative(stance, step_xy, step_yaw, stance_side):

@@ -24,20 +24,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..control.walking import Walking, WalkingConfig  # noqa: E402
-from ..report.plots import grouped_bar_figure, save_figure  # noqa: E402
-from ..robots.roles import biped_soles  # noqa: E402
-from .base import (COP_MARGIN, ENGINE, TIME_SPAN, Parameter, Scenario,  # noqa: E402
+from ..control.walking import Walking, WalkingConfig
+from ..report.plots import grouped_bar_figure, save_figure
+from ..robots.roles import biped_soles
+from .base import (COP_MARGIN, ENGINE, TIME_SPAN, Parameter, Scenario,
                    ScenarioResult, check_engine, duration_parameter, parse_list)
-from .pushes import FroudeScaled  # noqa: E402
-from .walking_runs import (WalkRun, draw_top_view, draw_torque_steps, push_of,  # noqa: E402
-                           shade_swings, simulate, step_rows, torque_jumps)
+from .pushes import FroudeScaled
+from .walking_runs import (WalkRun, capture_point_outside_support,
+                           draw_torque_steps, push_of, shade_swings, simulate, step_rows,
+                           torque_jumps, walking_figure)
 
 #: standing again: the base within this share of its initial height at the end
 HEIGHT_TOLERANCE = 0.1
@@ -108,7 +105,7 @@ def trial(robot, params: dict, dv: float, angle: float, progress: bool = False,
     z = run.a["base_position"][:, 2]
     standing = ctrl.phase.kind == "stand"
     height_ok = abs(z[-1] - z[0]) <= HEIGHT_TOLERANCE * z[0]
-    cp = run.a["cp_distance"]
+    cp = run.a["cp_distance"] = capture_point_outside_support(robot, run)
     metrics = {
         "dv_mps": dv, "angle_deg": angle, "peak_force_N": push.peak_force,
         "impulse_Ns": push.impulse,
@@ -189,11 +186,8 @@ def push_step_figure(path: Path, robot, run: WalkRun, title: str) -> Path:
     """Top view (soles, CoM, DCM, ZMP command, the push) and time series (push force and base
     height, the capture point's distance outside the support, torque steps)."""
     a, t = run.a, run.a["t"]
-    fig = plt.figure(figsize=(13, 7.5))
-    grid = fig.add_gridspec(3, 2, width_ratios=(1.0, 1.1))
-    draw_top_view(fig.add_subplot(grid[:, 0]), robot, run,
-                  "top view (start soles solid, landed soles dashed, push arrow)")
-    axes = [fig.add_subplot(grid[i, 1]) for i in range(3)]
+    fig, axes = walking_figure(robot, run,
+                               "top view (start soles solid, landed soles dashed, push arrow)")
     force = np.linalg.norm(run.sim.log.arrays()["push_force"], axis=1)[:len(t)]
     axes[0].plot(t[:len(force)], force, color="tab:green", label="push |F| (N)")
     axes[0].set_ylabel("N", fontsize=8)

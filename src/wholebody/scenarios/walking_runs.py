@@ -37,8 +37,8 @@ STAND_TIME, RAMP_TIME = 1.0, 1.0
 DISTANCE_SHARE = 0.8
 #: first controller cycles left out of the timing statistics
 TIMING_WARMUP = 50
-RECORDED = ("t", "base_position", "yaw", "com", "com_ref", "dcm", "dcm_ref", "zmp",
-            "cp_distance", "tau", "command")
+RECORDED = ("t", "base_position", "yaw", "com", "com_ref", "dcm", "dcm_ref", "zmp", "tau",
+            "command")
 
 
 @dataclass
@@ -94,7 +94,6 @@ def simulate(robot, ctrl: Walking, duration: float,
     rec = {k: [] for k in RECORDED}
     run.poses = {s: ([], []) for s in ctrl.soles}
     h0 = float(robot.q_ref[2])
-    weight = robot.mass * 9.81
 
     def compute(q, v, t):
         if command is not None:
@@ -112,17 +111,10 @@ def simulate(robot, ctrl: Walking, duration: float,
         yaw, tilt = base_yaw_tilt(q)
         dcm = robot.com[:2] + robot.vcom[:2] / ctrl.omega
         frames = sim.contact_frame_poses()
-        wrenches = sim.contact_wrenches()
-        loaded = [s for s in ctrl.soles if wrenches[s][2] > SUPPORT_FORCE_SHARE * weight]
-        distance = math.nan
-        if loaded:
-            support = SupportPolygon(np.vstack([sole_outline(robot, s, *frames[s])
-                                                for s in loaded]))
-            distance = float(np.linalg.norm(dcm - support.project(dcm)))
         for key, value in (("t", t), ("base_position", q[:3].copy()), ("yaw", yaw),
                            ("com", robot.com.copy()), ("com_ref", np.array(ctrl.com_ref)),
                            ("dcm", dcm), ("dcm_ref", np.array(ctrl.dcm_ref)),
-                           ("zmp", np.array(ctrl.zmp_command)), ("cp_distance", distance),
+                           ("zmp", np.array(ctrl.zmp_command)),
                            ("tau", np.array(sol.tau, dtype=float)),
                            ("command", ctrl.command.copy())):
             rec[key].append(value)
@@ -141,6 +133,24 @@ def simulate(robot, ctrl: Walking, duration: float,
     run.a = {k: np.asarray(v, dtype=float) for k, v in rec.items()}
     run.poses = {s: (np.asarray(p), np.asarray(R)) for s, (p, R) in run.poses.items()}
     return run
+
+
+def capture_point_outside_support(robot, run: WalkRun) -> np.ndarray:
+    """Per recorded cycle, how far the measured capture point is outside the support polygon of
+    the soles that carry SUPPORT_FORCE_SHARE of the weight in the twin (the log's contact
+    wrenches of the same cycles), NaN while none does."""
+    wrenches = np.asarray(run.sim.log.contact_wrenches)
+    columns = {s: robot.contact_names.index(s) for s in run.ctrl.soles}
+    threshold = SUPPORT_FORCE_SHARE * robot.mass * 9.81
+    out = np.full(len(run.a["t"]), math.nan)
+    for k in range(min(len(wrenches), len(out))):  # a fall ends the run before its last step
+        loaded = [s for s, i in columns.items() if wrenches[k, i, 2] > threshold]
+        if loaded:
+            support = SupportPolygon(np.vstack([
+                sole_outline(robot, s, run.poses[s][0][k], run.poses[s][1][k]) for s in loaded]))
+            dcm = run.a["dcm"][k]
+            out[k] = float(np.linalg.norm(dcm - support.project(dcm)))
+    return out
 
 
 def stance_intervals(steps, sole: str, end: float) -> list[tuple[float, float]]:
@@ -223,6 +233,15 @@ def step_rows(run: WalkRun) -> list[dict]:
             row["landing_from_start_xy_m"] = (landed - run.poses[s.contact][0][0, :2]).tolist()
         rows.append(row)
     return rows
+
+
+def walking_figure(robot, run: WalkRun, top_title: str):
+    """A walking run's figure: the top view (:func:`draw_top_view`, titled ``top_title``) on the
+    left, three time-series axes on the right → (figure, the three axes)."""
+    fig = plt.figure(figsize=(13, 7.5))
+    grid = fig.add_gridspec(3, 2, width_ratios=(1.1, 1.0))
+    draw_top_view(fig.add_subplot(grid[:, 0]), robot, run, top_title)
+    return fig, [fig.add_subplot(grid[i, 1]) for i in range(3)]
 
 
 def draw_top_view(ax, robot, run: WalkRun, title: str) -> None:
@@ -419,11 +438,7 @@ def walk_figure(path: Path, robot, run: WalkRun, parts, period: float, title: st
     """Top view (soles, CoM, DCM, ZMP command) and time series (command and base velocity,
     tracking errors, torque steps)."""
     a, t = run.a, run.a["t"]
-    fig = plt.figure(figsize=(13, 7.5))
-    grid = fig.add_gridspec(3, 2, width_ratios=(1.1, 1.0))
-    draw_top_view(fig.add_subplot(grid[:, 0]), robot, run,
-                  "top view (start soles solid, landed soles dashed)")
-    axes = [fig.add_subplot(grid[i, 1]) for i in range(3)]
+    fig, axes = walking_figure(robot, run, "top view (start soles solid, landed soles dashed)")
     dt = np.gradient(t)
     vel = np.gradient(a["base_position"][:, :2], axis=0) / dt[:, None]
     c, s = np.cos(a["yaw"]), np.sin(a["yaw"])
