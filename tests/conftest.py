@@ -108,6 +108,22 @@ def solo8_description() -> dict:
                          for n in ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")]}
 
 
+def one_sole_holding_torques(robot, q, stance) -> np.ndarray:
+    """The joint torques holding ``robot`` still at ``q`` on the sole ``stance`` alone: the
+    static equilibrium S^T tau + J^T f = g(q) solved as one least-squares system over (tau, f)
+    (square: the floating base's six rows and the sole's six unknowns), its residual checked."""
+    import pinocchio as pin
+
+    robot.update(q, np.zeros(robot.nv))
+    J = robot.stacked_contact_jacobian([stance])
+    g = pin.computeGeneralizedGravity(robot.model, robot.model.createData(), q)
+    S = np.hstack([np.zeros((robot.na, 6)), np.eye(robot.na)])
+    A = np.hstack([S.T, J.T])
+    x, *_ = np.linalg.lstsq(A, g, rcond=None)
+    np.testing.assert_allclose(A @ x, g, atol=1e-8)
+    return x[:robot.na]
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

@@ -28,7 +28,7 @@ from wholebody.planning.footsteps import (Footstep, FootstepPlanner, StepLimits,
 from wholebody.planning.reach import REACH_MARGIN
 from wholebody.robots.roles import biped_soles, leg_joints
 
-SHARE = 0.7  # the default share of the reach a step uses
+SHARE = 0.8  # the default share of the reach a step uses
 
 
 @pytest.fixture(scope="module")
@@ -370,10 +370,11 @@ def test_limits_are_plausible_for_each_humanoid(name):
 
 def test_romeos_stride_is_short_as_its_ankle_has_little_room_left():
     """romeo's posture bends its ankles to 0.35 rad of dorsiflexion, its limit 0.52: a flat sole
-    hardly goes behind the pelvis (the shank would lean further forward), so its stride, the share
-    of its backward reach (SLSQP), is short; at the walking drop, which bends the ankle to within
-    0.04 rad of its stop, shorter still, though not zero. Freeing the ankle to its stop lengthens
-    the reach: the ankle bounds it."""
+    hardly goes behind the pelvis (the shank would lean further forward), so at the standing
+    height its stride, the share of its backward reach (SLSQP), is short, and lower it is
+    shorter still. Freeing the ankle to its stop lengthens the reach: the ankle bounds it. Its
+    walking height is above standing (knees and ankles straighter), where the stride is more
+    than twice the standing one."""
     robot = _humanoid("romeo")
     model = robot.model
     sole = biped_soles(robot)[0]
@@ -381,16 +382,57 @@ def test_romeos_stride_is_short_as_its_ankle_has_little_room_left():
     ankle = list(iq).index(model.joints[model.getJointId("LAnklePitch")].idx_q)
     stop = model.lowerPositionLimit[iq][ankle]
     x, _ = _heading(robot)
-    for drop in (0.0, _walking_drop(robot)):
+    strides = {}
+    for drop in (0.0, 0.03):
         limits = StepLimits.from_robot(robot, com_height_drop=drop)
         back = min(r[1] for r in _oracle("romeo", drop).values())
         assert limits.forward == pytest.approx(SHARE * back, abs=2e-3)
-        assert 0.0 < limits.forward < 0.05
+        strides[drop] = limits.forward
         q = _lowered_stance("romeo", drop)
         lo, hi = _bounds(robot, iq, q)
         lo[ankle] = stop
         assert _slsqp_reach(robot, sole, -x, q, bounds=(lo, hi)) > back + 0.005
-    assert q[iq][ankle] - stop < 0.04  # at the walking drop
+    assert 0.0 < strides[0.03] < strides[0.0] < 0.05
+    drop = _walking_drop(robot)
+    assert drop < 0.0
+    walking = StepLimits.from_robot(robot, com_height_drop=drop).forward
+    assert walking > 2.0 * strides[0.0]
+    back = min(r[1] for r in _oracle("romeo", drop).values())
+    assert walking == pytest.approx(SHARE * min(back, 2 * min(r[0] for r in _oracle(
+        "romeo", drop).values())), abs=2e-3)
+
+
+@pytest.mark.parametrize("name", ["talos14", "romeo"])
+def test_the_walking_height_has_the_longest_stride_the_torques_allow(name):
+    """:func:`walking_com_drop` against a scan twice as fine over the same range: no height
+    where a sole holds the robot within its torque limits has a stride more than 3 % longer
+    than the chosen one's; the torques at the chosen one are within the limits (the static
+    equilibrium on one sole, :func:`conftest.one_sole_holding_torques`)."""
+    from conftest import one_sole_holding_torques
+    from wholebody.control.walking import (WALKING_DROP_RANGE, single_support_load,
+                                           walking_com_drop)
+    from wholebody.planning.support_shift import shift_key_pose
+    from wholebody.robots.reference import humanoid_length_ratio
+
+    robot = _humanoid(name)
+    chosen = walking_com_drop(robot)
+    scale = humanoid_length_ratio(robot)
+    best = 0.0
+    for drop in scale * np.linspace(*WALKING_DROP_RANGE, 21):
+        try:
+            stride = StepLimits.from_robot(robot, com_height_drop=float(drop)).forward
+        except ValueError:
+            continue
+        load = single_support_load(robot, float(drop))
+        if load is not None and load.share <= 1.0:
+            best = max(best, stride)
+    assert StepLimits.from_robot(robot, com_height_drop=chosen).forward >= 0.97 * best
+    for stance, swing in (robot.contact_names, robot.contact_names[::-1]):
+        _, q, _ = shift_key_pose(robot, stance, swing, chosen)
+        tau = one_sole_holding_torques(robot, q, stance)
+        lo, hi = robot.torque_bounds(q)
+        assert np.all(tau <= hi * (1 + 1e-3)) and np.all(tau >= lo * (1 + 1e-3))
+    robot.update(robot.q_ref, np.zeros(robot.nv))
 
 
 def test_g1_turns_its_soles_at_the_walking_drop():

@@ -205,6 +205,41 @@ def test_swing_endpoints_apex_and_derivatives(p0, p1, T, h, t0):
             np.testing.assert_allclose(a, b, atol=1e-12)
 
 
+@FAST
+@given(p0=vec3, dxy=st.tuples(st.floats(-0.6, 0.6), st.floats(-0.3, 0.3)),
+       T=st.floats(0.2, 1.5), h=st.floats(0.01, 0.2), depth=st.floats(0.0, 0.02))
+def test_swing_with_a_floor_is_over_its_target_when_it_meets_the_floor(p0, dxy, T, h, depth):
+    """A swing aimed ``depth`` below the floor: the time it passes the floor's height is found by
+    bisection on its sampled height (independent of the closed-form share); there its horizontal
+    position is the target's. Its height profile is the one without a floor, and its
+    horizontal one that swing's stretched by one factor (the same blend and timing)."""
+    floor = float(p0[2])
+    p1 = np.array([p0[0] + dxy[0], p0[1] + dxy[1], floor - depth])
+    sw = SwingTrajectory(p0, p1, T, h, 0.0, floor=floor)
+    plain = SwingTrajectory(p0, p1, T, h, 0.0)
+    lo, hi = 0.5 * T, T
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if sw.position(mid)[2] > floor else (lo, mid)
+    np.testing.assert_allclose(sw.position(hi)[:2], p1[:2], atol=1e-9)
+    ts = np.linspace(-0.1, 1.1, 61) * T
+    np.testing.assert_allclose(sw.position(ts)[:, 2], plain.position(ts)[:, 2], atol=1e-12)
+    move = np.linalg.norm(p1[:2] - p0[:2])
+    stretch = move / np.linalg.norm(plain.position(hi)[:2] - p0[:2]) if move > 1e-6 else 1.0
+    stretched, reference = sw.evaluate(ts), plain.evaluate(ts)
+    for k, (a, b) in enumerate(zip(stretched, reference)):
+        origin = p0[:2] if k == 0 else 0.0  # positions about the lift-off point
+        np.testing.assert_allclose(a[:, :2] - origin, stretch * (b[:, :2] - origin),
+                                   atol=1e-9 / T ** 2)
+    buf = [np.zeros(3) for _ in range(3)]
+    for t in (-1.0, 0.3 * T, 0.95 * T, 2 * T):
+        sw.evaluate_into(t, *buf)
+        for a, b in zip(buf, sw.evaluate(t)):
+            np.testing.assert_allclose(a, b, atol=1e-12)
+    with pytest.raises(ValueError, match="floor"):
+        SwingTrajectory(p0, p1, T, h, floor=floor + h + 1.0)
+
+
 def test_swing_holds_outside_and_functional_form():
     p0, p1 = np.array([0.0, 0.0, 0.02]), np.array([0.2, 0.05, 0.12])
     pos, vel, acc = swing_trajectory(p0, p1, 0.4, np.array([-0.1, 0.5]))

@@ -121,3 +121,32 @@ def test_in_double_support_the_soles_forces_put_the_cop_at_the_commanded_zmp():
             checked += 1
         sim.step(sol.tau)
     assert checked > 500
+
+
+@pytest.mark.parametrize("turn, yaw_rate, side, lateral",
+                         [(90.0, 0.35, 1.0, 0.12), (-45.0, 0.5, -0.3, 0.1), (30.0, 2.0, 0.01, 1.0)])
+def test_the_walk_schedule_turns_and_side_steps_exactly_in_whole_step_periods(
+        turn, yaw_rate, side, lateral):
+    """The controller reads its command once a step: the turn and the side-step of the ``walk``
+    schedule last whole step periods (at least one), at a rate within half a period's worth of
+    the asked one, and the command integrated over them (a rectangle rule at 0.1 ms, apart
+    from the schedule's own integration) gives the asked heading change and distance."""
+    from wholebody.scenarios import get_scenario
+    from wholebody.scenarios.walking_runs import schedule, step_period
+
+    robot = wb.load_robot("talos14")
+    params = get_scenario("walk").validate(robot, {"turn": turn, "yaw_rate": yaw_rate,
+                                                   "side_distance": side, "lateral": lateral})
+    period = step_period(robot, params)
+    parts = {p.name: p for p in schedule(robot, params)}
+    for name, amount, rate, axis in (("turn", math.radians(turn), yaw_rate, 2),
+                                     ("side", side, lateral, 1)):
+        part = parts[name]
+        n = (part.end - part.start) / period
+        assert n >= 1.0 - 1e-9 and abs(n - round(n)) < 1e-9
+        asked = abs(amount) / rate
+        assert abs(part.end - part.start - asked) <= 0.5 * period + 1e-9 or round(n) == 1
+        samples = round((part.end - part.start) / 1e-4)
+        dt = (part.end - part.start) / samples
+        t = part.start + (np.arange(samples) + 0.5) * dt
+        assert sum(part.command(x)[axis] for x in t) * dt == pytest.approx(amount, rel=1e-6)

@@ -39,6 +39,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -47,7 +48,9 @@ from scipy.spatial import ConvexHull
 from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation
 from ..planning.dcm import DCMPlan, lipm_frequency, predicted_dcm
+from ..planning.support_shift import KEY_POSE_TOLERANCE, shift_key_pose
 from ..planning.footsteps import Footstep, FootstepPlanner, StepLimits, clamp_step
+from ..planning.blend import quintic_blend
 from ..planning.swing import SwingTrajectory
 from ..robot import FREE_FLYER_NV
 from ..robots.reference import humanoid_length_ratio
@@ -55,6 +58,7 @@ from ..robots.roles import biped_soles, leg_joints
 from ..tasks import ForceRegularizer
 from ..validation import finite_array, nonnegative, number, positive
 from ..variables import Variables
+from .standing import gravity_compensation
 from .stacks import (COP_MARGIN, POSTURE_PD, POSTURE_WEIGHT, SWING_FOOT_PD, TORSION, table2_stack,
                      table4_stack)
 
@@ -77,6 +81,70 @@ LEG_POSTURE_WEIGHT = 1e-3
 def _scaled(robot, value: float, power: float) -> float:
     """talos14's ``value`` scaled by (h / h_talos14) ** power (lengths: 1, times: 1/2)."""
     return value * humanoid_length_ratio(robot) ** power
+
+
+#: the walking CoM height is chosen this far below (positive) or above (negative) the standing
+#: one, in talos14's metres (scaled by the robot's height), in steps of WALKING_DROP_STEP
+WALKING_DROP_RANGE = (-0.05, 0.05)
+WALKING_DROP_STEP = 0.01
+
+
+class SingleSupportLoad(NamedTuple):
+    """The most loaded joint holding ``robot`` still on one sole (the CoG over it) at a CoM
+    drop: its share of its torque limit, its name, the torque and the limit (Nm), the sole."""
+    share: float
+    joint: str
+    torque: float
+    limit: float
+    stance: str
+
+
+def single_support_load(robot, drop: float) -> SingleSupportLoad | None:
+    """The torques that hold ``robot`` still on either sole at ``drop`` below the standing CoM
+    height, the CoG over that sole (:func:`~wholebody.planning.support_shift.shift_key_pose`;
+    Herzog et al. 2016, eq. 14 with that sole alone), against the limits: the worst joint of
+    the two stances, or None when no pose within the joint limits has the CoG over a sole."""
+    worst = None
+    for stance, swing in (robot.contact_names, robot.contact_names[::-1]):
+        _, q, residual = shift_key_pose(robot, stance, swing, drop)
+        if residual > KEY_POSE_TOLERANCE:
+            robot.update(robot.q_ref, np.zeros(robot.nv))
+            return None
+        robot.update(q, np.zeros(robot.nv))
+        need, _ = gravity_compensation(robot, [stance])
+        lo, hi = robot.torque_bounds(q)
+        ratio = np.maximum(need / np.maximum(hi, 1e-12), need / np.minimum(lo, -1e-12))
+        k = int(np.argmax(ratio))
+        if worst is None or ratio[k] > worst.share:
+            worst = SingleSupportLoad(float(ratio[k]), robot.joint_names[k], float(need[k]),
+                                      float(hi[k] if need[k] > 0 else lo[k]), stance)
+    robot.update(robot.q_ref, np.zeros(robot.nv))
+    return worst
+
+
+def walking_com_drop(robot) -> float:
+    """The CoM drop below standing (negative: above) ``robot`` walks at: of the drops of
+    :data:`WALKING_DROP_RANGE`, the one with the longest stride
+    (:meth:`StepLimits.from_robot`, the legs' reach at that height) among those where one sole
+    can hold the robot within its torque limits (:func:`single_support_load`). Bending the
+    knees lengthens the stride until a joint nears a limit: talos14's stride grows with the
+    drop across the range, romeo's ankle pitch stands near its stop, so its stride is longest
+    when the knees straighten. The range's top when no drop qualifies (check-robot says why)."""
+    scale = humanoid_length_ratio(robot)
+    lo, hi = WALKING_DROP_RANGE
+    drops = scale * np.arange(lo, hi + 0.5 * WALKING_DROP_STEP, WALKING_DROP_STEP)
+    strides = []
+    for drop in drops:
+        try:
+            strides.append((StepLimits.from_robot(robot, com_height_drop=float(drop)).forward,
+                            float(drop)))
+        except ValueError:  # a sole cannot stand flat at that height
+            continue
+    for _, drop in sorted(strides, reverse=True):
+        load = single_support_load(robot, drop)
+        if load is not None and load.share <= 1.0:
+            return drop
+    return float(scale * hi)
 
 
 @dataclass(frozen=True)
@@ -137,7 +205,8 @@ class WalkingConfig:
                    initial_double_support=_scaled(robot, 0.6, 0.5),
                    final_double_support=_scaled(robot, 0.6, 0.5),
                    recovery_double_support=_scaled(robot, 0.05, 0.5),
-                   com_drop=_scaled(robot, 0.04, 1.0),
+                   com_drop=(overrides["com_drop"] if "com_drop" in overrides
+                             else walking_com_drop(robot)),
                    clearance=_scaled(robot, 0.05, 1.0),
                    touchdown_depth=_scaled(robot, 0.005, 1.0))
         return replace(base, **overrides).checked()
@@ -147,7 +216,8 @@ class WalkingConfig:
                      "initial_double_support", "final_double_support", "recovery_double_support",
                      "dcm_gain"):
             positive(getattr(self, name), name)
-        for name in ("com_drop", "clearance", "touchdown_depth", "capture_margin"):
+        number(self.com_drop, "com_drop")
+        for name in ("clearance", "touchdown_depth", "capture_margin"):
             nonnegative(getattr(self, name), name)
         number(self.adjust_until, "adjust_until", low=0.0, high=1.0)
         number(self.recovery_reach, "recovery_reach", low=0.0, low_open=True, high=1.0)
@@ -548,7 +618,8 @@ class Walking:
             pos, yaw = self._sole_pose(sole, cycle)
             target = ph.footstep.position.copy()
             target[2] -= c.touchdown_depth
-            self.swing = SwingTrajectory(pos, target, ph.end - ph.start, c.clearance, t0=ph.start)
+            self.swing = SwingTrajectory(pos, target, ph.end - ph.start, c.clearance, t0=ph.start,
+                                         floor=ph.footstep.position[2])
             self.swing_yaw = (yaw, ph.footstep.yaw)
             self.swing_planned = ph.footstep
             self.swing_task[ph.stance].weight = (c.recovery_swing_weight if self.recovery_walk
@@ -689,9 +760,7 @@ class Walking:
             self._adjust_step(t, ph, dcm)
         pos, vel, acc = np.empty(3), np.empty(3), np.empty(3)
         self.swing.evaluate_into(t, pos, vel, acc)
-        u = min(max((t - ph.start) / (ph.end - ph.start), 0.0), 1.0)
-        s = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
-        ds = 30.0 * u * u * (1.0 - u) ** 2 / (ph.end - ph.start)
+        s, ds, _ = quintic_blend((t - ph.start) / (ph.end - ph.start), ph.end - ph.start)
         y0, y1 = self.swing_yaw
         dyaw = _wrap(y1 - y0)
         task.position = pos
@@ -714,7 +783,8 @@ class Walking:
         new = np.array([xy[0], xy[1], self.swing.p1[2]])
         if np.linalg.norm(new[:2] - self.swing.p1[:2]) > 1e-4:
             self.swing = SwingTrajectory(self.swing.p0, new, self.swing.duration,
-                                         self.config.clearance, t0=self.swing.t0)
+                                         self.config.clearance, t0=self.swing.t0,
+                                         floor=planned.position[2])
             self.steps[-1].target = np.array([xy[0], xy[1], planned.position[2]])
 
 

@@ -29,8 +29,9 @@ there). With f and b the smaller of the two legs' reaches forward and backward:
   0.22 m (0.87 b) and falls with 0.24 m (0.95 b), with 0.27 m after 4 steps, its trailing knee
   straightened onto its limit; iCub (2 f < b) still walks with steps of 2 f, its ankles at their
   limits, and with share * 2 f no joint reaches a limit. A robot whose lowered stance holds a
-  joint near its limit (romeo's ankle pitch, 0.03 rad from its stop at the walking drop) has
-  almost no reach that way, so almost no stride: flat soles cannot step further at that height;
+  joint near its limit (romeo's ankle pitch, near its stop when its knees bend) has almost no
+  reach that way, so almost no stride: flat soles cannot step further at that height, and it
+  walks higher (:func:`~wholebody.control.walking.walking_com_drop` picks the height);
 * width: the stance leg's sideways reach carries the pelvis over the stance sole, so only the
   swing leg's widens the step: at most the standing width plus its outward reach; at least the
   standing width minus its inward reach, and never so narrow that the soles' edges come closer
@@ -44,7 +45,8 @@ there). With f and b the smaller of the two legs' reaches forward and backward:
   hip-yaw joint does not turn its sole.
 
 The reaches are scaled by ``share`` (< 1): a leg at its full reach has a straight knee, a
-singularity, and no margin left to balance with.
+singularity, and no margin left to balance with; Alexander's 0.87 b above is the most measured
+to walk.
 
 :class:`FootstepPlanner` turns a velocity command into footsteps with a unicycle path (the path
 frame moves with the command, the soles land either side of it at the standing width) and
@@ -69,7 +71,7 @@ from .support_shift import joint_range
 __all__ = ["Footstep", "FootstepPlanner", "SoleReach", "StepLimits", "clamp_step", "sole_reach"]
 
 #: share of each measured reach a step may use
-STEP_SHARE = 0.7
+STEP_SHARE = 0.8
 #: gap between the soles' edges at the narrowest step, as a share of a sole's width
 SOLE_GAP = 0.1
 #: largest relative yaw of the soles (rad), whatever the hips allow
@@ -317,9 +319,9 @@ class StepLimits:
         reaches of :func:`sole_reach` along and across the soles' heading (the smaller of the two
         legs'), the stride from the trailing leg's reach back and the leading leg's forward,
         times ``share``."""
-        if not (math.isfinite(com_height_drop) and 0.0 <= com_height_drop < robot.q_ref[2]):
-            raise ValueError(f"com_height_drop: expected 0 <= drop < the standing base height "
-                             f"{robot.q_ref[2]:.3f} m, got {com_height_drop!r}")
+        if not (math.isfinite(com_height_drop) and abs(com_height_drop) < robot.q_ref[2]):
+            raise ValueError(f"com_height_drop: expected |drop| < the standing base height "
+                             f"{robot.q_ref[2]:.3f} m (negative: higher), got {com_height_drop!r}")
         if not (math.isfinite(margin) and 0.0 <= margin < 0.5):
             raise ValueError(f"margin: expected 0 <= margin < 0.5, got {margin!r}")
         if not (math.isfinite(share) and 0.0 < share <= 1.0):

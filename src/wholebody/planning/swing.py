@@ -10,6 +10,11 @@ the whole swing; the height follows two quintic blends, ``z0 -> z_apex`` over th
 ends with zero velocity and acceleration, so the trajectory is C2 (continuous acceleration; the jerk
 jumps at mid-swing), starts and lands with zero velocity and acceleration, and its highest point is
 exactly ``z_apex``, reached at mid-swing (each half is monotone in z).
+
+A target below the floor (a touchdown pressed into it) meets the floor before the swing's end,
+where the horizontal blend is not yet complete: with ``floor`` given, the horizontal move is
+stretched so that the foot is over the target when its descent passes the floor's height (the
+blend's shape and timing unchanged; it lands on its footstep, not short of it).
 """
 
 from __future__ import annotations
@@ -29,9 +34,13 @@ class SwingTrajectory:
 
     Positions are those of the foot frame (for a point foot of radius r on flat ground the frame is
     r above the ground). Before ``t0`` the foot is held at ``p0``, after touchdown at ``p1``.
+    ``floor``: the height (between ``p1``'s and the apex) at which the foot is over ``p1``
+    (module docstring; it then moves on by the blend's rest, horizontally, until touchdown);
+    None: at the end.
     """
 
-    def __init__(self, p0, p1, duration: float, clearance: float = 0.1, t0: float = 0.0):
+    def __init__(self, p0, p1, duration: float, clearance: float = 0.1, t0: float = 0.0,
+                 floor: float | None = None):
         self.p0 = np.array(p0, dtype=float).reshape(3)
         self.p1 = np.array(p1, dtype=float).reshape(3)
         if not (np.all(np.isfinite(self.p0)) and np.all(np.isfinite(self.p1))):
@@ -47,6 +56,15 @@ class SwingTrajectory:
         self._dxy = self.p1[:2] - self.p0[:2]
         self._rise = self.apex_height - self.p0[2]
         self._fall = self.p1[2] - self.apex_height
+        #: share of the swing at which the foot passes ``floor`` (1 without one)
+        self.floor_share = 1.0
+        if floor is not None:
+            if not (np.isfinite(floor) and self.p1[2] <= floor < self.apex_height):
+                raise ValueError(f"floor: expected a height in [{self.p1[2]:.4g}, "
+                                 f"{self.apex_height:.4g}) (touchdown to apex), got {floor!r}")
+            self.floor_share = 0.5 * (1.0 + _descent_share(
+                (self.apex_height - floor) / (self.apex_height - self.p1[2])))
+            self._dxy = self._dxy / quintic_blend(self.floor_share)[0]
 
     @property
     def t1(self) -> float:
@@ -108,6 +126,14 @@ class SwingTrajectory:
 
     def acceleration(self, t):
         return self.evaluate(t)[2]
+
+
+def _descent_share(fraction: float) -> float:
+    """The share sigma of the descent's blend at which it has covered ``fraction`` of its
+    height: the root in [0, 1] of 6 sigma^5 - 15 sigma^4 + 10 sigma^3 = fraction."""
+    roots = np.roots([6.0, -15.0, 10.0, 0.0, 0.0, -float(fraction)])
+    real = roots[np.abs(roots.imag) < 1e-9].real
+    return float(np.clip(real[(real >= -1e-9) & (real <= 1.0 + 1e-9)], 0.0, 1.0).min())
 
 
 def swing_trajectory(p0, p1, duration: float, t, clearance: float = 0.1):

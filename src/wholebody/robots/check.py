@@ -158,41 +158,30 @@ WALKING_TORQUE_SHARE = 0.8
 
 def _walking(robot, report: RobotCheck) -> None:
     """A biped's walking on the defaults of :class:`~wholebody.control.walking.Walking`: the
-    torques that hold it still on one sole at the walking height (the CoG over that sole,
-    :func:`~wholebody.planning.support_shift.shift_key_pose`; eq. 14 with that sole alone)
-    against the limits, and the step length the legs' reach allows
-    (:class:`~wholebody.planning.footsteps.StepLimits`) against what the ``walk`` scenario's
-    default speed asks. Not part of :func:`inspect_robot` (a few least squares and LPs)."""
-    from ..control.standing import gravity_compensation
-    from ..control.walking import WalkingConfig
+    torques that hold it still on one sole at the walking height
+    (:func:`~wholebody.control.walking.single_support_load`) against the limits, and the step
+    length the legs' reach allows (:class:`~wholebody.planning.footsteps.StepLimits`) against
+    what the ``walk`` scenario's default speed asks. Not part of :func:`inspect_robot` (a few
+    least squares and LPs)."""
+    from ..control.walking import WalkingConfig, single_support_load
     from ..planning.footsteps import StepLimits
-    from ..planning.support_shift import KEY_POSE_TOLERANCE, shift_key_pose
     from ..scenarios.walk import PARAMETERS
 
     config = WalkingConfig.for_robot(robot)
-    worst = (0.0, "", 0.0, 0.0, "")
-    for stance, swing in (robot.contact_names, robot.contact_names[::-1]):
-        _, q, residual = shift_key_pose(robot, stance, swing, config.com_drop)
-        if residual > KEY_POSE_TOLERANCE:
-            return  # _single_support has said it
-        robot.update(q, np.zeros(robot.nv))
-        need, _ = gravity_compensation(robot, [stance])
-        lo, hi = robot.torque_bounds(q)
-        ratio = np.maximum(need / np.maximum(hi, 1e-12), need / np.minimum(lo, -1e-12))
-        k = int(np.argmax(ratio))
-        if ratio[k] > worst[0]:
-            worst = (float(ratio[k]), robot.joint_names[k], float(need[k]),
-                     float(hi[k] if need[k] > 0 else lo[k]), stance)
-    robot.update(robot.q_ref, np.zeros(robot.nv))
-    share, joint, need, limit, stance = worst
-    report.facts["walking_single_support_torque_max_fraction_of_limit"] = share
-    if share > WALKING_TORQUE_SHARE:
+    load = single_support_load(robot, config.com_drop)
+    if load is None:
+        return  # _single_support has said it
+    report.facts["walking_com_drop_m"] = config.com_drop
+    report.facts["walking_single_support_torque_max_fraction_of_limit"] = load.share
+    if load.share > WALKING_TORQUE_SHARE:
+        where = (f"{1e3 * config.com_drop:.0f} mm below standing" if config.com_drop >= 0
+                 else f"{-1e3 * config.com_drop:.0f} mm above standing")
         report.add("warning", "walking",
-                   f"standing still on {stance} at the walking height ({1e3 * config.com_drop:.0f} "
-                   f"mm below standing, the CoG over the sole) takes {need:.1f} Nm on '{joint}', "
-                   f"{share:.0%} of its {limit:.1f} Nm limit: walking on the defaults has too little "
-                   f"torque left to move and will fall",
-                   "stronger joints (torque_limits) or a walking config with a smaller com_drop")
+                   f"standing still on {load.stance} at the walking height ({where}, the CoG "
+                   f"over the sole) takes {load.torque:.1f} Nm on '{load.joint}', "
+                   f"{load.share:.0%} of its {load.limit:.1f} Nm limit: walking on the defaults "
+                   f"has little torque left to move and may fall",
+                   "stronger joints (torque_limits) or a walking config with another com_drop")
     limits = StepLimits.from_robot(robot, com_height_drop=config.com_drop)
     period = config.single_support + config.double_support
     speed = next(p.default for p in PARAMETERS if p.name == "speed").value(robot)

@@ -5,7 +5,9 @@ walking controller (:class:`~wholebody.control.walking.Walking`, Tables 2 and 4 
 A velocity command schedule drives the controller: 1 s standing, the forward speed ramped in over
 1 s and held for ``steps`` step periods, a turn by ``turn`` degrees at ``yaw_rate`` (walking on at
 half the speed), a side-step of ``side_distance`` at ``lateral``, then a zero command and
-``settle`` s to stop (``steps=0``, ``turn=0`` or ``side_distance=0`` leave a part out).
+``settle`` s to stop (``steps=0``, ``turn=0`` or ``side_distance=0`` leave a part out). The
+controller reads its command at each touchdown, so the turn and the side-step last a whole number
+of step periods, at the rate nearest ``yaw_rate`` (``lateral``) that makes them exact.
 
 Everything is measured on the simulator: the base's path and heading, the CoM and the DCM against
 the controller's references, each sole's slip while it stands (from its touchdown to its next

@@ -329,13 +329,18 @@ def schedule(robot, params: dict) -> list[Part]:
     if params["steps"] > 0:
         add("ramp", RAMP_TIME, (0.0, 0.0, 0.0), (v, 0.0, 0.0))
         add("forward", params["steps"] * period, (v, 0.0, 0.0))
+    def whole_periods(amount: float, rate: float) -> tuple[float, float]:
+        """(duration, rate): ``amount`` at the rate nearest ``rate`` that takes a whole number
+        of step periods (the controller reads its command once a step)."""
+        duration = max(1, round(abs(amount) / rate / period)) * period
+        return duration, math.copysign(abs(amount) / duration, amount)
+
     if params["turn"] != 0:
-        turn = math.radians(params["turn"])
-        add("turn", abs(turn) / params["yaw_rate"],
-            (0.5 * v, 0.0, math.copysign(params["yaw_rate"], turn)))
+        duration, rate = whole_periods(math.radians(params["turn"]), params["yaw_rate"])
+        add("turn", duration, (0.5 * v, 0.0, rate))
     if params["side_distance"] != 0:
-        add("side", abs(params["side_distance"]) / params["lateral"],
-            (0.0, math.copysign(params["lateral"], params["side_distance"]), 0.0))
+        duration, lateral = whole_periods(params["side_distance"], params["lateral"])
+        add("side", duration, (0.0, lateral, 0.0))
     add("settle", params["settle"], (0.0, 0.0, 0.0))
     return parts
 
