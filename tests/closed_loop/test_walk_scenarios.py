@@ -35,6 +35,18 @@ def test_talos14_walks_ten_steps_forward_and_stops(robots):
     assert m["net_displacement_m"] >= 0.8 * m["commanded_forward_distance_m"], m
 
 
+def test_talos14_turns_by_the_commanded_heading(robots):
+    """A 90° turn (two step periods forward first): the base's heading measured in the twin
+    changes by the commanded amount to within 2°, though each sole lands a little more turned
+    than planned."""
+    m = get_scenario("walk").run(robots["talos14"],
+                                 overrides={"steps": "2", "side_distance": "0"}).metrics
+    assert not m["fallen"] and m["failed_cycles"] == 0, m
+    assert m["commanded_heading_change_deg"] == pytest.approx(90.0, abs=1e-6)
+    assert m["heading_change_deg"] == pytest.approx(90.0, abs=2.0), m
+    assert m["standing_at_end"], m
+
+
 def test_talos14_survives_a_front_push_by_stepping(robots):
     result = get_scenario("push-step").run(robots["talos14"], overrides=FRONT_PUSH)
     m = result.metrics

@@ -422,6 +422,11 @@ class Walking:
                 feet[f.contact] = (step.position, step.yaw)
                 steps.append(step)
             return steps
+        last = self.steps[-1] if self.steps else None
+        if last is not None and last.contact == stance and math.isfinite(last.touchdown):
+            # the path's heading goes on from the planned one: a sole landing a little turned
+            # does not turn the rest of the walk with it
+            feet[stance] = (feet[stance][0], last.yaw)
         period = self.config.single_support + self.config.double_support
         return self.planner.from_velocity(feet, self._other(stance), tuple(self.command),
                                           period, n)
