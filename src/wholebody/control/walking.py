@@ -172,7 +172,12 @@ class WalkingConfig:
     the hierarchy swing the leg to make the momentum the CoP cannot, a leg strategy that helps
     a recovery, while a walking step pushed that way lands late and off its footstep; ``step_horizon``: footsteps planned ahead (the plan ends at rest);
     ``stepping``: recover pushes by stepping; ``cop_margin``, ``torsion``: the hierarchies' CoP
-    margin and yaw-moment rows; ``posture_gains``, ``swing_gains``: as in the Table 2/4 stacks."""
+    margin and yaw-moment rows; ``posture_gains``, ``swing_gains``: as in the Table 2/4 stacks;
+    ``joint_braking``: the horizon over which the joint-limit rows brake a joint to its limit
+    (:class:`~wholebody.tasks.JointAccelerationLimits`, Fahmi et al. 2019, eqs. 17-18; the
+    stacks' default is 10 ms): with the CoP at a sole's edge the hierarchy swings the upper body
+    for the momentum the CoP cannot make, and braking that within 10 ms asks more than the
+    torque limits give: the joint hits its stop and the body pitches over it."""
 
     single_support: float
     recovery_single_support: float
@@ -196,6 +201,7 @@ class WalkingConfig:
     torsion: bool = TORSION
     posture_gains: tuple[float, float] = POSTURE_PD
     swing_gains: tuple[float, float] = SWING_FOOT_PD
+    joint_braking: float = 0.05
 
     @classmethod
     def for_robot(cls, robot, **overrides) -> "WalkingConfig":
@@ -208,13 +214,14 @@ class WalkingConfig:
                    com_drop=(overrides["com_drop"] if "com_drop" in overrides
                              else walking_com_drop(robot)),
                    clearance=_scaled(robot, 0.05, 1.0),
-                   touchdown_depth=_scaled(robot, 0.005, 1.0))
+                   touchdown_depth=_scaled(robot, 0.005, 1.0),
+                   joint_braking=_scaled(robot, 0.05, 0.5))
         return replace(base, **overrides).checked()
 
     def checked(self) -> "WalkingConfig":
         for name in ("single_support", "recovery_single_support", "double_support",
                      "initial_double_support", "final_double_support", "recovery_double_support",
-                     "dcm_gain"):
+                     "dcm_gain", "joint_braking"):
             positive(getattr(self, name), name)
         number(self.com_drop, "com_drop")
         for name in ("clearance", "touchdown_depth", "capture_margin"):
@@ -351,7 +358,7 @@ class Walking:
         """eq. 22's P and D: zero on the horizontal rows (the DCM feedback gives their
         feed-forward, :meth:`_horizontal_acceleration`), the height's PD on the vertical, damping
         of the angular momentum as the stacks have it; the legs' posture rows light and without
-        stiffness."""
+        stiffness; the joint-limit rows braking over ``joint_braking``."""
         c = self.config
         kp_z, kd_z = c.height_gains
         for stack in self.stacks:
@@ -369,6 +376,7 @@ class Walking:
                 w[FREE_FLYER_NV + np.array(idx)] = LEG_POSTURE_WEIGHT
                 kp[idx] = 0.0
             posture.weight, posture.kp = w, kp
+            stack.find("joint acceleration limits").horizon = c.joint_braking
 
     def _standing_com(self, feet=None) -> np.ndarray:
         """The standing CoM reference over the soles' midpoint: the posture's offset from it,
