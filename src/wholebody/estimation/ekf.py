@@ -147,18 +147,25 @@ class KinematicInertialEKF:
         self._warned = False
 
     # ------------------------------------------------------------------ start
-    def reset(self, reading: SensorReading, base_position=(0.0, 0.0, 0.0)) -> StateEstimate:
+    def reset(self, reading: SensorReading, base_position=(0.0, 0.0, 0.0),
+              base_velocity=(0.0, 0.0, 0.0)) -> StateEstimate:
         """Start from ``reading``: the orientation from its attitude filter, the base at
-        ``base_position`` (world, m) and at rest, the feet where the joints put them."""
+        ``base_position`` (world, m) with linear velocity ``base_velocity`` (base frame, m/s;
+        default at rest), the feet where the joints put them."""
         position = np.asarray(base_position, dtype=float)
         if position.shape != (3,) or not np.all(np.isfinite(position)):
             raise ValueError(f"base_position: expected 3 finite numbers, got {base_position!r}")
+        velocity = np.asarray(base_velocity, dtype=float)
+        if velocity.shape != (3,) or not np.all(np.isfinite(velocity)):
+            raise ValueError(f"base_velocity: expected 3 finite numbers, got {base_velocity!r}")
         noise = self.noise
         attitude = np.asarray(reading.orientation, dtype=float)
         self.rotation = pin.Quaternion(attitude[3], *attitude[:3]).normalized().toRotationMatrix()
         base_rotation = self.rotation @ self._imu_rotation.T
         self.position = position + base_rotation @ self._imu_translation
-        self.velocity = np.zeros(3)
+        omega_world = self.rotation @ np.asarray(reading.gyro, dtype=float)
+        self.velocity = base_rotation @ velocity + np.cross(omega_world,
+                                                            base_rotation @ self._imu_translation)
         self.accel_bias, self.gyro_bias = np.zeros(3), np.zeros(3)
         measured, _ = self.kinematics.feet_in_imu(reading.joint_positions, reading.gyro,
                                                   reading.joint_velocities)
