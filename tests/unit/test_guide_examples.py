@@ -92,9 +92,19 @@ def check_walk(ns: dict) -> None:
     assert abs(q[2] - ns["robot"].q_ref[2]) < 0.1  # standing, not fallen
 
 
+def check_estimated_state(ns: dict) -> None:
+    log, robot = ns["log"], ns["robot"]
+    assert ns["sim"].t == pytest.approx(2.0, abs=2e-3)
+    # the filter ran once per step of the twin: 2000 steps read the states at t = 0 .. 1.999 s
+    assert len(log["t"]) == 2000 and np.allclose(np.diff(log["t"]), 1e-3)
+    assert np.max(np.abs(log["q_true"][:, 0] - log["q_true"][0, 0])) > 1e-3  # the push moved it
+    assert np.all(np.isfinite(log["q_hat"])) and ns["q"][2] > 0.9 * robot.q_ref[2]
+
+
 EXAMPLES = {"own-stack": check_own_stack, "own-task": check_own_task,
-            "own-loop": check_own_loop, "walk": check_walk}
-SLOW = {"own-loop", "walk"}  # simulate the twin: seconds
+            "own-loop": check_own_loop, "walk": check_walk,
+            "estimated-state": check_estimated_state}
+SLOW = {"own-loop", "walk", "estimated-state"}  # simulate the twin: seconds
 
 
 def test_guide_has_exactly_the_examples():

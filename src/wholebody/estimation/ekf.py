@@ -1,0 +1,311 @@
+"""A kinematic-inertial extended Kalman filter for a legged robot's floating base (Bloesch et al.
+2013, "State estimation for legged robots: consistent fusion of leg kinematics and IMU").
+
+State (Sect. III-A): the IMU's position r and velocity v in the world, its orientation R (IMU ->
+world), the position p_i of every contact frame of the robot in the world, and the accelerometer
+and gyroscope biases b_f, b_w. The IMU drives the prediction (Sect. III-B, eqs. 5-11); the feet's
+positions relative to the IMU from forward kinematics of the measured joints are the measurement
+(Sect. III-C, eq. 12). A foot in contact stays put up to a small process noise, a swinging foot
+gets a large one, so it follows its measurement and is anchored again where it lands (eq. 9).
+A ball foot in contact rolls: its centre (the contact frame) moves by omega_foot x (radius z) on
+flat ground, which the prediction adds (without it, HyQ's feet rolling forward in stance make the
+estimate lag 2-3 % of the distance trotted).
+
+The filter works on the error state [dr, dv, dphi, dp_1 .. dp_n, db_f, db_w] with the orientation
+error about the world axes (R = exp(dphi) R_hat), which gives the linearisations below in the
+world frame instead of the paper's body-frame form; the models are the same.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot import FREE_FLYER_NQ, GRAVITY, Robot
+from ..sim.sensors import SensorReading, SensorSpec
+from .kinematics import LegKinematics
+
+log = logging.getLogger(__name__)
+
+_GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY])
+
+
+def _skew(x: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of two 3-vectors (numpy.cross costs ten times more on 3-vectors)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+@dataclass(frozen=True)
+class EstimatorNoise:
+    """The filter's noise model (Bloesch et al. 2013, Sect. III-B and III-C).
+
+    gyro_noise, accel_noise          IMU white noise, std per sample (rad/s, m/s^2)
+    gyro_bias_walk, accel_bias_walk  bias random walks (per sqrt(s))
+    stance_foot_walk                 random walk of a foot in contact (m per sqrt(s)): slip, rolling
+    swing_foot_walk                  random walk of a foot in the air (m per sqrt(s))
+    kinematics_noise                 std of a foot's position from the joints (m): encoders, the
+                                     kinematic model, the contact point moving on the foot
+    initial_position                 std of the initial position (m)
+    initial_velocity                 std of the initial velocity (m/s)
+    initial_orientation              std of the initial roll, pitch and yaw (rad)
+    initial_gyro_bias, initial_accel_bias  std of the initial biases (rad/s, m/s^2)
+    """
+
+    gyro_noise: float = 3e-3
+    accel_noise: float = 3e-2
+    gyro_bias_walk: float = 1e-4
+    accel_bias_walk: float = 1e-3
+    stance_foot_walk: float = 2e-3
+    swing_foot_walk: float = 1.0
+    kinematics_noise: float = 2e-3
+    initial_position: float = 1e-3
+    initial_velocity: float = 1e-2
+    initial_orientation: float = 1e-2
+    initial_gyro_bias: float = 2e-3
+    initial_accel_bias: float = 2e-2
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"EstimatorNoise.{f.name} must be a finite number > 0, got "
+                                 f"{value!r}")
+
+    @classmethod
+    def for_sensors(cls, spec: SensorSpec, **overrides) -> "EstimatorNoise":
+        """The IMU terms and initial biases from a sensor spec (each at least a small floor so
+        that the filter stays well posed for exact sensors), the rest from the defaults."""
+        floor = 1e-6
+        values = dict(gyro_noise=max(spec.gyro_noise, floor),
+                      accel_noise=max(spec.accel_noise, floor),
+                      gyro_bias_walk=max(spec.gyro_bias_walk, floor),
+                      accel_bias_walk=max(spec.accel_bias_walk, floor),
+                      initial_gyro_bias=max(spec.gyro_bias, floor),
+                      initial_accel_bias=max(spec.accel_bias, floor),
+                      initial_orientation=max(spec.attitude_noise, floor) + 1e-3)
+        values.update(overrides)
+        return cls(**values)
+
+
+@dataclass
+class StateEstimate:
+    """The filter's output (Pinocchio conventions, see :mod:`wholebody.robot`).
+
+    q, v         configuration (base position, quaternion x y z w, joints) and velocity (base
+                 twist in the base frame, joint rates)
+    covariance   the error-state covariance [dr, dv, dphi, dp_i..., db_f, db_w] (world axes)
+    innovation   (ncontact, 3): last measured minus predicted foot position in the IMU frame (m)
+    foot_test    (ncontact,): each foot's squared innovation normalised by its covariance (a
+                 chi-square with 3 degrees of freedom when the foot behaves as modelled)
+    feet         (ncontact, 3): the estimated contact positions in the world
+    """
+
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    covariance: np.ndarray
+    innovation: np.ndarray
+    foot_test: np.ndarray
+    feet: np.ndarray
+
+
+class KinematicInertialEKF:
+    """Floating-base state of ``robot`` from an IMU at ``imu_frame`` and its joint encoders.
+
+    Call :meth:`reset` with a first :class:`~wholebody.sim.sensors.SensorReading` and the base's
+    position (unobservable: the filter keeps it relative to where it starts), then :meth:`update`
+    with every following reading. The contacts are the robot description's, in its order; a
+    reading's ``contact`` flags which of them are loaded."""
+
+    def __init__(self, robot: Robot, noise: EstimatorNoise | None = None,
+                 imu_frame: str | None = None):
+        self.robot = robot
+        self.noise = noise or EstimatorNoise()
+        if not isinstance(self.noise, EstimatorNoise):
+            raise ValueError(f"noise: expected an EstimatorNoise, got {type(self.noise).__name__}")
+        self.kinematics = LegKinematics(robot, imu_frame)
+        n_feet = self.kinematics.count
+        if n_feet == 0:
+            raise ValueError(f"robot '{robot.name}': contacts: the estimator needs at least one "
+                             f"contact frame (a foot)")
+        self.n_feet = n_feet
+        self.size = 15 + 3 * n_feet
+        self._feet = slice(9, 9 + 3 * n_feet)
+        self._accel_bias = slice(9 + 3 * n_feet, 12 + 3 * n_feet)
+        self._gyro_bias = slice(12 + 3 * n_feet, 15 + 3 * n_feet)
+        self._H = np.zeros((3 * n_feet, self.size))
+        self._F = np.eye(self.size)
+        self._radii = self.kinematics.radii
+        self._identity = np.eye(self.size)
+        self._R_meas = self.noise.kinematics_noise ** 2 * np.eye(3 * n_feet)
+        imu = self.kinematics.imu_in_base
+        self._imu_rotation, self._imu_translation = imu.rotation.copy(), imu.translation.copy()
+        self.estimate: StateEstimate | None = None
+        self._t = 0.0
+        self._warned = False
+
+    # ------------------------------------------------------------------ start
+    def reset(self, reading: SensorReading, base_position=(0.0, 0.0, 0.0),
+              base_velocity=(0.0, 0.0, 0.0)) -> StateEstimate:
+        """Start from ``reading``: the orientation from its attitude filter, the base at
+        ``base_position`` (world, m) with linear velocity ``base_velocity`` (base frame, m/s;
+        default at rest), the feet where the joints put them."""
+        position = np.asarray(base_position, dtype=float)
+        if position.shape != (3,) or not np.all(np.isfinite(position)):
+            raise ValueError(f"base_position: expected 3 finite numbers, got {base_position!r}")
+        velocity = np.asarray(base_velocity, dtype=float)
+        if velocity.shape != (3,) or not np.all(np.isfinite(velocity)):
+            raise ValueError(f"base_velocity: expected 3 finite numbers, got {base_velocity!r}")
+        noise = self.noise
+        attitude = np.asarray(reading.orientation, dtype=float)
+        self.rotation = pin.Quaternion(attitude[3], *attitude[:3]).normalized().toRotationMatrix()
+        base_rotation = self.rotation @ self._imu_rotation.T
+        self.position = position + base_rotation @ self._imu_translation
+        omega_world = self.rotation @ np.asarray(reading.gyro, dtype=float)
+        self.velocity = base_rotation @ velocity + _cross(omega_world,
+                                                          base_rotation @ self._imu_translation)
+        self.accel_bias, self.gyro_bias = np.zeros(3), np.zeros(3)
+        measured, _ = self.kinematics.feet_in_imu(reading.joint_positions, reading.gyro,
+                                                  reading.joint_velocities)
+        self.feet = self.position + measured @ self.rotation.T
+        variances = np.concatenate([
+            np.full(3, noise.initial_position ** 2), np.full(3, noise.initial_velocity ** 2),
+            np.full(3, noise.initial_orientation ** 2),
+            np.full(3 * self.n_feet, noise.initial_position ** 2 + noise.kinematics_noise ** 2),
+            np.full(3, noise.initial_accel_bias ** 2), np.full(3, noise.initial_gyro_bias ** 2)])
+        self.P = np.diag(variances)
+        self._t = float(reading.t)
+        self._omega = np.asarray(reading.gyro, dtype=float).copy()
+        self._innovation = np.zeros((self.n_feet, 3))
+        self._foot_test = np.zeros(self.n_feet)
+        self.estimate = self._output(reading)
+        return self.estimate
+
+    # ------------------------------------------------------------------ each cycle
+    def update(self, reading: SensorReading) -> StateEstimate:
+        """Predict with the IMU up to ``reading.t``, correct with the legs' kinematics; returns the
+        new estimate. Never raises: a reading that is not finite or not later than the last one is
+        skipped (logged once) and the last estimate returned."""
+        if self.estimate is None:
+            raise RuntimeError("KinematicInertialEKF.update before reset: call reset(reading, "
+                               "base_position) with the first reading")
+        dt = float(reading.t) - self._t
+        if not (dt > 0.0 and np.isfinite(reading.gyro).all() and np.isfinite(reading.accel).all()
+                and np.isfinite(reading.joint_positions).all()):
+            self._warn(f"reading at t = {reading.t!r} skipped (not finite or not after "
+                       f"t = {self._t:.6f})")
+            return self.estimate
+        gyro = np.asarray(reading.gyro, dtype=float)
+        contact = np.asarray(reading.contact, bool)
+        if contact.shape != (self.n_feet,):
+            contact = np.zeros(self.n_feet, bool)
+        measured, foot_rates = self.kinematics.feet_in_imu(
+            reading.joint_positions, gyro - self.gyro_bias, reading.joint_velocities)
+        self._predict(gyro, np.asarray(reading.accel, dtype=float), contact, foot_rates, dt)
+        self._correct(measured)
+        self._t = float(reading.t)
+        self.estimate = self._output(reading)
+        return self.estimate
+
+    def _predict(self, gyro: np.ndarray, accel: np.ndarray, contact: np.ndarray,
+                 foot_rates: np.ndarray, dt: float) -> None:
+        """Bloesch et al. 2013, eqs. 5-11: IMU integration and the error-state covariance; the
+        stance feet roll by their angular velocity ``foot_rates`` (IMU frame)."""
+        noise, R = self.noise, self.rotation
+        omega = gyro - self.gyro_bias
+        force_world = R @ (accel - self.accel_bias)
+        acc = force_world + _GRAVITY_WORLD
+        self.position = self.position + dt * self.velocity + 0.5 * dt * dt * acc
+        self.velocity = self.velocity + dt * acc
+        # omega x (radius z) = radius (omega_y, -omega_x, 0), world axes; zero for soles
+        rates_world = foot_rates @ R.T
+        rolling = np.zeros((self.n_feet, 3))
+        rolling[:, 0] = rates_world[:, 1]
+        rolling[:, 1] = -rates_world[:, 0]
+        self.feet = self.feet + (dt * contact * self._radii)[:, None] * rolling
+        self.rotation = R @ pin.exp3(omega * dt)
+        self._omega = omega
+        F = self._F
+        F[0:3, 3:6] = dt * np.eye(3)
+        F[3:6, 6:9] = -dt * _skew(force_world)
+        F[3:6, self._accel_bias] = -dt * R
+        F[6:9, self._gyro_bias] = -dt * R
+        Q = np.zeros(self.size)
+        Q[0:3] = (0.5 * dt * dt * noise.accel_noise) ** 2
+        Q[3:6] = (dt * noise.accel_noise) ** 2
+        Q[6:9] = (dt * noise.gyro_noise) ** 2
+        walk = np.where(contact, noise.stance_foot_walk, noise.swing_foot_walk)
+        Q[self._feet] = np.repeat(walk ** 2 * dt, 3)
+        Q[self._accel_bias] = noise.accel_bias_walk ** 2 * dt
+        Q[self._gyro_bias] = noise.gyro_bias_walk ** 2 * dt
+        P = F @ self.P @ F.T
+        P[np.diag_indices(self.size)] += Q
+        self.P = P
+
+    def _correct(self, measured: np.ndarray) -> None:
+        """Bloesch et al. 2013, eq. 12: the feet relative to the IMU, s_i = R^T (p_i - r)."""
+        R, H = self.rotation, self._H
+        relative = self.feet - self.position
+        predicted = relative @ R
+        for i in range(self.n_feet):
+            rows = slice(3 * i, 3 * i + 3)
+            H[rows, 0:3] = -R.T
+            H[rows, 6:9] = R.T @ _skew(relative[i])
+            H[rows, 9 + 3 * i:12 + 3 * i] = R.T
+        innovation = (measured - predicted).ravel()
+        PHt = self.P @ H.T
+        S = H @ PHt + self._R_meas
+        blocks = np.array([S[3 * i:3 * i + 3, 3 * i:3 * i + 3] for i in range(self.n_feet)])
+        try:
+            K = np.linalg.solve(S, PHt.T).T
+            S_inv_blocks = np.linalg.inv(blocks)
+        except np.linalg.LinAlgError:
+            self._warn("kinematic update skipped: singular innovation covariance")
+            return
+        dx = K @ innovation
+        self.position = self.position + dx[0:3]
+        self.velocity = self.velocity + dx[3:6]
+        self.rotation = pin.exp3(dx[6:9]) @ self.rotation
+        self.feet = self.feet + dx[self._feet].reshape(-1, 3)
+        self.accel_bias = self.accel_bias + dx[self._accel_bias]
+        self.gyro_bias = self.gyro_bias + dx[self._gyro_bias]
+        IKH = self._identity - K @ H  # Joseph form: stays symmetric positive definite
+        P = IKH @ self.P @ IKH.T + self.noise.kinematics_noise ** 2 * (K @ K.T)
+        self.P = 0.5 * (P + P.T)
+        self._innovation = innovation.reshape(-1, 3)
+        self._foot_test = np.einsum("ni,nij,nj->n", self._innovation, S_inv_blocks,
+                                    self._innovation)
+
+    # ------------------------------------------------------------------ output
+    def _output(self, reading: SensorReading) -> StateEstimate:
+        """The IMU's state carried to the free-flyer (base joint) in Pinocchio's conventions."""
+        R_imu, R_i, t_i = self.rotation, self._imu_rotation, self._imu_translation
+        R_base = R_imu @ R_i.T
+        lever = R_base @ t_i
+        omega_world = R_imu @ self._omega
+        base_velocity_world = self.velocity - _cross(omega_world, lever)
+        q = np.empty(self.robot.nq)
+        q[0:3] = self.position - lever
+        q[3:7] = pin.Quaternion(R_base).normalized().coeffs()
+        q[FREE_FLYER_NQ:] = reading.joint_positions
+        v = np.empty(self.robot.nv)
+        v[0:3] = R_base.T @ base_velocity_world
+        v[3:6] = R_i @ self._omega
+        v[6:] = reading.joint_velocities
+        return StateEstimate(t=self._t, q=q, v=v, covariance=self.P.copy(),
+                             innovation=self._innovation.copy(), foot_test=self._foot_test.copy(),
+                             feet=self.feet.copy())
+
+    def _warn(self, message: str) -> None:
+        if not self._warned:
+            log.warning("state estimator: %s", message)
+            self._warned = True

@@ -1,0 +1,99 @@
+"""The estimator in the twin's loop: sensors read from the simulator and the EKF updated at every
+simulator step, the estimate beside the twin's true state, and a controller run on the estimate."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..sim.sensors import Sensors, SensorSpec
+from .ekf import EstimatorNoise, KinematicInertialEKF, StateEstimate
+
+
+@dataclass
+class EstimationLog:
+    """One row per simulator step: the time, the twin's true (q, v), the estimate's (q, v), the
+    feet's normalised innovations, the contact flags and the covariance's diagonal."""
+
+    t: list = field(default_factory=list)
+    q_true: list = field(default_factory=list)
+    v_true: list = field(default_factory=list)
+    q_hat: list = field(default_factory=list)
+    v_hat: list = field(default_factory=list)
+    foot_test: list = field(default_factory=list)
+    contact: list = field(default_factory=list)
+    variance: list = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__}
+
+
+class TwinEstimation:
+    """A simulator observer (:class:`~wholebody.sim.simulator.SimObserver`): at every step it
+    reads ``sensors`` from the twin and updates ``estimator``, started at each reset from the
+    twin's true base position. :meth:`current` gives the estimate of the present state (a
+    controller calls it before the step, the observer's ``step`` then finds it done)."""
+
+    def __init__(self, sensors: Sensors, estimator: KinematicInertialEKF, record: bool = True):
+        self.sensors, self.estimator, self.record = sensors, estimator, record
+        self.sim = None
+        self.log = EstimationLog()
+
+    @classmethod
+    def for_robot(cls, robot, spec: SensorSpec | None = None, seed: int = 0,
+                  **noise_overrides) -> "TwinEstimation":
+        """Sensors of ``spec`` (default :class:`SensorSpec`) seeded with ``seed`` and a filter
+        whose noise model matches them (:meth:`EstimatorNoise.for_sensors`)."""
+        spec = spec or SensorSpec()
+        sensors = Sensors(robot, spec, np.random.default_rng(seed))
+        return cls(sensors, KinematicInertialEKF(robot, EstimatorNoise.for_sensors(
+            spec, **noise_overrides)))
+
+    def start(self, sim) -> None:
+        self.sim = sim
+        self.log = EstimationLog()
+        self.estimator.reset(self.sensors.read(sim), sim.state()[0][:3])
+        self._record(sim, self.estimator.estimate)
+
+    def step(self, sim) -> None:
+        self.current()
+
+    def controller_result(self, sim, result) -> None:
+        pass
+
+    def current(self) -> StateEstimate:
+        """The estimate at the simulator's present time (read and updated once per step)."""
+        sim, estimator = self.sim, self.estimator
+        if estimator.estimate is not None and sim.t > estimator.estimate.t:
+            self._record(sim, estimator.update(self.sensors.read(sim)))
+        return estimator.estimate
+
+    def _record(self, sim, estimate: StateEstimate) -> None:
+        if not self.record:
+            return
+        q, v = sim.state()
+        log = self.log
+        log.t.append(sim.t)
+        log.q_true.append(q)
+        log.v_true.append(v)
+        log.q_hat.append(estimate.q)
+        log.v_hat.append(estimate.v)
+        log.foot_test.append(estimate.foot_test)
+        log.contact.append(self.sensors.last_contact)
+        log.variance.append(np.diag(estimate.covariance).copy())
+
+
+class OnEstimatedState:
+    """``controller`` fed with the estimate of ``estimation`` (a :class:`TwinEstimation` observing
+    the simulator) instead of the state it is given: ``compute(q, v, t)`` ignores q and v."""
+
+    def __init__(self, controller, estimation: TwinEstimation):
+        self.controller, self.estimation = controller, estimation
+
+    def compute(self, q, v, t):
+        estimate = self.estimation.current()
+        return self.controller.compute(estimate.q, estimate.v, t)
+
+    def __getattr__(self, name):  # the wrapped controller's attributes (plans, impedance...)
+        return getattr(self.controller, name)
