@@ -84,6 +84,7 @@ def trotting_run():
     return robot, estimation.log.arrays()
 
 
+@pytest.mark.slow  # closed loop in the twin
 def test_standing_talos14(standing_run):
     robot, log = standing_run
     duration = log["t"][-1]
@@ -100,6 +101,7 @@ def test_standing_talos14(standing_run):
     assert np.all(drift < tilt_bound(SPEC) * leg_length(robot)), drift
 
 
+@pytest.mark.slow  # closed loop in the twin
 def test_trotting_hyq(trotting_run):
     robot, log = trotting_run
     assert log["contact"][-2000:].mean() < 0.8  # feet did lift: a trot, not a stand
@@ -116,6 +118,7 @@ def test_trotting_hyq(trotting_run):
     assert tilt.max() < tilt_bound(SPEC), tilt.max()
 
 
+@pytest.mark.slow  # closed loop in the twin
 def test_covariance_positive_along_the_runs(standing_run, trotting_run):
     for _, log in (standing_run, trotting_run):
         assert np.all(log["variance"] > 0.0)
