@@ -55,6 +55,7 @@ from ..robots.roles import biped_soles, leg_joints
 from ..tasks import ForceRegularizer
 from ..validation import finite_array, nonnegative, number, positive
 from ..variables import Variables
+from .base import FailureStreak
 from .stacks import (COP_MARGIN, POSTURE_PD, POSTURE_WEIGHT, SWING_FOOT_PD, TORSION, table2_stack,
                      table4_stack)
 
@@ -199,6 +200,7 @@ class Walking:
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
         self.robot = robot
+        self.failures = FailureStreak("Walking")  # HELD cycles in a row, in the status
         self.config = (WalkingConfig.for_robot(robot) if config is None else config).checked()
         c = self.config
         self.left, self.right = biped_soles(robot)
@@ -470,6 +472,7 @@ class Walking:
         else:
             self.last_cycle = self.cycles[id(stack)]
             sol = self.last_cycle.solve(q, v, variables)
+        sol = self.failures.note(sol)
         self.last = sol
         self.cycle_times.append(time.perf_counter() - t0)
         return sol
