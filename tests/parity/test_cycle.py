@@ -236,8 +236,8 @@ def talos_stack(robot, full=False):
 @native
 @pytest.mark.parametrize("name", ["talos14", "talos", "hyq"])
 def test_terms_equal_robot_update(robots, name, rng):
-    """M, h, CoM, its velocity and Jacobian, centroidal momentum and matrix, Adot_G v and the contact
-    points of the compiled update equal Robot.update's (Pinocchio's Python bindings on the URDF
+    """M, h, CoM, its velocity and Jacobian, centroidal momentum and matrix, Adot_G v, the contact
+    points and drifts of the compiled update equal Robot.update's (Pinocchio's Python bindings on the URDF
     model; the compiled cycle rebuilds the model from arrays); the points are the sole origins /
     sphere bottoms, checked against the frame placements."""
     robot = robots[name]
@@ -250,7 +250,8 @@ def test_terms_equal_robot_update(robots, name, rng):
         robot.update(q, v)
         expected = {"M": robot.M, "h": robot.h, "com": robot.com, "vcom": robot.vcom,
                     "h_G": robot.h_G, "A_G": robot.A_G, "A_G_dot_v": robot.A_G_dot_v,
-                    "J_com": robot.J_com, "points": robot.contact_points}
+                    "J_com": robot.J_com, "points": robot.contact_points,
+                    "contact_drifts": robot.stacked_contact_drift(robot.contact_names)}
         assert set(terms) == set(expected)
         for key, value in expected.items():
             assert terms[key].shape == np.shape(value), key
