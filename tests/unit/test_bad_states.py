@@ -213,3 +213,41 @@ def test_integral_does_not_wind_up_on_failed_cycles(robots, engine):
     assert ctrl.compute(q, v, 1e300).ok  # dt = 1e300: clamped
     limit = ctrl.lqr.integral_limit
     assert np.all(np.isfinite(ctrl.cog_integral)) and np.all(np.abs(ctrl.cog_integral) <= limit)
+
+
+def other_hierarchy_controller(robot, kind):
+    """ContactSwitch, Stepping or Walking on talos14, built as their scenarios build them."""
+    from wholebody.scenarios import get_scenario
+    if kind == "contact-switch":
+        from wholebody.control.contact_switch import ContactSwitch
+        from wholebody.scenarios import single_support
+        params = get_scenario("single-support").validate(robot, {})
+        stance, _ = single_support.stance_and_swing(robot, params)
+        return ContactSwitch(robot, stance, single_support.config(robot, params), gains="pd")
+    if kind == "stepping":
+        from wholebody.control.stepping import Stepping
+        from wholebody.scenarios import stepping
+        return Stepping(robot, stepping.config(robot, get_scenario("stepping").validate(robot, {})))
+    from wholebody.control.walking import Walking
+    return Walking(robot)
+
+
+@pytest.mark.parametrize("kind", ["contact-switch", "stepping", "walking"])
+def test_other_hierarchy_controllers_count_failed_cycles(robots, kind):
+    """The held cycles of the other hierarchy controllers say how many in a row; a sane state
+    afterwards is solved (its dynamics checked with RNEA) and a new failure starts at 1."""
+    robot = robots["talos14"]
+    ctrl = other_hierarchy_controller(robot, kind)
+    q, v = robot.q_ref, np.zeros(robot.nv)
+    bad = v.copy()
+    bad[0] = OVERFLOWING_SPEED
+    assert ctrl.compute(q, v, 0.0).ok
+    for n in range(1, 4):
+        sol = ctrl.compute(q, bad, 0.002 * n)
+        assert sol.outcome is Outcome.HELD and sol.status.startswith("v: ")
+        assert sol.status.endswith(f"({n} failed cycle(s) in a row)")
+    sol = ctrl.compute(q, v, 0.008)
+    assert sol.ok and "in a row" not in sol.status
+    dyn = fuzz.DynamicsCheck(robot)
+    assert max(dyn.residuals(q, v, sol)) < 1e-6 * dyn.weight
+    assert ctrl.compute(q, bad, 0.010).status.endswith("(1 failed cycle(s) in a row)")

@@ -46,6 +46,7 @@ from scipy.spatial import ConvexHull
 
 from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation
+from ..guard import Outcome
 from ..planning.dcm import DCMPlan, lipm_frequency, predicted_dcm
 from ..planning.footsteps import Footstep, FootstepPlanner, StepLimits, clamp_step
 from ..planning.swing import SwingTrajectory
@@ -456,7 +457,8 @@ class Walking:
         t0 = time.perf_counter()
         robot = self.robot
         cycle = self.last_cycle
-        if self.cycles is None or cycle is None:
+        held = self.last is not None and self.last.outcome is Outcome.HELD
+        if self.cycles is None or cycle is None or held:  # (a held cycle's state: maybe absurd)
             robot.update(q, v)
             com, vcom = robot.com.copy(), robot.vcom.copy()
             cycle = None
