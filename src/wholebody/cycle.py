@@ -540,8 +540,9 @@ class HierarchyCycle:
         """The torques for state (q, v) with the active contacts of ``variables`` (default all).
 
         Never raises for numerical reasons (a failed solve is flagged, its torque finite and
-        within limits, as :meth:`Formulation.solve`); bad input — q/v of the wrong size or with
-        NaN, a task producing NaN rows — raises ValueError naming the field or task."""
+        within limits, as :meth:`Formulation.solve`; so is a finite state whose rigid-body terms
+        overflow, its status naming ``v``); bad input — q/v of the wrong size or with NaN, a
+        task producing NaN rows — raises ValueError naming the field or task."""
         robot = self.robot
         variables = variables or self._default_variables()
         if not self.native:

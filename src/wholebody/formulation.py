@@ -232,7 +232,9 @@ class Formulation:
         ``benchmarks/bench_wbc.py``). ``diagnostics`` computes the per-task report (extra
         work every cycle). Never raises for numerical reasons: a
         failed solve returns a :class:`Solution` with outcome ``HELD`` (``ok`` False), the reason,
-        and a torque computed from the best available solution, clipped to the torque limits. ``regularization`` is the eps of eq. 5
+        and a torque computed from the best available solution, clipped to the torque limits; a
+        cached state whose rigid-body terms are not finite (products of a velocity ~1e155
+        overflow) returns ``HELD`` with zero torque and a reason naming ``v``. ``regularization`` is the eps of eq. 5
         on the scaled variables; the paper's 1e-4 visibly trades tasks off (see the tests), 1e-6
         does not, and much smaller values make quadprog cycle.
         """

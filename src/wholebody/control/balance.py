@@ -200,7 +200,10 @@ class MomentumBalance:
     integral of the CoG error ``robot.com - com_ref`` in the augmented LQR cost — integral action,
     our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
     accumulated here, one step per :meth:`compute` call with ``dt`` the time since the previous
-    call, clamped to ``+-integral_limit`` (m s, anti-windup); :meth:`reset_integral` zeroes it.
+    call, clamped to ``+-integral_limit`` (m s, anti-windup), not on a cycle that is ``HELD``;
+    :meth:`reset_integral` zeroes it. A ``HELD`` cycle's status ends with "(N failed cycle(s) in
+    a row)" (:class:`~wholebody.control.base.FailureStreak`); the next sane state is solved as
+    if nothing had failed.
     ``q_orientation`` (LQR only; None/0 = off, the default and the paper's controller): weight of
     the orientation error in the augmented LQR state (ours; see :mod:`wholebody.control.lqr`); the
     error fed back is the floating base's, ``theta = log3(R_base R_ref^T)`` (world axes) against
