@@ -41,6 +41,9 @@ State families (every state is a pure function of (seed, robot, family, index), 
   normal, 0.3 rad/s on the joints, 0.2 m/s and 0.3 rad/s on the base;
 * ``wild``: roll/pitch ±45°, joints uniform over their whole range, base position ±10 cm,
   velocities 3x larger;
+* ``beyond-limits``: as near-upright, and on 20 % of the states (drawn) one joint (drawn) is
+  beyond its lower or upper limit (drawn) by up to :data:`BEYOND_SPAN` — what a controller sees
+  after an overshoot, a fall or an encoder offset;
 * ``in-contact``: the robot standing on its feet — base roll/pitch within ±5°, joints drawn
   around the posture, then moved (Gauss-Newton on the contact frames' Jacobians, within the
   limits) until every contact is where it stands in the posture (turned with the base's yaw),
@@ -54,7 +57,7 @@ start would otherwise carry one random state into the next. MomentumBalance (the
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/fuzz.py --states 2000 [--seed 0]
         [--robots talos14 hyq] [--controllers pd lqr passive quasi-static standing]
-        [--families near-upright wild in-contact] [--engines python native] [--jobs 1]
+        [--families near-upright wild in-contact beyond-limits] [--engines python native] [--jobs 1]
         [--json OUT]
 
 ``--states`` counts per robot and family; the exit code is 1 when any NaN, limit violation,
@@ -87,7 +90,7 @@ from wholebody.guard import LIMIT_TOLERANCE  # noqa: E402
 from wholebody.planning.trunk import TrunkState  # noqa: E402
 
 ROBOTS = ("talos14", "hyq")
-FAMILIES = ("near-upright", "wild", "in-contact")
+FAMILIES = ("near-upright", "wild", "in-contact", "beyond-limits")
 #: controllers per robot, each with its engines and whether its qdd/lam satisfy the dynamics
 CONTROLLERS = {
     "talos14": {"pd": (("python", "native"), True), "lqr": (("python", "native"), True),
@@ -106,13 +109,19 @@ PERTURBATION = 1e-12
 #: a state is ill-posed when that perturbation moves an engine's torque by more than this (Nm):
 #: a tenth of DISAGREE_SMALL, since the two engines' rounding differs by less than PERTURBATION
 ILL_POSED = 0.1 * DISAGREE_SMALL
+#: well-posed disagreements listed by index in a report (reproduce each with --index)
+WELL_POSED_LISTED = 50
 
 #: state families: roll/pitch bound (deg), joint sampling, base position noise (m), velocity factor
 FAMILY_SPECS = {
     "near-upright": {"tilt": 10.0, "joints": "posture", "position": 0.02, "speed": 1.0},
     "wild": {"tilt": 45.0, "joints": "range", "position": 0.1, "speed": 3.0},
     "in-contact": {"tilt": 5.0, "joints": "posture", "position": 0.02, "speed": 1.0},
+    "beyond-limits": {"tilt": 10.0, "joints": "posture", "position": 0.02, "speed": 1.0,
+                      "beyond": 0.2},
 }
+#: beyond-limits states: a joint outside its range by up to this much (rad)
+BEYOND_SPAN = 0.2
 #: in-contact states: Gauss-Newton iterations that put the contacts back on the floor, and the
 #: largest contact placement error (m, rad) accepted (else the state is drawn again)
 CONTACT_ITERATIONS, CONTACT_TOLERANCE, CONTACT_DRAWS = 50, 1e-9, 20
@@ -165,7 +174,20 @@ def sample_state(robot, family: str, rng: np.random.Generator) -> tuple[np.ndarr
     v = np.concatenate([rng.normal(scale=k * BASE_SPEED, size=3),
                         rng.normal(scale=k * BASE_RATE, size=3),
                         rng.normal(scale=k * JOINT_SPEED, size=robot.na)])
+    if rng.uniform() < spec.get("beyond", 0.0):
+        q[7:] = joint_beyond_limit(robot, q[7:], rng)
     return q, v
+
+
+def joint_beyond_limit(robot, joints: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``joints`` with one joint of finite range (drawn uniformly) moved beyond its lower or
+    upper limit (drawn) by up to :data:`BEYOND_SPAN` (uniform)."""
+    bounded = np.flatnonzero(np.isfinite(robot.q_min) & np.isfinite(robot.q_max))
+    joints = joints.copy()
+    j = bounded[rng.integers(bounded.size)]
+    past = rng.uniform(0.0, BEYOND_SPAN)
+    joints[j] = robot.q_max[j] + past if rng.integers(2) else robot.q_min[j] - past
+    return joints
 
 
 def contact_targets(robot, yaw: float) -> dict:
@@ -414,6 +436,8 @@ class Disagreement:
     worst_index: int = -1
     first_ok_differs: int = -1
     first_well_posed: int = -1  # first state above DISAGREE_SMALL that is not ill-posed
+    #: the first WELL_POSED_LISTED well-posed states above DISAGREE_SMALL or whose ok differs
+    well_posed_indices: list = field(default_factory=list)
 
     def merge(self, other: "Disagreement") -> None:
         for name in ("states", "above_small", "above_large", "ok_differs", "above_small_solved",
@@ -425,6 +449,8 @@ class Disagreement:
         if other.first_well_posed >= 0 and (self.first_well_posed < 0
                                             or other.first_well_posed < self.first_well_posed):
             self.first_well_posed = other.first_well_posed
+        self.well_posed_indices = sorted(self.well_posed_indices
+                                         + other.well_posed_indices)[:WELL_POSED_LISTED]
         if other.first_ok_differs >= 0 and (self.first_ok_differs < 0
                                             or other.first_ok_differs < self.first_ok_differs):
             self.first_ok_differs = other.first_ok_differs
@@ -455,6 +481,60 @@ def sensitivity(runners, q, v, plan, index: int, taus) -> float:
         diff = float(np.abs(tau - taus[runner.controller, runner.engine][0]).max())
         worst = max(worst, math.inf if diff != diff else diff)
     return worst
+
+
+#: relative size of the perturbation of a cascade's level arrays in :func:`row_sensitivity`: the
+#: engines' level arrays differ by up to ~1e-13 relative (their rigid-body terms round differently)
+ROW_PERTURBATION = 1e-13
+
+
+def row_sensitivity(robot, controller: str, q, v, trials: int = 5, seed: int = 0) -> dict:
+    """For a cascade controller (``pd``, ``lqr``) at (q, v): the level arrays of both engines,
+    each solved again by the same :func:`~wholebody.formulation.solve_levels` (``reproduce``: how
+    far that torque is from the engine's own, Nm; 0 up to round-off says the engines differ only
+    through their arrays), and how far the reference's torque moves when its arrays (matrices,
+    targets, bounds) are scaled by 1 + ROW_PERTURBATION ξ (``moves``: max and min over
+    ``trials``, Nm). A move as large as the engines' difference says the torque is not determined
+    by double-precision rows: a perturbation of (q, v) (:func:`sensitivity`) moves the rows along
+    the state's own directions only and can miss that."""
+    from wholebody.formulation import solve_levels
+    from wholebody.solvers import Level
+    fields = ("B", "b", "w", "C", "lower", "upper", "v")
+
+    def copied(levels):
+        return [Level.trusted(*(np.array(getattr(L, f), float) for f in fields), name=L.name)
+                for L in levels]
+
+    runners = {e: Runner(robot, controller, e) for e in ("python", "native")}
+    taus = {e: np.asarray(r.run(q, v, None).tau, float) for e, r in runners.items()}
+    ctrl = runners["python"].ctrl
+    levels = {"python": copied([lp.level for lp in ctrl.formulation._plan.levels]),
+              "native": copied(runners["native"].ctrl.cycle.levels)}
+    robot.update(q, v)
+    scales = ctrl.formulation.scales(ctrl.variables)
+    nv, nl = ctrl.variables.nv, ctrl.variables.n_lambda
+    J_u = robot.stacked_contact_jacobian(ctrl.variables.contacts)[:, 6:]
+    lo, hi = robot.torque_bounds(q)
+
+    def torque(lv):
+        x = solve_levels(lv, True, "cascade", "daqp", 1e-6, "quadprog")[0].x * scales
+        return np.clip(robot.M[6:] @ x[:nv] + robot.h[6:] - J_u.T @ x[nv:nv + nl], lo, hi)
+
+    out = {"engines": float(np.abs(taus["python"] - taus["native"]).max()),
+           "reproduce": {e: float(np.abs(torque(lv) - taus[e]).max())
+                         for e, lv in levels.items()}}
+    rng = np.random.default_rng([seed, 13])
+    moves = []
+    for _ in range(trials):
+        lv = copied(levels["python"])
+        for L in lv:
+            for f in ("B", "b", "C", "lower", "upper"):
+                a = getattr(L, f)
+                finite = np.isfinite(a)
+                a[finite] *= 1.0 + ROW_PERTURBATION * rng.standard_normal(int(finite.sum()))
+        moves.append(float(np.abs(torque(lv) - taus["python"]).max()))
+    out["moves"] = (max(moves), min(moves))
+    return out
 
 
 def daqp_failures(result) -> int:
@@ -567,6 +647,8 @@ def fuzz_chunk(robot_name: str, family: str, seed: int, start: int, stop: int,
                     d.ok_differs_well_posed += a[1] != b[1]
                     if diff > DISAGREE_SMALL and d.first_well_posed < 0:
                         d.first_well_posed = index
+                    if len(d.well_posed_indices) < WELL_POSED_LISTED:
+                        d.well_posed_indices.append(int(index))
             if not ill:
                 d.max_diff_well_posed = max(d.max_diff_well_posed, diff)
     return {"stats": [asdict(s) for s in stats.values()],
@@ -657,6 +739,12 @@ def table(report: dict) -> str:
                          f"{d['ill_posed'] / n:>9.1%} {d['max_diff_well_posed']:>18.3g} "
                          f"{d['above_small_well_posed']:>5} {d['ok_differs_well_posed']:>10}  "
                          f"{d['worst_index']}, {d['first_ok_differs']}, {d['first_well_posed']}")
+    listed = [d for d in report["disagreement"] if d.get("well_posed_indices")]
+    if listed:
+        lines += ["", "well-posed disagreements (> 1e-6 Nm or ok differs), first "
+                      f"{WELL_POSED_LISTED}: indices"]
+        lines += [f"  {d['robot']} {d['controller']} {d['family']}: "
+                  f"{' '.join(map(str, d['well_posed_indices']))}" for d in listed]
     firsts = [(s, c, e) for s in report["stats"] for c, e in sorted(s["first"].items())]
     if firsts:
         lines += ["", f"first state of each kind (reproduce: --robots R --families F --index I "
@@ -706,6 +794,12 @@ def show_state(robot_name: str, family: str, seed: int, index: int, controllers)
                   f"residuals {residual}, tau {np.asarray(result.tau)!r}")
             for category, entry in s.first.items():
                 print(f"    {category}: {entry['message']}")
+        if name in ("pd", "lqr") and set(engines) == {"python", "native"}:
+            r = row_sensitivity(robot, name, q, v)
+            print(f"{name}: engines {r['engines']:.3g} Nm apart; the same cascade on each engine's "
+                  f"level arrays: {r['reproduce']['python']:.3g} / {r['reproduce']['native']:.3g} "
+                  f"Nm from its torque; the reference's arrays x (1 + {ROW_PERTURBATION:g} xi) "
+                  f"move its torque by {r['moves'][0]:.3g} Nm (least {r['moves'][1]:.3g})")
 
 
 def main(argv=None) -> int:

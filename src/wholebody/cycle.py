@@ -27,7 +27,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .formulation import Formulation, Solution, Stack, make_solution, solve_levels
+from .formulation import (Formulation, Solution, Stack, make_solution, overflow_status,
+                          solve_levels, unsolved_solution)
 from .robot import FREE_FLYER_NQ, Robot
 from .solvers import Level
 from .solvers.compiled_cascade import BoundCascade
@@ -539,8 +540,9 @@ class HierarchyCycle:
         """The torques for state (q, v) with the active contacts of ``variables`` (default all).
 
         Never raises for numerical reasons (a failed solve is flagged, its torque finite and
-        within limits, as :meth:`Formulation.solve`); bad input — q/v of the wrong size or with
-        NaN, a task producing NaN rows — raises ValueError naming the field or task."""
+        within limits, as :meth:`Formulation.solve`; so is a finite state whose rigid-body terms
+        overflow, its status naming ``v``); bad input — q/v of the wrong size or with NaN, a
+        task producing NaN rows — raises ValueError naming the field or task."""
         robot = self.robot
         variables = variables or self._default_variables()
         if not self.native:
@@ -563,6 +565,10 @@ class HierarchyCycle:
         program.pack(self)
         if not (self.engine.fill(program.id) and math.isfinite(program.weights.sum())
                 and (program.weights >= program.w_min).all()):
+            if not all(np.isfinite(term).all() for term in self.engine.terms().values()):
+                return unsolved_solution(robot.nv, variables,
+                                         robot.torque_limits.bounds(np.asarray(q, float)[7:]),
+                                         len(self.stack.levels), overflow_status(v))
             program.raise_invalid()
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
         t_rows = time.perf_counter()

@@ -232,14 +232,22 @@ class Formulation:
         ``benchmarks/bench_wbc.py``). ``diagnostics`` computes the per-task report (extra
         work every cycle). Never raises for numerical reasons: a
         failed solve returns a :class:`Solution` with outcome ``HELD`` (``ok`` False), the reason,
-        and a torque computed from the best available solution, clipped to the torque limits. ``regularization`` is the eps of eq. 5
+        and a torque computed from the best available solution, clipped to the torque limits; a
+        cached state whose rigid-body terms are not finite (products of a velocity ~1e155
+        overflow) returns ``HELD`` with zero torque and a reason naming ``v``. ``regularization`` is the eps of eq. 5
         on the scaled variables; the paper's 1e-4 visibly trades tasks off (see the tests), 1e-6
         does not, and much smaller values make quadprog cycle.
         """
         robot = self.robot
         variables = variables or Variables(robot)
         t0 = time.perf_counter()
-        levels, meta = self.levels(stack, variables)
+        try:
+            levels, meta = self.levels(stack, variables)
+        except ValueError:
+            if robot.terms_finite():
+                raise
+            return unsolved_solution(robot.nv, variables, robot.torque_bounds(),
+                                     len(stack.levels), overflow_status(robot.v))
         t_rows = time.perf_counter()
         if analytic_first_level is None:
             use_analytic = self.analytic_first_level(stack)
@@ -331,6 +339,25 @@ def make_solution(qdd: np.ndarray, lam: np.ndarray, tau: np.ndarray,
     forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
     return Solution(qdd, lam, tau, forces, outcome, status, np.asarray(costs),
                     contacts=variables.contacts)
+
+
+def overflow_status(v) -> str:
+    """The reason of a cycle whose rigid-body terms are not finite at a finite state: products of
+    the velocity ``v`` overflow (Coriolis terms and contact drifts go as |v|², which overflows
+    beyond ~1e154)."""
+    largest = float(np.max(np.abs(np.asarray(v, dtype=float))))
+    return (f"v: the rigid-body terms at this state are not finite (largest |v| {largest:.3g}: "
+            f"products of the velocity overflow); not solved, zero torque")
+
+
+def unsolved_solution(nv: int, variables: Variables, bounds: tuple[np.ndarray, np.ndarray],
+                      n_levels: int, status: str) -> Solution:
+    """A cycle that could not be posed (no QP solved): zero q̈, λ and torque (inside any limits),
+    outcome ``HELD``, the reason ``status``; NaN level costs."""
+    sol = make_solution(np.zeros(nv), np.zeros(variables.n_lambda), np.zeros(bounds[0].shape),
+                        bounds, Outcome.HELD, status, np.full(n_levels, np.nan), variables)
+    sol.timings = {"qps": 0}
+    return sol
 
 
 def _signature(r: TaskRows) -> tuple:

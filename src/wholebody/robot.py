@@ -452,6 +452,14 @@ class Robot:
         self.com_drift = self.A_G_dot_v[:3] / self.mass
         self._update_contacts()
 
+    def terms_finite(self) -> bool:
+        """True when the cycle's cached terms (M, h, Ȧ_G v, the contact Jacobians and drifts) are
+        finite. A finite state can make them inf/NaN: products of a velocity beyond ~1e154
+        overflow."""
+        J = self._frame_cache[("stacked J", self.contact_names)]
+        drift = self._frame_cache[("stacked drift", self.contact_names)]
+        return all(bool(np.isfinite(a).all()) for a in (self.M, self.h, self.A_G_dot_v, J, drift))
+
     def _update_contacts(self) -> None:
         """Contact Jacobians, drifts and points of every contact, filled into one stacked array
         per cycle (``contact_jacobians[name]`` are views of it, so stacking all contacts is free).

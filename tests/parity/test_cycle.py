@@ -236,8 +236,8 @@ def talos_stack(robot, full=False):
 @native
 @pytest.mark.parametrize("name", ["talos14", "talos", "hyq"])
 def test_terms_equal_robot_update(robots, name, rng):
-    """M, h, CoM, its velocity and Jacobian, centroidal momentum and matrix, Adot_G v and the contact
-    points of the compiled update equal Robot.update's (Pinocchio's Python bindings on the URDF
+    """M, h, CoM, its velocity and Jacobian, centroidal momentum and matrix, Adot_G v, the contact
+    points and drifts of the compiled update equal Robot.update's (Pinocchio's Python bindings on the URDF
     model; the compiled cycle rebuilds the model from arrays); the points are the sole origins /
     sphere bottoms, checked against the frame placements."""
     robot = robots[name]
@@ -250,7 +250,8 @@ def test_terms_equal_robot_update(robots, name, rng):
         robot.update(q, v)
         expected = {"M": robot.M, "h": robot.h, "com": robot.com, "vcom": robot.vcom,
                     "h_G": robot.h_G, "A_G": robot.A_G, "A_G_dot_v": robot.A_G_dot_v,
-                    "J_com": robot.J_com, "points": robot.contact_points}
+                    "J_com": robot.J_com, "points": robot.contact_points,
+                    "contact_drifts": robot.stacked_contact_drift(robot.contact_names)}
         assert set(terms) == set(expected)
         for key, value in expected.items():
             assert terms[key].shape == np.shape(value), key
@@ -318,6 +319,44 @@ def test_every_kind_levels_equal_formulation(robots, name, full):
     anchors = s_native.find("contacts").anchors
     assert set(anchors) == set(robot.contact_names)
     assert assert_same_refs(s_native, s_python, name) == n_first_use_refs(s_native) >= 2
+
+
+@native
+@pytest.mark.parametrize("mode", ["braking", "tanh"])
+@pytest.mark.parametrize("name", ["hyq", "talos14"])
+def test_joint_limit_rows_beyond_the_limits(robots, name, mode):
+    """Joints outside their range (each joint by 0.01-0.5 rad, below or above, moving away or
+    back): every level array of both engines — the joint-acceleration-limit rows among them —
+    equal up to round-off, both engines' torques within the limits; with the tanh bounds a
+    violated limit pushes back (upper bound below zero past the upper limit, lower bound above
+    zero past the lower one)."""
+    robot = robots[name]
+    stacks = [Stack([[NewtonEuler(name="newton-euler"), TorqueLimits(name="torque limits")],
+                     [ContactConstraint(name="contacts"),
+                      JointAccelerationLimits(name="qdd limits", mode=mode)],
+                     [PostureTask(name="posture", weight=0.1)]]) for _ in range(2)]
+    variables = Variables(robot, robot.contact_names)
+    rng = np.random.default_rng(31)
+    states = []
+    for k in range(6):
+        q, v = robot.random_state(rng, velocity_scale=0.3)
+        past = rng.uniform(0.01, 0.5, size=robot.na)
+        above = rng.random(robot.na) < 0.5
+        q[7:] = np.where(above, robot.q_max + past, robot.q_min - past)
+        states.append((q, v))
+    cycle, _, _ = compare_on_states(robot, stacks[0], stacks[1], variables, states,
+                                    where=f"{name} {mode} beyond the limits")
+    limits = stacks[1].find("qdd limits")
+    python = HierarchyCycle(robot, stacks[1], engine="python")
+    for q, v in states:
+        a, b = cycle.solve(q, v, variables), python.solve(q, v, variables)
+        lo, hi = robot.torque_bounds(q)
+        assert np.all(np.abs(a.tau) <= hi + 1e-12) and np.all(np.abs(b.tau) <= hi + 1e-12)
+        robot.update(q, v)
+        qdd_lo, qdd_hi = limits.bounds(robot)
+        above = q[7:] > robot.q_max
+        if mode == "tanh":  # the tanh bounds do not depend on the velocity
+            assert np.all(qdd_hi[above] < 0.0) and np.all(qdd_lo[~above] > 0.0)
 
 
 # ---------------------------------------------------------------------------- 4. parameters

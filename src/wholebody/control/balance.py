@@ -26,12 +26,14 @@ import pinocchio as pin
 
 from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation, Solution
+from ..guard import Outcome
 from ..robot import Robot
 from ..variables import Variables
 from ..planning.blend import quintic_blend
 from ..tasks.base import contact_list
 from ..tasks.momentum import momentum_gain
 from ..validation import finite_array, nonnegative, number, positive
+from .base import FailureStreak
 from .lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_DIAG, MomentumLQR
 from .stacks import ANGULAR_MOMENTUM_WEIGHT, COP_MARGIN, POSTURE_PD, TORSION, table2_stack
 
@@ -198,7 +200,10 @@ class MomentumBalance:
     integral of the CoG error ``robot.com - com_ref`` in the augmented LQR cost — integral action,
     our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
     accumulated here, one step per :meth:`compute` call with ``dt`` the time since the previous
-    call, clamped to ``+-integral_limit`` (m s, anti-windup); :meth:`reset_integral` zeroes it.
+    call, clamped to ``+-integral_limit`` (m s, anti-windup), not on a cycle that is ``HELD``;
+    :meth:`reset_integral` zeroes it. A ``HELD`` cycle's status ends with "(N failed cycle(s) in
+    a row)" (:class:`~wholebody.control.base.FailureStreak`); the next sane state is solved as
+    if nothing had failed.
     ``q_orientation`` (LQR only; None/0 = off, the default and the paper's controller): weight of
     the orientation error in the augmented LQR state (ours; see :mod:`wholebody.control.lqr`); the
     error fed back is the floating base's, ``theta = log3(R_base R_ref^T)`` (world axes) against
@@ -282,6 +287,7 @@ class MomentumBalance:
                     if gains == "lqr" else None)
         self.cog_integral = np.zeros(3)
         self._t_last: float | None = None
+        self.failures = FailureStreak("MomentumBalance")
         if self.lqr is not None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             self.lqr.gains(robot, self.contacts)  # gains at the reference pose (Sect. 3.2 remark)
@@ -319,14 +325,11 @@ class MomentumBalance:
                 q_ref = robot.q_ref.copy()
                 q_ref[:7] = ref.base
                 self.posture.q_ref = q_ref
+        integral = None
         if self.lqr is not None:
             hdot = self.hdot_ref if np.any(self.hdot_ref) else None
-            integral = None
             if self.lqr.integral:
-                dt = 0.0 if self._t_last is None else max(float(t) - self._t_last, 0.0)
-                self.cog_integral = self.lqr.clamp_integral(
-                    self.cog_integral + dt * (robot.com - self.com_ref))
-                integral = self.cog_integral
+                integral = self._integral_step(t)
             self._t_last = float(t)
             theta = self.base_orientation_error() if self.lqr.orientation else None
             K, k = self.lqr.feedback(robot, self.com_ref, self.h_ref, contacts=self.contacts,
@@ -337,6 +340,21 @@ class MomentumBalance:
             self.momentum.h_ref = self.h_ref
             self.momentum.hdot_ref = self.hdot_ref
         if self.cycle is not None:
-            return self.cycle.solve(q, v, self.variables)
-        return self.formulation.solve(self.stack, self.variables, backend=self.backend,
-                                      diagnostics=False)
+            sol = self.cycle.solve(q, v, self.variables)
+        else:
+            sol = self.formulation.solve(self.stack, self.variables, backend=self.backend,
+                                         diagnostics=False)
+        if integral is not None and sol.outcome is not Outcome.HELD:
+            self.cog_integral = integral  # a held cycle's error is not integrated (anti-windup)
+        return self.failures.note(sol)
+
+    def _integral_step(self, t: float) -> np.ndarray:
+        """The CoG-error integral advanced by ``dt`` (the time since the previous call) for this
+        cycle's feedback, clamped to ``+-integral_limit``; :meth:`compute` keeps it only when the
+        cycle is not ``HELD``. A non-finite step (an absurd ``t``: dt = inf times a zero error)
+        leaves it as it was."""
+        dt = 0.0 if self._t_last is None else max(float(t) - self._t_last, 0.0)
+        step = dt * (self.robot.com - self.com_ref)
+        if not np.isfinite(step).all():
+            return self.cog_integral.copy()
+        return self.lqr.clamp_integral(self.cog_integral + step)

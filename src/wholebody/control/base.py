@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..guard import Outcome
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -42,3 +45,27 @@ class PlannedController:
                          for n in self.planner.legs])
         return self.solve(self.planner.update(t, feet=feet))
 
+
+
+class FailureStreak:
+    """The failed cycles in a row of one controller (``who`` names it in the log): :meth:`note`
+    appends "(N failed cycle(s) in a row)" to the status of a ``HELD`` solution — as PassiveWBC
+    does — logs one warning when a streak starts and one when the controller solves again, and
+    ends the streak on the first solution that is not ``HELD``. Nothing else is kept: the next
+    sane state is solved as if the streak had not happened."""
+
+    def __init__(self, who: str):
+        self.who = who
+        self.count = 0  # length of the current streak of HELD cycles
+
+    def note(self, solution):
+        """``solution`` with its status extended when it is ``HELD``; the streak counted."""
+        if solution.outcome is Outcome.HELD:
+            self.count += 1
+            if self.count == 1:
+                log.warning("%s: %s", self.who, solution.status)
+            solution.status = f"{solution.status} ({self.count} failed cycle(s) in a row)"
+        elif self.count:
+            log.warning("%s: solved again after %d failed cycles", self.who, self.count)
+            self.count = 0
+        return solution

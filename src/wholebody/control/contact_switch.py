@@ -40,6 +40,7 @@ from ..tasks.momentum import momentum_gain
 from ..tasks.motion import JointTrajectoryTask
 from ..variables import Variables
 from .balance import lqr_q
+from .base import FailureStreak
 from .lqr import MomentumLQR
 from .stacks import COP_MARGIN, POSTURE_PD, SWING_FOOT_PD, TORSION, table2_stack, table4_stack
 
@@ -151,6 +152,7 @@ class ContactSwitch:
             raise ValueError(f"sine_joints: expected two joints, got {list(config.sine_joints)}")
         swing_contact = next(n for n in robot.contact_names if n != stance)
         self.robot, self.config, self.gains_kind = robot, config, gains
+        self.failures = FailureStreak("ContactSwitch")  # HELD cycles in a row, in the status
         self.stance, self.swing_contact = stance, swing_contact
         self.timeline = Timeline.from_config(config)
         self.swing_frame = robot.contact(swing_contact).frame
@@ -333,6 +335,6 @@ class ContactSwitch:
                 self.swing_posture.kp = self._posture_kp * (1.0 - (1.0 - e) * self._leg_mask)
                 stack = self.swinging
         self._set_momentum(stack, t, gains)
-        sol = self.formulation.solve(stack, variables, diagnostics=False)
+        sol = self.failures.note(self.formulation.solve(stack, variables, diagnostics=False))
         self.last = sol
         return sol

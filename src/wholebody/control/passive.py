@@ -68,6 +68,27 @@ POSTURE_FREQUENCY = 8.0
 STANCE_RANK_TOLERANCE = 1e-4
 
 
+#: the plan's arrays a cycle reads (PlanState fields; ``trunk.`` those of its TrunkState)
+PLAN_ARRAYS = ("touchdown_normal", "foot_position", "foot_velocity", "foot_acceleration",
+               "trunk.position", "trunk.velocity", "trunk.acceleration", "trunk.rotation",
+               "trunk.angular_velocity", "trunk.angular_acceleration")
+
+
+def nonfinite_plan_field(plan) -> str | None:
+    """The first of :data:`PLAN_ARRAYS` of ``plan`` with a NaN/inf entry, or None (one sum per
+    array on the fast path; a finite array whose sum overflows is looked at entry by entry)."""
+    trunk = plan.trunk
+    arrays = (plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
+              plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
+              trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration)
+    if math.isfinite(sum(float(np.sum(a)) for a in arrays)):
+        return None
+    for name, a in zip(PLAN_ARRAYS, arrays):
+        if not np.isfinite(a).all():
+            return name
+    return None
+
+
 def free_joints(robot) -> np.ndarray:
     """(na,) bool: the joints that point-foot tasks (three rows per foot, stance or swing) do not
     determine: every joint of a leg of more than three joints, and joints in no leg (a spine, a
@@ -349,9 +370,12 @@ class PassiveWBC(PlannedController):
         """One QP (eq. 7) at the robot's cached state for ``plan`` (a PlanState-like object)."""
         if self._native is not None:
             self._native.update(self.robot.q, self.robot.v)
-            return self._solve_native(plan)
+            return self._solve_native(plan, self.robot.q)
         t0 = time.perf_counter()
         self.last_plan = plan
+        bad = nonfinite_plan_field(plan)
+        if bad is not None:
+            return self._bad_plan(plan, bad, self.robot.q, self.robot.h[6:], t0)
         robot, qp = self.robot, self.qp
         J = robot.stacked_contact_jacobian(self.contacts)
         stance = plan.contact[self._leg]
@@ -468,8 +492,9 @@ class PassiveWBC(PlannedController):
         self.last_x = result.x
         return result
 
-    def _torque_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """τ_min(q), τ_max(q) of eq. 15 with the weak-joint overrides (indices cached)."""
+    def _torque_bounds(self, q=None) -> tuple[np.ndarray, np.ndarray]:
+        """τ_min(q), τ_max(q) of eq. 15 with the weak-joint overrides (indices cached); ``q``
+        defaults to the robot's cached state."""
         limits, robot = self.torque_limits, self.robot
         key = tuple(limits.upper_override.items())
         if key != self._override_key:
@@ -477,7 +502,7 @@ class PassiveWBC(PlannedController):
             self._override_index = np.array([robot.joint_names.index(j) for j, _ in key], int)
             self._override_value = np.array([value for _, value in key], float)
             self._override_key = key
-        hi = robot.torque_limits.upper(robot.q[7:]) * limits.scale
+        hi = robot.torque_limits.upper((robot.q if q is None else q)[7:]) * limits.scale
         if self._override_index.size:
             hi[self._override_index] = np.minimum(hi[self._override_index], self._override_value)
         return -hi, hi
@@ -501,10 +526,23 @@ class PassiveWBC(PlannedController):
         return self._report(ok, qdd, F, tau, status, G @ F, W_d, pat.s3[::3], swing_errors,
                             timings)
 
+    def _bad_plan(self, plan, field: str, q, gravity_torque, t0: float) -> Solution:
+        """A plan with a NaN/inf entry (e.g. a planner evaluated at an absurd time): no QP, the
+        previous torque held (both engines alike, before anything of the cycle is assembled:
+        stance anchors and the observer are left as they were)."""
+        self._tau_bounds = self._torque_bounds(q)
+        qdd, F, tau, status = self._failed(f"plan: {field} is not finite", gravity_torque)
+        return self._report(False, qdd, F, tau, status, np.zeros(6), np.full(6, np.nan),
+                            plan.contact[self._leg], None,
+                            {"assemble": time.perf_counter() - t0, "solve": 0.0})
+
     def _failed(self, reason: str, gravity_torque):
         """A failed solve (``reason``: the solver's status): hold the previous torque (or the
         nonlinear effects); :meth:`_report` clips it."""
         tau = self.last_tau if self.last_tau is not None else gravity_torque
+        if not np.isfinite(gravity_torque).all():  # at a finite state: |v|² overflowed
+            reason = (f"v: the rigid-body terms at this state are not finite (products of the "
+                      f"velocity overflow); {reason}")
         status = f"{reason}: previous torque held (clipped to limits)"
         if self._failing == 0:  # one warning per streak of failed cycles, not one per cycle
             log.warning("PassiveWBC cycle %d: %s", self.robot.cycle, status)
@@ -639,7 +677,7 @@ class PassiveWBC(PlannedController):
         if self._native is None:
             return super().compute(q, v, t)
         self._native.update(q, v)
-        return self._solve_native(self.planner.update(t, feet=self._nb["feet"].copy()))
+        return self._solve_native(self.planner.update(t, feet=self._nb["feet"].copy()), q)
 
     def cycle(self, q, v, plan) -> Solution:
         """One cycle at the state (q, v) for a given ``plan``: update + QP + torques."""
@@ -647,12 +685,16 @@ class PassiveWBC(PlannedController):
             self.robot.update(q, v)
             return self.solve(plan)
         self._native.update(q, v)
-        return self._solve_native(plan)
+        return self._solve_native(plan, q)
 
-    def _solve_native(self, plan) -> Solution:
+    def _solve_native(self, plan, q) -> Solution:
+        """:meth:`solve` in the compiled cycle, updated to the state (``q``, v) already."""
         t0 = time.perf_counter()
         self.last_plan = plan
         nb, trunk = self._nb, plan.trunk
+        bad = nonfinite_plan_field(plan)
+        if bad is not None:
+            return self._bad_plan(plan, bad, np.asarray(q, dtype=float), nb["h"][6:], t0)
         if self.observer is not None and self._commanded_wrench is not None:
             self.impedance.external_wrench = self.observer.update(
                 nb["h_G"], self._commanded_wrench, self.robot.mass, self.control_period)

@@ -27,6 +27,7 @@ from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
 from ..tasks import ForceRegularizer
 from ..variables import Variables
+from .base import FailureStreak
 from .stacks import COM_PD, COP_MARGIN, POSTURE_PD, SWING_FOOT_PD, TORSION, table1_stack
 
 
@@ -101,6 +102,7 @@ class Stepping:
     def __init__(self, robot, config: SteppingConfig, reduced: bool = True,
                  engine: str = "auto", torsion: bool = TORSION, cop_margin: float = COP_MARGIN):
         self.robot, self.config, self.reduced = robot, config, reduced
+        self.failures = FailureStreak("Stepping")  # HELD cycles in a row, in the status
         self.phases = timeline(config)
         self.formulation = Formulation(robot, reduced=reduced)
         full = not reduced
@@ -218,6 +220,7 @@ class Stepping:
             sol = self.formulation.solve(stack, variables, diagnostics=False)
         else:
             sol = self.cycles[id(stack)].solve(q, v, variables)
+        sol = self.failures.note(sol)
         self.cycle_times.append(time.perf_counter() - t0)
         self.timings.append(dict(sol.timings))
         self.n_contacts.append(len(variables.contacts))

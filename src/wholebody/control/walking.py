@@ -47,6 +47,7 @@ from scipy.spatial import ConvexHull
 
 from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation
+from ..guard import Outcome
 from ..planning.dcm import DCMPlan, lipm_frequency, predicted_dcm
 from ..planning.support_shift import KEY_POSE_TOLERANCE, shift_key_pose
 from ..planning.footsteps import Footstep, FootstepPlanner, StepLimits, clamp_step
@@ -58,6 +59,7 @@ from ..robots.roles import biped_soles, leg_joints
 from ..tasks import ForceRegularizer
 from ..validation import finite_array, nonnegative, number, positive
 from ..variables import Variables
+from .base import FailureStreak
 from .standing import gravity_compensation
 from .stacks import (COP_MARGIN, POSTURE_PD, POSTURE_WEIGHT, SWING_FOOT_PD, TORSION, table2_stack,
                      table4_stack)
@@ -276,6 +278,7 @@ class Walking:
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
         self.robot = robot
+        self.failures = FailureStreak("Walking")  # HELD cycles in a row, in the status
         self.config = (WalkingConfig.for_robot(robot) if config is None else config).checked()
         c = self.config
         self.left, self.right = biped_soles(robot)
@@ -537,7 +540,8 @@ class Walking:
         t0 = time.perf_counter()
         robot = self.robot
         cycle = self.last_cycle
-        if self.cycles is None or cycle is None:
+        held = self.last is not None and self.last.outcome is Outcome.HELD
+        if self.cycles is None or cycle is None or held:  # (a held cycle's state: maybe absurd)
             robot.update(q, v)
             com, vcom = robot.com.copy(), robot.vcom.copy()
             cycle = None
@@ -553,6 +557,7 @@ class Walking:
         else:
             self.last_cycle = self.cycles[id(stack)]
             sol = self.last_cycle.solve(q, v, variables)
+        sol = self.failures.note(sol)
         self.last = sol
         self.cycle_times.append(time.perf_counter() - t0)
         return sol

@@ -275,6 +275,13 @@ public:
     d["A_G_dot_v"] = A_G_dot_v_;
     d["J_com"] = MatrixXd(data_.Jcom);
     d["points"] = MatrixXd(points_);
+    Index rows = 0;  // every contact's drift (Robot.stacked_contact_drift of all contacts)
+    for (Index i = 0; i < nc_; ++i)
+      rows += contact_dims_[i];
+    VectorXd drifts(rows);
+    for (Index i = 0, r = 0; i < nc_; r += contact_dims_[i], ++i)
+      drifts.segment(r, contact_dims_[i]) = contact_drift_[i].head(contact_dims_[i]);
+    d["contact_drifts"] = drifts;
     return d;
   }
 

@@ -239,7 +239,7 @@ namespace wholebody_native
         const int j = rows[k];
         const double a = linkage(Index(k), 0), b = linkage(Index(k), 1);
         const double force = linkage(Index(k), 2), q_peak = linkage(Index(k), 3);
-        const double t = q_joints[j] + M_PI / 2 - q_peak;
+        const double t = q_joints[j] + (M_PI / 2 - q_peak); // TorqueProfile's _angle_offset
         hi[j] = force * a * b * std::abs(std::sin(t)) / std::sqrt(a * a + b * b - 2.0 * a * b * std::cos(t));
       }
     }
