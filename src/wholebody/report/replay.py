@@ -4,8 +4,10 @@ The scene is built with meshcat (its three.js viewer and animation player, ``mai
 embedded in the page): the robot's URDF visual meshes loaded by Pinocchio's ``MeshcatVisualizer``,
 the twin's environment geoms (floor, boxes, ramps, platform, board), contact forces and pushes as
 arrows, CoM, CoP and capture-point markers, the footsteps of a walking run as sole outlines on the
-floor, all animated by one meshcat ``Animation``. No meshcat server runs: the viewer's commands are
-recorded by :class:`_CommandLog`, packed with msgpack, gzipped and embedded in base64; the page
+floor, all animated by one meshcat ``set_animation`` command (built by
+:class:`~wholebody.report.animation_tracks.TrackAnimation`, which keeps the keyframes as numbers).
+No meshcat server runs: the viewer's commands are recorded by :class:`_CommandLog`, packed with
+msgpack, gzipped and embedded in base64; the page
 unpacks them with the browser's ``DecompressionStream`` and feeds them to
 ``viewer.handle_command_bytearray``. Opens from disk, no network.
 
@@ -36,6 +38,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..sim.recorder import Recording
+from .animation_tracks import TrackAnimation
 from .replay_page import page
 
 log = logging.getLogger(__name__)
@@ -461,7 +464,6 @@ def build_commands(recordings: Sequence[Recording],
     legend, footsteps). ``footsteps``: one list per recording (``summary.json``'s rows, see
     :func:`summary_footsteps`), or None."""
     import meshcat
-    import meshcat.animation
     import meshcat.geometry as mg
     from pinocchio.visualize import MeshcatVisualizer
 
@@ -493,7 +495,7 @@ def build_commands(recordings: Sequence[Recording],
     centre = 0.5 * (lo + hi)
     half = np.maximum(0.5 * (hi - lo), 0.5 * FLOOR_SIZE * h)
     lo, hi = centre - half, centre + half
-    animation = meshcat.animation.Animation(default_framerate=1.0 / period)
+    animation = TrackAnimation(default_framerate=1.0 / period)
     drawn_steps = []
     for i, (rec, offset) in enumerate(zip(recordings, offsets)):
         root = f"run{i}"
@@ -572,7 +574,7 @@ def build_commands(recordings: Sequence[Recording],
             point = capture[k] + [0.0, 0.0, 0.004 * h] if shown else com
             frame[f"{root}/capture_point"].set_property("visible", "bool", shown)
             frame[f"{root}/capture_point"].set_transform(_homogeneous(point) @ flat)
-    vis.set_animation(animation, play=False, repetitions=1)
+    window.records.append(COMMAND + animation.packed_command(play=False, repetitions=1))
     t0 = float(recordings[0].t[0])
     frames = max(r.frames for r in recordings)
     pushes = [float(np.linalg.norm(sum((f for _, f in acting), np.zeros(3))))

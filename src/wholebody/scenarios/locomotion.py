@@ -16,7 +16,7 @@ course (:func:`course_environment`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
@@ -31,6 +31,7 @@ from ..robots import reference
 from ..robots.reference import froude_ratio
 from ..robots.roles import check_gait_legs, quadruped_legs
 from ..sim.environment import Box, Environment
+from ..sim.series import SeriesLog
 from ..sim.simulator import Simulator
 from ..tasks.wrench import DAMPING_RATIO_THETA, DAMPING_RATIO_X, TrunkImpedance, trunk_weights
 from .base import TIME_SPAN, BaseHeight, Parameter, RobotRelative
@@ -305,32 +306,16 @@ def _strip_box(s, width: float, thickness: float) -> Box:
     return Box(tuple(centre), (0.5 * length, 0.5 * width, 0.5 * thickness), (0.0, -angle, 0.0))
 
 
-@dataclass
-class GaitLog:
+class GaitLog(SeriesLog):
     """One row per control cycle. Errors are reference minus measured (world axes): CoM position,
     trunk orientation (log3(R_d Rᵀ)); ``feet`` are the simulator's foot-frame positions; ``stance``
     the planner's contact flags; ``tau``/``tau_min``/``tau_max`` the command and its limits;
     ``contact_speed`` the horizontal speed of each foot's material contact point (zero while a
-    foot sphere rolls, nonzero when it slips)."""
+    foot sphere rolls, nonzero when it slips). Stored as numbers in chunks
+    (:class:`~wholebody.sim.series.SeriesLog`)."""
 
-    t: list = field(default_factory=list)
-    com_error: list = field(default_factory=list)
-    orientation_error: list = field(default_factory=list)
-    com: list = field(default_factory=list)
-    com_ref: list = field(default_factory=list)
-    feet: list = field(default_factory=list)
-    stance: list = field(default_factory=list)
-    tau: list = field(default_factory=list)
-    tau_min: list = field(default_factory=list)
-    tau_max: list = field(default_factory=list)
-    ok: list = field(default_factory=list)
-    swing_error: list = field(default_factory=list)
-    cycle_time: list = field(default_factory=list)
-    forces: list = field(default_factory=list)
-    contact_speed: list = field(default_factory=list)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {k: np.asarray(v) for k, v in self.__dict__.items()}
+    FIELDS = ("t", "com_error", "orientation_error", "com", "com_ref", "feet", "stance", "tau",
+              "tau_min", "tau_max", "ok", "swing_error", "cycle_time", "forces", "contact_speed")
 
 
 @dataclass
@@ -465,24 +450,18 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
             robot.update(q, v)  # controllers that keep their own terms (PassiveWBC engine="native")
         pin.framesForwardKinematics(robot.model, pin_data, q)
         imp = ctrl.impedance
-        log.t.append(t)
-        log.com_error.append(imp.last_errors[0:3].copy())
-        log.orientation_error.append(imp.last_errors[3:6].copy())
-        log.com.append(robot.com.copy())
-        log.com_ref.append(np.array(plan.trunk.position))
-        log.feet.append(np.array([pin_data.oMf[f].translation for f in frame_ids]))
-        log.stance.append(plan.contact.copy())
-        log.tau.append(result.tau.copy())
         lo, hi = ctrl.torque_limits.bounds(robot)
-        log.tau_min.append(lo)
-        log.tau_max.append(hi)
-        log.ok.append(result.ok)
-        log.cycle_time.append(sum(result.timings.get(k, 0.0) for k in ("assemble", "solve")))
-        log.swing_error.append(max((r.error for r in result.tasks if r.name.startswith("swing")),
-                                   default=0.0))
-        log.forces.append(np.array(result.lam))
-        log.contact_speed.append([np.linalg.norm((robot.contact_jacobians[n] @ robot.v)[:2])
-                                  for n in legs])
+        log.append(
+            t=t, com_error=imp.last_errors[0:3], orientation_error=imp.last_errors[3:6],
+            com=robot.com, com_ref=plan.trunk.position,
+            feet=[pin_data.oMf[f].translation for f in frame_ids], stance=plan.contact,
+            tau=result.tau, tau_min=lo, tau_max=hi, ok=result.ok,
+            swing_error=max((r.error for r in result.tasks if r.name.startswith("swing")),
+                            default=0.0),
+            cycle_time=sum(result.timings.get(k, 0.0) for k in ("assemble", "solve")),
+            forces=result.lam,
+            contact_speed=[np.linalg.norm((robot.contact_jacobians[n] @ robot.v)[:2])
+                           for n in legs])
         tilt = np.arccos(np.clip(pin.Quaternion(q[3:7]).toRotationMatrix()[2, 2], -1, 1))
         if fell_at is None and (q[2] - planner.terrain.height(q[0], q[1]) < fall_height
                                 or tilt > FALL_TILT):

@@ -9,6 +9,7 @@ Numpy only; :mod:`wholebody.report.replay` turns :class:`Recording` objects into
 from __future__ import annotations
 
 import logging
+import weakref
 from dataclasses import dataclass, field
 
 import mujoco
@@ -93,12 +94,12 @@ class ReplayRecorder:
             raise ValueError(f"fps must be > 0, got {fps}")
         self.fps = float(fps)
         self.recordings: list[Recording] = []
-        self._current = None
+        self._current = lambda: None  # a weak reference to the simulation being recorded
 
     def start(self, sim) -> None:
-        if self.recordings and self.recordings[-1].frames == 0 and self._current is sim:
+        if self.recordings and self.recordings[-1].frames == 0 and self._current() is sim:
             self.recordings.pop()  # a reset before the first step: the run starts over
-        self._current = sim
+        self._current = weakref.ref(sim)  # the simulator (and its log) is not kept for the replay
         self._stride = max(1, int(round(1.0 / (self.fps * sim.dt))))
         self._steps = 0
         robot = sim.robot

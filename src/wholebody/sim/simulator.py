@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from dataclasses import dataclass, field
 from typing import Protocol, Sequence
 
 import mujoco
@@ -20,6 +19,7 @@ from . import convert
 from .disturbance import Push
 from .environment import Environment
 from .mismatch import Mismatch
+from .series import SeriesLog
 from .twin import SimOptions, Twin, build_twin
 
 log = logging.getLogger(__name__)
@@ -42,23 +42,24 @@ class SimulationDiverged(RuntimeError):
                          f"robot model drove the state to NaN/inf")
 
 
-@dataclass
-class SimLog:
-    """Time series recorded by :class:`Simulator` (one row per step, Pinocchio convention)."""
+class SimLog(SeriesLog):
+    """Time series recorded by :class:`Simulator`, one float64 row per step (Pinocchio
+    convention), each read as an array (steps, ...): ``t``, ``q``, ``v``, ``tau_command``,
+    ``tau_applied``, ``contact_wrenches`` (steps, ncontact, 6: world [force; torque about the
+    contact frame]) and ``push_force`` (steps, 3: world). Stored as numbers in chunks
+    (:class:`~wholebody.sim.series.SeriesLog`): about 8 bytes per number per step, no object per
+    row."""
 
-    contact_names: tuple[str, ...]
-    t: list = field(default_factory=list)
-    q: list = field(default_factory=list)
-    v: list = field(default_factory=list)
-    tau_command: list = field(default_factory=list)
-    tau_applied: list = field(default_factory=list)
-    contact_wrenches: list = field(default_factory=list)  # (ncontact, 6) world [f; torque]
-    push_force: list = field(default_factory=list)  # (3,) world
+    FIELDS = ("t", "q", "v", "tau_command", "tau_applied", "contact_wrenches", "push_force")
+    DTYPES = dict.fromkeys(FIELDS, np.float64)
+
+    def __init__(self, contact_names: Sequence[str]):
+        super().__init__()
+        self.contact_names = tuple(contact_names)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The log as numpy arrays."""
-        out = {k: np.asarray(getattr(self, k)) for k in
-               ("t", "q", "v", "tau_command", "tau_applied", "contact_wrenches", "push_force")}
+        """The log as numpy arrays (read-only), and the ``contact_names``."""
+        out = super().arrays()
         out["contact_names"] = np.asarray(self.contact_names)
         return out
 
@@ -212,13 +213,9 @@ class Simulator:
         push_force = self._apply_pushes(self.t)
         self._set_platform(self.t)
         if self.record:
-            self.log.t.append(self.t)
-            self.log.q.append(q)
-            self.log.v.append(v)
-            self.log.tau_command.append(tau.copy())
-            self.log.tau_applied.append(clipped)
-            self.log.contact_wrenches.append(self.contact_wrenches_array())
-            self.log.push_force.append(push_force)
+            self.log.append(t=self.t, q=q, v=v, tau_command=tau, tau_applied=clipped,
+                            contact_wrenches=self.contact_wrenches_array(),
+                            push_force=push_force)
         for observer in self.observers:
             observer.step(self)
         t_start = self.data.time

@@ -1,0 +1,115 @@
+"""A time series of fixed-shape numeric rows, appended one at a time and kept in numpy chunks.
+
+A per-step log held as a Python list of small arrays costs an object header and a list slot per
+row (about twice the numbers themselves for a robot's state); :class:`Series` keeps the numbers
+only: rows are copied into preallocated chunks (``FIRST_CHUNK`` rows, each next chunk twice the
+previous, up to ``MAX_CHUNK``), so memory grows with the rows stored plus at most one partly
+filled chunk, and nothing is copied while the series grows. :meth:`Series.array` joins the chunks
+into one array on demand (and keeps it: a second read copies nothing).
+
+The values are those of ``np.asarray`` of the list of rows: the dtype is the first row's, widened
+the way numpy would if a later row needs it (an int series that meets a float becomes float64).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: rows of the first chunk, and the most rows one chunk holds
+FIRST_CHUNK, MAX_CHUNK = 256, 16384
+
+
+class Series:
+    """Rows of one shape appended with :meth:`append`; :meth:`array` is them all, (rows, *shape).
+
+    ``dtype`` fixes the dtype (rows are cast to it); None: numpy's choice for the rows seen."""
+
+    def __init__(self, dtype=None):
+        self._fixed_dtype = None if dtype is None else np.dtype(dtype)
+        self._chunks: list[np.ndarray] = []
+        self._filled = 0  # rows used in the last chunk
+        self._rows = 0
+
+    def __len__(self) -> int:
+        return self._rows
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the chunks (filled or not)."""
+        return sum(c.nbytes for c in self._chunks)
+
+    def append(self, row) -> None:
+        """Copy ``row`` (an array, a sequence of numbers or a number) in as the next row.
+        ValueError if its shape differs from the first row's."""
+        row = np.asarray(row, dtype=self._fixed_dtype)
+        if not self._chunks:
+            self._chunks.append(np.empty((FIRST_CHUNK, *row.shape), dtype=row.dtype))
+        last = self._chunks[-1]
+        if row.shape != last.shape[1:]:
+            raise ValueError(f"series: a row of shape {row.shape} after rows of shape "
+                             f"{last.shape[1:]}")
+        if row.dtype != last.dtype and not np.can_cast(row.dtype, last.dtype, "safe"):
+            self._widen(np.result_type(last.dtype, row.dtype))
+            last = self._chunks[-1]
+        if self._filled == len(last):
+            size = min(max(2 * len(last), FIRST_CHUNK), MAX_CHUNK)
+            last = np.empty((size, *row.shape), dtype=last.dtype)
+            self._chunks.append(last)
+            self._filled = 0
+        last[self._filled] = row
+        self._filled += 1
+        self._rows += 1
+
+    def array(self) -> np.ndarray:
+        """All rows, (rows, *row shape), read-only (a view of the series' storage: copy it to
+        write to it); with no row yet, ``np.asarray([])`` in the series' dtype."""
+        if not self._chunks:
+            return np.asarray([], dtype=self._fixed_dtype)
+        if len(self._chunks) > 1 or self._filled < len(self._chunks[0]):
+            joined = np.concatenate([*self._chunks[:-1], self._chunks[-1][:self._filled]])
+            self._chunks, self._filled = [joined], len(joined)
+        view = self._chunks[0].view()
+        view.flags.writeable = False
+        return view
+
+    def _widen(self, dtype: np.dtype) -> None:
+        self._chunks = [c.astype(dtype) for c in self._chunks]
+
+
+class SeriesLog:
+    """Named :class:`Series` appended together, one row each per :meth:`append`; a subclass names
+    them in ``FIELDS`` and may fix some dtypes in ``DTYPES`` (name -> dtype). Each series reads as
+    an attribute of its name (its :meth:`Series.array`); :meth:`arrays` gives them all."""
+
+    FIELDS: tuple[str, ...] = ()
+    DTYPES: dict[str, object] = {}
+
+    def __init__(self):
+        self._series = {name: Series(self.DTYPES.get(name)) for name in self.FIELDS}
+
+    def append(self, **row) -> None:
+        """One row of every series (keywords: the ``FIELDS``, all of them)."""
+        if row.keys() != self._series.keys():
+            missing, unknown = self._series.keys() - row.keys(), row.keys() - self._series.keys()
+            raise ValueError(f"{type(self).__name__}.append: missing {sorted(missing)}, unknown "
+                             f"{sorted(unknown)}")
+        for name, value in row.items():
+            self._series[name].append(value)
+
+    def __len__(self) -> int:
+        return len(self._series[self.FIELDS[0]]) if self.FIELDS else 0
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        series = self.__dict__.get("_series", {})
+        if name in series:
+            return series[name].array()
+        raise AttributeError(f"'{type(self).__name__}' object has no attribute '{name}'")
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the series' storage."""
+        return sum(s.nbytes for s in self._series.values())
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every series as an array (read-only views), by name."""
+        return {name: s.array() for name, s in self._series.items()}
