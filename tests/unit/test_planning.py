@@ -20,6 +20,7 @@ import wholebody as wb
 from wholebody.planning import (
     LEGS, CrawlSway, Footprint, GaitPlanner, GaitSchedule, SwingTrajectory, Terrain,
     TrunkReference, VelocityCommand, crawl, raibert_foothold, stand, swing_trajectory, trot)
+from wholebody.planning.blend import quintic_blend
 
 LF, RF, LH, RH = LEGS
 FAST = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -224,8 +225,7 @@ def test_swing_with_a_floor_is_over_its_target_when_it_meets_the_floor(p0, dxy, 
     np.testing.assert_allclose(sw.position(hi)[:2], p1[:2], atol=1e-9)
     ts = np.linspace(-0.1, 1.1, 61) * T
     np.testing.assert_allclose(sw.position(ts)[:, 2], plain.position(ts)[:, 2], atol=1e-12)
-    move = np.linalg.norm(p1[:2] - p0[:2])
-    stretch = move / np.linalg.norm(plain.position(hi)[:2] - p0[:2]) if move > 1e-6 else 1.0
+    stretch = 1.0 / quintic_blend(hi / T)[0]  # the plain swing's share of its move by then
     stretched, reference = sw.evaluate(ts), plain.evaluate(ts)
     for k, (a, b) in enumerate(zip(stretched, reference)):
         origin = p0[:2] if k == 0 else 0.0  # positions about the lift-off point
