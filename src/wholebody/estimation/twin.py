@@ -3,30 +3,19 @@ simulator step, the estimate beside the twin's true state, and a controller run 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from ..sim.sensors import Sensors, SensorSpec
+from ..sim.series import SeriesLog
 from .ekf import EstimatorNoise, KinematicInertialEKF, StateEstimate
 
 
-@dataclass
-class EstimationLog:
+class EstimationLog(SeriesLog):
     """One row per simulator step: the time, the twin's true (q, v), the estimate's (q, v), the
-    feet's normalised innovations, the contact flags and the covariance's diagonal."""
+    feet's normalised innovations, the contact flags and the covariance's diagonal (numpy chunks,
+    :class:`~wholebody.sim.series.SeriesLog`)."""
 
-    t: list = field(default_factory=list)
-    q_true: list = field(default_factory=list)
-    v_true: list = field(default_factory=list)
-    q_hat: list = field(default_factory=list)
-    v_hat: list = field(default_factory=list)
-    foot_test: list = field(default_factory=list)
-    contact: list = field(default_factory=list)
-    variance: list = field(default_factory=list)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__}
+    FIELDS = ("t", "q_true", "v_true", "q_hat", "v_hat", "foot_test", "contact", "variance")
 
 
 class TwinEstimation:
@@ -73,15 +62,9 @@ class TwinEstimation:
         if not self.record:
             return
         q, v = sim.state()
-        log = self.log
-        log.t.append(sim.t)
-        log.q_true.append(q)
-        log.v_true.append(v)
-        log.q_hat.append(estimate.q)
-        log.v_hat.append(estimate.v)
-        log.foot_test.append(estimate.foot_test)
-        log.contact.append(self.sensors.last_contact)
-        log.variance.append(np.diag(estimate.covariance).copy())
+        self.log.append(t=sim.t, q_true=q, v_true=v, q_hat=estimate.q, v_hat=estimate.v,
+                        foot_test=estimate.foot_test, contact=self.sensors.last_contact,
+                        variance=np.diag(estimate.covariance))
 
 
 class OnEstimatedState:
