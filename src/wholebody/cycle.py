@@ -2,7 +2,7 @@
 the rigid-body terms and the task rows in compiled code (Herzog et al. 2016, Sect. 2 and 5.1).
 
 :class:`HierarchyCycle` does what ``robot.update(q, v)`` followed by
-``Formulation(robot).solve(stack, variables)`` does, with the same results (tests/test_cycle.py
+``Formulation(robot).solve(stack, variables)`` does, with the same results (tests/parity/test_cycle.py
 compares the level arrays and the torques): the compiled part (``wholebody._hierarchy_cycle``,
 src/wholebody/native/hierarchy_cycle.cpp) computes Pinocchio's terms and every task's rows into
 the level arrays, the cascade solves them (compiled as well, its level QPs by DAQP/quadprog), and
@@ -10,10 +10,12 @@ the compiled part returns tau of eq. 14. Python only copies each task's current 
 references, weights) into a flat array every cycle, so a controller keeps changing them on the
 task objects as before.
 
-Every task of Tables 1, 2 and 4 has a compiled counterpart (``KINDS``); a stack with another task
-runs with ``engine="python"`` (the reference), which ``engine="auto"`` picks by itself. With the
-native engine the Python robot's cache (``robot.com``, ``robot.M``...) is *not* updated: read the
-cycle's own :attr:`HierarchyCycle.com`, :attr:`~HierarchyCycle.vcom`, :attr:`~HierarchyCycle.h_G`.
+A task with a compiled kernel (``Task.kernel``; every task of Tables 1, 2 and 4) has its rows
+written in C++ from the parameters its schema declares (:mod:`wholebody.tasks.schema`); a task
+without one (a user's own) writes its rows from Python (:meth:`Task.rows`) into the same arrays,
+and the rest of the stack stays compiled. With the native engine the Python robot's cache
+(``robot.com``, ``robot.M``...) is updated only when the stack has such a task: read the cycle's
+own :attr:`HierarchyCycle.com`, :attr:`~HierarchyCycle.vcom`, :attr:`~HierarchyCycle.h_G`.
 """
 
 from __future__ import annotations
@@ -22,22 +24,18 @@ import functools
 import logging
 import math
 import time
-from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from .formulation import (Formulation, Solution, Stack, make_solution, overflow_status,
-                          solve_levels, unsolved_solution)
+from .formulation import (Formulation, Solution, Stack, eq14_blocks, make_solution,
+                          overflow_status, place_rows, solve_levels, unsolved_solution)
 from .robot import FREE_FLYER_NQ, Robot
 from .solvers import Level
 from .solvers.compiled_cascade import BoundCascade
-from .tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
-                    FrictionCone, FullDynamics, JointAccelerationLimits, JointTrajectoryTask,
-                    MomentumForce, MomentumPD, NewtonEuler, PostureTask, TorqueLimits)
+from .tasks import FullDynamics
 from .tasks.base import Task, contact_subset
-from .tasks.contact import WORLD_UP, NormalForceBounds
-from .tasks.regularization import AccelerationRegularizer
+from .tasks.schema import LayoutContext, plain_scalar, scalars_writer
 from .variables import Variables
 
 try:
@@ -61,250 +59,83 @@ def warn_python_fallback(what: str, reason: str) -> None:
     log.warning("%s: engine 'auto' runs the Python engine: %s", what, reason)
 
 
-# ---------------------------------------------------------------------------- task kinds
-@dataclass(frozen=True)
-class _Kind:
-    """A task class's compiled counterpart: its name in hierarchy_cycle.cpp, whether its rows are
-    equalities, the structure its row layout depends on, its parameter count and its packer
-    (task, parameter view, cycle, names) -> None."""
-
-    name: str
-    eq: bool
-    structure: Callable[[Task], object]
-    n_params: Callable[[Task, Robot, tuple], int]
-    pack: Callable
+# ---------------------------------------------------------------------------- kernels
+def kernel_tasks() -> dict[str, type]:
+    """Every task class with a compiled kernel, by kernel name (``Task.kernel``)."""
+    found, todo = {}, [Task]
+    while todo:
+        cls = todo.pop()
+        todo.extend(cls.__subclasses__())
+        if cls.has_kernel():
+            found[cls.kernel] = cls
+    return found
 
 
-def _names(task, variables: Variables) -> tuple[str, ...]:
-    return contact_subset(variables, getattr(task, "contacts", None))
+def python_tasks(stack: Stack) -> list[Task]:
+    """The stack's tasks without a compiled kernel: the native engine has them write their rows
+    from Python (:meth:`Task.rows`) into its arrays every cycle."""
+    return [t for t in stack.tasks() if not type(t).has_kernel()]
 
 
-def _set(view: np.ndarray, value, task: Task, field: str) -> None:
-    """view[:] = value (broadcast), with an error naming the task's field."""
-    try:
-        view[:] = value
-    except (ValueError, TypeError):
-        shape = np.shape(value)
-        raise ValueError(f"task '{task.name}': field '{field}' has shape {shape}; the native cycle "
-                         f"takes a scalar or {view.shape[0]} values (use engine='python' for "
-                         f"other forms)") from None
+class _Slot:
+    """One task in a program: its rows [start, stop) (equalities or inequalities), the active
+    contacts it applies to and, for a task with a kernel, its parameters' views in the program's
+    parameter array."""
 
-
-def _pack_nothing(task, p, cycle, names):
-    pass
-
-
-def _pack_torque_limits(task: TorqueLimits, p, cycle, names):
-    p[0] = task.scale
-    cap = p[1:]
-    cap[:] = np.inf
-    for joint, value in task.upper_override.items():
-        if joint not in cycle.robot.joint_names:
-            raise ValueError(f"upper_override: unknown joint '{joint}'")
-        i = cycle.robot.joint_names.index(joint)
-        cap[i] = min(cap[i], value)
-
-
-def _pack_joint_limits(task: JointAccelerationLimits, p, cycle, names):
-    p[0] = task.mode == "tanh"
-    p[1], p[2], p[3] = task.horizon, task.a_max, task.steepness
-
-
-def _pack_contacts(task: ContactConstraint, p, cycle, names):
-    p[0], p[1] = task.kp, task.kd
-    if task.kp or task.kd:
-        for i, n in enumerate(names):
-            if n not in task.anchors:  # touchdown position: the contact frame where first seen
-                task.anchors[n] = cycle.contact_frame_position(n)
-            p[2 + 3 * i:5 + 3 * i] = task.anchors[n]
-
-
-def _pack_normals(task, p, names):
-    for i, n in enumerate(names):
-        p[3 * i:3 * i + 3] = task.normals.get(n, WORLD_UP)
-
-
-def _pack_friction(task: FrictionCone, p, cycle, names):
-    p[0] = task.mu
-    _pack_normals(task, p[1:], names)
-
-
-def _pack_normal_bounds(task: NormalForceBounds, p, cycle, names):
-    p[0], p[1] = task.f_min, task.f_max
-    _pack_normals(task, p[2:], names)
-
-
-def _pack_momentum_pd(task: MomentumPD, p, cycle, names):
-    if task.com_ref is None:
-        task.com_ref = cycle.com
-    _set(p[:36], np.ravel(task.P), task, "P")
-    _set(p[36:72], np.ravel(task.D), task, "D")
-    _set(p[72:75], task.com_ref, task, "com_ref")
-    _set(p[75:81], task.h_ref, task, "h_ref")
-    _set(p[81:87], task.hdot_ref, task, "hdot_ref")
-
-
-def _pack_momentum_force(task: MomentumForce, p, cycle, names):
-    if task.K is None or task.k is None:
-        raise ValueError(f"{task.name}: gains K and k are not set")
-    nl = (p.shape[0]) // 10
-    if task.K.shape != (nl, 9) or task.k.shape != (nl,):
-        raise ValueError(f"{task.name}: K must be ({nl}, 9) and k ({nl},) for contacts {list(names)}; "
-                         f"got {task.K.shape} and {task.k.shape}")
-    p[:9 * nl] = task.K.ravel()
-    p[9 * nl:] = task.k
-
-
-def _pack_com(task: CoMTask, p, cycle, names):
-    if task.position is None:
-        task.position = cycle.com
-    _set(p[0:3], task.position, task, "position")
-    _set(p[3:6], task.velocity, task, "velocity")
-    _set(p[6:9], task.acceleration, task, "acceleration")
-    _set(p[9:12], task.kp, task, "kp")
-    _set(p[12:15], task.kd, task, "kd")
-
-
-def _pack_frame(task: FrameTask, p, cycle, names):
-    if task.position is None or task.rotation is None:
-        pos, rot = cycle.frame_placement(task.frame)
-        if task.position is None:
-            task.position = pos
-        if task.rotation is None:
-            task.rotation = rot
-    _set(p[0:3], task.position, task, "position")
-    _set(p[3:12], np.ravel(task.rotation), task, "rotation")
-    _set(p[12:18], task.velocity, task, "velocity")
-    _set(p[18:24], task.acceleration, task, "acceleration")
-    _set(p[24:30], task.kp, task, "kp")
-    _set(p[30:36], task.kd, task, "kd")
-
-
-def _pack_posture(task: PostureTask, p, cycle, names):
-    robot = cycle.robot
-    nq, na = robot.nq, robot.na
-    _set(p[:nq], robot.q_ref if task.q_ref is None else task.q_ref, task, "q_ref")
-    _set(p[nq:nq + na], task.kp, task, "kp")
-    _set(p[nq + na:nq + 2 * na], task.kd, task, "kd")
-    _set(p[nq + 2 * na:nq + 2 * na + 6], task.base_kp, task, "base_kp")
-    _set(p[nq + 2 * na + 6:], task.base_kd, task, "base_kd")
-
-
-def _pack_force_regularizer(task: ForceRegularizer, p, cycle, names):
-    if not task.targets:
-        p[:] = 0.0
-        return
-    r = 0
-    for n in names:
-        d = cycle.robot.contact(n).dim
-        target = task.targets.get(n)
-        if target is None:
-            p[r:r + d] = 0.0
-        else:
-            _set(p[r:r + d], target, task, f"targets['{n}']")
-        r += d
-
-
-def _pack_joint_trajectory(task: JointTrajectoryTask, p, cycle, names):
-    k = len(task.joints)
-    if task.position is None:
-        task.position = cycle.joint_positions(task.joints)
-    for i, (field, value) in enumerate((("position", task.position), ("velocity", task.velocity),
-                                        ("acceleration", task.acceleration), ("kp", task.kp),
-                                        ("kd", task.kd))):
-        _set(p[i * k:(i + 1) * k], value, task, field)
-
-
-def _dims(robot: Robot, names) -> int:
-    return sum(robot.contact(n).dim for n in names)
-
-
-def _posture_base(task: PostureTask) -> bool:
-    return bool(task.base_kp or task.base_kd)
-
-
-def _no_structure(task) -> None:
-    return None
-
-
-def _contacts_structure(task):
-    return task.contacts
-
-
-#: Task classes with a compiled counterpart (exact classes: a subclass may change the rows).
-KINDS: dict[type, _Kind] = {
-    NewtonEuler: _Kind("newton_euler", True, _no_structure, lambda t, r, n: 0, _pack_nothing),
-    FullDynamics: _Kind("full_dynamics", True, _no_structure, lambda t, r, n: 0, _pack_nothing),
-    TorqueLimits: _Kind("torque_limits", False, _no_structure, lambda t, r, n: 1 + r.na,
-                        _pack_torque_limits),
-    JointAccelerationLimits: _Kind("joint_acceleration_limits", False, _no_structure,
-                                   lambda t, r, n: 4, _pack_joint_limits),
-    ContactConstraint: _Kind("contact_constraint", True, _contacts_structure,
-                             lambda t, r, n: 2 + 3 * len(n), _pack_contacts),
-    CenterOfPressure: _Kind("center_of_pressure", False, _contacts_structure, lambda t, r, n: 1,
-                            lambda t, p, c, n: p.__setitem__(0, t.margin)),
-    FrictionCone: _Kind("friction_cone", False, lambda t: (t.contacts, t.torsion),
-                        lambda t, r, n: 1 + 3 * len(n), _pack_friction),
-    NormalForceBounds: _Kind("normal_force_bounds", False, _contacts_structure,
-                             lambda t, r, n: 2 + 3 * len(n), _pack_normal_bounds),
-    MomentumPD: _Kind("momentum_pd", True, _no_structure, lambda t, r, n: 87, _pack_momentum_pd),
-    MomentumForce: _Kind("momentum_force", True, _contacts_structure,
-                         lambda t, r, n: 10 * _dims(r, n), _pack_momentum_force),
-    CoMTask: _Kind("com", True, lambda t: tuple(t.rows_idx), lambda t, r, n: 15, _pack_com),
-    FrameTask: _Kind("frame", True, lambda t: (t.frame, t.mask), lambda t, r, n: 36, _pack_frame),
-    PostureTask: _Kind("posture", True, _posture_base, lambda t, r, n: r.nq + 2 * r.na + 12,
-                       _pack_posture),
-    ForceRegularizer: _Kind("force_regularizer", True, _contacts_structure,
-                            lambda t, r, n: _dims(r, n), _pack_force_regularizer),
-    AccelerationRegularizer: _Kind("acceleration_regularizer", True, _no_structure,
-                                   lambda t, r, n: 0, _pack_nothing),
-    JointTrajectoryTask: _Kind("joint_trajectory", True, lambda t: t.joints,
-                               lambda t, r, n: 5 * len(t.joints), _pack_joint_trajectory),
-}
-
-_PER_CONTACT = {"contact_constraint", "center_of_pressure", "friction_cone", "normal_force_bounds",
-                "momentum_force", "force_regularizer"}
-
-
-def unsupported_tasks(stack: Stack) -> list[Task]:
-    """The stack's tasks without a compiled counterpart (they need ``engine="python"``)."""
-    return [t for t in stack.tasks() if type(t) not in KINDS]
+    def __init__(self, rank, order, task, eq, start, stop, layout, params=()):
+        self.rank, self.order, self.task, self.eq = rank, order, task, eq
+        self.start, self.stop, self.layout, self.params = start, stop, layout, list(params)
 
 
 # ---------------------------------------------------------------------------- programs
 class _Program:
-    """The level arrays of one stack structure and contact set, filled by the compiled cycle:
-    per level its equality rows then its inequality rows (as Formulation's plan), one buffer
-    each for all levels; plus the flat parameter array the tasks are packed into."""
+    """The level arrays of one stack and contact set, filled by the compiled cycle: per level its
+    equality rows then its inequality rows (as Formulation's plan), one buffer each for all
+    levels; plus the flat parameter array the tasks' schemas are packed into (offsets derived
+    from :attr:`Task.params`, sent to the kernels by name). Tasks without a kernel write their
+    rows from Python (``python_rows``: their rows of this cycle, which fix their row counts)."""
 
-    def __init__(self, cycle: "HierarchyCycle", variables: Variables, key):
+    def __init__(self, cycle: "HierarchyCycle", variables: Variables, key, python_rows: dict):
         robot, stack = cycle.robot, cycle.stack
         self.key = key
         self.variables = variables
         n = cycle.formulation.size(variables)
         contact_index = {c: i for i, c in enumerate(robot.contact_names)}
         active = {c: i for i, c in enumerate(variables.contacts)}
-        slots, self.packs, self.level_slots = [], [], []
+        self.slots: list[_Slot] = []
+        self.level_bounds: list[tuple[int, int]] = []
+        compiled, sizes = [], []
         start = n_params = 0
         for rank, tasks in enumerate(stack.levels, start=1):
             level = {True: [], False: []}
             for order, task in enumerate(tasks):
-                kind = KINDS[type(task)]
-                names = _names(task, variables) if kind.name in _PER_CONTACT else ()
-                m = self._rows(task, kind, robot, variables, names)
+                layout = cycle.layout_of(task, variables)
+                if id(task) in python_rows:
+                    rows = python_rows[id(task)]
+                    m, eq = rows.m, rows.is_equality
+                else:
+                    m, eq = task.row_count(layout), task.kind == "eq"
                 if m:  # a task without rows here (e.g. CoP rows of point feet) has no slot
-                    level[kind.eq].append((order, task, kind, names, m))
+                    level[eq].append((order, task, layout, m))
             first = start
             for eq in (True, False):
-                for order, task, kind, names, m in level[eq]:
-                    n_p = kind.n_params(task, robot, names)
-                    slots.append(self._slot(task, kind, cycle, names, active, start, m, n_params))
-                    self.packs.append((task, kind.pack, (start, start + m), (n_params, n_params + n_p),
-                                       names))
-                    self.level_slots.append((rank, order, task, eq, start, start + m))
+                for order, task, layout, m in level[eq]:
+                    slot = _Slot(rank, order, task, eq, start, start + m, layout)
+                    if id(task) not in python_rows:
+                        params = {}  # the plain scalars first, adjacent: packed in one block
+                        ordered = sorted(task.params, key=lambda p: not plain_scalar(p))
+                        for param in ordered:
+                            size = param.size.resolve(layout)
+                            params[param.name] = [n_params, size]
+                            slot.params.append((param, n_params, size))
+                            n_params += size
+                        compiled.append({
+                            "kernel": task.kernel, "start": start, "m": m, "eq": eq,
+                            "contacts": [active[c] for c in layout.contacts], "params": params,
+                            "selection": cycle.selection_of(task)})
+                    self.slots.append(slot)
                     start += m
-                    n_params += n_p
-            self.level_slots.append((rank, None, None, None, first, start))
+            self.level_bounds.append((first, start))
         rows = start
         self.mat = np.zeros((rows, n))
         self.target, self.weights = np.zeros(rows), np.ones(rows)
@@ -313,35 +144,51 @@ class _Program:
         self.qdd, self.lam = np.zeros(robot.nv), np.zeros(variables.n_lambda)
         self.tau, self.tau_lo, self.tau_hi = (np.zeros(robot.na) for _ in range(3))
         self.scales = cycle.formulation.scales(variables).copy()
-        self.id = cycle.engine.compile({
+        self.description = {
             "contacts": [contact_index[c] for c in variables.contacts],
             "reduced": cycle.formulation.reduced, "rows": rows, "nparams": self.params.shape[0],
-            "scales": self.scales, "slots": slots,
+            "scales": self.scales, "slots": compiled,
             "buffers": {"mat": self.mat, "target": self.target, "lower": self.lower,
                         "upper": self.upper, "params": self.params, "qdd": self.qdd,
                         "lam": self.lam, "tau": self.tau, "tau_lo": self.tau_lo,
-                        "tau_hi": self.tau_hi}})
-        # the packers' views (made once) and the solver's levels (views of the buffers)
-        self.packs = [(task, pack, self.weights[a:b], self.params[c:d], names)
-                      for task, pack, (a, b), (c, d), names in self.packs]
+                        "tau_hi": self.tau_hi}}
+        self.id = cycle.engine.compile(self.description)  # what was sent (tests re-send it)
+        # the packers' views (made once), the Python tasks' row views, the solver's levels
+        self.packs = [(s.task, self.weights[s.start:s.stop], self._writers(s, cycle))
+                      for s in self.slots if id(s.task) not in python_rows]
+        self.python = [(s.task, s.eq, self.mat[s.start:s.stop], self.target[s.start:s.stop],
+                        self.lower[s.start:s.stop], self.upper[s.start:s.stop],
+                        self.weights[s.start:s.stop])
+                       for s in self.slots if id(s.task) in python_rows]
         self.ineq_rows = np.zeros(rows, dtype=bool)
         self.levels, self.meta = [], []
-        for rank, tasks in enumerate(stack.levels, start=1):
-            entries = sorted(e for e in self.level_slots if e[0] == rank and e[2] is not None)
-            first, last = [(a, b) for r, _, t, _, a, b in self.level_slots if r == rank and t is None][0]
-            k = sum(b - a for _, _, _, eq, a, b in entries if eq)
+        for rank, (first, last) in enumerate(self.level_bounds, start=1):
+            entries = sorted((s for s in self.slots if s.rank == rank), key=lambda s: s.order)
+            k = sum(s.stop - s.start for s in entries if s.eq)
             eq_rows, in_rows = slice(first, first + k), slice(first + k, last)
             self.ineq_rows[in_rows] = True
             self.levels.append(Level.trusted(
                 self.mat[eq_rows], self.target[eq_rows], self.weights[eq_rows], self.mat[in_rows],
                 self.lower[in_rows], self.upper[in_rows], self.weights[in_rows], name=f"level {rank}"))
             # in the declared task order, as Formulation's (for the task reports)
-            self.meta.append([(task, "eq", self.mat[a:b], self.target[a:b], None) if eq else
-                              (task, "ineq", self.mat[a:b], self.lower[a:b], self.upper[a:b])
-                              for _, _, task, eq, a, b in entries])
+            self.meta.append([(s.task, "eq", self.mat[s.start:s.stop], self.target[s.start:s.stop], None)
+                              if s.eq else
+                              (s.task, "ineq", self.mat[s.start:s.stop], self.lower[s.start:s.stop],
+                               self.upper[s.start:s.stop]) for s in entries])
         self.w_min = np.where(self.ineq_rows, np.nextafter(0.0, 1.0), 0.0)
         self._bound: BoundCascade | None = None  # the compiled cascade on self.levels
         self._bound_key = None
+
+    def _writers(self, slot: _Slot, cycle: "HierarchyCycle") -> list:
+        """The functions that pack a task's parameters (its plain scalars in one)."""
+        scalars = [(p, a, n) for p, a, n in slot.params if plain_scalar(p)]
+        writers = [param.writer(slot.task, self.params[a:a + size], slot.layout, cycle)
+                   for param, a, size in slot.params if not plain_scalar(param)]
+        if scalars:
+            a = scalars[0][1]
+            writers.append(scalars_writer(slot.task, [p for p, _, _ in scalars],
+                                          self.params[a:a + len(scalars)], slot.layout, cycle))
+        return writers
 
     def bound(self, cycle: "HierarchyCycle") -> BoundCascade | None:
         """The compiled cascade bound to these levels for the cycle's current solver settings
@@ -358,57 +205,33 @@ class _Program:
                     backend_options=cycle.backend_options)
         return self._bound
 
-    @staticmethod
-    def _rows(task, kind: _Kind, robot: Robot, variables: Variables, names) -> int:
-        dims = [robot.contact(n).dim for n in names]
-        rect = sum(d == 6 for d in dims)
-        return {
-            "newton_euler": lambda: 6, "full_dynamics": lambda: robot.nv,
-            "torque_limits": lambda: robot.na, "joint_acceleration_limits": lambda: robot.na,
-            "contact_constraint": lambda: sum(dims), "force_regularizer": lambda: sum(dims),
-            "center_of_pressure": lambda: 4 * rect,
-            "friction_cone": lambda: 4 * len(names) + (8 * rect if task.torsion else 0),
-            "normal_force_bounds": lambda: len(names), "momentum_pd": lambda: 6,
-            "momentum_force": lambda: 6, "com": lambda: len(task.rows_idx),
-            "frame": lambda: len(range(6)[FrameTask.MASKS[task.mask]]),
-            "posture": lambda: robot.nv if _posture_base(task) else robot.na,
-            "acceleration_regularizer": lambda: robot.nv,
-            "joint_trajectory": lambda: len(task.joints),
-        }[kind.name]()
-
-    @staticmethod
-    def _slot(task, kind: _Kind, cycle, names, active, start, m, param) -> dict:
-        robot = cycle.robot
-        rows, frame = [], -1
-        if kind.name == "com":
-            rows = list(task.rows_idx)
-        elif kind.name == "frame":
-            rows = list(range(6)[FrameTask.MASKS[task.mask]])
-            frame = cycle.frame_index(task.frame)
-        elif kind.name == "joint_trajectory":
-            missing = [j for j in task.joints if j not in robot.joint_names]
-            if missing:
-                raise ValueError(f"joints: unknown joints {missing}")
-            rows = [robot.joint_names.index(j) for j in task.joints]
-        return {"kind": kind.name, "start": start, "m": m, "param": param,
-                "contacts": [active[n] for n in names], "rows": rows, "frame": frame,
-                "base": kind.name == "posture" and _posture_base(task),
-                "torsion": kind.name == "friction_cone" and bool(task.torsion)}
-
     def pack(self, cycle: "HierarchyCycle") -> None:
-        """Every task's current parameters and weights into the arrays (Python, every cycle)."""
-        for task, pack, weights, params, names in self.packs:
+        """Every compiled task's current parameters (by its schema) and weights into the arrays
+        (Python, every cycle)."""
+        for task, weights, writers in self.packs:
             weights[:] = task.weight
-            pack(task, params, cycle, names)
+            for write in writers:
+                write()
+
+    def write_python_rows(self, cycle: "HierarchyCycle", python_rows: dict) -> None:
+        """The rows of the tasks without a kernel (unscaled, as Formulation places them; the
+        compiled fill scales the lambda and tau columns of every row)."""
+        if not self.python:
+            return
+        robot, variables = cycle.robot, self.variables
+        eq14 = functools.partial(eq14_blocks, robot, variables) if cycle.formulation.reduced else None
+        for task, eq, A, target, lower, upper, weights in self.python:
+            A[:] = 0.0
+            place_rows(python_rows[id(task)], A, target if eq else None, lower, upper,
+                       variables.nv, variables.n_lambda, eq14)
+            weights[:] = task.weight
 
     def raise_invalid(self) -> None:
         """Name the task whose rows are NaN/inf, whose bounds cross or whose weight is bad."""
-        for rank, _, task, eq, a, b in self.level_slots:
-            if task is None:
-                continue
-            rows = slice(a, b)
+        for s in self.slots:
+            rows = slice(s.start, s.stop)
             w = self.weights[rows]
-            if eq:
+            if s.eq:
                 total = self.mat[rows].sum() + self.target[rows].sum() + w.sum()
                 good = np.isfinite(total) and (w >= 0).all()
             else:
@@ -416,7 +239,7 @@ class _Program:
                 good = (np.isfinite(self.mat[rows].sum() + w.sum()) and (w > 0).all()
                         and (lo <= up).all())
             if not good:
-                raise ValueError(f"level {rank}: task '{task.name}' produced NaN/inf rows, "
+                raise ValueError(f"level {s.rank}: task '{s.task.name}' produced NaN/inf rows, "
                                  f"lower > upper or a bad weight")
 
 
@@ -428,9 +251,10 @@ class HierarchyCycle:
     ----------
     robot, stack : the robot and the task hierarchy (e.g. :func:`~wholebody.control.stacks.table2_stack`).
     reduced : the reduced [qdd, lambda] (default) or the full [qdd, lambda, tau] formulation.
-    engine : ``"native"`` (compiled rigid-body terms and rows; every task must be in ``KINDS``),
-        ``"python"`` (``robot.update`` + :meth:`Formulation.solve`, the reference) or ``"auto"``
-        (native when built and supported).
+    engine : ``"native"`` (compiled rigid-body terms, and rows for every task with a kernel; a
+        task without one writes its rows from Python into the same arrays), ``"python"``
+        (``robot.update`` + :meth:`Formulation.solve`, the reference) or ``"auto"`` (native when
+        built).
     method, backend, fallback_backend, regularization, backend_options : as
         :meth:`Formulation.solve` (``backend_options`` with scalar values, e.g. DAQP's
         ``{"primal_tol": 1e-7}``); ``backend``, ``fallback_backend``, ``regularization`` and
@@ -443,22 +267,14 @@ class HierarchyCycle:
                  backend_options: dict | None = None):
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got '{engine}'")
-        missing = unsupported_tasks(stack)
-        if engine == "native":
-            if _hierarchy_cycle is None:
-                raise ValueError("engine: 'native' needs the compiled extension "
-                                 "wholebody._hierarchy_cycle (install with a C++ compiler)")
-            if missing:
-                raise ValueError(f"engine: 'native' has no compiled counterpart for tasks "
-                                 f"{[t.name for t in missing]} (types "
-                                 f"{sorted({type(t).__name__ for t in missing})}); use engine='python'")
+        if engine == "native" and _hierarchy_cycle is None:
+            raise ValueError("engine: 'native' needs the compiled extension "
+                             "wholebody._hierarchy_cycle (install with a C++ compiler)")
         if engine == "auto":
-            engine = "native" if _hierarchy_cycle is not None and not missing else "python"
+            engine = "native" if _hierarchy_cycle is not None else "python"
             if engine == "python":
-                reason = ("the compiled extension wholebody._hierarchy_cycle is not built"
-                          if _hierarchy_cycle is None else
-                          f"no compiled counterpart for tasks {[t.name for t in missing]}")
-                warn_python_fallback("HierarchyCycle", reason)
+                warn_python_fallback("HierarchyCycle", "the compiled extension "
+                                     "wholebody._hierarchy_cycle is not built")
         self.robot, self.stack, self.engine_name = robot, stack, engine
         self.formulation = Formulation(robot, reduced=reduced)
         self.method, self.backend = method, backend
@@ -476,11 +292,9 @@ class HierarchyCycle:
             self._frames: dict[int, int] = {}  # model frame id -> the compiled cycle's frame index
             for c in robot.contacts:
                 self._frames.setdefault(c.frame_id, len(self._frames))
-            for task in stack.tasks():
-                if isinstance(task, FrameTask):
-                    fid = robot.frame_id(task.frame, f"task '{task.name}'.frame")
-                    self._frames.setdefault(fid, len(self._frames))
             self.engine = _hierarchy_cycle.HierarchyCycle(self._spec())
+            for task in stack.tasks():  # the frames known now (a task inserted later adds its own)
+                self.selection_of(task)
 
     @property
     def native(self) -> bool:
@@ -517,7 +331,28 @@ class HierarchyCycle:
         return self.engine.h_G if self.native else self.robot.h_G.copy()
 
     def frame_index(self, frame: str) -> int:
-        return self._frames[self.robot.frame_id(frame, "frame")]
+        """The compiled cycle's index of a model frame (added to it on first use)."""
+        return self.frame_slot(self.robot.frame_id(frame, "frame"))
+
+    def frame_slot(self, fid: int) -> int:
+        """The compiled cycle's index of the model frame ``fid`` (added to it on first use)."""
+        if fid not in self._frames:
+            f = self.robot.model.frames[fid]
+            self._frames[fid] = self.engine.add_frame(int(f.parentJoint), f.placement.homogeneous)
+            self._q = None  # the compiled state must be updated again
+        return self._frames[fid]
+
+    def layout_of(self, task: Task, variables: Variables) -> LayoutContext:
+        """What the task's schema sizes resolve against: its active contacts, its rows."""
+        contacts = contact_subset(variables, task.contacts) if task.per_contact else ()
+        return LayoutContext(self.robot, contacts, task.selection(self.robot).get("rows", ()))
+
+    def selection_of(self, task: Task) -> dict[str, list[int]]:
+        """The task's selection for its kernel, a model frame id turned into the cycle's index."""
+        selection = {k: [int(i) for i in v] for k, v in task.selection(self.robot).items()}
+        if "frame" in selection:
+            selection["frame"] = [self.frame_slot(fid) for fid in selection["frame"]]
+        return selection
 
     def frame_placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
         """(position, rotation) of a contact frame or a FrameTask's frame at the last state."""
@@ -558,11 +393,17 @@ class HierarchyCycle:
             sol.timings["total"] = time.perf_counter() - t0
             return sol
         t0 = time.perf_counter()
+        python_rows = {}
+        tasks = self.stack.tasks()
+        if self._python_tasks(tasks):  # tasks without a kernel read the Python robot's cache
+            robot.update(q, v)
+            python_rows = {id(t): t.rows(robot, variables) for t in self._python}
+        program = self._program_for(variables, tasks, python_rows)
         self.engine.update(q, v)
         self._q = q
         t1 = time.perf_counter()
-        program = self._program_for(variables)
         program.pack(self)
+        program.write_python_rows(self, python_rows)
         if not (self.engine.fill(program.id) and math.isfinite(program.weights.sum())
                 and (program.weights >= program.w_min).all()):
             if not all(np.isfinite(term).all() for term in self.engine.terms().values()):
@@ -594,13 +435,25 @@ class HierarchyCycle:
             self._all_contacts = Variables(self.robot)
         return self._all_contacts
 
-    def _program_for(self, variables: Variables) -> _Program:
-        key = (variables.contacts, tuple(KINDS[type(t)].structure(t) for t in self.stack.tasks()))
+    def _python_tasks(self, tasks: list[Task]) -> list[Task]:
+        """The tasks without a kernel (recomputed when the stack's tasks change)."""
+        ids = tuple(map(id, tasks))
+        if getattr(self, "_python_key", None) != ids:
+            self._python_key, self._python = ids, python_tasks(self.stack)
+        return self._python
+
+    def _program_for(self, variables: Variables, tasks: list[Task], python_rows: dict) -> _Program:
+        """The program of the stack as it is now (its levels and tasks, their layouts, the
+        Python tasks' row signatures) and the active contacts; built on first use."""
+        key = (variables.contacts, self._python_key, tuple(map(len, self.stack.levels)),
+               tuple([t.layout_key() for t in tasks]),
+               tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
+                      for i, r in python_rows.items()]))
         program = self._program
         if program is None or program.key != key:
             program = self._programs.get(key)
             if program is None:
-                program = self._programs[key] = _Program(self, variables, key)
+                program = self._programs[key] = _Program(self, variables, key, python_rows)
             self._program = program
         return program
 

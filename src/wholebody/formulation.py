@@ -456,12 +456,9 @@ class _Plan:
     def fill(self, formulation: "Formulation", variables: Variables, rows: list[list[TaskRows]]):
         """Refill the level arrays in place; None if a task's rows no longer fit the layout."""
         robot, nv, nl = formulation.robot, variables.nv, variables.n_lambda
-        lam_cols, tau_cols = slice(nv, nv + nl), slice(nv + nl, None)
         scale_tail = formulation.scales(variables)[nv:]
-        reduced = formulation.reduced
-        eq14 = None  # (M_u, -J_u^T, h_u) of eq. 14, made on first use
+        eq14 = _memo(lambda: eq14_blocks(robot, variables)) if formulation.reduced else None
         for lp, level_rows in zip(self.levels, rows):
-            E, C = lp.E, lp.C
             for i in lp.empty:
                 if level_rows[i].m:
                     return None
@@ -469,46 +466,73 @@ class _Plan:
                 r = level_rows[i]
                 if _signature(r) != sig:
                     return None
-                A = E[a:b] if eq else C[a:b]
-                if r.qdd is not None:
-                    A[:, :nv] = r.qdd
-                if r.lam is not None:
-                    A[:, lam_cols] = r.lam
-                offset = None
-                if r.tau is not None:
-                    if reduced:  # eq. 14: tau = M_u qdd + h_u - J_u^T lambda
-                        if eq14 is None:
-                            J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
-                            eq14 = (robot.M[FREE_FLYER_NV:], -J_u.T, robot.h[FREE_FLYER_NV:])
-                        M_u, mJ_uT, h_u = eq14
-                        if r.tau_identity:
-                            tau_qdd, tau_lam, offset = M_u, mJ_uT, h_u
-                        else:
-                            tau_qdd, tau_lam, offset = r.tau @ M_u, r.tau @ mJ_uT, r.tau @ h_u
-                        if r.qdd is None:
-                            A[:, :nv] = tau_qdd
-                        else:
-                            A[:, :nv] += tau_qdd
-                        if r.lam is None:
-                            A[:, lam_cols] = tau_lam
-                        else:
-                            A[:, lam_cols] += tau_lam
-                    else:
-                        A[:, tau_cols] = r.tau
                 if eq:
-                    if offset is None:
-                        lp.e[a:b] = r.target
-                    else:
-                        np.subtract(r.target, offset, out=lp.e[a:b])
+                    place_rows(r, lp.E[a:b], lp.e[a:b], None, None, nv, nl, eq14)
                     lp.w[a:b] = task.weight
                 else:
-                    if offset is None:
-                        lp.lo[a:b] = r.lower
-                        lp.up[a:b] = r.upper
-                    else:
-                        np.subtract(r.lower, offset, out=lp.lo[a:b])
-                        np.subtract(r.upper, offset, out=lp.up[a:b])
+                    place_rows(r, lp.C[a:b], None, lp.lo[a:b], lp.up[a:b], nv, nl, eq14)
                     lp.vw[a:b] = task.weight
         self.mat[:, nv:] *= scale_tail
         self.check()
         return [lp.level for lp in self.levels], [lp.meta for lp in self.levels]
+
+
+def eq14_blocks(robot: Robot, variables: Variables) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M_u, -J_u^T, h_u) of eq. 14, tau = M_u qdd + h_u - J_u^T lambda, at the robot's cached
+    state for the active contacts."""
+    J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
+    return robot.M[FREE_FLYER_NV:], -J_u.T, robot.h[FREE_FLYER_NV:]
+
+
+def _memo(make):
+    """``make()`` evaluated on the first call only."""
+    cache = []
+
+    def get():
+        if not cache:
+            cache.append(make())
+        return cache[0]
+    return get
+
+
+def place_rows(r: TaskRows, A: np.ndarray, target, lower, upper, nv: int, nl: int,
+               eq14=None) -> None:
+    """A task's rows into ``A`` (its rows over [qdd, lambda] or [qdd, lambda, tau], unscaled)
+    and into ``target`` (equalities) or ``lower``/``upper`` (inequalities). ``eq14``: None for the
+    full formulation (tau columns after lambda), else a callable giving :func:`eq14_blocks` (the
+    reduced one: a tau block is replaced by eq. 14, Herzog et al. 2016). ``A``'s columns without
+    a block are left as they are."""
+    lam_cols = slice(nv, nv + nl)
+    if r.qdd is not None:
+        A[:, :nv] = r.qdd
+    if r.lam is not None:
+        A[:, lam_cols] = r.lam
+    offset = None
+    if r.tau is not None:
+        if eq14 is not None:  # eq. 14: tau = M_u qdd + h_u - J_u^T lambda
+            M_u, mJ_uT, h_u = eq14()
+            if r.tau_identity:
+                tau_qdd, tau_lam, offset = M_u, mJ_uT, h_u
+            else:
+                tau_qdd, tau_lam, offset = r.tau @ M_u, r.tau @ mJ_uT, r.tau @ h_u
+            if r.qdd is None:
+                A[:, :nv] = tau_qdd
+            else:
+                A[:, :nv] += tau_qdd
+            if r.lam is None:
+                A[:, lam_cols] = tau_lam
+            else:
+                A[:, lam_cols] += tau_lam
+        else:
+            A[:, nv + nl:] = r.tau
+    if r.target is not None:
+        if offset is None:
+            target[:] = r.target
+        else:
+            np.subtract(r.target, offset, out=target)
+    else:
+        if offset is None:
+            lower[:], upper[:] = r.lower, r.upper
+        else:
+            np.subtract(r.lower, offset, out=lower)
+            np.subtract(r.upper, offset, out=upper)

@@ -1,18 +1,21 @@
-// One control cycle of hierarchical inverse dynamics in compiled code (Herzog et al. 2016, seed
-// 000): Pinocchio's rigid-body terms (Robot.update), the rows of the tasks of Tables 1, 2 and 4
+// One control cycle of hierarchical inverse dynamics in compiled code (Herzog et al. 2016):
+// Pinocchio's rigid-body terms (Robot.update), the rows of the tasks that have a kernel
 // (wholebody.tasks) and their mapping onto the solver's levels (wholebody.formulation: reduced
 // [qdd, lambda] with tau eliminated by eq. 14, or full [qdd, lambda, tau]), written into the level
 // arrays that wholebody.cycle.HierarchyCycle hands to the cascade; then tau from the solution.
 //
-// It mirrors the Python tasks and Formulation (the tested reference) row for row: same layout,
-// same formulas; tests/test_cycle.py checks the level arrays of both on random states. Task
-// parameters (gains, references, weights) live in Python-owned arrays that Python refills every
-// cycle from the task objects, so a controller changes them on the tasks as before.
+// A kernel is registered by its task's name (HierarchyCycle::kernels, the Python class's
+// ``kernel``) with the parameters it reads by name, in the order of its task's schema
+// (wholebody.tasks.schema); a program's slots are checked against it at compile. The Python tasks
+// are the reference, row for row; tests/parity/test_cycle.py checks the level arrays of both on
+// random states. Task parameters live in Python-owned arrays that Python refills every cycle from
+// the task objects, so a controller changes them on the tasks as before.
 #include "native_common.hpp"
 
 #include <pinocchio/algorithm/centroidal.hpp>
 #include <pinocchio/algorithm/compute-all-terms.hpp>
 #include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/spatial.hpp>
 
@@ -27,37 +30,37 @@ namespace
 {
   using Vector6d = Eigen::Matrix<double, 6, 1>;
   using RowMap = Map<RowMatrix>;
+  using Rows = Eigen::Ref<RowMatrix>;
+  using Segment = Eigen::Ref<VectorXd>;
 
-  // the task kinds with a compiled counterpart (names as wholebody.cycle.KINDS)
-  enum class Kind
+  // what a kernel's parameter size counts (wholebody.tasks.schema.UNITS)
+  enum class Unit { Fixed, Nq, Na, Nv, Contact, ContactDim, Rows };
+
+  // a kernel's parameter: its name and k entries per unit (wholebody.tasks.schema.Param)
+  struct ParamSpec
   {
-    NewtonEuler, FullDynamics, TorqueLimits, JointAccelerationLimits, ContactConstraint,
-    CenterOfPressure, FrictionCone, NormalForceBounds, MomentumPD, MomentumForce, CoM, Frame,
-    Posture, ForceRegularizer, AccelerationRegularizer, JointTrajectory
+    std::string name;
+    Index k = 1;
+    Unit per = Unit::Fixed;
   };
 
-  const std::map<std::string, Kind> kKinds = {
-    {"newton_euler", Kind::NewtonEuler}, {"full_dynamics", Kind::FullDynamics},
-    {"torque_limits", Kind::TorqueLimits}, {"joint_acceleration_limits", Kind::JointAccelerationLimits},
-    {"contact_constraint", Kind::ContactConstraint}, {"center_of_pressure", Kind::CenterOfPressure},
-    {"friction_cone", Kind::FrictionCone}, {"normal_force_bounds", Kind::NormalForceBounds},
-    {"momentum_pd", Kind::MomentumPD}, {"momentum_force", Kind::MomentumForce}, {"com", Kind::CoM},
-    {"frame", Kind::Frame}, {"posture", Kind::Posture}, {"force_regularizer", Kind::ForceRegularizer},
-    {"acceleration_regularizer", Kind::AccelerationRegularizer},
-    {"joint_trajectory", Kind::JointTrajectory}};
-
-  // one task's rows in a program: where they go, where its parameters are, what it selects
+  // one task's rows in a program: where they go, where its parameters are (in the order of its
+  // kernel's ParamSpecs), what it selects (in the order of its kernel's selection names)
   struct Slot
   {
-    Kind kind;
-    Index start = 0, m = 0, param = 0;
-    std::vector<Index> contacts; // positions in the program's active contacts
-    std::vector<Index> rows;     // CoM axes, frame mask rows, joint indices
-    Index frame = -1;            // index into the cycle's frames (Frame tasks)
-    bool base = false, torsion = false;
+    std::string kernel;
+    Index start = 0, m = 0;
+    std::vector<Index> contacts;           // positions in the program's active contacts
+    std::vector<Index> offsets, sizes;     // per kernel parameter
+    std::vector<std::vector<Index>> picks; // per kernel selection name
+    Index frame = -1;                      // the cycle's frame of a "frame" selection
+    const double * params = nullptr;
+    const double * p(std::size_t i) const { return params + offsets[i]; }
+    const std::vector<Index> & pick(std::size_t i) const { return picks[i]; }
+    bool flag(std::size_t i) const { return !picks[i].empty() && picks[i][0] != 0; }
   };
 
-  // the level arrays of one stack and contact set (Python-owned, see HierarchyCycle._compile)
+  // the level arrays of one stack and contact set (Python-owned, see wholebody.cycle._Program)
   struct Program
   {
     std::vector<Index> contacts; // robot contact indices, in lambda order
@@ -153,7 +156,9 @@ public:
     updated_ = true;
   }
 
-  // A program: the level layout of one stack and contact set (see HierarchyCycle._compile).
+  // A program: the level layout of one stack and contact set (wholebody.cycle._Program). Each
+  // slot names its kernel and sends its parameters' {name: [offset, size]} and its selection
+  // {name: [ints]}; they must be exactly the kernel's, with the sizes it expects.
   int compile(const py::dict & p)
   {
     Program prog;
@@ -184,44 +189,23 @@ public:
     prog.Jc.setZero(prog.nl, nv_);
     prog.drift.setZero(prog.nl);
     for (const py::handle & item : get<py::list>(p, "slots"))
-    {
-      const py::dict s = py::reinterpret_borrow<py::dict>(item);
-      Slot slot;
-      const std::string kind = get<std::string>(s, "kind");
-      const auto it = kKinds.find(kind);
-      if (it == kKinds.end())
-        throw std::invalid_argument("compile: unknown task kind '" + kind + "'");
-      slot.kind = it->second;
-      slot.start = get<Index>(s, "start");
-      slot.m = get<Index>(s, "m");
-      slot.param = get<Index>(s, "param");
-      slot.contacts = get<std::vector<Index>>(s, "contacts");
-      slot.rows = get<std::vector<Index>>(s, "rows");
-      slot.frame = get<Index>(s, "frame");
-      slot.base = get<bool>(s, "base");
-      slot.torsion = get<bool>(s, "torsion");
-      if (slot.start < 0 || slot.m < 0 || slot.start + slot.m > prog.rows || slot.param < 0
-          || slot.param > prog.nparams)
-        throw std::invalid_argument("compile: slot '" + kind + "' outside the buffers");
-      for (Index c : slot.contacts)
-        if (c < 0 || c >= Index(prog.contacts.size()))
-          throw std::invalid_argument("compile: slot '" + kind + "' names an inactive contact");
-      if (slot.kind == Kind::Frame && (slot.frame < 0 || slot.frame >= Index(frames_.size())))
-        throw std::invalid_argument("compile: frame index out of range");
-      if (slot.kind == Kind::FullDynamics && prog.reduced)
-        throw std::invalid_argument("compile: FullDynamics belongs to the full formulation");
-      const Index expected = rows_of(slot, prog);
-      if (expected != slot.m)
-        throw std::invalid_argument("compile: slot '" + kind + "' has " + std::to_string(slot.m)
-                                    + " rows, its task has " + std::to_string(expected));
-      prog.slots.push_back(std::move(slot));
-    }
+      prog.slots.push_back(slot_of(py::reinterpret_borrow<py::dict>(item), prog));
     programs_.push_back(std::move(prog));
     return int(programs_.size()) - 1;
   }
 
+  // The names of the registered kernels (the Python task classes' ``kernel``).
+  static std::vector<std::string> kernel_names()
+  {
+    std::vector<std::string> names;
+    for (const auto & [name, kernel] : kernels())
+      names.push_back(name);
+    return names;
+  }
+
   // Fills a program's level arrays from this cycle's terms and its parameters (Formulation.levels
-  // without the weights, which Python writes). False if some entry is NaN/inf or lower > upper.
+  // without the weights, which Python writes, and without the rows of tasks that have no kernel,
+  // which Python writes before this call). False if some entry is NaN/inf or lower > upper.
   bool fill(int id)
   {
     Program & P = program(id);
@@ -238,8 +222,8 @@ public:
     for (const Slot & s : P.slots)
     {
       A.middleRows(s.start, s.m).setZero();
-      fill_slot(P, s, A.middleRows(s.start, s.m), e.segment(s.start, s.m), lo.segment(s.start, s.m),
-                up.segment(s.start, s.m), P.params + s.param);
+      (this->*kernels().at(s.kernel).fill)(P, s, A.middleRows(s.start, s.m), e.segment(s.start, s.m),
+                                           lo.segment(s.start, s.m), up.segment(s.start, s.m));
     }
     if (P.n > nv_)
       A.rightCols(P.n - nv_).array().rowwise() *= P.scales.tail(P.n - nv_).transpose().array();
@@ -298,6 +282,21 @@ public:
     return py::make_tuple(Vector3d(M.translation()), Matrix3d(M.rotation()));
   }
 
+  // A frame on ``joint`` at ``placement`` (4x4, row-major) added after construction (a FrameTask
+  // inserted into a stack); its index. The state must be updated again before the next fill.
+  Index add_frame(int joint, const DoubleArray & placement)
+  {
+    if (joint < 1 || joint >= model_.njoints)
+      throw std::invalid_argument("add_frame: joint index out of range");
+    frames_.push_back(model_.addFrame(pinocchio::Frame("frame" + std::to_string(frames_.size()),
+                                                       pinocchio::JointIndex(joint),
+                                                       placement_from(input(placement, 16, "placement")),
+                                                       pinocchio::OP_FRAME)));
+    data_ = wholebody::LeggedData(model_);
+    updated_ = false;
+    return Index(frames_.size()) - 1;
+  }
+
   Index nv() const { return nv_; }
   Index na() const { return na_; }
 
@@ -309,30 +308,187 @@ private:
     return programs_[std::size_t(id)];
   }
 
-  // rows a task of this kind has (the Python side's count, checked at compile)
-  Index rows_of(const Slot & s, const Program & P) const
+  // ------------------------------------------------------------------ kernels by name
+  using RowCount = Index (HierarchyCycle::*)(const Program &, const Slot &) const;
+  using Fill = void (HierarchyCycle::*)(const Program &, const Slot &, Rows, Segment, Segment, Segment);
+
+  // A task's compiled counterpart: equality or inequality rows, its parameters and selection
+  // (by name, in the order its fill reads them: s.p(0), s.pick(0)...), its row count and fill.
+  struct Kernel
   {
-    Index dims = 0, rect = 0;
-    for (Index c : s.contacts)
+    bool eq;
+    std::vector<ParamSpec> params;
+    std::vector<std::string> selection;
+    RowCount rows;
+    Fill fill;
+  };
+
+  // The registry: one entry per task class with ``kernel = "<name>"`` (wholebody.tasks).
+  static const std::map<std::string, Kernel> & kernels()
+  {
+    using C = HierarchyCycle;
+    static const std::map<std::string, Kernel> registry = {
+      {"newton_euler", {true, {}, {}, &C::rows_fixed<6>, &C::fill_newton_euler}},
+      {"full_dynamics", {true, {}, {}, &C::rows_nv, &C::fill_full_dynamics}},
+      {"torque_limits", {false, {{"scale"}, {"cap", 1, Unit::Na}}, {}, &C::rows_na, &C::fill_torque_limits}},
+      {"joint_acceleration_limits",
+       {false, {{"tanh"}, {"horizon"}, {"a_max"}, {"steepness"}}, {}, &C::rows_na,
+        &C::fill_joint_acceleration_limits}},
+      {"contact_constraint",
+       {true, {{"kp"}, {"kd"}, {"anchors", 3, Unit::Contact}}, {}, &C::rows_contact_dims,
+        &C::fill_contact_constraint}},
+      {"center_of_pressure", {false, {{"margin"}}, {}, &C::rows_cop, &C::fill_center_of_pressure}},
+      {"friction_cone",
+       {false, {{"mu"}, {"normals", 3, Unit::Contact}}, {"torsion"}, &C::rows_friction, &C::fill_friction_cone}},
+      {"normal_force_bounds",
+       {false, {{"f_min"}, {"f_max"}, {"normals", 3, Unit::Contact}}, {}, &C::rows_contacts,
+        &C::fill_normal_force_bounds}},
+      {"momentum_pd",
+       {true, {{"P", 36}, {"D", 36}, {"com_ref", 3}, {"h_ref", 6}, {"hdot_ref", 6}}, {},
+        &C::rows_fixed<6>, &C::fill_momentum_pd}},
+      {"momentum_force",
+       {true, {{"K", 9, Unit::ContactDim}, {"k", 1, Unit::ContactDim}}, {}, &C::rows_fixed<6>,
+        &C::fill_momentum_force}},
+      {"com",
+       {true, {{"position", 3}, {"velocity", 3}, {"acceleration", 3}, {"kp", 3}, {"kd", 3}}, {"rows"},
+        &C::rows_picked, &C::fill_com}},
+      {"frame",
+       {true, {{"position", 3}, {"rotation", 9}, {"velocity", 6}, {"acceleration", 6}, {"kp", 6}, {"kd", 6}},
+        {"rows", "frame"}, &C::rows_picked, &C::fill_frame}},
+      {"posture",
+       {true, {{"q_ref", 1, Unit::Nq}, {"kp", 1, Unit::Na}, {"kd", 1, Unit::Na}, {"base_kp", 6}, {"base_kd", 6}},
+        {"with_base"}, &C::rows_posture, &C::fill_posture}},
+      {"force_regularizer",
+       {true, {{"targets", 1, Unit::ContactDim}}, {}, &C::rows_contact_dims, &C::fill_force_regularizer}},
+      {"acceleration_regularizer", {true, {}, {}, &C::rows_nv, &C::fill_acceleration_regularizer}},
+      {"acceleration_target", {true, {{"target", 1, Unit::Nv}}, {}, &C::rows_nv, &C::fill_acceleration_target}},
+      {"joint_trajectory",
+       {true, {{"position", 1, Unit::Rows}, {"velocity", 1, Unit::Rows}, {"acceleration", 1, Unit::Rows},
+               {"kp", 1, Unit::Rows}, {"kd", 1, Unit::Rows}},
+        {"rows"}, &C::rows_picked, &C::fill_joint_trajectory}}};
+    return registry;
+  }
+
+  // One slot of a program from its Python description, checked against its kernel: the same
+  // parameter names and sizes, the same selection names, the same row count and kind.
+  Slot slot_of(const py::dict & s, const Program & P) const
+  {
+    Slot slot;
+    slot.kernel = get<std::string>(s, "kernel");
+    const auto it = kernels().find(slot.kernel);
+    if (it == kernels().end())
+      throw std::invalid_argument("compile: no kernel named '" + slot.kernel + "'");
+    const Kernel & kernel = it->second;
+    const std::string where = "compile: kernel '" + slot.kernel + "'";
+    slot.start = get<Index>(s, "start");
+    slot.m = get<Index>(s, "m");
+    if (slot.start < 0 || slot.m < 0 || slot.start + slot.m > P.rows)
+      throw std::invalid_argument(where + ": rows outside the buffers");
+    if (get<bool>(s, "eq") != kernel.eq)
+      throw std::invalid_argument(where + ": its rows are " + (kernel.eq ? "equalities" : "inequalities"));
+    slot.contacts = get<std::vector<Index>>(s, "contacts");
+    for (Index c : slot.contacts)
+      if (c < 0 || c >= Index(P.contacts.size()))
+        throw std::invalid_argument(where + ": names an inactive contact");
+    const py::dict selection = get<py::dict>(s, "selection");
+    bool same_selection = py::len(selection) == kernel.selection.size();
+    for (const std::string & name : kernel.selection)
+      same_selection = same_selection && selection.contains(name);
+    if (!same_selection)
+      throw std::invalid_argument(where + ": expected the selection " + joined(kernel.selection));
+    for (const std::string & name : kernel.selection)
+      slot.picks.push_back(get<std::vector<Index>>(selection, name.c_str()));
+    if (slot.kernel == "frame")
     {
-      dims += contact_dims_[P.contacts[c]];
-      rect += contact_dims_[P.contacts[c]] == 6;
+      const auto & frame = slot.picks[1];
+      if (frame.size() != 1 || frame[0] < 0 || frame[0] >= Index(frames_.size()))
+        throw std::invalid_argument(where + ": frame index out of range");
+      slot.frame = frame[0];
     }
-    switch (s.kind)
+    for (Index r : (kernel.selection.empty() || kernel.selection[0] != "rows") ? std::vector<Index>{}
+                                                                              : slot.picks[0])
+      if (r < 0 || r >= (slot.kernel == "joint_trajectory" ? na_ : 6))
+        throw std::invalid_argument(where + ": selected row " + std::to_string(r) + " out of range");
+    if (slot.kernel == "full_dynamics" && P.reduced)
+      throw std::invalid_argument(where + ": FullDynamics belongs to the full formulation");
+    const py::dict params = get<py::dict>(s, "params");
+    std::vector<std::string> names;
+    for (const ParamSpec & spec : kernel.params)
+      names.push_back(spec.name);
+    bool same = py::len(params) == kernel.params.size();
+    for (const std::string & name : names)
+      same = same && params.contains(name);
+    if (!same)
+      throw std::invalid_argument(where + ": expected the parameters " + joined(names));
+    for (const ParamSpec & spec : kernel.params)
     {
-      case Kind::NewtonEuler: return 6;
-      case Kind::FullDynamics: return nv_;
-      case Kind::TorqueLimits: case Kind::JointAccelerationLimits: return na_;
-      case Kind::ContactConstraint: case Kind::ForceRegularizer: return dims;
-      case Kind::CenterOfPressure: return 4 * rect;
-      case Kind::FrictionCone: return 4 * Index(s.contacts.size()) + (s.torsion ? 8 * rect : 0);
-      case Kind::NormalForceBounds: return Index(s.contacts.size());
-      case Kind::MomentumPD: case Kind::MomentumForce: return 6;
-      case Kind::CoM: case Kind::Frame: case Kind::JointTrajectory: return Index(s.rows.size());
-      case Kind::Posture: return s.base ? nv_ : na_;
-      case Kind::AccelerationRegularizer: return nv_;
+      const auto range = get<std::vector<Index>>(params, spec.name.c_str());
+      const Index expected = spec.k * count(spec.per, slot, P);
+      if (range.size() != 2 || range[1] != expected || range[0] < 0 || range[0] + range[1] > P.nparams)
+        throw std::invalid_argument(where + ": parameter '" + spec.name + "' must be "
+                                    + std::to_string(expected) + " values inside the parameter array");
+      slot.offsets.push_back(range[0]);
+      slot.sizes.push_back(range[1]);
+    }
+    slot.params = P.params;
+    const Index expected = (this->*kernel.rows)(P, slot);
+    if (expected != slot.m)
+      throw std::invalid_argument(where + ": " + std::to_string(slot.m) + " rows given, its task has "
+                                  + std::to_string(expected));
+    return slot;
+  }
+
+  static std::string joined(const std::vector<std::string> & names)
+  {
+    std::string out = "[";
+    for (std::size_t i = 0; i < names.size(); ++i)
+      out += (i ? ", '" : "'") + names[i] + "'";
+    return out + "]";
+  }
+
+  Index contact_dims(const Slot & s, const Program & P) const
+  {
+    Index dims = 0;
+    for (Index c : s.contacts)
+      dims += contact_dims_[P.contacts[c]];
+    return dims;
+  }
+
+  Index count(Unit unit, const Slot & s, const Program & P) const
+  {
+    switch (unit)
+    {
+      case Unit::Fixed: return 1;
+      case Unit::Nq: return nq_;
+      case Unit::Na: return na_;
+      case Unit::Nv: return nv_;
+      case Unit::Contact: return Index(s.contacts.size());
+      case Unit::ContactDim: return contact_dims(s, P);
+      case Unit::Rows: return Index(s.picks.empty() ? 0 : s.picks[0].size());
     }
     return -1;
+  }
+
+  // row counts (the Python task's row_count, checked at compile)
+  template<Index N>
+  Index rows_fixed(const Program &, const Slot &) const { return N; }
+  Index rows_nv(const Program &, const Slot &) const { return nv_; }
+  Index rows_na(const Program &, const Slot &) const { return na_; }
+  Index rows_contact_dims(const Program & P, const Slot & s) const { return contact_dims(s, P); }
+  Index rows_contacts(const Program &, const Slot & s) const { return Index(s.contacts.size()); }
+  Index rows_picked(const Program &, const Slot & s) const { return Index(s.pick(0).size()); }
+  Index rows_posture(const Program &, const Slot & s) const { return s.flag(0) ? nv_ : na_; }
+  Index soles(const Program & P, const Slot & s) const
+  {
+    Index rect = 0;
+    for (Index c : s.contacts)
+      rect += contact_dims_[P.contacts[c]] == 6;
+    return rect;
+  }
+  Index rows_cop(const Program & P, const Slot & s) const { return 4 * soles(P, s); }
+  Index rows_friction(const Program & P, const Slot & s) const
+  {
+    return 4 * Index(s.contacts.size()) + (s.flag(0) ? 8 * soles(P, s) : 0);
   }
 
   template<typename Out>
@@ -342,285 +498,304 @@ private:
     hi *= torque_scale_;
   }
 
-  // tau = M_u qdd + h_u - J_u^T lambda (eq. 14) for rows whose tau block is the identity:
-  // writes the qdd and lambda columns, returns the offset h_u moved to the bounds.
-  template<typename Rows>
-  void eq14_rows(const Program & P, Rows && A) const
+  // eq. 13: M_l qdd - J_{c,l}^T lambda = -h_l
+  void fill_newton_euler(const Program & P, const Slot &, Rows A, Segment e, Segment, Segment)
   {
-    A.leftCols(nv_) = data_.M.bottomRows(na_);
-    A.middleCols(nv_, P.nl) = -P.Jc.rightCols(na_).transpose();
+    A.leftCols(nv_) = data_.M.topRows(6);
+    A.middleCols(nv_, P.nl) = -P.Jc.leftCols(6).transpose();
+    e = -data_.nle.head(6);
   }
 
-  template<typename Rows, typename Vec>
-  void fill_slot(const Program & P, const Slot & s, Rows A, Vec e, Vec lo, Vec up, const double * p)
+  // eq. 1: M qdd - J_c^T lambda - S^T tau = -h
+  void fill_full_dynamics(const Program & P, const Slot &, Rows A, Segment e, Segment, Segment)
   {
-    const Index nv = nv_, na = na_;
-    switch (s.kind)
+    A.leftCols(nv_) = data_.M;
+    A.middleCols(nv_, P.nl) = -P.Jc.transpose();
+    A.bottomRightCorner(na_, na_) = -MatrixXd::Identity(na_, na_);
+    e = -data_.nle;
+  }
+
+  // eq. 16, tau eliminated by eq. 14 in the reduced formulation
+  void fill_torque_limits(const Program & P, const Slot & s, Rows A, Segment, Segment lo, Segment up)
+  {
+    const double scale = *s.p(0);
+    const Map<const VectorXd> cap(s.p(1), na_);
+    VectorXd hi(na_);
+    torque_upper(hi);
+    lo = (-hi * scale).cwiseMax(-cap);
+    up = (hi * scale).cwiseMin(cap);
+    if (P.reduced)
     {
-      case Kind::NewtonEuler: // eq. 13: M_l qdd - J_{c,l}^T lambda = -h_l
-        A.leftCols(nv) = data_.M.topRows(6);
-        A.middleCols(nv, P.nl) = -P.Jc.leftCols(6).transpose();
-        e = -data_.nle.head(6);
-        break;
-      case Kind::FullDynamics: // eq. 1: M qdd - J_c^T lambda - S^T tau = -h
-        A.leftCols(nv) = data_.M;
-        A.middleCols(nv, P.nl) = -P.Jc.transpose();
-        A.bottomRightCorner(na, na) = -MatrixXd::Identity(na, na);
-        e = -data_.nle;
-        break;
-      case Kind::TorqueLimits: // eq. 16; p = [scale, cap (na)]
+      A.leftCols(nv_) = data_.M.bottomRows(na_);
+      A.middleCols(nv_, P.nl) = -P.Jc.rightCols(na_).transpose();
+      lo -= data_.nle.tail(na_);
+      up -= data_.nle.tail(na_);
+    }
+    else
+      A.rightCols(na_).setIdentity();
+  }
+
+  // Fahmi et al. 2019 eqs. 17-18 (braking) or Herzog et al. 2016 Sect. 2.1 (tanh)
+  void fill_joint_acceleration_limits(const Program &, const Slot & s, Rows A, Segment, Segment lo, Segment up)
+  {
+    const bool tanh_mode = *s.p(0) != 0.0;
+    const double h = *s.p(1), a_max = *s.p(2), k = *s.p(3);
+    A.middleCols(6, na_).setIdentity();
+    for (Index j = 0; j < na_; ++j)
+    {
+      const double q = q_[7 + j], qd = v_[6 + j];
+      if (tanh_mode)
       {
-        VectorXd hi(na);
-        torque_upper(hi);
-        const VectorXd lo0 = -hi * p[0], hi0 = hi * p[0];
-        const Map<const VectorXd> cap(p + 1, na);
-        lo = lo0.cwiseMax(-cap);
-        up = hi0.cwiseMin(cap);
-        if (P.reduced)
-        {
-          eq14_rows(P, A);
-          lo -= data_.nle.tail(na);
-          up -= data_.nle.tail(na);
-        }
-        else
-          A.rightCols(na).setIdentity();
-        break;
+        lo[j] = a_max * std::tanh(k * (q_min_[j] - q));
+        up[j] = a_max * std::tanh(k * (q_max_[j] - q));
       }
-      case Kind::JointAccelerationLimits: // p = [tanh?, horizon, a_max, steepness]
+      else
       {
-        A.middleCols(6, na).setIdentity();
-        for (Index j = 0; j < na; ++j)
-        {
-          const double q = q_[7 + j], qd = v_[6 + j];
-          if (p[0] != 0.0)
+        lo[j] = 2.0 * (q_min_[j] - q - h * qd) / (h * h);
+        up[j] = 2.0 * (q_max_[j] - q - h * qd) / (h * h);
+      }
+    }
+  }
+
+  // eq. 2 (+ Fahmi et al. 2019 eq. 32: the anchor PD)
+  void fill_contact_constraint(const Program & P, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const double kp = *s.p(0), kd = *s.p(1);
+    const double * anchors = s.p(2);
+    Index r = 0;
+    for (std::size_t k = 0; k < s.contacts.size(); ++k)
+    {
+      const Index a = s.contacts[k], c = P.contacts[a], d = contact_dims_[c];
+      A.block(r, 0, d, nv_) = P.Jc.middleRows(P.offsets[a], d);
+      e.segment(r, d) = -P.drift.segment(P.offsets[a], d);
+      if (kp != 0.0 || kd != 0.0)
+      {
+        const Vector3d pos = data_.oMf[frames_[contact_frames_[c]]].translation();
+        const VectorXd vel = contact_J_[c].topRows(d) * v_;
+        e.segment(r, 3) += kp * (Map<const Vector3d>(anchors + 3 * k) - pos) - kd * vel.head(3);
+        if (d == 6)
+          e.segment(r + 3, 3) -= kd * vel.tail(3);
+      }
+      r += d;
+    }
+  }
+
+  // the CoP inside each (margin-shrunk) sole: 4 rows per rectangle contact
+  void fill_center_of_pressure(const Program & P, const Slot & s, Rows A, Segment, Segment lo, Segment up)
+  {
+    const double margin = *s.p(0);
+    Index r = 0;
+    for (Index a : s.contacts)
+    {
+      const Index c = P.contacts[a];
+      if (contact_dims_[c] != 6)
+        continue;
+      const Matrix3d R = data_.oMf[frames_[contact_frames_[c]]].rotation();
+      const double hx = (1.0 - margin) * half_sizes_(c, 0), hy = (1.0 - margin) * half_sizes_(c, 1);
+      auto B = A.block(r, nv_ + P.offsets[a], 4, 6);
+      B.row(0).head(3) = B.row(1).head(3) = -hx * R.col(2).transpose();
+      B.row(2).head(3) = B.row(3).head(3) = -hy * R.col(2).transpose();
+      B.row(0).tail(3) = -R.col(1).transpose();
+      B.row(1).tail(3) = R.col(1).transpose();
+      B.row(2).tail(3) = R.col(0).transpose();
+      B.row(3).tail(3) = -R.col(0).transpose();
+      lo.segment(r, 4).setConstant(-kInf);
+      up.segment(r, 4).setZero();
+      r += 4;
+    }
+  }
+
+  // the friction pyramid about each normal, and with torsion the soles' yaw-moment facets
+  void fill_friction_cone(const Program & P, const Slot & s, Rows A, Segment, Segment lo, Segment up)
+  {
+    const double mu = *s.p(0);
+    const double * normals = s.p(1);
+    const bool torsion = s.flag(0);
+    Index r = 0;
+    for (std::size_t k = 0; k < s.contacts.size(); ++k)
+    {
+      const Index a = s.contacts[k], c = P.contacts[a], col = nv_ + P.offsets[a];
+      Vector3d t1, t2, n;
+      tangent_basis(Map<const Vector3d>(normals + 3 * k), t1, t2, n);
+      A.block(r, col, 1, 3) = (t1 - mu * n).transpose();
+      A.block(r + 1, col, 1, 3) = (-t1 - mu * n).transpose();
+      A.block(r + 2, col, 1, 3) = (t2 - mu * n).transpose();
+      A.block(r + 3, col, 1, 3) = (-t2 - mu * n).transpose();
+      r += 4;
+      if (torsion && contact_dims_[c] == 6)
+      { // the yaw-moment facets of the sole's contact wrench cone in its measured axes
+        // (FrictionCone.wrench_cone_block; Caron et al. 2015)
+        const Matrix3d R = data_.oMf[frames_[contact_frames_[c]]].rotation();
+        const double hx = half_sizes_(c, 0), hy = half_sizes_(c, 1);
+        for (double sx : {1.0, -1.0})
+          for (double sy : {1.0, -1.0})
           {
-            lo[j] = p[2] * std::tanh(p[3] * (q_min_[j] - q));
-            up[j] = p[2] * std::tanh(p[3] * (q_max_[j] - q));
+            const Vector3d force = -mu * (hx + hy) * R.col(2) + sx * hy * R.col(0) + sy * hx * R.col(1);
+            const Vector3d moment = R.col(2) + mu * (sx * R.col(0) + sy * R.col(1));
+            A.block(r, col, 1, 3) = A.block(r + 1, col, 1, 3) = force.transpose();
+            A.block(r, col + 3, 1, 3) = moment.transpose();
+            A.block(r + 1, col + 3, 1, 3) = -moment.transpose();
+            r += 2;
           }
-          else
-          {
-            const double h = p[1];
-            lo[j] = 2.0 * (q_min_[j] - q - h * qd) / (h * h);
-            up[j] = 2.0 * (q_max_[j] - q - h * qd) / (h * h);
-          }
-        }
-        break;
       }
-      case Kind::ContactConstraint: // eq. 2 (+ Fahmi eq. 32); p = [kp, kd, anchors (3 each)]
+    }
+    lo.setConstant(-kInf);
+    up.setZero();
+  }
+
+  // f_min <= f.n <= f_max per contact
+  void fill_normal_force_bounds(const Program & P, const Slot & s, Rows A, Segment, Segment lo, Segment up)
+  {
+    const double * normals = s.p(2);
+    for (std::size_t k = 0; k < s.contacts.size(); ++k)
+    {
+      Vector3d t1, t2, n;
+      tangent_basis(Map<const Vector3d>(normals + 3 * k), t1, t2, n);
+      A.block(Index(k), nv_ + P.offsets[s.contacts[k]], 1, 3) = n.transpose();
+      lo[Index(k)] = *s.p(0);
+      up[Index(k)] = *s.p(1);
+    }
+  }
+
+  // eq. 22: A_G qdd = P [m (x_ref - x); 0] + D (h_ref - h) + hdot_ref - Adot_G v
+  void fill_momentum_pd(const Program &, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const Map<const RowMatrix> Pm(s.p(0), 6, 6), Dm(s.p(1), 6, 6);
+    Vector6d err = Vector6d::Zero();
+    err.head<3>() = mass_ * (Map<const Vector3d>(s.p(2)) - data_.com[0]);
+    A.leftCols(nv_) = data_.Ag;
+    e = Pm * err + Dm * (Map<const Vector6d>(s.p(3)) - data_.hg.toVector()) + Map<const Vector6d>(s.p(4))
+        - A_G_dot_v_;
+  }
+
+  // eq. 24: G lambda = G (k - K [x; h])
+  void fill_momentum_force(const Program & P, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const Index nt = contact_dims(s, P);
+    const Map<const RowMatrix> K(s.p(0), nt, 9);
+    const Map<const VectorXd> k(s.p(1), nt);
+    Eigen::Matrix<double, 9, 1> state;
+    state << data_.com[0], data_.hg.toVector();
+    const VectorXd force = k - K * state;
+    e.setZero();
+    Index col = 0;
+    for (Index a : s.contacts)
+    {
+      const Index c = P.contacts[a], d = contact_dims_[c];
+      const Vector3d r = points_.row(c).transpose() - data_.com[0];
+      Eigen::Matrix<double, 6, 6> G = Eigen::Matrix<double, 6, 6>::Zero();
+      G.topLeftCorner<3, 3>().setIdentity();
+      G.block<3, 3>(3, 0) = pinocchio::skew(r);
+      if (d == 6)
+        G.bottomRightCorner<3, 3>().setIdentity();
+      A.block(0, nv_ + P.offsets[a], 6, d) = G.leftCols(d);
+      e += G.leftCols(d) * force.segment(col, d);
+      col += d;
+    }
+  }
+
+  // the CoM's PD on the selected axes
+  void fill_com(const Program &, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const Vector3d a = Map<const Vector3d>(s.p(2))
+                       + Map<const Vector3d>(s.p(3)).cwiseProduct(Map<const Vector3d>(s.p(0)) - data_.com[0])
+                       + Map<const Vector3d>(s.p(4)).cwiseProduct(Map<const Vector3d>(s.p(1)) - data_.vcom[0])
+                       - A_G_dot_v_.head<3>() / mass_;
+    const auto & rows = s.pick(0);
+    for (std::size_t k = 0; k < rows.size(); ++k)
+    {
+      A.row(Index(k)).head(nv_) = data_.Jcom.row(rows[k]);
+      e[Index(k)] = a[rows[k]];
+    }
+  }
+
+  // a frame's PD on the selected rows of [position; orientation] (world axes)
+  void fill_frame(const Program &, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const auto fid = frames_[s.frame];
+    const pinocchio::SE3 & M = data_.oMf[fid];
+    const Matrix3d R_ref = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(s.p(1));
+    Vector6d err;
+    err.head<3>() = Map<const Vector3d>(s.p(0)) - M.translation();
+    err.tail<3>() = pinocchio::log3(Matrix3d(R_ref * M.rotation().transpose()));
+    const Vector6d vel = pinocchio::getFrameVelocity(model_, data_, fid, pinocchio::LOCAL_WORLD_ALIGNED).toVector();
+    const Vector6d drift =
+      pinocchio::getFrameClassicalAcceleration(model_, data_, fid, pinocchio::LOCAL_WORLD_ALIGNED).toVector();
+    const Vector6d a = Map<const Vector6d>(s.p(3)) + Map<const Vector6d>(s.p(4)).cwiseProduct(err)
+                       + Map<const Vector6d>(s.p(5)).cwiseProduct(Map<const Vector6d>(s.p(2)) - vel) - drift;
+    frame_J_.setZero();
+    pinocchio::getFrameJacobian(model_, data_, fid, pinocchio::LOCAL_WORLD_ALIGNED, frame_J_);
+    const auto & rows = s.pick(0);
+    for (std::size_t k = 0; k < rows.size(); ++k)
+    {
+      A.row(Index(k)).head(nv_) = frame_J_.row(rows[k]);
+      e[Index(k)] = a[rows[k]];
+    }
+  }
+
+  // joint-space PD toward q_ref (pinocchio::difference: any joint type), with the base rows
+  // (log6 of the relative placement, local frame) when selected
+  void fill_posture(const Program &, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const Map<const VectorXd> q_ref(s.p(0), nq_), kp(s.p(1), na_), kd(s.p(2), na_);
+    const VectorXd error = pinocchio::difference(model_, q_, q_ref);
+    const VectorXd joint = kp.cwiseProduct(error.tail(na_)) - kd.cwiseProduct(v_.tail(na_));
+    if (!s.flag(0))
+    {
+      A.middleCols(6, na_).setIdentity();
+      e = joint;
+      return;
+    }
+    const Eigen::Quaterniond quat(q_[6], q_[3], q_[4], q_[5]), quat_ref(q_ref[6], q_ref[3], q_ref[4], q_ref[5]);
+    const pinocchio::SE3 base(quat.toRotationMatrix(), q_.head<3>());
+    const pinocchio::SE3 base_ref(quat_ref.toRotationMatrix(), q_ref.head<3>());
+    const Vector6d err = pinocchio::log6(base.actInv(base_ref)).toVector();
+    A.leftCols(nv_).setIdentity();
+    e.head(6) = Map<const Vector6d>(s.p(3)).cwiseProduct(err) - Map<const Vector6d>(s.p(4)).cwiseProduct(v_.head<6>());
+    e.tail(na_) = joint;
+  }
+
+  // lambda ≈ targets, rows scaled (ForceRegularizer.row_scale)
+  void fill_force_regularizer(const Program & P, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const double * targets = s.p(0);
+    Index r = 0;
+    for (Index a : s.contacts)
+    {
+      const Index c = P.contacts[a], d = contact_dims_[c];
+      for (Index j = 0; j < d; ++j)
       {
-        Index r = 0;
-        for (std::size_t k = 0; k < s.contacts.size(); ++k)
-        {
-          const Index a = s.contacts[k], c = P.contacts[a], d = contact_dims_[c];
-          A.block(r, 0, d, nv) = P.Jc.middleRows(P.offsets[a], d);
-          e.segment(r, d) = -P.drift.segment(P.offsets[a], d);
-          if (p[0] != 0.0 || p[1] != 0.0)
-          {
-            const Vector3d pos = data_.oMf[frames_[contact_frames_[c]]].translation();
-            const VectorXd vel = contact_J_[c].topRows(d) * v_;
-            e.segment(r, 3) += p[0] * (Map<const Vector3d>(p + 2 + 3 * k) - pos) - p[1] * vel.head(3);
-            if (d == 6)
-              e.segment(r + 3, 3) -= p[1] * vel.tail(3);
-          }
-          r += d;
-        }
-        break;
+        const double scale = j < 3 ? 1.0 : 1.0 / half_sizes_.row(c).maxCoeff();
+        A(r + j, nv_ + P.offsets[a] + j) = scale;
+        e[r + j] = scale * targets[r + j];
       }
-      case Kind::CenterOfPressure: // p = [margin]
-      {
-        Index r = 0;
-        for (Index a : s.contacts)
-        {
-          const Index c = P.contacts[a];
-          if (contact_dims_[c] != 6)
-            continue;
-          const Matrix3d R = data_.oMf[frames_[contact_frames_[c]]].rotation();
-          const double hx = (1.0 - p[0]) * half_sizes_(c, 0), hy = (1.0 - p[0]) * half_sizes_(c, 1);
-          auto B = A.block(r, nv + P.offsets[a], 4, 6);
-          B.row(0).head(3) = B.row(1).head(3) = -hx * R.col(2).transpose();
-          B.row(2).head(3) = B.row(3).head(3) = -hy * R.col(2).transpose();
-          B.row(0).tail(3) = -R.col(1).transpose();
-          B.row(1).tail(3) = R.col(1).transpose();
-          B.row(2).tail(3) = R.col(0).transpose();
-          B.row(3).tail(3) = -R.col(0).transpose();
-          lo.segment(r, 4).setConstant(-kInf);
-          up.segment(r, 4).setZero();
-          r += 4;
-        }
-        break;
-      }
-      case Kind::FrictionCone: // p = [mu, normals (3 each)]
-      {
-        const double mu = p[0];
-        Index r = 0;
-        for (std::size_t k = 0; k < s.contacts.size(); ++k)
-        {
-          const Index a = s.contacts[k], c = P.contacts[a], col = nv + P.offsets[a];
-          Vector3d t1, t2, n;
-          tangent_basis(Map<const Vector3d>(p + 1 + 3 * k), t1, t2, n);
-          A.block(r, col, 1, 3) = (t1 - mu * n).transpose();
-          A.block(r + 1, col, 1, 3) = (-t1 - mu * n).transpose();
-          A.block(r + 2, col, 1, 3) = (t2 - mu * n).transpose();
-          A.block(r + 3, col, 1, 3) = (-t2 - mu * n).transpose();
-          r += 4;
-          if (s.torsion && contact_dims_[c] == 6)
-          { // the yaw-moment facets of the sole's contact wrench cone in its measured axes
-            // (FrictionCone.wrench_cone_block; Caron et al. 2015)
-            const Matrix3d R = data_.oMf[frames_[contact_frames_[c]]].rotation();
-            const double hx = half_sizes_(c, 0), hy = half_sizes_(c, 1);
-            for (double sx : {1.0, -1.0})
-              for (double sy : {1.0, -1.0})
-              {
-                const Vector3d force = -mu * (hx + hy) * R.col(2) + sx * hy * R.col(0) + sy * hx * R.col(1);
-                const Vector3d moment = R.col(2) + mu * (sx * R.col(0) + sy * R.col(1));
-                A.block(r, col, 1, 3) = A.block(r + 1, col, 1, 3) = force.transpose();
-                A.block(r, col + 3, 1, 3) = moment.transpose();
-                A.block(r + 1, col + 3, 1, 3) = -moment.transpose();
-                r += 2;
-              }
-          }
-        }
-        lo.setConstant(-kInf);
-        up.setZero();
-        break;
-      }
-      case Kind::NormalForceBounds: // p = [f_min, f_max, normals (3 each)]
-        for (std::size_t k = 0; k < s.contacts.size(); ++k)
-        {
-          Vector3d t1, t2, n;
-          tangent_basis(Map<const Vector3d>(p + 2 + 3 * k), t1, t2, n);
-          A.block(Index(k), nv + P.offsets[s.contacts[k]], 1, 3) = n.transpose();
-          lo[Index(k)] = p[0];
-          up[Index(k)] = p[1];
-        }
-        break;
-      case Kind::MomentumPD: // eq. 22; p = [P (36), D (36), com_ref, h_ref, hdot_ref]
-      {
-        const Map<const RowMatrix> Pm(p, 6, 6), Dm(p + 36, 6, 6);
-        Vector6d err = Vector6d::Zero();
-        err.head<3>() = mass_ * (Map<const Vector3d>(p + 72) - data_.com[0]);
-        A.leftCols(nv) = data_.Ag;
-        e = Pm * err + Dm * (Map<const Vector6d>(p + 75) - data_.hg.toVector())
-            + Map<const Vector6d>(p + 81) - A_G_dot_v_;
-        break;
-      }
-      case Kind::MomentumForce: // eq. 24; p = [K (nl_task x 9), k (nl_task)]
-      {
-        Index nt = 0;
-        for (Index a : s.contacts)
-          nt += contact_dims_[P.contacts[a]];
-        const Map<const RowMatrix> K(p, nt, 9);
-        const Map<const VectorXd> k(p + 9 * nt, nt);
-        Eigen::Matrix<double, 9, 1> state;
-        state << data_.com[0], data_.hg.toVector();
-        const VectorXd force = k - K * state;
-        e.setZero();
-        Index col = 0;
-        for (Index a : s.contacts)
-        {
-          const Index c = P.contacts[a], d = contact_dims_[c];
-          const Vector3d r = points_.row(c).transpose() - data_.com[0];
-          Eigen::Matrix<double, 6, 6> G = Eigen::Matrix<double, 6, 6>::Zero();
-          G.topLeftCorner<3, 3>().setIdentity();
-          G.block<3, 3>(3, 0) = pinocchio::skew(r);
-          if (d == 6)
-            G.bottomRightCorner<3, 3>().setIdentity();
-          A.block(0, nv + P.offsets[a], 6, d) = G.leftCols(d);
-          e += G.leftCols(d) * force.segment(col, d);
-          col += d;
-        }
-        break;
-      }
-      case Kind::CoM: // p = [position, velocity, acceleration, kp (3), kd (3)]
-      {
-        const Vector3d a = Map<const Vector3d>(p + 6)
-                           + Map<const Vector3d>(p + 9).cwiseProduct(Map<const Vector3d>(p) - data_.com[0])
-                           + Map<const Vector3d>(p + 12).cwiseProduct(Map<const Vector3d>(p + 3) - data_.vcom[0])
-                           - A_G_dot_v_.head<3>() / mass_;
-        for (std::size_t k = 0; k < s.rows.size(); ++k)
-        {
-          A.row(Index(k)).head(nv) = data_.Jcom.row(s.rows[k]);
-          e[Index(k)] = a[s.rows[k]];
-        }
-        break;
-      }
-      case Kind::Frame: // p = [position, rotation (9), velocity (6), acceleration (6), kp (6), kd (6)]
-      {
-        const auto fid = frames_[s.frame];
-        const pinocchio::SE3 & M = data_.oMf[fid];
-        const Matrix3d R_ref = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(p + 3);
-        Vector6d err;
-        err.head<3>() = Map<const Vector3d>(p) - M.translation();
-        err.tail<3>() = pinocchio::log3(Matrix3d(R_ref * M.rotation().transpose()));
-        const Vector6d vel =
-          pinocchio::getFrameVelocity(model_, data_, fid, pinocchio::LOCAL_WORLD_ALIGNED).toVector();
-        const Vector6d drift =
-          pinocchio::getFrameClassicalAcceleration(model_, data_, fid, pinocchio::LOCAL_WORLD_ALIGNED)
-            .toVector();
-        const Vector6d a = Map<const Vector6d>(p + 18) + Map<const Vector6d>(p + 24).cwiseProduct(err)
-                           + Map<const Vector6d>(p + 30).cwiseProduct(Map<const Vector6d>(p + 12) - vel)
-                           - drift;
-        frame_J_.setZero();
-        pinocchio::getFrameJacobian(model_, data_, fid, pinocchio::LOCAL_WORLD_ALIGNED, frame_J_);
-        for (std::size_t k = 0; k < s.rows.size(); ++k)
-        {
-          A.row(Index(k)).head(nv) = frame_J_.row(s.rows[k]);
-          e[Index(k)] = a[s.rows[k]];
-        }
-        break;
-      }
-      case Kind::Posture: // p = [q_ref (nq), kp (na), kd (na), base_kp (6), base_kd (6)]
-      {
-        const Map<const VectorXd> q_ref(p, nq_), kp(p + nq_, na), kd(p + nq_ + na, na);
-        const VectorXd joint = kp.cwiseProduct(q_ref.tail(na) - q_.tail(na)) - kd.cwiseProduct(v_.tail(na));
-        if (!s.base)
-        {
-          A.middleCols(6, na).setIdentity();
-          e = joint;
-          break;
-        }
-        // base error in the local frame: log6 of the relative placement
-        const Eigen::Quaterniond quat(q_[6], q_[3], q_[4], q_[5]), quat_ref(q_ref[6], q_ref[3], q_ref[4], q_ref[5]);
-        const pinocchio::SE3 base(quat.toRotationMatrix(), q_.head<3>());
-        const pinocchio::SE3 base_ref(quat_ref.toRotationMatrix(), q_ref.head<3>());
-        const Vector6d err = pinocchio::log6(base.actInv(base_ref)).toVector();
-        A.leftCols(nv).setIdentity();
-        e.head(6) = Map<const Vector6d>(p + nq_ + 2 * na).cwiseProduct(err)
-                    - Map<const Vector6d>(p + nq_ + 2 * na + 6).cwiseProduct(v_.head<6>());
-        e.tail(na) = joint;
-        break;
-      }
-      case Kind::ForceRegularizer: // p = [targets (dim each)]; rows scaled (ForceRegularizer.row_scale)
-      {
-        Index r = 0;
-        for (Index a : s.contacts)
-        {
-          const Index c = P.contacts[a], d = contact_dims_[c];
-          for (Index j = 0; j < d; ++j)
-          {
-            const double scale = j < 3 ? 1.0 : 1.0 / half_sizes_.row(c).maxCoeff();
-            A(r + j, nv + P.offsets[a] + j) = scale;
-            e[r + j] = scale * p[r + j];
-          }
-          r += d;
-        }
-        break;
-      }
-      case Kind::AccelerationRegularizer:
-        A.leftCols(nv).setIdentity();
-        e.setZero();
-        break;
-      case Kind::JointTrajectory: // p = [position, velocity, acceleration, kp, kd] (k each)
-      {
-        const Index k = Index(s.rows.size());
-        for (Index i = 0; i < k; ++i)
-        {
-          const Index j = s.rows[i];
-          A(i, 6 + j) = 1.0;
-          e[i] = p[2 * k + i] + p[3 * k + i] * (p[i] - q_[7 + j]) + p[4 * k + i] * (p[k + i] - v_[6 + j]);
-        }
-        break;
-      }
+      r += d;
+    }
+  }
+
+  void fill_acceleration_regularizer(const Program &, const Slot &, Rows A, Segment e, Segment, Segment)
+  {
+    A.leftCols(nv_).setIdentity();
+    e.setZero();
+  }
+
+  // qdd ≈ target (PassiveWBC's posture regulariser, Fahmi et al. 2019 eq. 7a)
+  void fill_acceleration_target(const Program &, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    A.leftCols(nv_).setIdentity();
+    e = Map<const VectorXd>(s.p(0), nv_);
+  }
+
+  // named joints track (position, velocity, acceleration) with a PD (Herzog et al. 2016 Sect. 5.4)
+  void fill_joint_trajectory(const Program &, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const auto & rows = s.pick(0);
+    const double *position = s.p(0), *velocity = s.p(1), *acceleration = s.p(2), *kp = s.p(3), *kd = s.p(4);
+    for (std::size_t i = 0; i < rows.size(); ++i)
+    {
+      const Index j = rows[i];
+      A(Index(i), 6 + j) = 1.0;
+      e[Index(i)] = acceleration[i] + kp[i] * (position[i] - q_[7 + j]) + kd[i] * (velocity[i] - v_[6 + j]);
     }
   }
 
@@ -655,6 +830,8 @@ PYBIND11_MODULE(_hierarchy_cycle, m)
     .def("recover", &HierarchyCycle::recover, py::arg("program"), py::arg("x"))
     .def("terms", &HierarchyCycle::terms)
     .def("frame_placement", &HierarchyCycle::frame_placement, py::arg("frame"))
+    .def("add_frame", &HierarchyCycle::add_frame, py::arg("joint"), py::arg("placement"))
+    .def_static("kernels", &HierarchyCycle::kernel_names)
     .def_property_readonly("com", &HierarchyCycle::com)
     .def_property_readonly("vcom", &HierarchyCycle::vcom)
     .def_property_readonly("h_G", &HierarchyCycle::h_G)

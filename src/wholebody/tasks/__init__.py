@@ -7,8 +7,9 @@ from .dynamics import FullDynamics, NewtonEuler
 from .limits import JointAccelerationLimits, TorqueLimits
 from .momentum import MomentumForce, MomentumPD, momentum_map
 from .motion import CoMTask, FrameTask, JointTrajectoryTask, PostureTask
+from .regularization import AccelerationRegularizer
 
 __all__ = ["Task", "TaskRows", "CenterOfPressure", "ContactConstraint", "ForceRegularizer",
            "FrictionCone", "NormalForceBounds", "tangent_basis", "FullDynamics", "NewtonEuler",
            "JointAccelerationLimits", "TorqueLimits", "MomentumForce", "MomentumPD", "momentum_map",
-           "CoMTask", "FrameTask", "JointTrajectoryTask", "PostureTask"]
+           "CoMTask", "FrameTask", "JointTrajectoryTask", "PostureTask", "AccelerationRegularizer"]

@@ -32,6 +32,7 @@ import numpy as np
 from ..robot import Robot
 from ..validation import finite_array, number
 from ..variables import Variables
+from .schema import KernelTask
 
 
 @dataclass
@@ -229,7 +230,7 @@ def normal_map(value, field: str, obj=None) -> dict:
 
 
 # ------------------------------------------------------------------------------------- tasks
-class Task:
+class Task(KernelTask):
     """Base class: a named equality (``kind = "eq"``) or inequality (``kind = "ineq"``) task.
 
     ``weight``: a finite number >= 0 or one per row (> 0 for inequality tasks), checked on every

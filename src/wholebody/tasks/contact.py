@@ -3,10 +3,13 @@ Sect. II-C)."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .base import (Task, TaskRows, checked_attribute, contact_list, contact_subset, flag,
                    gain_rule, normal_map, scalar_rule)
+from . import schema
 
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 
@@ -64,6 +67,14 @@ def friction_faces(normal: np.ndarray, mu: float) -> np.ndarray:
     return np.array([t1 - mu * n, -t1 - mu * n, t2 - mu * n, -t2 - mu * n])
 
 
+@functools.lru_cache(maxsize=None)
+def _world_up(count: int) -> np.ndarray:
+    """``count`` world-up normals stacked (read-only, shared)."""
+    up = np.tile(WORLD_UP, count)
+    up.flags.writeable = False
+    return up
+
+
 class _PerContact(Task):
     """A task with one block of rows per selected contact, placed in the lambda columns.
 
@@ -72,6 +83,7 @@ class _PerContact(Task):
 
     contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
     normals = checked_attribute(normal_map, "contact name -> non-zero surface normal.")
+    per_contact = True
 
     def __init__(self, name=None, weight=1.0, contacts=None, normals=None):
         super().__init__(name, weight)
@@ -80,6 +92,12 @@ class _PerContact(Task):
 
     def normal(self, contact: str) -> np.ndarray:
         return np.asarray(self.normals.get(contact, WORLD_UP), dtype=float)
+
+    def stacked_normals(self, layout, state=None) -> np.ndarray:
+        """The normals of the layout's contacts, stacked (the compiled kernels' parameter)."""
+        if not self.normals:
+            return _world_up(len(layout.contacts))
+        return np.concatenate([self.normal(n) for n in layout.contacts]) if layout.contacts else ()
 
     def _lambda_rows(self, variables, blocks: dict[str, np.ndarray]) -> np.ndarray:
         """Stack per-contact (rows x dim) blocks into (rows x n_lambda)."""
@@ -105,10 +123,28 @@ class ContactConstraint(_PerContact):
     kp = checked_attribute(gain_rule(scalar_only=True), "Anchor stiffness (1/s^2), >= 0.")
     kd = checked_attribute(gain_rule(scalar_only=True), "Contact-velocity damping (1/s), >= 0.")
 
+    kernel = "contact_constraint"
+    params = (schema.scalar("kp"), schema.scalar("kd"),
+              schema.vector("anchors", 3, "contact",
+                            get=lambda t, layout, state: t.stacked_anchors(layout, state)))
+
     def __init__(self, name=None, weight=1.0, contacts=None, kp: float = 0.0, kd: float = 0.0):
         super().__init__(name, weight, contacts)
         self.kp, self.kd = kp, kd
         self.anchors: dict[str, np.ndarray] = {}
+
+    def row_count(self, layout):
+        return layout.count("contact_dim")
+
+    def stacked_anchors(self, layout, state) -> np.ndarray | float:
+        """The anchors of the layout's contacts, each held where ``state`` first saw its frame
+        (only when the anchor gains are on, as :meth:`rows`)."""
+        if not (self.kp or self.kd):
+            return 0.0
+        for n in layout.contacts:
+            if n not in self.anchors:
+                self.anchors[n] = state.contact_frame_position(n)
+        return np.concatenate([self.anchors[n] for n in layout.contacts]) if layout.contacts else ()
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
@@ -157,6 +193,20 @@ class FrictionCone(_PerContact):
     kind = "ineq"
     mu = checked_attribute(scalar_rule(low=0.0, low_open=True), "Friction coefficient, > 0.")
     torsion = checked_attribute(flag, "Add the rectangle contacts' yaw-moment rows (6D contacts).")
+
+    kernel = "friction_cone"
+    params = (schema.scalar("mu"),
+              schema.vector("normals", 3, "contact", get=_PerContact.stacked_normals))
+
+    def selection(self, robot):
+        return {"torsion": [int(self.torsion)]}
+
+    def layout_key(self):
+        return (self.torsion,)
+
+    def row_count(self, layout):
+        rect = sum(layout.robot.contact(n).dim == 6 for n in layout.contacts)
+        return 4 * len(layout.contacts) + (8 * rect if self.torsion else 0)
 
     def __init__(self, mu: float, name=None, weight=1.0, contacts=None, normals=None,
                  torsion: bool = False):
@@ -241,6 +291,13 @@ class NormalForceBounds(_PerContact):
     f_min = checked_attribute(_f_min_rule, "Least normal force (N), finite, 0 <= f_min < f_max.")
     f_max = checked_attribute(_f_max_rule, "Largest normal force (N), > f_min, may be inf.")
 
+    kernel = "normal_force_bounds"
+    params = (schema.scalar("f_min"), schema.scalar("f_max"),
+              schema.vector("normals", 3, "contact", get=_PerContact.stacked_normals))
+
+    def row_count(self, layout):
+        return len(layout.contacts)
+
     def __init__(self, f_min: float = 0.0, f_max: float = np.inf, name=None, weight=1.0,
                  contacts=None, normals=None):
         super().__init__(name, weight, contacts, normals)
@@ -269,6 +326,12 @@ class CenterOfPressure(_PerContact):
     kind = "ineq"
     margin = checked_attribute(scalar_rule(low=0.0, high=1.0, high_open=True),
                                "Relative shrinking of the sole, in [0, 1).")
+
+    kernel = "center_of_pressure"
+    params = (schema.scalar("margin"),)
+
+    def row_count(self, layout):
+        return 4 * sum(layout.robot.contact(n).dim == 6 for n in layout.contacts)
 
     def __init__(self, name=None, weight=1.0, contacts=None, margin: float = 0.0):
         super().__init__(name, weight, contacts)
@@ -311,6 +374,20 @@ class CenterOfPressure(_PerContact):
 class ForceRegularizer(_PerContact):
     """lambda_i ≈ target_i (default zero): regularises contact forces, or unloads a contact before
     it is removed (Herzog et al. 2016 Sect. 5.4)."""
+
+    kernel = "force_regularizer"
+    params = (schema.vector("targets", 1, "contact_dim",
+                            get=lambda t, layout, state: t.stacked_targets(layout)),)
+
+    def row_count(self, layout):
+        return layout.count("contact_dim")
+
+    def stacked_targets(self, layout) -> np.ndarray | float:
+        """The targets of the layout's contacts, stacked (zero where none)."""
+        if not self.targets:
+            return 0.0
+        return np.concatenate([np.broadcast_to(self.targets.get(n, 0.0), layout.robot.contact(n).dim)
+                               for n in layout.contacts])
 
     def __init__(self, name=None, weight=1.0, contacts=None, targets=None):
         super().__init__(name, weight, contacts)

@@ -14,6 +14,11 @@ class NewtonEuler(Task):
     The only dynamics constraint of the reduced formulation: tau is eliminated with eq. 14.
     """
 
+    kernel = "newton_euler"
+
+    def row_count(self, layout):
+        return 6
+
     def rows(self, robot, variables):
         n = FREE_FLYER_NV
         J = robot.stacked_contact_jacobian(variables.contacts)
@@ -22,6 +27,11 @@ class NewtonEuler(Task):
 
 class FullDynamics(Task):
     """All nv rows of M qdd + h = S^T tau + J_c^T lambda (eq. 1), for the full formulation."""
+
+    kernel = "full_dynamics"
+
+    def row_count(self, layout):
+        return layout.robot.nv
 
     def rows(self, robot, variables):
         J = robot.stacked_contact_jacobian(variables.contacts)

@@ -6,6 +6,7 @@ import numpy as np
 
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from .base import Task, TaskRows, checked_attribute, choice_rule, scalar_rule
+from .schema import flag, scalar, vector
 
 
 def _overrides(value, field) -> dict[str, float]:
@@ -34,11 +35,29 @@ class TorqueLimits(Task):
     upper_override = checked_attribute(
         lambda value, field, obj: _overrides(value, field), "joint name -> torque cap (Nm) >= 0.")
 
+    kernel = "torque_limits"
+    params = (scalar("scale"), vector("cap", 1, "na", get=lambda t, layout, state: t.caps(layout.robot)))
+
     def __init__(self, name=None, weight=1.0, scale: float = 1.0,
                  upper_override: dict[str, float] | None = None):
         super().__init__(name, weight)
         self.scale = scale
         self.upper_override = upper_override
+
+    def caps(self, robot) -> np.ndarray:
+        """Per joint the cap of ``upper_override`` (inf where none; inf alone if none)."""
+        if not self.upper_override:
+            return np.inf
+        cap = np.full(robot.na, np.inf)
+        for joint, value in self.upper_override.items():
+            if joint not in robot.joint_names:
+                raise ValueError(f"upper_override: unknown joint '{joint}'")
+            i = robot.joint_names.index(joint)
+            cap[i] = min(cap[i], value)
+        return cap
+
+    def row_count(self, layout):
+        return layout.robot.na
 
     def bounds(self, robot) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = robot.torque_bounds()
@@ -81,6 +100,13 @@ class JointAccelerationLimits(Task):
     horizon = checked_attribute(scalar_rule(low=0.0, low_open=True), "Braking horizon (s), > 0.")
     a_max = checked_attribute(scalar_rule(low=0.0, low_open=True), "tanh amplitude (rad/s^2), > 0.")
     steepness = checked_attribute(scalar_rule(low=0.0, low_open=True), "tanh slope (1/rad), > 0.")
+
+    kernel = "joint_acceleration_limits"
+    params = (flag("tanh", get=lambda t, layout, state: t.mode == "tanh"), scalar("horizon"),
+              scalar("a_max"), scalar("steepness"))
+
+    def row_count(self, layout):
+        return layout.robot.na
 
     def __init__(self, name=None, weight=1.0, mode: str = "braking", horizon: float = 0.01,
                  a_max: float = 200.0, steepness: float = 10.0):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import schema
 from .base import Task, TaskRows, check_gain, checked_attribute, contact_list, contact_subset
 
 
@@ -59,6 +60,20 @@ class MomentumPD(Task):
     P = checked_attribute(momentum_gain, "6x6 gain on [m (x_ref - x_cog); 0].")
     D = checked_attribute(momentum_gain, "6x6 gain on h_ref - h.")
 
+    kernel = "momentum_pd"
+    params = (schema.matrix("P", 36), schema.matrix("D", 36),
+              schema.vector("com_ref", 3, get=lambda t, layout, state: t.held_com_ref(state)),
+              schema.vector("h_ref", 6), schema.vector("hdot_ref", 6))
+
+    def row_count(self, layout):
+        return 6
+
+    def held_com_ref(self, state) -> np.ndarray:
+        """``com_ref``, set to ``state.com`` if not set yet (hold the CoM first seen)."""
+        if self.com_ref is None:
+            self.com_ref = np.array(state.com, dtype=float)
+        return self.com_ref
+
     def __init__(self, P=None, D=None, name=None, weight=1.0):
         super().__init__(name, weight)
         self.P = np.diag([MOMENTUM_P] * 3 + [0.0] * 3) if P is None else P
@@ -69,8 +84,7 @@ class MomentumPD(Task):
         self.hdot_ref = np.zeros(6)
 
     def desired_rate(self, robot) -> np.ndarray:
-        if self.com_ref is None:
-            self.com_ref = robot.com.copy()
+        self.held_com_ref(robot)
         e = np.concatenate([robot.mass * (self.com_ref - robot.com), np.zeros(3)])
         return self.P @ e + self.D @ (self.h_ref - robot.h_G) + self.hdot_ref
 
@@ -87,6 +101,23 @@ class MomentumForce(Task):
     active contacts, an empty list = none."""
 
     contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
+    per_contact = True
+    kernel = "momentum_force"
+    params = (schema.matrix("K", 9, "contact_dim", get=lambda t, layout, state: t.gains(layout)[0]),
+              schema.vector("k", 1, "contact_dim", get=lambda t, layout, state: t.gains(layout)[1]))
+
+    def row_count(self, layout):
+        return 6
+
+    def gains(self, layout) -> tuple[np.ndarray, np.ndarray]:
+        """(K, k), checked against the layout's contacts."""
+        n = layout.count("contact_dim")
+        if self.K is None or self.k is None:
+            raise ValueError(f"{self.name}: gains K and k are not set")
+        if self.K.shape != (n, 9) or self.k.shape != (n,):
+            raise ValueError(f"{self.name}: K must be ({n}, 9) and k ({n},) for contacts "
+                             f"{list(layout.contacts)}; got {self.K.shape} and {self.k.shape}")
+        return self.K, self.k
 
     def __init__(self, K=None, k=None, name=None, weight=1.0, contacts=None):
         super().__init__(name, weight)

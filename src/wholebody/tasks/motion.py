@@ -7,6 +7,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
+from . import schema
 from .base import (Task, TaskRows, check_gain, checked_attribute, choice_rule, gain_rule,
                    pd_acceleration)
 
@@ -25,6 +26,26 @@ class CoMTask(Task):
     kp = checked_attribute(gain_rule(size=3), _GAINS_DOC)
     kd = checked_attribute(gain_rule(size=3), _GAINS_DOC)
 
+    kernel = "com"
+    params = (schema.vector("position", 3, get=lambda t, layout, state: t.held_position(state)),
+              schema.vector("velocity", 3), schema.vector("acceleration", 3),
+              schema.diagonal("kp", 3), schema.diagonal("kd", 3))
+
+    def selection(self, robot):
+        return {"rows": list(self.rows_idx)}
+
+    def layout_key(self):
+        return tuple(self.rows_idx)
+
+    def row_count(self, layout):
+        return len(self.rows_idx)
+
+    def held_position(self, state) -> np.ndarray:
+        """``position``, set to ``state.com`` if not set yet (hold the CoM first seen)."""
+        if self.position is None:
+            self.position = np.array(state.com, dtype=float)
+        return self.position
+
     def __init__(self, kp=100.0, kd=20.0, name=None, weight=1.0, axes: str = "xyz"):
         super().__init__(name, weight)
         self.kp, self.kd = kp, kd
@@ -38,8 +59,7 @@ class CoMTask(Task):
         self.acceleration = np.zeros(3)
 
     def rows(self, robot, variables):
-        if self.position is None:
-            self.position = robot.com.copy()
+        self.held_position(robot)
         a = pd_acceleration(self.kp, self.kd, self.position - robot.com,
                             self.velocity - robot.vcom, self.acceleration)
         i = self.rows_idx
@@ -59,6 +79,32 @@ class FrameTask(Task):
     kd = checked_attribute(gain_rule(size=6), _GAINS_DOC)
     mask = checked_attribute(choice_rule(tuple(MASKS)), "'6d', 'position' or 'orientation'.")
 
+    kernel = "frame"
+    params = (schema.vector("position", 3, get=lambda t, layout, state: t.held_pose(state)[0]),
+              schema.matrix("rotation", 9, get=lambda t, layout, state: t.held_pose(state)[1]),
+              schema.vector("velocity", 6), schema.vector("acceleration", 6),
+              schema.diagonal("kp", 6), schema.diagonal("kd", 6))
+
+    def selection(self, robot):
+        return {"rows": list(range(6)[self.MASKS[self.mask]]),
+                "frame": [robot.frame_id(self.frame, f"task '{self.name}'.frame")]}
+
+    def layout_key(self):
+        return (self.frame, self.mask)
+
+    def row_count(self, layout):
+        return len(range(6)[self.MASKS[self.mask]])
+
+    def held_pose(self, state) -> tuple[np.ndarray, np.ndarray]:
+        """(position, rotation), each set where ``state`` sees the frame if not set yet."""
+        if self.position is None or self.rotation is None:
+            pos, rot = state.frame_placement(self.frame)
+            if self.position is None:
+                self.position = pos
+            if self.rotation is None:
+                self.rotation = rot
+        return self.position, self.rotation
+
     def __init__(self, frame: str, kp=100.0, kd=20.0, name=None, weight=1.0, mask: str = "6d"):
         super().__init__(name or f"frame {frame}", weight)
         self.frame, self.kp, self.kd, self.mask = frame, kp, kd, mask
@@ -69,10 +115,7 @@ class FrameTask(Task):
 
     def rows(self, robot, variables):
         pos, rot = robot.frame_placement(self.frame)
-        if self.position is None:
-            self.position = pos
-        if self.rotation is None:
-            self.rotation = rot
+        self.held_pose(robot)
         error = np.concatenate([self.position - pos, pin.log3(self.rotation @ rot.T)])
         vel = robot.frame_velocity(self.frame)
         a = pd_acceleration(self.kp, self.kd, error, self.velocity - vel, self.acceleration)
@@ -93,6 +136,27 @@ class PostureTask(Task):
     kd = checked_attribute(gain_rule(), _GAINS_DOC)
     base_kp = checked_attribute(gain_rule(scalar_only=True), "Base stiffness (1/s^2), >= 0.")
     base_kd = checked_attribute(gain_rule(scalar_only=True), "Base damping (1/s), >= 0.")
+
+    kernel = "posture"
+    params = (schema.vector("q_ref", 1, "nq", get=lambda t, layout, state: t.reference(layout.robot)),
+              schema.diagonal("kp", 1, "na"), schema.diagonal("kd", 1, "na"),
+              schema.diagonal("base_kp", 6), schema.diagonal("base_kd", 6))
+
+    def selection(self, robot):
+        return {"with_base": [int(self.has_base())]}
+
+    def layout_key(self):
+        return (self.has_base(),)
+
+    def row_count(self, layout):
+        return layout.robot.nv if self.has_base() else layout.robot.na
+
+    def has_base(self) -> bool:
+        """True when the floating base has rows too (``base_kp`` or ``base_kd`` > 0)."""
+        return bool(self.base_kp or self.base_kd)
+
+    def reference(self, robot) -> np.ndarray:
+        return robot.q_ref if self.q_ref is None else self.q_ref
 
     def __init__(self, kp=50.0, kd=10.0, name=None, weight=1.0, q_ref=None,
                  base_kp: float = 0.0, base_kd: float = 0.0):
@@ -130,6 +194,29 @@ class JointTrajectoryTask(Task):
 
     kp = checked_attribute(_joint_gain, _GAINS_DOC)
     kd = checked_attribute(_joint_gain, _GAINS_DOC)
+
+    kernel = "joint_trajectory"
+    params = (schema.vector("position", 1, "rows", get=lambda t, layout, state: t.held_position(state)),
+              schema.vector("velocity", 1, "rows"), schema.vector("acceleration", 1, "rows"),
+              schema.diagonal("kp", 1, "rows"), schema.diagonal("kd", 1, "rows"))
+
+    def selection(self, robot):
+        missing = [j for j in self.joints if j not in robot.joint_names]
+        if missing:
+            raise ValueError(f"joints: unknown joints {missing}")
+        return {"rows": [robot.joint_names.index(j) for j in self.joints]}
+
+    def layout_key(self):
+        return self.joints
+
+    def row_count(self, layout):
+        return len(self.joints)
+
+    def held_position(self, state) -> np.ndarray:
+        """``position``, set where ``state`` sees the joints if not set yet."""
+        if self.position is None:
+            self.position = state.joint_positions(self.joints)
+        return self.position
 
     def __init__(self, joints, kp=100.0, kd=20.0, name=None, weight=1.0):
         if isinstance(joints, str) or not all(isinstance(j, str) for j in joints) or not joints:

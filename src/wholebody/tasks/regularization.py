@@ -10,11 +10,17 @@ import numpy as np
 from ..robot import FREE_FLYER_NV
 from .base import (Task, TaskRows, checked_attribute, contact_list, contact_subset, normal_map,
                    scalar_rule, vector_rule)
+from . import schema
 from .contact import WORLD_UP, tangent_rows
 
 
 class AccelerationRegularizer(Task):
     """q̈ ≈ 0 (all nv rows, base included)."""
+
+    kernel = "acceleration_regularizer"
+
+    def row_count(self, layout):
+        return layout.robot.nv
 
     def rows(self, robot, variables):
         return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None, target=np.zeros(robot.nv))
@@ -25,6 +31,8 @@ class AccelerationTarget(AccelerationRegularizer):
     posture regulariser: 0 on the base, a PD toward the posture on the joints)."""
 
     target = checked_attribute(vector_rule(), "Accelerations (nv,), finite.")
+    kernel = "acceleration_target"
+    params = (schema.vector("target", 1, "nv"),)
 
     def __init__(self, target, name=None, weight=1.0):
         super().__init__(name, weight)

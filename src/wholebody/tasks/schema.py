@@ -1,0 +1,204 @@
+"""What a task hands to its compiled kernel, declared once on the task class.
+
+A task class with a compiled counterpart names its kernel (``kernel = "com"``) and declares its
+parameters as a typed schema (``params``): each :class:`Param` has a name, a size in the robot's
+or the task's own units (:class:`Size`) and a form (a vector, a diagonal gain that a scalar fills,
+a rotation, a matrix). From the schema the native cycle (:mod:`wholebody.cycle`) derives where each
+parameter goes in the flat parameter array and sends that layout to C++ by name; the kernel
+registered under the same name (src/wholebody/native/hierarchy_cycle.cpp) checks it receives
+exactly the parameters and sizes it expects. Nobody writes an offset by hand.
+
+Besides its parameters a kernel gets the task's *selection*: named lists of integers fixed for a
+layout (the active contacts it applies to, the CoM axes or frame rows it keeps, a frame's index,
+a flag such as the posture's base rows), from :meth:`KernelTask.selection`. The number of rows is
+:meth:`KernelTask.row_count` (the kernel counts them too; the compiled program checks they agree).
+
+The values come from the task object every cycle, through :meth:`Param.value` (by default the
+attribute of the same name): a controller keeps changing them on the task as before.
+"""
+
+from __future__ import annotations
+
+import operator
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol, Sequence
+
+import numpy as np
+
+#: what a :class:`Size` may count: a fixed number, the robot's nq / na / nv, the task's contacts,
+#: the sum of their wrench dimensions, or the entries of its ``rows`` selection
+UNITS = ("", "nq", "na", "nv", "contact", "contact_dim", "rows")
+#: how a value becomes the parameter's entries: ``vector`` as is (a scalar fills every entry),
+#: ``diagonal`` a gain given as a number or one value per entry (a matrix is refused),
+#: ``matrix`` a full matrix (row-major), ``flag`` a bool as 0/1
+FORMS = ("vector", "diagonal", "matrix", "flag")
+
+
+@dataclass(frozen=True)
+class Size:
+    """``k`` entries per ``per`` (:data:`UNITS`; "" = exactly ``k``)."""
+
+    k: int = 1
+    per: str = ""
+
+    def __post_init__(self):
+        if self.per not in UNITS:
+            raise ValueError(f"Size.per: expected one of {UNITS}, got {self.per!r}")
+
+    def resolve(self, layout: "LayoutContext") -> int:
+        return self.k * layout.count(self.per)
+
+
+class LayoutContext:
+    """What sizes and selections are resolved against: the robot, the active contacts a task
+    applies to (in lambda order) and the task's own ``rows`` selection."""
+
+    def __init__(self, robot, contacts: Sequence[str] = (), rows: Sequence[int] = ()):
+        self.robot, self.contacts, self.rows = robot, tuple(contacts), tuple(rows)
+
+    def count(self, unit: str) -> int:
+        robot = self.robot
+        return {"": 1, "nq": robot.nq, "na": robot.na, "nv": robot.nv,
+                "contact": len(self.contacts), "rows": len(self.rows),
+                "contact_dim": sum(robot.contact(n).dim for n in self.contacts)}[unit]
+
+
+class CycleState(Protocol):
+    """The state a parameter value may read (first-use references: hold where first seen):
+    :class:`wholebody.cycle.HierarchyCycle` provides it."""
+
+    com: np.ndarray
+
+    def frame_placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]: ...
+    def contact_frame_position(self, contact: str) -> np.ndarray: ...
+    def joint_positions(self, joints: Sequence[str]) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of a task's kernel: ``name`` (the kernel looks it up by this name),
+    ``size``, ``form`` (:data:`FORMS`) and ``get`` (task, layout, state) -> value (default: the
+    task's attribute ``name``)."""
+
+    name: str
+    size: Size
+    form: str = "vector"
+    get: Callable[[Any, LayoutContext, CycleState], Any] | None = None
+
+    def __post_init__(self):
+        if self.form not in FORMS:
+            raise ValueError(f"Param.form: expected one of {FORMS}, got {self.form!r}")
+
+    def value(self, task, layout: LayoutContext, state: CycleState):
+        return getattr(task, self.name) if self.get is None else self.get(task, layout, state)
+
+    def writer(self, task, view: np.ndarray, layout: LayoutContext,
+               state: CycleState) -> Callable[[], None]:
+        """A function that writes the task's current value into ``view`` (this parameter's
+        entries), made once per program so that a cycle pays one call per parameter. A value of
+        another shape is a ValueError naming the task's field and the forms the kernel takes
+        (a matrix for a ``diagonal`` gain among them: it cannot broadcast into the entries)."""
+        name, get, form = self.name, self.get, self.form
+        if form == "flag":
+            def write():
+                view[0] = bool(self.value(task, layout, state))
+            return write
+
+        def refuse(value):
+            raise ValueError(f"task '{task.name}': field '{name}' has shape {np.shape(value)}; "
+                             f"the native cycle takes {'a scalar or ' if form != 'matrix' else ''}"
+                             f"{view.shape[0]} values (use engine='python' for other forms)")
+        # one closure per case, without further calls in the common one (a cycle packs every
+        # parameter of every task)
+        if form == "matrix":
+            def write():
+                value = self.value(task, layout, state)
+                try:
+                    view[:] = np.ravel(value)
+                except (ValueError, TypeError):
+                    refuse(value)
+        elif get is None:
+            def write():
+                try:
+                    view[:] = getattr(task, name)
+                except (ValueError, TypeError):
+                    refuse(getattr(task, name))
+        else:
+            def write():
+                value = get(task, layout, state)
+                try:
+                    view[:] = value
+                except (ValueError, TypeError):
+                    refuse(value)
+        return write
+
+
+def plain_scalar(param: Param) -> bool:
+    """A one-entry vector read straight from the task's attribute (packed in one block)."""
+    return param.form == "vector" and param.get is None and param.size == Size(1)
+
+
+def scalars_writer(task, params: Sequence[Param], view: np.ndarray, layout: LayoutContext,
+                   state: CycleState) -> Callable[[], None]:
+    """One writer for a task's :func:`plain_scalar` parameters, adjacent in ``view`` in this
+    order (one call a cycle for all of them; a bad value is named by its own writer)."""
+    read = operator.attrgetter(*(p.name for p in params))
+    one = len(params) == 1
+
+    def write():
+        try:
+            view[:] = read(task)
+        except (ValueError, TypeError):
+            for i, param in enumerate(params):
+                param.writer(task, view[i:i + 1], layout, state)()
+            raise
+    return write if not one else params[0].writer(task, view, layout, state)
+
+
+def scalar(name: str, get=None) -> Param:
+    return Param(name, Size(1), "vector", get)
+
+
+def vector(name: str, k: int = 1, per: str = "", get=None) -> Param:
+    return Param(name, Size(k, per), "vector", get)
+
+
+def diagonal(name: str, k: int = 1, per: str = "", get=None) -> Param:
+    return Param(name, Size(k, per), "diagonal", get)
+
+
+def matrix(name: str, k: int, per: str = "", get=None) -> Param:
+    return Param(name, Size(k, per), "matrix", get)
+
+
+def flag(name: str, get=None) -> Param:
+    return Param(name, Size(1), "flag", get)
+
+
+class KernelTask:
+    """The compiled-kernel side of a task class (mixed into :class:`~wholebody.tasks.base.Task`).
+
+    ``kernel``: the name of the compiled kernel (None: rows from Python only); ``params``: its
+    schema; ``per_contact``: the task applies to a subset of the active contacts (its
+    ``contacts`` attribute). A subclass that changes the rows must set ``kernel = None`` (or its
+    own kernel): only the class that declares ``kernel`` runs it."""
+
+    kernel: str | None = None
+    params: tuple[Param, ...] = ()
+    per_contact: bool = False
+
+    @classmethod
+    def has_kernel(cls) -> bool:
+        return cls.__dict__.get("kernel") is not None
+
+    def selection(self, robot) -> dict[str, list[int]]:
+        """Named integer lists fixed for a layout (CoM axes, frame rows, joint indices, flags);
+        ``rows`` also sizes parameters counted per row."""
+        return {}
+
+    def layout_key(self) -> tuple:
+        """What the row layout depends on besides the active contacts (hashable)."""
+        return ()
+
+    def row_count(self, layout: LayoutContext) -> int:  # pragma: no cover - per class
+        raise NotImplementedError
