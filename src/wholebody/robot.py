@@ -23,6 +23,8 @@ import numpy as np
 import pinocchio as pin
 
 from .robots.description import ContactSpec, DescriptionError, RobotDescription
+from .robots.mjcf import KEYFRAME_PREFIX
+from .robots.model_file import load_model_file, model_armature
 from .robots.torque_limits import TorqueProfile
 
 log = logging.getLogger(__name__)
@@ -171,22 +173,12 @@ class Robot:
     """
 
     def __init__(self, description: RobotDescription):
-        from .robots.locate import resolve_model_path
-
         self.description = description
         self.name = description.name
         where = f"robot '{self.name}'"
-        urdf = resolve_model_path(description.urdf, description.base_dir)
-        try:
-            if description.inertia_overrides:
-                full = pin.buildModelFromXML(
-                    urdf_with_inertias(urdf, description.inertia_overrides, where),
-                    pin.JointModelFreeFlyer())
-            else:
-                full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
-        except ValueError as exc:  # not a URDF (e.g. an SDF or MJCF file), or a malformed one
-            raise DescriptionError(f"{where}: field 'urdf' = '{description.urdf}': {exc} (only URDF "
-                                   f"files are read)") from None
+        source = load_model_file(description, where)
+        full = source.model
+        self.source = source
         q_posture = self.full_posture(full, description)
         if description.locked_joints:
             joints = _model_joint_names(full)
@@ -205,9 +197,9 @@ class Robot:
         self._check_joint_types()
         if self.na == 0:
             raise DescriptionError(f"{where}: the model has no joints besides the floating base "
-                                   f"(urdf = '{description.urdf}'): not a legged robot")
+                                   f"(model = '{description.urdf}'): not a legged robot")
         check_inertias(model, where)
-        self._set_armature(description.armature)
+        self._set_armature(description.armature, source)
         self.contacts: tuple[Contact, ...] = tuple(
             _resolve_contact(model, spec, i, where) for i, spec in enumerate(description.contacts))
         self.data: pin.Data = model.createData()
@@ -266,7 +258,14 @@ class Robot:
         """The posture of ``d`` as a configuration of the unreduced model ``full`` (its URDF, locked
         joints included): the SRDF group state or the joint table (other joints at 0), then the
         ``posture_overrides``."""
-        if isinstance(d.posture, str):
+        if isinstance(d.posture, str) and d.posture.startswith(KEYFRAME_PREFIX):
+            if d.posture not in full.referenceConfigurations:
+                have = [k[len(KEYFRAME_PREFIX):] for k in full.referenceConfigurations
+                        if k.startswith(KEYFRAME_PREFIX)]
+                raise DescriptionError(f"robot '{d.name}': field 'posture' = '{d.posture}': the "
+                                       f"model file has no such keyframe; keyframes: {have} "
+                                       f"(keyframes are read from MJCF files only)")
+        elif isinstance(d.posture, str):
             from .robots.locate import resolve_model_path
 
             srdf = resolve_model_path(d.srdf, d.base_dir)  # type: ignore[arg-type]
@@ -275,6 +274,7 @@ class Robot:
                 raise DescriptionError(f"robot '{d.name}': field 'posture' = '{d.posture}' is not "
                                        f"a group state of {srdf.name}; have "
                                        f"{list(full.referenceConfigurations)}")
+        if isinstance(d.posture, str):
             q = np.array(full.referenceConfigurations[d.posture], dtype=float)
             Robot._check_group_state(full, q, d)
         else:
@@ -297,8 +297,8 @@ class Robot:
                                f"{float(hi):g}])")
         if outside:
             raise DescriptionError(
-                f"robot '{d.name}': field 'posture' = '{d.posture}' puts joints outside their URDF "
-                f"limits: {', '.join(outside)}; set posture_overrides for them to angles inside")
+                f"robot '{d.name}': field 'posture' = '{d.posture}' puts joints outside their "
+                f"limits in the model file: {', '.join(outside)}; set posture_overrides for them to angles inside")
 
     @staticmethod
     def _set_joint_angles(full: pin.Model, q: np.ndarray, table, field: str,
@@ -358,19 +358,19 @@ class Robot:
                                        f"({j.shortname()}) is not a 1-DoF revolute/prismatic "
                                        f"joint (lock it with 'locked_joints')")
 
-    def _set_armature(self, armature) -> None:
+    def _set_armature(self, armature, source) -> None:
+        """The joint-space armature: the model file's (MJCF ``armature``; a URDF has none),
+        replaced by the description's ``armature`` (scalar: all joints; table: the joints named)."""
         arm = np.zeros(self.nv)
         if isinstance(armature, dict):
-            for joint, value in armature.items():
+            for joint in armature:
                 if joint not in self.joint_names:
                     locked = joint in self.description.locked_joints
                     raise DescriptionError(
                         f"robot '{self.name}': armature.{joint}: "
                         + ("the joint is locked" if locked else "no such actuated joint")
                         + f"; actuated joints: {list(self.joint_names)}")
-                arm[FREE_FLYER_NV + self.joint_names.index(joint)] = value
-        else:
-            arm[FREE_FLYER_NV:] = float(armature)
+        arm[FREE_FLYER_NV:] = model_armature(source, self.joint_names, armature)
         if not (np.all(np.isfinite(arm)) and np.all(arm >= 0)):  # RobotDescription checked it
             raise DescriptionError(f"robot '{self.name}': armature: expected finite numbers >= 0, "
                                    f"got {armature!r}")
