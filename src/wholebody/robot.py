@@ -260,8 +260,8 @@ class Robot:
         ``posture_overrides``."""
         if isinstance(d.posture, str) and d.posture.startswith(KEYFRAME_PREFIX):
             if d.posture not in full.referenceConfigurations:
-                have = [k[len(KEYFRAME_PREFIX):] for k in full.referenceConfigurations
-                        if k.startswith(KEYFRAME_PREFIX)]
+                keys = [getattr(k, "key", lambda k=k: k)() for k in full.referenceConfigurations]
+                have = [k[len(KEYFRAME_PREFIX):] for k in keys if k.startswith(KEYFRAME_PREFIX)]
                 raise DescriptionError(f"robot '{d.name}': field 'posture' = '{d.posture}': the "
                                        f"model file has no such keyframe; keyframes: {have} "
                                        f"(keyframes are read from MJCF files only)")
