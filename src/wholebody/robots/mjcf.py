@@ -179,8 +179,10 @@ def build_model(m, where: str = "robot") -> MjcfModel:
     base = _floating_body(m, where)
     efforts, sources = _effort_limits(m)
     model = pin.Model()
-    root = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(),
-                          m.body(base).name or "root_joint")
+    free = [j for j in range(m.njnt) if m.jnt_bodyid[j] == base
+            and int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)]
+    root_name = (m.joint(free[0]).name if free else "") or "root_joint"
+    root = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), root_name)
     model.addJointFrame(root, 0)
     # each MuJoCo body: (Pinocchio joint it moves with, its placement in that joint's frame, the
     # frame id of its BODY frame)

@@ -43,6 +43,7 @@ class ModelSource:
     own_floating_joint: bool = False
     armature: dict[str, float] = field(default_factory=dict)  # the file's, joint -> kg m^2
     effort_sources: dict[str, str] = field(default_factory=dict)
+    mujoco_model: object = None  # MJCF: the compiled mujoco.MjModel (its geoms, for init-robot)
 
 
 @contextmanager
@@ -132,7 +133,7 @@ def _load_mjcf(path: Path, d: RobotDescription, where: str) -> ModelSource:
         model.referenceConfigurations[KEYFRAME_PREFIX + key] = q
     own = any(int(t) == int(mujoco.mjtJoint.mjJNT_FREE) for t in m.jnt_type)
     return ModelSource(model, path, "mjcf", own_floating_joint=own, armature=built.armature,
-                       effort_sources=built.effort_sources)
+                       effort_sources=built.effort_sources, mujoco_model=m)
 
 
 def load_model_file(d: RobotDescription, where: str) -> ModelSource:
