@@ -336,3 +336,64 @@ def test_urdf_parser_noise_is_collected(tmp_path, caplog):
         with captured_stderr("robot 'x': URDF x.urdf"):
             os.write(2, b"Error: unknown element\nline 2\n")
     assert any("unknown element" in r.getMessage() for r in caplog.records)
+
+
+# ------------------------------------------------------------------ init-robot
+def test_init_robot_drafts_a_quadruped_from_a_urdf(tmp_path):
+    """The quadruped URDF: four point feet at the foot links with the collision spheres' radius,
+    a computed posture with the feet under the hips (legs bent, inside the limits) that stands on
+    all four (check-robot finds no error)."""
+    from wholebody.robots.check import check_robot
+    from wholebody.robots.draft import draft_description
+
+    urdf = tmp_path / "quad.urdf"
+    urdf.write_text(quadruped_urdf())
+    draft = draft_description(urdf)
+    contacts = {c["frame"]: c for c in draft.data["contacts"]}
+    assert set(contacts) == {f"{leg}_foot" for leg in LEGS}
+    assert all(c["type"] == "point" and c["radius"] == 0.02 and "offset" not in c
+               for c in contacts.values())
+    assert isinstance(draft.data["posture"], dict)
+    assert any("posture: computed" in n for n in draft.notes)
+    path = tmp_path / "quad.toml"
+    path.write_text(draft.text)
+    report = check_robot(str(path))
+    assert report.ok, [f.message for f in report.findings]
+    robot = wb.load_robot(str(path))
+    for c in robot.contacts:  # each foot below its leg's first joint
+        hip = robot.data.oMi[robot.model.getJointId(c.frame[:2] + "_haa")].translation
+        foot = robot.contact_point(c.name)
+        assert np.linalg.norm(foot[:2] - hip[:2]) < 0.05
+    assert wb.load_robot(str(urdf)).na == 12  # a model file loads through the same draft
+
+
+def test_init_robot_drafts_a_biped_from_an_mjcf(biped_xml, tmp_path):
+    """The biped MJCF: two soles from the box geoms (half sizes and bottom-face centres in the
+    foot bodies' frames), the keyframe as the posture."""
+    from wholebody.robots.draft import draft_description
+
+    draft = draft_description(biped_xml)
+    assert draft.data["posture"] == "keyframe:crouch"
+    soles = {c["frame"]: c for c in draft.data["contacts"]}
+    assert set(soles) == {"l_foot", "r_foot"}
+    for c in soles.values():
+        assert c["type"] == "rectangle" and c["half_size"] == [0.1, 0.05]
+        assert c["offset"] == pytest.approx([0.02, 0.0, -0.06])
+        assert c["name"] in ("l_sole", "r_sole")  # the geoms' own names
+    path = tmp_path / "biped.toml"
+    path.write_text(draft.text)
+    assert wb.load_robot(str(path)).na == 8
+
+
+def test_init_robot_cli(tmp_path, biped_xml, capsys):
+    from wholebody.cli import main
+
+    out = tmp_path / "b.toml"
+    assert main(["init-robot", str(biped_xml), "--out", str(out)]) == 0
+    assert "check: posture" in capsys.readouterr().out and out.is_file()
+    assert main(["init-robot", str(biped_xml), "--out", str(out)]) == 2  # exists: --force
+    assert main(["init-robot", str(tmp_path / "none.xml")]) == 2
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<mujoco><worldbody><body><joint type='nope'/></body></worldbody></mujoco>")
+    assert main(["init-robot", str(bad)]) == 2
+    assert "does not compile" in capsys.readouterr().err

@@ -335,12 +335,15 @@ def _computed_posture(model: pin.Model, feet: list[Foot]) -> dict[str, float]:
     data = model.createData()
     q = _seed(model)
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    pin.framesForwardKinematics(model, data, _neutral(model))
+    hips = {id(f): data.oMi[f.chain[0]].translation.copy() for f in feet}
+    # one sole level for every foot: the hips' mean height less a fraction of the shortest leg
+    level = (float(np.mean([h[2] for h in hips.values()]))
+             - LEG_HEIGHT_FRACTION[feet[0].type] * min(f.length for f in feet))
     for foot in feet:
         fid = model.getFrameId(foot.frame, pin.FrameType.BODY)
         offset = pin.SE3(np.eye(3), np.array(foot.offset))
-        pin.framesForwardKinematics(model, data, _neutral(model))
-        hip = data.oMi[foot.chain[0]].translation.copy()
-        target = hip - np.array([0, 0, LEG_HEIGHT_FRACTION[foot.type] * foot.length])
+        target = np.array([*hips[id(foot)][:2], level])
         idx_v = [model.joints[j].idx_v for j in foot.chain]
         flat = foot.type == "rectangle"
         for _ in range(200):
@@ -358,7 +361,7 @@ def _computed_posture(model: pin.Model, feet: list[Foot]) -> dict[str, float]:
             for k, j in enumerate(foot.chain):
                 i = model.joints[j].idx_q
                 q[i] = np.clip(q[i] + 0.5 * step[k], lo[i], hi[i])
-    return {model.names[j]: round(float(q[model.joints[j].idx_q]), 4)
+    return {model.names[j]: round(float(q[model.joints[j].idx_q]), 6)
             for j in range(2, model.njoints) if model.joints[j].nq == 1}
 
 
