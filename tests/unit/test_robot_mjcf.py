@@ -397,3 +397,73 @@ def test_init_robot_cli(tmp_path, biped_xml, capsys):
     bad.write_text("<mujoco><worldbody><body><joint type='nope'/></body></worldbody></mujoco>")
     assert main(["init-robot", str(bad)]) == 2
     assert "does not compile" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ continuous joints
+def _continuous_quadruped(tmp_path):
+    """The quadruped with its knees as continuous joints (unbounded revolute: nq = 2, nv = 1)."""
+    text = quadruped_urdf()
+    for leg in LEGS:
+        start = text.index(f'<joint name="{leg}_kfe" type="revolute">')
+        end = text.index("</joint>", start)
+        joint = text[start:end].replace('type="revolute"', 'type="continuous"').replace(
+            'lower="-2.5" upper="-0.2" ', "")
+        text = text[:start] + joint + text[end:]
+    path = tmp_path / "wheels.urdf"
+    path.write_text(text)
+    return {"name": "wheels", "model": str(path),
+            "posture": {**{f"{leg}_kfe": -1.2 for leg in LEGS}, **{f"{leg}_hfe": 0.6
+                                                                 for leg in LEGS}},
+            "contacts": [{"name": leg, "frame": f"{leg}_foot", "type": "point", "radius": 0.02}
+                         for leg in LEGS]}
+
+
+def test_continuous_joints_have_angles(tmp_path, rng):
+    """Continuous joints load (not refused, not converted: (cos, sin) coordinates); their angle
+    is atan2(sin, cos), they have no limits, the joint error is the shortest signed angle
+    (pin.difference), and the angles' time derivative along a motion is the joint velocity
+    (finite differences)."""
+    robot = wb.load_robot(_continuous_quadruped(tmp_path))
+    knees = [robot.joint_names.index(f"{leg}_kfe") for leg in LEGS]
+    assert robot.nq == 7 + 12 + 4 and robot.na == 12 and not robot.angles_are_coordinates
+    assert np.all(np.isinf(robot.q_min[knees])) and np.all(np.isinf(robot.q_max[knees]))
+    angles = robot.joint_angles(robot.q_ref)
+    np.testing.assert_allclose(angles[knees], -1.2, atol=1e-12)
+    q, v = robot.random_state(rng)
+    np.testing.assert_allclose(robot.joint_angles(robot.with_joint_angles(q, angles)), angles,
+                               atol=1e-12)
+    # the error wraps: from 3.1 to -3.1 is +0.083 rad, not -6.2
+    a, b = angles.copy(), angles.copy()
+    a[knees], b[knees] = 3.1, -3.1
+    err = robot.joint_error(robot.with_joint_angles(q, a), robot.with_joint_angles(q, b))
+    np.testing.assert_allclose(err[knees], 2 * np.pi - 6.2, atol=1e-12)
+    dt = 1e-7
+    q2 = pin.integrate(robot.model, q, v * dt)
+    rate = (robot.joint_angles(q2) - robot.joint_angles(q)) / dt
+    np.testing.assert_allclose(rate, v[6:], atol=1e-5)
+    lo, hi = robot.torque_bounds(q)
+    assert np.all(hi == 40.0 * (np.arange(12) % 3 == 2) + 30.0 * (np.arange(12) % 3 != 2))
+
+
+def test_continuous_joints_are_refused_for_simulation_and_lock(tmp_path):
+    """Until the controllers and the twin run them, a simulation refuses continuous joints with
+    the way out; locked, the robot simulates."""
+    from wholebody.robots.check import load_fit_robot
+    from wholebody.sim.twin import build_twin
+
+    data = _continuous_quadruped(tmp_path)
+    robot = wb.load_robot(data)
+    with pytest.raises(ValueError, match="continuous joints yet.*locked_joints"):
+        build_twin(robot)
+    path = tmp_path / "wheels.toml"
+    path.write_text(f'name = "wheels"\nmodel = "{data["model"]}"\n[posture]\n'
+                    + "".join(f"{k} = {v}\n" for k, v in data["posture"].items())
+                    + "".join(f'[[contacts]]\nname = "{leg}"\nframe = "{leg}_foot"\n'
+                              f'type = "point"\nradius = 0.02\n' for leg in LEGS))
+    with pytest.raises(ValueError, match=r"continuous joint\(s\).*locked_joints"):
+        load_fit_robot(str(path))
+    locked = wb.load_robot({**data, "locked_joints": [f"{leg}_kfe" for leg in LEGS],
+                            "posture": {f"{leg}_hfe": 0.6 for leg in LEGS}
+                            | {f"{leg}_kfe": -1.2 for leg in LEGS}})
+    assert locked.angles_are_coordinates and locked.na == 8
+    build_twin(locked)
