@@ -342,7 +342,7 @@ def test_urdf_parser_noise_is_collected(tmp_path, caplog):
 def test_init_robot_drafts_a_quadruped_from_a_urdf(tmp_path):
     """The quadruped URDF: four point feet at the foot links with the collision spheres' radius,
     a computed posture with the feet under the hips (legs bent, inside the limits) that stands on
-    all four (check-robot finds no error)."""
+    all four (check-robot finds no error); the URDF given as the robot loads the same draft."""
     from wholebody.robots.check import check_robot
     from wholebody.robots.draft import draft_description
 
@@ -360,10 +360,10 @@ def test_init_robot_drafts_a_quadruped_from_a_urdf(tmp_path):
     report = check_robot(str(path))
     assert report.ok, [f.message for f in report.findings]
     robot = wb.load_robot(str(path))
-    for c in robot.contacts:  # each foot below its leg's first joint
-        hip = robot.data.oMi[robot.model.getJointId(c.frame[:2] + "_haa")].translation
+    for c in robot.contacts:  # each foot below its leg's hip (the thigh's joint)
+        hip = robot.data.oMi[robot.model.getJointId(c.frame[:2] + "_hfe")].translation
         foot = robot.contact_point(c.name)
-        assert np.linalg.norm(foot[:2] - hip[:2]) < 0.05
+        assert np.linalg.norm(foot[:2] - hip[:2]) < 0.02
     assert wb.load_robot(str(urdf)).na == 12  # a model file loads through the same draft
 
 

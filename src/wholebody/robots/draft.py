@@ -13,10 +13,11 @@ what it guessed:
   collision geometry (a box's bottom face, the footprint of spheres at the sole's corners, a mesh's
   bounding box: MJCF only) in the frame of the body carrying it, ``offset`` at its centre;
   a URDF foot whose collision is a mesh is taken as a point at its frame with radius 0 (flagged);
-* **posture**: an MJCF keyframe (one named like "home"/"stand", else the first), or an SRDF group
-  state of an ``.srdf`` beside the URDF or in a sibling ``srdf`` folder, else a computed one: each
-  foot under its leg's first joint at :data:`LEG_HEIGHT_FRACTION` of the leg's length (sole
-  level), found by damped least squares within the joint limits from a bent seed;
+* **posture**: an MJCF keyframe inside the joint limits (one named like "home"/"stand", else the
+  first), or an SRDF group state of an ``.srdf`` beside the URDF or in a sibling ``srdf`` folder,
+  else a computed one: each foot where it is with the joints at 0 (clipped into their limits) in
+  x and y, all at one level, :data:`LEG_HEIGHT_FRACTION` of the shortest leg below the hips
+  (soles flat), found by damped least squares within the joint limits from a bent seed;
 * **torque limits**: the model file's; a joint without one gets an override placeholder to fill;
 * **armature**: the MJCF's comes with the model; a URDF has none (a line to fill is written).
 
@@ -291,8 +292,13 @@ def _posture(source: ModelSource, feet: list[Foot], notes: list[str]) -> tuple[o
     model = source.model
     keys = [getattr(k, "key", lambda k=k: k)() for k in model.referenceConfigurations]
     keyframes = [k[len(KEYFRAME_PREFIX):] for k in keys if k.startswith(KEYFRAME_PREFIX)]
-    if keyframes:
-        chosen = _preferred(keyframes)
+    inside = [k for k in keyframes if _within_limits(model, model.referenceConfigurations[
+        KEYFRAME_PREFIX + k])]
+    if keyframes and not inside:
+        notes.append(f"posture: the MJCF keyframes {keyframes} put joints outside their limits: "
+                     f"not used")
+    if inside:
+        chosen = _preferred(inside)
         notes.append(f"posture: the MJCF keyframe '{chosen}' (keyframes: {keyframes}); check "
                      f"that the robot stands in it")
         return KEYFRAME_PREFIX + chosen, None
@@ -304,9 +310,15 @@ def _posture(source: ModelSource, feet: list[Foot], notes: list[str]) -> tuple[o
                 notes.append(f"posture: the group state '{chosen}' of {srdf} (states: {states})")
                 return chosen, str(srdf)
     angles = _computed_posture(model, feet)
-    notes.append("posture: computed (no keyframe or SRDF state): each foot under its leg's first "
-                 "joint at a fraction of the leg's length; check the knees bend the right way")
+    notes.append("posture: computed (no keyframe or SRDF state): the feet where straight legs put "
+                 "them, legs bent to a common height; check the knees bend the right way")
     return angles, None
+
+
+def _within_limits(model: pin.Model, q: np.ndarray) -> bool:
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    return all(lo[j.idx_q] - 1e-9 <= q[j.idx_q] <= hi[j.idx_q] + 1e-9
+               for j in model.joints[2:] if j.nq == 1)
 
 
 def _preferred(names: list[str]) -> str:
@@ -337,13 +349,16 @@ def _computed_posture(model: pin.Model, feet: list[Foot]) -> dict[str, float]:
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     pin.framesForwardKinematics(model, data, _neutral(model))
     hips = {id(f): data.oMi[f.chain[0]].translation.copy() for f in feet}
+    # where each foot is with the legs at neutral (hanging straight below their hips)
+    below = {id(f): (data.oMf[model.getFrameId(f.frame, pin.FrameType.BODY)]
+                     * pin.SE3(np.eye(3), np.array(f.offset))).translation.copy() for f in feet}
     # one sole level for every foot: the hips' mean height less a fraction of the shortest leg
     level = (float(np.mean([h[2] for h in hips.values()]))
              - LEG_HEIGHT_FRACTION[feet[0].type] * min(f.length for f in feet))
     for foot in feet:
         fid = model.getFrameId(foot.frame, pin.FrameType.BODY)
         offset = pin.SE3(np.eye(3), np.array(foot.offset))
-        target = np.array([*hips[id(foot)][:2], level])
+        target = np.array([*below[id(foot)][:2], level])
         idx_v = [model.joints[j].idx_v for j in foot.chain]
         flat = foot.type == "rectangle"
         for _ in range(200):
