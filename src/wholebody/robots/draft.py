@@ -27,8 +27,6 @@ the user to check. Nothing here is robot-specific: names only come from the mode
 
 from __future__ import annotations
 
-import logging
-import math
 import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -41,7 +39,6 @@ from .description import NAME_PATTERN, RobotDescription
 from .model_file import ModelSource, load_model_file
 from .mjcf import KEYFRAME_PREFIX
 
-log = logging.getLogger(__name__)
 
 #: a limb is a leg when its lowest point is within this fraction of the leg length of the lowest
 FOOT_BAND = 0.15
