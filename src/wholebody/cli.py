@@ -1,5 +1,5 @@
-"""Command line: ``wholebody robots | check-robot ROBOT | scenarios | run SCENARIO | sweep |
-report``.
+"""Command line: ``wholebody robots | check-robot ROBOT | init-robot MODEL | scenarios |
+run SCENARIO | sweep | report``.
 
 Exit codes: 0 success; 1 the scenario ran but did not meet its success criterion; 2 bad usage
 (unknown robot, scenario, controller or parameter; a parameter value outside its declared range;
@@ -50,6 +50,7 @@ def _cmd_robots(args) -> int:
 def _cmd_check_robot(args) -> int:
     from .robots.check import check_robot
 
+    _note_drafted(args.robot)
     report = check_robot(args.robot)
     if args.json:
         print(json.dumps(report.as_dict(), indent=2))
@@ -79,6 +80,52 @@ def _cmd_check_robot(args) -> int:
               (f"\n    fix: {finding.fix}" if finding.fix else ""))
     print(f"{report.source}: {'OK' if report.ok else 'ERRORS'}")
     return EXIT_OK if report.ok else EXIT_USAGE
+
+
+def _note_drafted(robot: str | None) -> None:
+    """Say so when ``--robot``/``check-robot`` is given a model file instead of a description."""
+    from .robots import is_model_file
+
+    if robot and is_model_file(robot):
+        print(f"note: {robot} is a model file, not a description: using the description "
+              f"`wholebody init-robot {robot}` drafts (its guesses unchecked); write it to a "
+              f"file with --out to check and edit it", file=sys.stderr)
+
+
+def _cmd_init_robot(args) -> int:
+    from .robots.description import DescriptionError
+    from .robots.draft import draft_description
+
+    model = Path(args.model)
+    if not model.is_file():
+        return _usage_error(ValueError(f"init-robot: model file not found: {model}"))
+    out = Path(args.out) if args.out else None
+    if out is not None and out.exists() and not args.force:
+        return _usage_error(ValueError(f"init-robot: --out {out} exists; pass --force to "
+                                       f"overwrite it"))
+    started = time.perf_counter()
+    try:
+        draft = draft_description(model, args.name)
+    except (DescriptionError, ValueError, OSError) as exc:
+        return _usage_error(exc)
+    if out is None:
+        print(draft.text, end="")
+    else:
+        try:
+            out.write_text(draft.text)
+        except OSError as exc:
+            return _usage_error(ValueError(f"init-robot: cannot write --out {out}: "
+                                           f"{exc.strerror or exc}"))
+    stream = sys.stderr if out is None else sys.stdout
+    print(f"drafted '{draft.data['name']}' from {model} in {time.perf_counter() - started:.1f} s"
+          + (f": wrote {out}" if out else ""), file=stream)
+    print(f"  {len(draft.data['contacts'])} contact(s): "
+          + ", ".join(f"{c['name']} ({c['type']} on {c['frame']})" for c in draft.data["contacts"]),
+          file=stream)
+    for note in draft.notes:
+        print(f"  check: {note}", file=stream)
+    print(f"  next: wholebody check-robot {out or 'FILE.toml'}", file=stream)
+    return EXIT_OK
 
 
 def _cmd_scenarios(args) -> int:
@@ -169,6 +216,7 @@ def _run(args, held: contextlib.ExitStack) -> int:
         if args.controller and args.controller not in scenario.controllers:
             raise ValueError(f"scenario '{scenario.name}' has no controller '{args.controller}'; "
                              f"controllers: {', '.join(scenario.controllers)}")
+        _note_drafted(args.robot)
         robot = load_fit_robot(args.robot or scenario.default_robot)
         params = scenario.validate(robot, overrides)
         _check_observed(args, scenario, params)
@@ -319,9 +367,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("check-robot", help="load and check a robot description: size, contacts "
                                            "and their roles, posture, limits (exit 2 on errors)")
-    p.add_argument("robot", help="preset name or path to a robot .toml")
+    p.add_argument("robot", help="preset name, path to a robot .toml, or a .urdf/.xml model file "
+                                 "(checked through the description init-robot drafts)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_check_robot)
+
+    p = sub.add_parser("init-robot", help="draft a robot description (.toml) from a URDF or MJCF "
+                                          "model file: feet, contacts, posture, limits")
+    p.add_argument("model", help="the robot's URDF or MJCF (.xml) file")
+    p.add_argument("--out", help="write the draft to this .toml file (default: print it)")
+    p.add_argument("--name", help="the robot's name (default: the file's stem)")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.set_defaults(func=_cmd_init_robot)
 
     p = sub.add_parser("scenarios", help="list the scenarios and their parameters")
     p.add_argument("--json", action="store_true", help="machine-readable output")
@@ -329,7 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("run", help="run a closed-loop scenario in the MuJoCo twin")
     p.add_argument("scenario", help="scenario name (see `wholebody scenarios`)")
-    p.add_argument("--robot", help="preset name or path to a robot .toml (default: the scenario's)")
+    p.add_argument("--robot", help="preset name, path to a robot .toml, or a .urdf/.xml model "
+                                   "file (run on the description init-robot drafts; default: "
+                                   "the scenario's robot)")
     p.add_argument("--controller", help="controller variant (default: the scenario's first)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario parameter (repeatable)")

@@ -23,6 +23,8 @@ import numpy as np
 import pinocchio as pin
 
 from .robots.description import ContactSpec, DescriptionError, RobotDescription
+from .robots.mjcf import KEYFRAME_PREFIX
+from .robots.model_file import load_model_file, model_armature
 from .robots.torque_limits import TorqueProfile
 
 log = logging.getLogger(__name__)
@@ -171,22 +173,12 @@ class Robot:
     """
 
     def __init__(self, description: RobotDescription):
-        from .robots.locate import resolve_model_path
-
         self.description = description
         self.name = description.name
         where = f"robot '{self.name}'"
-        urdf = resolve_model_path(description.urdf, description.base_dir)
-        try:
-            if description.inertia_overrides:
-                full = pin.buildModelFromXML(
-                    urdf_with_inertias(urdf, description.inertia_overrides, where),
-                    pin.JointModelFreeFlyer())
-            else:
-                full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
-        except ValueError as exc:  # not a URDF (e.g. an SDF or MJCF file), or a malformed one
-            raise DescriptionError(f"{where}: field 'urdf' = '{description.urdf}': {exc} (only URDF "
-                                   f"files are read)") from None
+        source = load_model_file(description, where)
+        full = source.model
+        self.source = source
         q_posture = self.full_posture(full, description)
         if description.locked_joints:
             joints = _model_joint_names(full)
@@ -205,9 +197,9 @@ class Robot:
         self._check_joint_types()
         if self.na == 0:
             raise DescriptionError(f"{where}: the model has no joints besides the floating base "
-                                   f"(urdf = '{description.urdf}'): not a legged robot")
+                                   f"(model = '{description.urdf}'): not a legged robot")
         check_inertias(model, where)
-        self._set_armature(description.armature)
+        self._set_armature(description.armature, source)
         self.contacts: tuple[Contact, ...] = tuple(
             _resolve_contact(model, spec, i, where) for i, spec in enumerate(description.contacts))
         self.data: pin.Data = model.createData()
@@ -237,8 +229,21 @@ class Robot:
             raise DescriptionError(f"{where}: field 'trunk_frame' = '{self.trunk_frame}' is not a "
                                    f"frame of the model")
 
-        self.q_min = model.lowerPositionLimit[FREE_FLYER_NQ:].copy()
-        self.q_max = model.upperPositionLimit[FREE_FLYER_NQ:].copy()
+        # the joints' angle coordinates: q[_angle_q] for 1-DoF joints; a continuous joint (nq = 2:
+        # cos, sin) has its angle atan2(q[_sin_q], q[_cos_q]) at index _unbounded of the angles
+        kinds = [model.joints[j] for j in range(2, model.njoints)]
+        self._unbounded = np.array([i for i, j in enumerate(kinds) if j.nq == 2], dtype=int)
+        self._bounded = np.array([i for i, j in enumerate(kinds) if j.nq == 1], dtype=int)
+        self._angle_q = np.array([j.idx_q for j in kinds if j.nq == 1], dtype=int)
+        self._cos_q = np.array([j.idx_q for j in kinds if j.nq == 2], dtype=int)
+        self._sin_q = self._cos_q + 1
+        #: True when every joint has one coordinate: the angles are q[7:] as they are
+        self.angles_are_coordinates = self._unbounded.size == 0
+        #: the joints' angle limits (na,): a continuous joint has none (-inf, inf)
+        self.q_min = np.full(self.na, -np.inf)
+        self.q_max = np.full(self.na, np.inf)
+        self.q_min[self._bounded] = model.lowerPositionLimit[self._angle_q]
+        self.q_max[self._bounded] = model.upperPositionLimit[self._angle_q]
         self.v_max = model.velocityLimit[FREE_FLYER_NV:].copy()
         self.torque_limits = TorqueProfile(self.joint_names, model.effortLimit[FREE_FLYER_NV:],
                                           description.torque_limits, where)
@@ -266,7 +271,14 @@ class Robot:
         """The posture of ``d`` as a configuration of the unreduced model ``full`` (its URDF, locked
         joints included): the SRDF group state or the joint table (other joints at 0), then the
         ``posture_overrides``."""
-        if isinstance(d.posture, str):
+        if isinstance(d.posture, str) and d.posture.startswith(KEYFRAME_PREFIX):
+            if d.posture not in full.referenceConfigurations:
+                keys = [getattr(k, "key", lambda k=k: k)() for k in full.referenceConfigurations]
+                have = [k[len(KEYFRAME_PREFIX):] for k in keys if k.startswith(KEYFRAME_PREFIX)]
+                raise DescriptionError(f"robot '{d.name}': field 'posture' = '{d.posture}': the "
+                                       f"model file has no such keyframe; keyframes: {have} "
+                                       f"(keyframes are read from MJCF files only)")
+        elif isinstance(d.posture, str):
             from .robots.locate import resolve_model_path
 
             srdf = resolve_model_path(d.srdf, d.base_dir)  # type: ignore[arg-type]
@@ -275,6 +287,7 @@ class Robot:
                 raise DescriptionError(f"robot '{d.name}': field 'posture' = '{d.posture}' is not "
                                        f"a group state of {srdf.name}; have "
                                        f"{list(full.referenceConfigurations)}")
+        if isinstance(d.posture, str):
             q = np.array(full.referenceConfigurations[d.posture], dtype=float)
             Robot._check_group_state(full, q, d)
         else:
@@ -297,8 +310,8 @@ class Robot:
                                f"{float(hi):g}])")
         if outside:
             raise DescriptionError(
-                f"robot '{d.name}': field 'posture' = '{d.posture}' puts joints outside their URDF "
-                f"limits: {', '.join(outside)}; set posture_overrides for them to angles inside")
+                f"robot '{d.name}': field 'posture' = '{d.posture}' puts joints outside their "
+                f"limits in the model file: {', '.join(outside)}; set posture_overrides for them to angles inside")
 
     @staticmethod
     def _set_joint_angles(full: pin.Model, q: np.ndarray, table, field: str,
@@ -311,6 +324,9 @@ class Robot:
                 raise DescriptionError(f"robot '{name}': field '{field}' names unknown joint "
                                        f"'{joint}'; joints of the model: {joints}")
             j = full.joints[full.getJointId(joint)]
+            if j.nq == 2 and j.nv == 1:  # a continuous joint: (cos, sin) of the angle, no limits
+                q[j.idx_q:j.idx_q + 2] = math.cos(value), math.sin(value)
+                continue
             if j.nq != 1:
                 raise DescriptionError(f"robot '{name}': {field}.{joint}: joint '{joint}' "
                                        f"({j.shortname()}) has no single angle")
@@ -353,24 +369,24 @@ class Robot:
             raise DescriptionError(f"robot '{self.name}': the root joint must be a free flyer")
         for jid in range(2, self.model.njoints):
             j = self.model.joints[jid]
-            if j.nq != 1 or j.nv != 1:
+            if j.nv != 1 or j.nq not in (1, 2):  # nq = 2: a continuous joint (cos, sin)
                 raise DescriptionError(f"robot '{self.name}': joint '{self.model.names[jid]}' "
-                                       f"({j.shortname()}) is not a 1-DoF revolute/prismatic "
-                                       f"joint (lock it with 'locked_joints')")
+                                       f"({j.shortname()}) is not a 1-DoF revolute, continuous "
+                                       f"or prismatic joint (lock it with 'locked_joints')")
 
-    def _set_armature(self, armature) -> None:
+    def _set_armature(self, armature, source) -> None:
+        """The joint-space armature: the model file's (MJCF ``armature``; a URDF has none),
+        replaced by the description's ``armature`` (scalar: all joints; table: the joints named)."""
         arm = np.zeros(self.nv)
         if isinstance(armature, dict):
-            for joint, value in armature.items():
+            for joint in armature:
                 if joint not in self.joint_names:
                     locked = joint in self.description.locked_joints
                     raise DescriptionError(
                         f"robot '{self.name}': armature.{joint}: "
                         + ("the joint is locked" if locked else "no such actuated joint")
                         + f"; actuated joints: {list(self.joint_names)}")
-                arm[FREE_FLYER_NV + self.joint_names.index(joint)] = value
-        else:
-            arm[FREE_FLYER_NV:] = float(armature)
+        arm[FREE_FLYER_NV:] = model_armature(source, self.joint_names, armature)
         if not (np.all(np.isfinite(arm)) and np.all(arm >= 0)):  # RobotDescription checked it
             raise DescriptionError(f"robot '{self.name}': armature: expected finite numbers >= 0, "
                                    f"got {armature!r}")
@@ -603,7 +619,40 @@ class Robot:
     def torque_bounds(self, q=None) -> tuple[np.ndarray, np.ndarray]:
         """(tau_min(q), tau_max(q)) for the actuated joints at ``q`` (default: the cached state)."""
         q = self.q if q is None else q
-        return self.torque_limits.bounds(q[FREE_FLYER_NQ:])
+        return self.torque_limits.bounds(self.joint_angles(q))
+
+    # ------------------------------------------------------------------ joint angles
+    def joint_angles(self, q) -> np.ndarray:
+        """The ``na`` joint angles (or slide positions) of configuration ``q``, in joint order:
+        ``q[7:]`` when every joint has one coordinate; a continuous joint's (cos, sin) pair gives
+        ``atan2(sin, cos)`` in (-pi, pi]."""
+        q = np.asarray(q, dtype=float)
+        if self.angles_are_coordinates:
+            return q[FREE_FLYER_NQ:].copy()
+        angles = np.empty(self.na)
+        angles[self._bounded] = q[self._angle_q]
+        angles[self._unbounded] = np.arctan2(q[self._sin_q], q[self._cos_q])
+        return angles
+
+    def with_joint_angles(self, q, angles) -> np.ndarray:
+        """A copy of configuration ``q`` with the joints at ``angles`` (``na``): the inverse of
+        :meth:`joint_angles` (a continuous joint gets (cos, sin) of its angle)."""
+        q = np.array(q, dtype=float)
+        angles = np.asarray(angles, dtype=float)
+        q[self._angle_q] = angles[self._bounded]
+        q[self._cos_q] = np.cos(angles[self._unbounded])
+        q[self._sin_q] = np.sin(angles[self._unbounded])
+        return q
+
+    def joint_error(self, q, q_ref) -> np.ndarray:
+        """``q_ref``'s joints relative to ``q``'s, in velocity coordinates (``na``):
+        ``pin.difference(q, q_ref)[6:]`` (``q_ref[7:] - q[7:]`` for one-coordinate joints; the
+        shortest signed angle, in (-pi, pi], for a continuous joint), what a posture task drives
+        to zero."""
+        if self.angles_are_coordinates:
+            return np.asarray(q_ref, float)[FREE_FLYER_NQ:] - np.asarray(q, float)[FREE_FLYER_NQ:]
+        return pin.difference(self.model, np.asarray(q, float),
+                              np.asarray(q_ref, float))[FREE_FLYER_NV:]
 
     def random_state(self, rng: np.random.Generator, velocity_scale: float = 1.0
                      ) -> tuple[np.ndarray, np.ndarray]:
@@ -611,7 +660,7 @@ class Robot:
         q = self.q_ref.copy()
         lo = np.where(np.isfinite(self.q_min), self.q_min, -np.pi)
         hi = np.where(np.isfinite(self.q_max), self.q_max, np.pi)
-        q[FREE_FLYER_NQ:] = rng.uniform(lo, hi)
+        q = self.with_joint_angles(q, rng.uniform(lo, hi))
         q[:3] += rng.normal(scale=0.1, size=3)
         quat = rng.normal(size=4)
         q[3:7] = quat / np.linalg.norm(quat)
@@ -632,8 +681,8 @@ class Robot:
         for k in range(cycles):
             t = k * dt
             q = self.q_ref.copy()
-            q[FREE_FLYER_NQ:] = np.clip(q[FREE_FLYER_NQ:] + amp * np.sin(2 * np.pi * freq * t + phase),
-                                        lo, hi)
+            q = self.with_joint_angles(q, np.clip(
+                self.joint_angles(self.q_ref) + amp * np.sin(2 * np.pi * freq * t + phase), lo, hi))
             v = np.zeros(self.nv)
             v[FREE_FLYER_NV:] = amp * 2 * np.pi * freq * np.cos(2 * np.pi * freq * t + phase)
             v[:FREE_FLYER_NV] = 0.05 * np.sin(2 * np.pi * 0.5 * t + np.arange(FREE_FLYER_NV))

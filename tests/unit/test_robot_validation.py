@@ -333,7 +333,7 @@ def test_a_file_that_is_not_urdf_names_the_field():
             "posture": {}, "contacts": [{"name": "l", "frame": "left_toe", "type": "point",
                                          "radius": 0.0}]}
     raises_naming(lambda: wb.load_robot(data), "field 'urdf'", "cassie_v2.sdf",
-                  "only URDF files")
+                  "only URDF and MJCF files")
 
 
 @pytest.mark.parametrize("name", ["talos14", "talos", "hyq", "go1", "go2", "a1", "solo12"])

@@ -115,8 +115,14 @@ def robot_visuals(robot) -> tuple[pin.Model, pin.GeometryModel]:
     from ..robots.locate import example_robot_data_dir, resolve_model_path
 
     d = robot.description
+    source = getattr(robot, "source", None)
+    if source is not None and source.format != "urdf":
+        log.info("replay: the robot's model file is %s, whose meshes the replay does not read; "
+                 "the robot is drawn as a stick figure", source.format.upper())
+        return robot.model, stick_figure(robot)
     urdf = resolve_model_path(d.urdf, d.base_dir)
-    full = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+    root = () if source is not None and source.own_floating_joint else (pin.JointModelFreeFlyer(),)
+    full = pin.buildModelFromUrdf(str(urdf), *root)
     packages = [str(p) for p in urdf.parents] + [str(example_robot_data_dir().parents[1])]
     try:
         with warnings.catch_warnings():

@@ -43,6 +43,8 @@ def load_robot(name_or_path: str | Path | Mapping[str, Any] | RobotDescription):
     if text in preset_names():
         return Robot(preset_description(text))
     path = Path(text).expanduser()
+    if is_model_file(path):
+        return Robot(drafted_description(path))
     if path.suffix == ".toml" or path.exists():
         if path.is_dir():
             raise UnknownRobotError(f"robot file: {path} is a folder, not a .toml file")
@@ -52,4 +54,35 @@ def load_robot(name_or_path: str | Path | Mapping[str, Any] | RobotDescription):
             raise UnknownRobotError(f"robot file not found: {path}")
         return Robot(RobotDescription.from_toml(path))
     raise UnknownRobotError(
-        f"unknown robot '{text}'; presets: {', '.join(preset_names())} (or a path to a .toml file)")
+        f"unknown robot '{text}'; presets: {', '.join(preset_names())} (or a path to a .toml "
+        f"description, or to a .urdf or MJCF .xml model file)")
+
+
+#: suffixes of model files that ``load_robot`` drafts a description for
+MODEL_SUFFIXES = (".urdf", ".xml", ".mjcf")
+
+
+def is_model_file(path: str | Path) -> bool:
+    """True for an existing file with a model file's suffix (URDF or MJCF, not a description)."""
+    path = Path(path).expanduser()
+    return path.suffix.lower() in MODEL_SUFFIXES and path.is_file()
+
+
+def drafted_description(path: str | Path) -> RobotDescription:
+    """The description :func:`wholebody.robots.draft.draft_description` drafts for the model
+    file at ``path`` (what ``wholebody init-robot`` writes), logged as a draft; DescriptionError
+    when the draft cannot be used as it is (a joint without an effort limit)."""
+    import logging
+
+    from .draft import draft_description
+
+    draft = draft_description(path)
+    missing = draft.data.get("torque_limits", {}).get("overrides", {})
+    if missing:
+        raise DescriptionError(
+            f"robot file {path}: the model file gives no effort limit for joint(s) "
+            f"{sorted(missing)}: write a description with `wholebody init-robot {path} --out "
+            f"FILE.toml` and fill its torque_limits.overrides")
+    logging.getLogger(__name__).info("robot file %s: a model file, used through a drafted "
+                                     "description (%s)", path, "; ".join(draft.notes))
+    return RobotDescription.from_dict(draft.data, base_dir=Path(path).expanduser().parent)

@@ -3,14 +3,20 @@
 Fields (``*`` = required)::
 
     name*          short name
-    urdf*          "erd:<path inside example-robot-data/robots>" or a file path (relative to the TOML)
+    model*         the robot's model file, a URDF or an MJCF (MuJoCo XML, told apart by its root
+                   element ``<mujoco>``): "erd:<path inside example-robot-data/robots>" or a file
+                   path (relative to the TOML); ``urdf`` is the same field under its older name
+                   (give one of the two)
     srdf           same; needed when ``posture`` is a group-state name
-    posture*       SRDF group-state name (e.g. "half_sitting") or a table {joint name = angle}
+    posture*       SRDF group-state name (e.g. "half_sitting"), "keyframe:<name>" (a keyframe of
+                   an MJCF model file, e.g. "keyframe:home") or a table {joint name = angle}
     posture_overrides  {joint = angle} applied on top of the posture (e.g. an SRDF state with the
                    knees straighter), default none
     locked_joints  joints frozen at the posture (Pinocchio ``buildReducedModel``), default none
     armature       rotor inertia added to the joint-space inertia of every actuated joint (scalar or
-                   {joint = value}); the MuJoCo twin uses the same value, default 0
+                   {joint = value}); the MuJoCo twin uses the same value, default the model
+                   file's (an MJCF joint's ``armature``; 0 for a URDF); a table replaces the
+                   joints it names only
     inertia_overrides  {link = [ixx, iyy, izz]}: principal moments (kg m^2, about the link's centre
                    of mass, in its <inertial> frame) replacing the URDF's <inertia> of these links
                    (a URDF with zero or broken inertias), default none
@@ -208,12 +214,15 @@ class RobotDescription:
     posture_overrides: dict[str, float] = field(default_factory=dict)
     srdf: str | None = None
     locked_joints: tuple[str, ...] = ()
-    armature: float | dict[str, float] = 0.0
+    #: None: the model file's armature (MJCF), else a scalar for every joint or {joint: value}
+    armature: float | dict[str, float] | None = None
     inertia_overrides: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     torque_limits: dict[str, Any] = field(default_factory=dict)
     friction: float = 0.8
     trunk_frame: str | None = None
     base_dir: Path | None = None
+    #: the key the model file was given under ("model" or "urdf"), for messages
+    model_key: str = field(default="urdf", compare=False)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], base_dir: Path | None = None) -> "RobotDescription":
@@ -234,14 +243,22 @@ class RobotDescription:
                 raise DescriptionError(f"{where}: missing required field '{key}'")
             return data[key]
 
-        known = {"name", "urdf", "srdf", "posture", "posture_overrides", "locked_joints",
+        known = {"name", "model", "urdf", "srdf", "posture", "posture_overrides", "locked_joints",
                  "armature", "inertia_overrides", "contacts", "torque_limits", "friction",
                  "trunk_frame", "description"}
         unknown = sorted(str(k) for k in set(data) - known)
         if unknown:
             raise DescriptionError(f"{where}: unknown field(s) {unknown}; known: {sorted(known)}")
         name = _label(need("name"), "name", where)
-        urdf = _name(need("urdf"), "urdf", where)
+        if "model" in data and "urdf" in data:
+            raise DescriptionError(f"{where}: fields 'model' and 'urdf' are both given "
+                                   f"({data['model']!r}, {data['urdf']!r}); 'urdf' is the older "
+                                   f"name of 'model': keep one")
+        model_key = "urdf" if "urdf" in data else "model"
+        if data.get(model_key) in (None, ""):
+            raise DescriptionError(f"{where}: missing required field 'model' (the URDF or MJCF "
+                                   f"file; 'urdf' is its older name)")
+        urdf = _name(data[model_key], model_key, where)
         posture = need("posture")
         if isinstance(posture, Mapping):
             posture = {str(k): _checked(validation.number, v, f"posture.{k}", where)
@@ -255,8 +272,10 @@ class RobotDescription:
         srdf = data.get("srdf")
         if srdf is not None and srdf != "":
             srdf = _name(srdf, "srdf", where)
-        if isinstance(posture, str) and not srdf:
-            raise DescriptionError(f"{where}: field 'srdf' is required when 'posture' is a name")
+        if isinstance(posture, str) and not srdf and not posture.startswith("keyframe:"):
+            raise DescriptionError(f"{where}: field 'srdf' is required when 'posture' is a group-"
+                                   f"state name (a keyframe of an MJCF file is "
+                                   f"'keyframe:<name>'), got posture = {posture!r}")
         raw_contacts = _list(need("contacts"), "contacts", where, "a list of contact tables")
         contacts = tuple(_parse_contact(c, i, where) for i, c in enumerate(raw_contacts))
         names = [c.name for c in contacts]
@@ -269,8 +288,10 @@ class RobotDescription:
         locked = _list(data.get("locked_joints", ()), "locked_joints", where,
                        "a list of joint names")
         locked = tuple(_name(j, f"locked_joints[{i}]", where) for i, j in enumerate(locked))
-        armature = data.get("armature", 0.0)
-        if isinstance(armature, Mapping):
+        armature = data.get("armature")
+        if armature is None:
+            pass
+        elif isinstance(armature, Mapping):
             armature = {str(k): _checked(validation.nonnegative, v, f"armature.{k}", where)
                         for k, v in armature.items()}
         else:
@@ -286,7 +307,7 @@ class RobotDescription:
             posture_overrides=overrides,
             locked_joints=locked, armature=armature, inertia_overrides=inertias,
             torque_limits=check_torque_limits(data.get("torque_limits"), where),
-            friction=friction, trunk_frame=trunk, base_dir=base_dir,
+            friction=friction, trunk_frame=trunk, base_dir=base_dir, model_key=model_key,
         )
 
     @classmethod

@@ -70,6 +70,13 @@ def build_spec(robot: Robot, environment: Environment | None = None,
     mismatch = mismatch or Mismatch()
     options = options or SimOptions()
     model = robot.model
+    if not robot.angles_are_coordinates:
+        # MuJoCo's hinge has one qpos where Pinocchio's continuous joint has (cos, sin): the
+        # twin's state conversion (sim/convert.py) maps q[7:] one to one
+        joints = [n for n, j in zip(robot.joint_names, model.joints[2:]) if j.nq == 2]
+        raise ValueError(f"robot '{robot.name}': the MuJoCo twin does not simulate continuous "
+                         f"joints yet ({', '.join(joints)}); lock them with locked_joints to "
+                         f"simulate the robot")
     spec = mujoco.MjSpec()
     spec.modelname = robot.name
     spec.compiler.degree = False
@@ -107,8 +114,8 @@ def build_spec(robot: Robot, environment: Environment | None = None,
         is_hinge = np.linalg.norm(motion[3:]) > 0.5
         joint.type = mujoco.mjtJoint.mjJNT_HINGE if is_hinge else mujoco.mjtJoint.mjJNT_SLIDE
         joint.axis = motion[3:] if is_hinge else motion[:3]
-        idx_q, idx_v = model.joints[jid].idx_q, model.joints[jid].idx_v
-        lo, hi = model.lowerPositionLimit[idx_q], model.upperPositionLimit[idx_q]
+        idx_v = model.joints[jid].idx_v
+        lo, hi = robot.q_min[jid - 2], robot.q_max[jid - 2]  # a continuous joint: none
         if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
             joint.range = [lo, hi]
             joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE

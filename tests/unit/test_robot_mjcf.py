@@ -1,0 +1,469 @@
+"""Robots from MJCF files, and URDFs declaring their own floating joint.
+
+The evidence is independent of the conversion: MuJoCo's own mass matrix, centre of mass and
+keyframes of the same file, and Pinocchio's URDF parser on the same robot written as a URDF (which
+MuJoCo itself converts to MJCF here)."""
+
+import logging
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import wholebody as wb
+from wholebody.robots.description import DescriptionError
+from wholebody.robots.mjcf import build_model, load_mjcf
+from wholebody.sim import convert
+
+LEGS = {"lf": (0.25, 0.12), "rf": (0.25, -0.12), "lh": (-0.25, 0.12), "rh": (-0.25, -0.12)}
+
+
+def _inertial(mass, xyz, rpy, ixx, iyy, izz, ixy=0.0, ixz=0.0, iyz=0.0) -> str:
+    return (f'<inertial><origin xyz="{xyz}" rpy="{rpy}"/><mass value="{mass}"/>'
+            f'<inertia ixx="{ixx}" iyy="{iyy}" izz="{izz}" ixy="{ixy}" ixz="{ixz}" iyz="{iyz}"/>'
+            f'</inertial>')
+
+
+def quadruped_urdf(floating: bool = False, mujoco_tags: bool = False) -> str:
+    """A small quadruped: rotated joint origins, an axis along -y (an unaligned joint), offset and
+    rotated inertials with products of inertia, a fixed foot link with a sphere."""
+    parts = ['<robot name="quad">']
+    if mujoco_tags:  # MuJoCo's URDF import: keep the fixed links as bodies
+        parts.append('<mujoco><compiler fusestatic="false" discardvisual="true" '
+                     'balanceinertia="false"/></mujoco>')
+    if floating:
+        parts.append('<link name="world"/><joint name="float_base" type="floating">'
+                     '<parent link="world"/><child link="base"/></joint>')
+    parts.append('<link name="base">' + _inertial(8.0, "0.02 0.01 -0.01", "0.1 0 0.2",
+                                                  0.05, 0.2, 0.22, 0.003, -0.002, 0.001)
+                 + '</link>')
+    for leg, (x, y) in LEGS.items():
+        axis = "0 -1 0" if leg == "rh" else "0 1 0"
+        parts.append(
+            f'<joint name="{leg}_haa" type="revolute"><parent link="base"/><child link="{leg}_hip"/>'
+            f'<origin xyz="{x} {y} 0" rpy="0.05 0 0"/><axis xyz="1 0 0"/>'
+            f'<limit lower="-0.8" upper="0.8" effort="30" velocity="20"/></joint>'
+            f'<link name="{leg}_hip">' + _inertial(0.7, "0 0.03 0", "0 0 0", 1e-3, 1.2e-3, 9e-4,
+                                                   1e-5) + '</link>'
+            f'<joint name="{leg}_hfe" type="revolute"><parent link="{leg}_hip"/>'
+            f'<child link="{leg}_thigh"/><origin xyz="0 {0.05 if y > 0 else -0.05} 0" '
+            f'rpy="0 0.1 0"/><axis xyz="{axis}"/>'
+            f'<limit lower="-1.5" upper="1.5" effort="30" velocity="20"/></joint>'
+            f'<link name="{leg}_thigh">' + _inertial(1.0, "0 0 -0.1", "0 0.2 0", 8e-3, 8e-3, 1e-3,
+                                                     0, 2e-4) + '</link>'
+            f'<joint name="{leg}_kfe" type="revolute"><parent link="{leg}_thigh"/>'
+            f'<child link="{leg}_shank"/><origin xyz="0 0 -0.2"/><axis xyz="0 1 0"/>'
+            f'<limit lower="-2.5" upper="-0.2" effort="40" velocity="20"/></joint>'
+            f'<link name="{leg}_shank">' + _inertial(0.3, "0 0 -0.1", "0 0 0", 3e-3, 3e-3, 2e-4)
+            + '</link>'
+            f'<joint name="{leg}_foot_fixed" type="fixed"><parent link="{leg}_shank"/>'
+            f'<child link="{leg}_foot"/><origin xyz="0 0 -0.2"/></joint>'
+            f'<link name="{leg}_foot">' + _inertial(0.05, "0 0 0", "0 0 0", 1e-5, 1e-5, 1e-5)
+            + '<collision><geometry><sphere radius="0.02"/></geometry></collision></link>')
+    parts.append("</robot>")
+    return "".join(parts)
+
+
+def _mapped(q_from, model_from, model_to):
+    """``q_from`` (a configuration of ``model_from``) as a configuration of ``model_to``: the
+    base's 7 coordinates, then each joint by name."""
+    q = pin.neutral(model_to)
+    q[:7] = q_from[:7]
+    for jid in range(2, model_to.njoints):
+        src = model_from.joints[model_from.getJointId(model_to.names[jid])]
+        dst = model_to.joints[jid]
+        q[dst.idx_q:dst.idx_q + dst.nq] = q_from[src.idx_q:src.idx_q + src.nq]
+    return q
+
+
+def _random_q(model, rng):
+    lo = np.where(np.isfinite(model.lowerPositionLimit), model.lowerPositionLimit, -1.0)
+    hi = np.where(np.isfinite(model.upperPositionLimit), model.upperPositionLimit, 1.0)
+    q = pin.randomConfiguration(model, lo, hi)
+    q[:3] = rng.normal(size=3)
+    quat = rng.normal(size=4)
+    q[3:7] = quat / np.linalg.norm(quat)
+    return q
+
+
+def _full_mass_matrix(model, q):
+    M = pin.crba(model, model.createData(), q)
+    return np.triu(M) + np.triu(M, 1).T
+
+
+def test_mjcf_converted_by_mujoco_from_a_urdf_gives_the_urdfs_model(tmp_path, rng):
+    """The quadruped's URDF read by Pinocchio's URDF parser, and the same URDF compiled by
+    MuJoCo's own URDF import (no free joint: the world's moving child is the base) and converted:
+    same mass, centre of mass, frames and M(q) at random configurations. The MJCF file MuJoCo
+    writes of it loads too, equal to the precision of the numbers it prints (~6 digits)."""
+    urdf = tmp_path / "quad.urdf"
+    urdf.write_text(quadruped_urdf(mujoco_tags=True))
+    compiled = mujoco.MjModel.from_xml_path(str(urdf))
+    xml = tmp_path / "quad.xml"
+    mujoco.mj_saveLastXML(str(xml), compiled)
+    reference = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+    model = build_model(compiled).model
+    assert model.nv == reference.nv and set(model.names[2:]) == set(reference.names[2:])
+    assert pin.computeTotalMass(model) == pytest.approx(pin.computeTotalMass(reference), rel=1e-12)
+    written = load_mjcf(xml).model
+    M_written = _full_mass_matrix(written, pin.neutral(written))
+    np.testing.assert_allclose(M_written, _full_mass_matrix(model, pin.neutral(model)),
+                               atol=1e-5 * np.abs(M_written).max())
+    data, ref_data = model.createData(), reference.createData()
+    for _ in range(5):
+        q_ref = _random_q(reference, rng)
+        q = _mapped(q_ref, reference, model)
+        com = pin.centerOfMass(model, data, q)
+        np.testing.assert_allclose(com, pin.centerOfMass(reference, ref_data, q_ref), atol=1e-9)
+        M, M_ref = _full_mass_matrix(model, q), _full_mass_matrix(reference, q_ref)
+        # the same rows/columns: joints by name (both order them depth-first from the URDF)
+        perm = list(range(6)) + [reference.joints[reference.getJointId(n)].idx_v
+                                 for n in model.names[2:]]
+        np.testing.assert_allclose(M, M_ref[np.ix_(perm, perm)], atol=1e-9 * np.abs(M_ref).max())
+        for name in ("lf_foot", "rh_shank"):
+            pin.framesForwardKinematics(model, data, q)
+            pin.framesForwardKinematics(reference, ref_data, q_ref)
+            np.testing.assert_allclose(data.oMf[model.getFrameId(name)].homogeneous,
+                                       ref_data.oMf[reference.getFrameId(name)].homogeneous,
+                                       atol=1e-9)
+
+
+# a hand-written MJCF using what Menagerie files use: default classes and childclass, degrees,
+# euler angles, a joint away from its body's origin, full inertias, sites, keyframes, motors
+# with gear and ctrlrange, a position servo with a forcerange, a joint actuatorfrcrange, armature
+BIPED_MJCF = """
+<mujoco model="biped">
+  <compiler angle="degree" autolimits="true"/>
+  <default>
+    <default class="leg">
+      <joint axis="0 1 0" range="-90 90" armature="0.02" damping="0.1"/>
+      <motor ctrlrange="-1 1" gear="50"/>
+      <default class="knee"><joint range="0 150"/></default>
+    </default>
+  </default>
+  <worldbody>
+    <light pos="0 0 3"/>
+    <geom name="ground" type="plane" size="5 5 0.1"/>
+    <body name="pelvis" pos="0 0 0.9">
+      <freejoint name="root"/>
+      <inertial pos="0 0 0.05" mass="10" fullinertia="0.2 0.15 0.1 0.01 0 0.002"/>
+      <site name="imu" pos="0 0 0.1"/>
+      <body name="torso" pos="0 0 0.2" euler="0 5 0">
+        <inertial pos="0 0 0.1" mass="5" diaginertia="0.1 0.1 0.05"/>
+      </body>
+      <body name="l_thigh" pos="0 0.1 -0.05" childclass="leg" euler="3 0 0">
+        <joint name="l_hip_roll" axis="1 0 0" range="-30 30"/>
+        <inertial pos="0 0 -0.05" mass="1" diaginertia="0.01 0.01 0.002"/>
+        <body name="l_upper" pos="0 0 -0.05">
+          <joint name="l_hip_pitch" pos="0 0 0.02"/>
+          <inertial pos="0 0 -0.15" quat="0.98 0.1 0.1 0" mass="2" diaginertia="0.03 0.03 0.004"/>
+          <body name="l_shank" pos="0 0 -0.35">
+            <joint name="l_knee" class="knee"/>
+            <inertial pos="0 0 -0.17" mass="1.5" diaginertia="0.02 0.02 0.002"/>
+            <body name="l_foot" pos="0 0 -0.35">
+              <joint name="l_ankle" range="-45 45"/>
+              <inertial pos="0.02 0 -0.03" mass="0.6" diaginertia="0.002 0.003 0.003"/>
+              <geom name="l_sole" type="box" size="0.1 0.05 0.01" pos="0.02 0 -0.05"/>
+            </body>
+          </body>
+        </body>
+      </body>
+      <body name="r_thigh" pos="0 -0.1 -0.05" childclass="leg" euler="-3 0 0">
+        <joint name="r_hip_roll" axis="1 0 0" range="-30 30" actuatorfrcrange="-80 80"/>
+        <inertial pos="0 0 -0.05" mass="1" diaginertia="0.01 0.01 0.002"/>
+        <body name="r_upper" pos="0 0 -0.05">
+          <joint name="r_hip_pitch" pos="0 0 0.02"/>
+          <inertial pos="0 0 -0.15" quat="0.98 -0.1 0.1 0" mass="2" diaginertia="0.03 0.03 0.004"/>
+          <body name="r_shank" pos="0 0 -0.35">
+            <joint name="r_knee" class="knee"/>
+            <inertial pos="0 0 -0.17" mass="1.5" diaginertia="0.02 0.02 0.002"/>
+            <body name="r_foot" pos="0 0 -0.35">
+              <joint name="r_ankle" range="-45 45"/>
+              <inertial pos="0.02 0 -0.03" mass="0.6" diaginertia="0.002 0.003 0.003"/>
+              <geom name="r_sole" type="box" size="0.1 0.05 0.01" pos="0.02 0 -0.05"/>
+            </body>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor name="l_hip_roll" joint="l_hip_roll" class="leg"/>
+    <motor name="l_hip_pitch" joint="l_hip_pitch" class="leg"/>
+    <motor name="l_knee" joint="l_knee" class="leg" gear="100"/>
+    <position name="l_ankle" joint="l_ankle" kp="100" forcerange="-30 30"/>
+    <motor name="r_hip_roll" joint="r_hip_roll" class="leg"/>
+    <motor name="r_hip_pitch" joint="r_hip_pitch" class="leg"/>
+    <motor name="r_knee" joint="r_knee" class="leg" gear="100"/>
+    <position name="r_ankle" joint="r_ankle" kp="100" forcerange="-30 30"/>
+  </actuator>
+  <keyframe>
+    <key name="crouch" qpos="0 0 0.8 1 0 0 0  0.0 -0.4 0.8 -0.4  0.0 -0.4 0.8 -0.4"/>
+  </keyframe>
+</mujoco>
+"""
+
+
+def biped_description(path, **extra) -> dict:
+    return {"name": "biped", "model": str(path), "posture": "keyframe:crouch",
+            "contacts": [{"name": f"{s}_sole", "frame": f"{s}_foot", "type": "rectangle",
+                          "half_size": [0.1, 0.05], "offset": [0.02, 0.0, -0.06]}
+                         for s in ("l", "r")], **extra}
+
+
+@pytest.fixture()
+def biped_xml(tmp_path):
+    path = tmp_path / "biped.xml"
+    path.write_text(BIPED_MJCF)
+    return path
+
+
+def test_mjcf_robot_has_mujocos_dynamics(biped_xml, rng):
+    """M(q) (armature included) and the CoM of the Robot built from the MJCF are MuJoCo's own for
+    the same file, at random states; the MJCF's joint frames, sites and welded bodies are
+    frames of the model."""
+    robot = wb.load_robot(biped_description(biped_xml))
+    m = mujoco.MjModel.from_xml_path(str(biped_xml))
+    d = mujoco.MjData(m)
+    assert robot.mass == pytest.approx(m.body_mass.sum(), rel=1e-12)
+    assert robot.source.format == "mjcf" and robot.source.own_floating_joint
+    for name in ("imu", "torso", "l_foot", "r_knee"):
+        assert robot.model.existFrame(name)
+    for _ in range(5):
+        q, v = robot.random_state(rng)
+        d.qpos[:], d.qvel[:] = convert.pin_to_mj(q, v)
+        mujoco.mj_forward(m, d)
+        M_mj = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M_mj)
+        robot.update(q, v)
+        np.testing.assert_allclose(robot.M, convert.mass_matrix_to_pin(q, M_mj),
+                                   atol=1e-10 * np.abs(robot.M).max())
+        np.testing.assert_allclose(robot.com, d.subtree_com[1], atol=1e-12)
+        sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "imu")
+        np.testing.assert_allclose(robot.frame_placement("imu")[0], d.site_xpos[sid], atol=1e-12)
+
+
+def test_mjcf_limits_armature_and_keyframe(biped_xml):
+    """Position limits (degrees in the file), effort limits (motor: |gear| ctrlrange; position
+    servo: forcerange; actuatorfrcrange wins), armature from the default class, the keyframe's
+    joint angles as the posture."""
+    robot = wb.load_robot(biped_description(biped_xml))
+    limits = dict(zip(robot.joint_names, robot.torque_limits.constant))
+    assert limits == pytest.approx({"l_hip_roll": 50, "l_hip_pitch": 50, "l_knee": 100,
+                                    "l_ankle": 30, "r_hip_roll": 80, "r_hip_pitch": 50,
+                                    "r_knee": 100, "r_ankle": 30})
+    i = robot.joint_names.index("l_knee")
+    assert (robot.q_min[i], robot.q_max[i]) == pytest.approx((0.0, np.radians(150)))
+    np.testing.assert_allclose(robot.model.armature[6:], 0.02)
+    angles = dict(zip(robot.joint_names, robot.q_ref[7:]))
+    assert angles == pytest.approx({"l_hip_roll": 0, "l_hip_pitch": -0.4, "l_knee": 0.8,
+                                    "l_ankle": -0.4, "r_hip_roll": 0, "r_hip_pitch": -0.4,
+                                    "r_knee": 0.8, "r_ankle": -0.4})
+    # the description's armature replaces the file's: a table only for the joints it names
+    robot = wb.load_robot(biped_description(biped_xml, armature={"l_knee": 0.5}))
+    arm = dict(zip(robot.joint_names, robot.model.armature[6:]))
+    assert arm["l_knee"] == 0.5 and arm["r_knee"] == 0.02
+
+
+def test_twin_of_an_mjcf_robot_compiles_with_its_mass(biped_xml):
+    """The twin generated from the MJCF robot's Pinocchio model compiles, with the same mass."""
+    from wholebody.sim.simulator import Simulator
+
+    robot = wb.load_robot(biped_description(biped_xml))
+    sim = Simulator(robot, record=False)
+    assert sum(sim.model.body_mass) == pytest.approx(robot.mass, rel=1e-12)
+
+
+@pytest.mark.parametrize("edit,needle", [
+    (('<joint name="l_ankle" range="-45 45"/>', '<joint name="l_ankle" type="ball"/>'),
+     ["'l_ankle'", "ball joint"]),
+    (('<joint name="l_ankle" range="-45 45"/>',
+      '<joint name="l_ankle" range="-45 45"/><joint name="l_ankle2" axis="1 0 0"/>'),
+     ["body 'l_foot'", "2 joints", "one joint per body"]),
+    (('<light pos="0 0 3"/>', '<light pos="0 0 3"/><body name="box"><freejoint/>'
+      '<geom type="box" size="0.1 0.1 0.1"/></body>'), ["2 free joints", "'box'"]),
+    (('<joint name="l_knee" class="knee"/>', '<joint name="l_knee" class="nope"/>'),
+     ["does not compile", "nope"]),
+])
+def test_mjcf_that_cannot_be_read_is_named(tmp_path, edit, needle):
+    path = tmp_path / "bad.xml"
+    path.write_text(BIPED_MJCF.replace(*edit))
+    with pytest.raises(DescriptionError) as err:
+        wb.load_robot(biped_description(path))
+    assert all(n in str(err.value) for n in needle), str(err.value)
+
+
+def test_unknown_keyframe_and_both_model_fields_are_named(biped_xml):
+    with pytest.raises(DescriptionError, match=r"keyframe:stand.*keyframes: \['crouch'\]"):
+        wb.load_robot(biped_description(biped_xml, posture="keyframe:stand"))
+    data = biped_description(biped_xml)
+    with pytest.raises(DescriptionError, match="'model' and 'urdf' are both given"):
+        wb.load_robot({**data, "urdf": data["model"]})
+
+
+def test_urdf_with_its_own_floating_joint(tmp_path, rng):
+    """A URDF with a floating joint from a massless world link: that joint is the free flyer (no
+    second one is added), and the robot is the same as the URDF without it."""
+    plain, floating = tmp_path / "plain.urdf", tmp_path / "floating.urdf"
+    plain.write_text(quadruped_urdf())
+    floating.write_text(quadruped_urdf(floating=True))
+    description = {"name": "quad", "posture": {f"{leg}_kfe": -1.0 for leg in LEGS},
+                   "contacts": [{"name": leg, "frame": f"{leg}_foot", "type": "point",
+                                 "radius": 0.02} for leg in LEGS]}
+    a = wb.load_robot({**description, "urdf": str(plain)})
+    b = wb.load_robot({**description, "model": str(floating)})
+    assert b.model.names[1] == "float_base" and b.nq == a.nq and b.nv == a.nv
+    assert b.source.own_floating_joint and not a.source.own_floating_joint
+    assert b.base_frame == "base" and b.mass == pytest.approx(a.mass, rel=1e-12)
+    np.testing.assert_allclose(b.q_ref, a.q_ref, atol=1e-12)
+    for _ in range(3):
+        q, v = a.random_state(rng)
+        a.update(q, v)
+        b.update(q, v)
+        np.testing.assert_allclose(b.M, a.M, atol=1e-12)
+        np.testing.assert_allclose(b.h, a.h, atol=1e-10)
+
+
+def test_urdf_parser_noise_is_collected(tmp_path, caplog):
+    """What urdfdom prints on stderr while parsing ends up in one log record, not on the
+    terminal."""
+    import os
+
+    from wholebody.robots.model_file import captured_stderr
+
+    with caplog.at_level(logging.INFO, logger="wholebody.robots.model_file"):
+        with captured_stderr("robot 'x': URDF x.urdf"):
+            os.write(2, b"Error: unknown element\nline 2\n")
+    assert any("unknown element" in r.getMessage() for r in caplog.records)
+
+
+# ------------------------------------------------------------------ init-robot
+def test_init_robot_drafts_a_quadruped_from_a_urdf(tmp_path):
+    """The quadruped URDF: four point feet at the foot links with the collision spheres' radius,
+    a computed posture with the feet under the hips (legs bent, inside the limits) that stands on
+    all four (check-robot finds no error); the URDF given as the robot loads the same draft."""
+    from wholebody.robots.check import check_robot
+    from wholebody.robots.draft import draft_description
+
+    urdf = tmp_path / "quad.urdf"
+    urdf.write_text(quadruped_urdf())
+    draft = draft_description(urdf)
+    contacts = {c["frame"]: c for c in draft.data["contacts"]}
+    assert set(contacts) == {f"{leg}_foot" for leg in LEGS}
+    assert all(c["type"] == "point" and c["radius"] == 0.02 and "offset" not in c
+               for c in contacts.values())
+    assert isinstance(draft.data["posture"], dict)
+    assert any("posture: computed" in n for n in draft.notes)
+    path = tmp_path / "quad.toml"
+    path.write_text(draft.text)
+    report = check_robot(str(path))
+    assert report.ok, [f.message for f in report.findings]
+    robot = wb.load_robot(str(path))
+    for c in robot.contacts:  # each foot below its leg's hip (the thigh's joint)
+        hip = robot.data.oMi[robot.model.getJointId(c.frame[:2] + "_hfe")].translation
+        foot = robot.contact_point(c.name)
+        assert np.linalg.norm(foot[:2] - hip[:2]) < 0.02
+    assert wb.load_robot(str(urdf)).na == 12  # a model file loads through the same draft
+
+
+def test_init_robot_drafts_a_biped_from_an_mjcf(biped_xml, tmp_path):
+    """The biped MJCF: two soles from the box geoms (half sizes and bottom-face centres in the
+    foot bodies' frames), the keyframe as the posture."""
+    from wholebody.robots.draft import draft_description
+
+    draft = draft_description(biped_xml)
+    assert draft.data["posture"] == "keyframe:crouch"
+    soles = {c["frame"]: c for c in draft.data["contacts"]}
+    assert set(soles) == {"l_foot", "r_foot"}
+    for c in soles.values():
+        assert c["type"] == "rectangle" and c["half_size"] == [0.1, 0.05]
+        assert c["offset"] == pytest.approx([0.02, 0.0, -0.06])
+        assert c["name"] in ("l_sole", "r_sole")  # the geoms' own names
+    path = tmp_path / "biped.toml"
+    path.write_text(draft.text)
+    assert wb.load_robot(str(path)).na == 8
+
+
+def test_init_robot_cli(tmp_path, biped_xml, capsys):
+    from wholebody.cli import main
+
+    out = tmp_path / "b.toml"
+    assert main(["init-robot", str(biped_xml), "--out", str(out)]) == 0
+    assert "check: posture" in capsys.readouterr().out and out.is_file()
+    assert main(["init-robot", str(biped_xml), "--out", str(out)]) == 2  # exists: --force
+    assert main(["init-robot", str(tmp_path / "none.xml")]) == 2
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<mujoco><worldbody><body><joint type='nope'/></body></worldbody></mujoco>")
+    assert main(["init-robot", str(bad)]) == 2
+    assert "does not compile" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ continuous joints
+def _continuous_quadruped(tmp_path):
+    """The quadruped with its knees as continuous joints (unbounded revolute: nq = 2, nv = 1)."""
+    text = quadruped_urdf()
+    for leg in LEGS:
+        start = text.index(f'<joint name="{leg}_kfe" type="revolute">')
+        end = text.index("</joint>", start)
+        joint = text[start:end].replace('type="revolute"', 'type="continuous"').replace(
+            'lower="-2.5" upper="-0.2" ', "")
+        text = text[:start] + joint + text[end:]
+    path = tmp_path / "wheels.urdf"
+    path.write_text(text)
+    return {"name": "wheels", "model": str(path),
+            "posture": {**{f"{leg}_kfe": -1.2 for leg in LEGS}, **{f"{leg}_hfe": 0.6
+                                                                 for leg in LEGS}},
+            "contacts": [{"name": leg, "frame": f"{leg}_foot", "type": "point", "radius": 0.02}
+                         for leg in LEGS]}
+
+
+def test_continuous_joints_have_angles(tmp_path, rng):
+    """Continuous joints load (not refused, not converted: (cos, sin) coordinates); their angle
+    is atan2(sin, cos), they have no limits, the joint error is the shortest signed angle
+    (pin.difference), and the angles' time derivative along a motion is the joint velocity
+    (finite differences)."""
+    robot = wb.load_robot(_continuous_quadruped(tmp_path))
+    knees = [robot.joint_names.index(f"{leg}_kfe") for leg in LEGS]
+    assert robot.nq == 7 + 12 + 4 and robot.na == 12 and not robot.angles_are_coordinates
+    assert np.all(np.isinf(robot.q_min[knees])) and np.all(np.isinf(robot.q_max[knees]))
+    angles = robot.joint_angles(robot.q_ref)
+    np.testing.assert_allclose(angles[knees], -1.2, atol=1e-12)
+    q, v = robot.random_state(rng)
+    np.testing.assert_allclose(robot.joint_angles(robot.with_joint_angles(q, angles)), angles,
+                               atol=1e-12)
+    # the error wraps: from 3.1 to -3.1 is +0.083 rad, not -6.2
+    a, b = angles.copy(), angles.copy()
+    a[knees], b[knees] = 3.1, -3.1
+    err = robot.joint_error(robot.with_joint_angles(q, a), robot.with_joint_angles(q, b))
+    np.testing.assert_allclose(err[knees], 2 * np.pi - 6.2, atol=1e-12)
+    dt = 1e-7
+    q2 = pin.integrate(robot.model, q, v * dt)
+    rate = (robot.joint_angles(q2) - robot.joint_angles(q)) / dt
+    np.testing.assert_allclose(rate, v[6:], atol=1e-5)
+    lo, hi = robot.torque_bounds(q)
+    assert np.all(hi == 40.0 * (np.arange(12) % 3 == 2) + 30.0 * (np.arange(12) % 3 != 2))
+
+
+def test_continuous_joints_are_refused_for_simulation_and_lock(tmp_path):
+    """Until the controllers and the twin run them, a simulation refuses continuous joints with
+    the way out; locked, the robot simulates."""
+    from wholebody.robots.check import load_fit_robot
+    from wholebody.sim.twin import build_twin
+
+    data = _continuous_quadruped(tmp_path)
+    robot = wb.load_robot(data)
+    with pytest.raises(ValueError, match="continuous joints yet.*locked_joints"):
+        build_twin(robot)
+    path = tmp_path / "wheels.toml"
+    path.write_text(f'name = "wheels"\nmodel = "{data["model"]}"\n[posture]\n'
+                    + "".join(f"{k} = {v}\n" for k, v in data["posture"].items())
+                    + "".join(f'[[contacts]]\nname = "{leg}"\nframe = "{leg}_foot"\n'
+                              f'type = "point"\nradius = 0.02\n' for leg in LEGS))
+    with pytest.raises(ValueError, match=r"continuous joint\(s\).*locked_joints"):
+        load_fit_robot(str(path))
+    locked = wb.load_robot({**data, "locked_joints": [f"{leg}_kfe" for leg in LEGS],
+                            "posture": {f"{leg}_hfe": 0.6 for leg in LEGS}
+                            | {f"{leg}_kfe": -1.2 for leg in LEGS}})
+    assert locked.angles_are_coordinates and locked.na == 8
+    build_twin(locked)
