@@ -157,3 +157,14 @@ def plan_for():
     """``plan_near(robot, rng, stance, swing_noise=, normal=)`` of benchmarks/fuzz.py: a PassiveWBC
     plan near the robot's cached state, for tests that build such plans."""
     return fuzz.plan_near
+
+
+def torque_tolerance(solve, q, v, nq: int, atol: float = 1e-6) -> float:
+    """How close two engines' torques must be at (q, v): ``atol`` plus 100 times how far the
+    reference ``solve(q, v) -> tau`` itself moves when the base position moves by 1e-13 m. A
+    cascade whose levels conflict (a task sacrificed at a large cost, saturated torques) is
+    ill-conditioned: inputs that differ in the last bits (two engines round differently) move its
+    solution by far more than round-off, and this measures by how much."""
+    tau = solve(q, v)
+    nearby = solve(q + np.r_[np.full(3, 1e-13), np.zeros(nq - 3)], v)
+    return atol + 100.0 * float(np.abs(nearby - tau).max())

@@ -30,7 +30,7 @@ import numpy as np
 
 from .formulation import (Formulation, Solution, Stack, eq14_blocks, make_solution,
                           overflow_status, place_rows, solve_levels, unsolved_solution)
-from .robot import FREE_FLYER_NQ, Robot
+from .robot import Robot
 from .solvers import Level
 from .solvers.compiled_cascade import BoundCascade
 from .tasks import FullDynamics
@@ -104,7 +104,7 @@ class _Program:
         active = {c: i for i, c in enumerate(variables.contacts)}
         self.slots: list[_Slot] = []
         self.level_bounds: list[tuple[int, int]] = []
-        compiled, sizes = [], []
+        compiled = []
         start = n_params = 0
         for rank, tasks in enumerate(stack.levels, start=1):
             level = {True: [], False: []}
@@ -368,7 +368,7 @@ class HierarchyCycle:
 
     def joint_positions(self, joints: Sequence[str]) -> np.ndarray:
         idx = [self.robot.joint_names.index(j) for j in joints]
-        return np.asarray(self._q, dtype=float)[FREE_FLYER_NQ + np.asarray(idx, dtype=int)]
+        return self.robot.joint_angles(self._q)[idx]
 
     # ------------------------------------------------------------------ solve
     def solve(self, q, v, variables: Variables | None = None, diagnostics: bool = False) -> Solution:
@@ -408,7 +408,7 @@ class HierarchyCycle:
                 and (program.weights >= program.w_min).all()):
             if not all(np.isfinite(term).all() for term in self.engine.terms().values()):
                 return unsolved_solution(robot.nv, variables,
-                                         robot.torque_limits.bounds(np.asarray(q, float)[7:]),
+                                         robot.torque_bounds(np.asarray(q, float)),
                                          len(self.stack.levels), overflow_status(v))
             program.raise_invalid()
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")

@@ -467,3 +467,67 @@ def test_continuous_joints_are_refused_for_simulation_and_lock(tmp_path):
                             | {f"{leg}_kfe": -1.2 for leg in LEGS}})
     assert locked.angles_are_coordinates and locked.na == 8
     build_twin(locked)
+
+
+@pytest.mark.parametrize("mode", ["braking", "tanh"])
+def test_continuous_joints_in_both_engines(tmp_path, rng, mode):
+    """A stack with a posture (base rows on), joint-acceleration limits, torque limits and a joint
+    trajectory on continuous knees: the native cycle's level arrays and torques equal the Python
+    engine's on random states; a knee at -3.1 rad whose reference is 3.1 rad is driven the short
+    way (-0.083 rad through ±pi, from atan2 of the two (cos, sin) pairs here), and the knees
+    have no position limit (acceleration bounds infinite when braking, ±a_max with tanh)."""
+    from wholebody.cycle import HierarchyCycle, native_available
+    from wholebody.formulation import Stack
+    from wholebody.tasks import (ContactConstraint, FrictionCone, JointAccelerationLimits,
+                                 JointTrajectoryTask, NewtonEuler, PostureTask, TorqueLimits)
+    from wholebody.variables import Variables
+
+    if not native_available():
+        pytest.skip("the compiled cycle is not built")
+    robot = wb.load_robot(_continuous_quadruped(tmp_path))
+    knees = [robot.joint_names.index(f"{leg}_kfe") for leg in LEGS]
+    kp, kd = 40.0, 6.0
+
+    def stack():
+        return Stack([[NewtonEuler(), TorqueLimits()],
+                      [ContactConstraint(), FrictionCone(0.8), JointAccelerationLimits(mode=mode)],
+                      [JointTrajectoryTask([f"{next(iter(LEGS))}_kfe"], kp=80.0, kd=9.0, name="knee"),
+                       PostureTask(kp=kp, kd=kd, base_kp=20.0, base_kd=5.0, name="posture")]])
+
+    engines = {e: HierarchyCycle(robot, stack(), engine=e, backend="quadprog", fallback_backend=None)
+               for e in ("native", "python")}
+    assert engines["native"].native
+    angles = robot.joint_angles(robot.q_ref)
+    for i in range(4):
+        q, v = robot.random_state(rng, velocity_scale=0.2)
+        q[:7] = robot.q_ref[:7]
+        a = robot.joint_angles(q)
+        a[knees[0]] = -3.1
+        q = robot.with_joint_angles(q, a)
+        for e in engines.values():
+            e.stack.find("posture").q_ref = robot.with_joint_angles(robot.q_ref, np.where(
+                np.arange(robot.na) == knees[0], 3.1, angles))
+        sols = {name: e.solve(q, v, Variables(robot)) for name, e in engines.items()}
+        native_levels = [np.array(lv.B) for lv in engines["native"].levels]
+        python_levels = [np.array(lv.B) for lv in engines["python"].levels]
+        for x, y in zip(native_levels, python_levels):
+            np.testing.assert_allclose(x, y, atol=1e-8 * max(1.0, np.abs(y).max()))
+        for x, y in zip(engines["native"].levels, engines["python"].levels):
+            np.testing.assert_allclose(x.b, y.b, atol=1e-8)
+            np.testing.assert_array_equal(np.isinf(x.lower), np.isinf(y.lower))
+        if sols["native"].ok and sols["python"].ok:
+            from conftest import torque_tolerance
+            tol = torque_tolerance(lambda q, v: engines["python"].solve(q, v).tau, q, v, robot.nq)
+            np.testing.assert_allclose(sols["native"].tau, sols["python"].tau, atol=tol, rtol=0)
+        # the posture row of the first knee: kp * (shortest angle from -3.1 to 3.1) - kd * v
+        posture = engines["native"].levels[2]
+        cs, cs_ref = (np.cos(-3.1), np.sin(-3.1)), (np.cos(3.1), np.sin(3.1))
+        short = np.arctan2(cs[0] * cs_ref[1] - cs[1] * cs_ref[0], cs[0] * cs_ref[0] + cs[1] * cs_ref[1])
+        assert short == pytest.approx(6.2 - 2 * np.pi)  # down through ±pi, not up by 6.2
+        row = 1 + 6 + knees[0]  # after the knee trajectory's row and the base rows
+        assert posture.b[row] == pytest.approx(kp * short - kd * v[6 + knees[0]], abs=1e-9)
+        # the knees' acceleration limits: none (braking), the amplitude as far from any limit (tanh)
+        limits = engines["native"].levels[1]
+        lo, hi = limits.lower[-robot.na:], limits.upper[-robot.na:]
+        bound = np.inf if mode == "braking" else JointAccelerationLimits().a_max
+        assert np.all(lo[knees] == -bound) and np.all(hi[knees] == bound)

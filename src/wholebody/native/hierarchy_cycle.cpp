@@ -85,6 +85,8 @@ public:
   {
     add_joints(spec, model_);
     nq_ = model_.nq;
+    joint_angles_ = JointAngles(model_);
+    angles_ = VectorXd::Zero(model_.nv - 6);
     nv_ = model_.nv;
     na_ = nv_ - 6;
     auto frame_joints = get<std::vector<int>>(spec, "frame_joints");
@@ -131,6 +133,7 @@ public:
   void update(const DoubleArray & q_in, const DoubleArray & v_in)
   {
     A_G_dot_v_ = rigid_body_pass(model_, data_, q_in, v_in, q_, v_);
+    joint_angles_(q_, angles_);
     for (Index i = 0; i < nc_; ++i)
     {
       const auto fid = frames_[contact_frames_[i]];
@@ -494,7 +497,7 @@ private:
   template<typename Out>
   void torque_upper(Out && hi) const
   {
-    torque_.upper(q_.tail(na_), hi);
+    torque_.upper(angles_, hi);
     hi *= torque_scale_;
   }
 
@@ -543,7 +546,7 @@ private:
     A.middleCols(6, na_).setIdentity();
     for (Index j = 0; j < na_; ++j)
     {
-      const double q = q_[7 + j], qd = v_[6 + j];
+      const double q = angles_[j], qd = v_[6 + j];
       if (tanh_mode)
       {
         lo[j] = a_max * std::tanh(k * (q_min_[j] - q));
@@ -795,7 +798,7 @@ private:
     {
       const Index j = rows[i];
       A(Index(i), 6 + j) = 1.0;
-      e[Index(i)] = acceleration[i] + kp[i] * (position[i] - q_[7 + j]) + kd[i] * (velocity[i] - v_[6 + j]);
+      e[Index(i)] = acceleration[i] + kp[i] * (position[i] - angles_[j]) + kd[i] * (velocity[i] - v_[6 + j]);
     }
   }
 
@@ -805,6 +808,8 @@ private:
   std::vector<pinocchio::FrameIndex> frames_;
   std::vector<int> contact_frames_, contact_dims_;
   VectorXd radii_, q_min_, q_max_, q_, v_;
+  JointAngles joint_angles_; // the actuated joints' angles of q_ (continuous joints: atan2)
+  VectorXd angles_;
   RowMatrix half_sizes_;
   TorqueProfile torque_;
   double torque_scale_ = 1.0, mass_ = 0.0;

@@ -23,12 +23,19 @@ namespace wholebody
     typedef pinocchio::JointModelRevoluteUnalignedTpl<Scalar, Options> JointModelRevoluteUnaligned;
     typedef pinocchio::JointModelPrismaticUnalignedTpl<Scalar, Options> JointModelPrismaticUnaligned;
     typedef pinocchio::JointModelFreeFlyerTpl<Scalar, Options> JointModelFreeFlyer;
+    // continuous joints (unbounded revolute: q = (cos, sin), one velocity)
+    typedef pinocchio::JointModelRevoluteUnboundedTpl<Scalar, Options, 0> JointModelRUBX;
+    typedef pinocchio::JointModelRevoluteUnboundedTpl<Scalar, Options, 1> JointModelRUBY;
+    typedef pinocchio::JointModelRevoluteUnboundedTpl<Scalar, Options, 2> JointModelRUBZ;
+    typedef pinocchio::JointModelRevoluteUnboundedUnalignedTpl<Scalar, Options>
+      JointModelRevoluteUnboundedUnaligned;
     typedef pinocchio::JointModelMimicTpl<Scalar, Options, JointCollectionLegged> JointModelMimic;
     typedef pinocchio::JointModelCompositeTpl<Scalar, Options, JointCollectionLegged>
       JointModelComposite;
     typedef boost::variant<
       JointModelRX, JointModelRY, JointModelRZ, JointModelFreeFlyer, JointModelRevoluteUnaligned,
-      JointModelPX, JointModelPY, JointModelPZ, JointModelPrismaticUnaligned,
+      JointModelPX, JointModelPY, JointModelPZ, JointModelPrismaticUnaligned, JointModelRUBX,
+      JointModelRUBY, JointModelRUBZ, JointModelRevoluteUnboundedUnaligned,
       boost::recursive_wrapper<JointModelMimic>>
       JointModelVariant;
 
@@ -41,12 +48,18 @@ namespace wholebody
     typedef pinocchio::JointDataRevoluteUnalignedTpl<Scalar, Options> JointDataRevoluteUnaligned;
     typedef pinocchio::JointDataPrismaticUnalignedTpl<Scalar, Options> JointDataPrismaticUnaligned;
     typedef pinocchio::JointDataFreeFlyerTpl<Scalar, Options> JointDataFreeFlyer;
+    typedef pinocchio::JointDataRevoluteUnboundedTpl<Scalar, Options, 0> JointDataRUBX;
+    typedef pinocchio::JointDataRevoluteUnboundedTpl<Scalar, Options, 1> JointDataRUBY;
+    typedef pinocchio::JointDataRevoluteUnboundedTpl<Scalar, Options, 2> JointDataRUBZ;
+    typedef pinocchio::JointDataRevoluteUnboundedUnalignedTpl<Scalar, Options>
+      JointDataRevoluteUnboundedUnaligned;
     typedef pinocchio::JointDataMimicTpl<Scalar, Options, JointCollectionLegged> JointDataMimic;
     typedef pinocchio::JointDataCompositeTpl<Scalar, Options, JointCollectionLegged>
       JointDataComposite;
     typedef boost::variant<
       JointDataRX, JointDataRY, JointDataRZ, JointDataFreeFlyer, JointDataRevoluteUnaligned,
-      JointDataPX, JointDataPY, JointDataPZ, JointDataPrismaticUnaligned,
+      JointDataPX, JointDataPY, JointDataPZ, JointDataPrismaticUnaligned, JointDataRUBX,
+      JointDataRUBY, JointDataRUBZ, JointDataRevoluteUnboundedUnaligned,
       boost::recursive_wrapper<JointDataMimic>>
       JointDataVariant;
   };

@@ -188,6 +188,16 @@ namespace wholebody_native
         id = model.addJoint(
           parent, pinocchio::JointModelRevoluteUnaligned(Map<const Vector3d>(ax + 3 * k)), placement,
           name);
+      else if (kind == "JointModelRUBX")
+        id = model.addJoint(parent, pinocchio::JointModelRUBX(), placement, name);
+      else if (kind == "JointModelRUBY")
+        id = model.addJoint(parent, pinocchio::JointModelRUBY(), placement, name);
+      else if (kind == "JointModelRUBZ")
+        id = model.addJoint(parent, pinocchio::JointModelRUBZ(), placement, name);
+      else if (kind == "JointModelRevoluteUnboundedUnaligned")
+        id = model.addJoint(
+          parent, pinocchio::JointModelRevoluteUnboundedUnaligned(Map<const Vector3d>(ax + 3 * k)),
+          placement, name);
       else if (kind == "JointModelPrismaticUnaligned")
         id = model.addJoint(
           parent, pinocchio::JointModelPrismaticUnaligned(Map<const Vector3d>(ax + 3 * k)), placement,
@@ -195,8 +205,8 @@ namespace wholebody_native
       else
         throw std::invalid_argument(
           "spec: joint " + std::to_string(k + 1) + " is a " + kind
-          + "; the native cycle supports the free flyer and 1-DoF revolute/prismatic joints (about "
-            "any fixed axis)");
+          + "; the native cycle supports the free flyer and 1-DoF revolute (bounded or continuous) "
+            "and prismatic joints (about any fixed axis)");
       const Matrix3d I = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(in + 9 * k);
       model.appendBodyToJoint(
         id, pinocchio::Inertia(ms[k], Map<const Vector3d>(lv + 3 * k), I), pinocchio::SE3::Identity());
@@ -205,6 +215,31 @@ namespace wholebody_native
       throw std::invalid_argument("spec: the root joint must be a free flyer");
     model.armature = get_vector(spec, "armature", model.nv);
   }
+
+  // The actuated joints' angles (Robot.joint_angles): q[idx_q] of a one-coordinate joint,
+  // atan2(sin, cos) of a continuous joint's (cos, sin) pair.
+  struct JointAngles
+  {
+    std::vector<Index> idx_q;
+    std::vector<bool> continuous;
+
+    explicit JointAngles(const wholebody::LeggedModel & model)
+    {
+      for (int j = 2; j < model.njoints; ++j)
+      {
+        idx_q.push_back(model.joints[j].idx_q());
+        continuous.push_back(model.joints[j].nq() == 2);
+      }
+    }
+    JointAngles() = default;
+
+    void operator()(const VectorXd & q, VectorXd & angles) const
+    {
+      angles.resize(Index(idx_q.size()));
+      for (std::size_t j = 0; j < idx_q.size(); ++j)
+        angles[Index(j)] = continuous[j] ? std::atan2(q[idx_q[j] + 1], q[idx_q[j]]) : q[idx_q[j]];
+    }
+  };
 
   // tau_max(q) of the actuated joints (wholebody.robots.torque_limits.TorqueProfile.upper without
   // its scale): the constant bound, replaced on the joints with a linkage profile

@@ -110,6 +110,7 @@ public:
   {
     require_bound();
     rigid_body_pass(model_, data_, q_in, v_in, q_, v_);
+    joint_angles_(q_, angles_);
     for (Index i = 0; i < nc_; ++i)
     {
       Matrix6x & J6 = frame_jacobians_[i];
@@ -413,6 +414,8 @@ private:
   {
     add_joints(spec, model_);
     nq_ = model_.nq;
+    joint_angles_ = JointAngles(model_);
+    angles_ = VectorXd::Zero(model_.nv - 6);
     nv_ = model_.nv;
     na_ = nv_ - 6;
     posture_error_.setZero(nv_);
@@ -485,7 +488,7 @@ private:
   void torque_bounds()
   {
     Map<VectorXd> hi(tau_hi_, na_), lo(tau_lo_, na_);
-    torque_.upper(q_.tail(na_), hi);
+    torque_.upper(angles_, hi);
     hi *= torque_scale_;
     hi = hi.cwiseMin(torque_cap_);
     lo = -hi;
@@ -496,7 +499,7 @@ private:
   {
     for (Index j = 0; j < na_; ++j)
     {
-      const double q = q_[7 + j], qd = v_[6 + j];
+      const double q = angles_[j], qd = v_[6 + j];
       if (limits_tanh_)
       {
         lo[6 + j] = a_max_ * std::tanh(steepness_ * (q_min_[j] - q));
@@ -560,6 +563,8 @@ private:
   std::vector<int> leg_;
   std::vector<pinocchio::FrameIndex> frame_ids_;
   VectorXd radii_, q_min_, q_max_, q_, v_;
+  JointAngles joint_angles_; // the actuated joints' angles of q_ (continuous joints: atan2)
+  VectorXd angles_;
   // settings
   bool slack_none_ = false, torque_regularization_ = false, force_parallel_ = false, swing_feedforward_ = true;
   bool trunk_feedforward_ = true, limits_tanh_ = false;

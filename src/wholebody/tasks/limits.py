@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV
+from ..robot import FREE_FLYER_NV
 from .base import Task, TaskRows, checked_attribute, choice_rule, scalar_rule
 from .schema import flag, scalar, vector
 
@@ -114,7 +114,7 @@ class JointAccelerationLimits(Task):
         self.mode, self.horizon, self.a_max, self.steepness = mode, horizon, a_max, steepness
 
     def bounds(self, robot) -> tuple[np.ndarray, np.ndarray]:
-        q = robot.q[FREE_FLYER_NQ:]
+        q = robot.joint_angles(robot.q)
         qd = robot.v[FREE_FLYER_NV:]
         if self.mode == "braking":
             h = self.horizon

@@ -165,10 +165,9 @@ class PostureTask(Task):
         self.q_ref = None if q_ref is None else np.asarray(q_ref, dtype=float)
 
     def rows(self, robot, variables):
-        q_ref = robot.q_ref if self.q_ref is None else self.q_ref
+        q_ref = self.reference(robot)
         n = FREE_FLYER_NV
-        joint_acc = pd_acceleration(self.kp, self.kd, q_ref[FREE_FLYER_NQ:] - robot.q[FREE_FLYER_NQ:],
-                                    -robot.v[n:])
+        joint_acc = pd_acceleration(self.kp, self.kd, robot.joint_error(robot.q, q_ref), -robot.v[n:])
         if not (self.base_kp or self.base_kd):
             return TaskRows(qdd=robot.joint_selection, lam=None, tau=None, target=joint_acc)
         # base error in the local frame: log6 of the relative placement
@@ -234,7 +233,7 @@ class JointTrajectoryTask(Task):
             if missing:
                 raise ValueError(f"joints: unknown joints {missing}")
             self._idx = np.array([robot.joint_names.index(j) for j in self.joints])
-        q = robot.q[FREE_FLYER_NQ + self._idx]
+        q = robot.joint_angles(robot.q)[self._idx]
         qd = robot.v[FREE_FLYER_NV + self._idx]
         if self.position is None:
             self.position = q.copy()
