@@ -150,3 +150,32 @@ def test_the_walk_schedule_turns_and_side_steps_exactly_in_whole_step_periods(
         dt = (part.end - part.start) / samples
         t = part.start + (np.arange(samples) + 0.5) * dt
         assert sum(part.command(x)[axis] for x in t) * dt == pytest.approx(amount, rel=1e-6)
+
+
+def test_a_replan_from_a_dcm_the_first_knot_cannot_reach_starts_at_it():
+    """A re-plan from a measured DCM so far ahead that the knot halfway through the first double
+    support would leave the soles: that knot is held inside them, and the plan still starts at
+    the measured DCM (the plan's DCM at t, the LIPM's closed form, equals it) by moving the next
+    knot — where single support starts — which stays inside the stance sole."""
+    from wholebody.planning.footsteps import Footstep
+
+    robot = wb.load_robot("talos14")
+    ctrl = Walking(robot, engine="python")
+    stance, swing = ctrl.soles
+    com = np.r_[ctrl._support_center(), robot.com[2]]
+    stance_xy = ctrl.feet[stance][0][:2]
+    step = Footstep(swing, ctrl.feet[swing][0] + np.r_[0.2, 0.0, 0.0], 0.0)
+    soles = ctrl.support(ctrl.soles, ctrl.config.cop_margin)
+    sole = ctrl.support([stance], ctrl.config.cop_margin)
+    t, moved = 3.0, 0
+    for ahead in np.linspace(0.0, 0.06, 13):  # the measured DCM, ahead of the stance sole
+        dcm = np.r_[stance_xy + np.r_[ahead, 0.0], com[2]]
+        ctrl.zmp_command = ctrl._support_center()
+        ctrl._replan(t, com, dcm, stance, ctrl.config.double_support, [step])
+        knots = ctrl.plan.zmp_knots
+        np.testing.assert_allclose(soles.project(knots[1]), knots[1], atol=1e-9)
+        if not np.allclose(knots[2], stance_xy, atol=1e-9):  # the later knot was solved
+            moved += 1
+            np.testing.assert_allclose(ctrl.plan.dcm(t)[0], dcm[:2], atol=1e-9)
+            np.testing.assert_allclose(sole.project(knots[2]), knots[2], atol=1e-9)
+    assert moved, "no draw needed the later knot: the test did not reach the case"

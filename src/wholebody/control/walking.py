@@ -481,12 +481,25 @@ class Walking:
         inside = self.support(self.soles, self.config.cop_margin).project(plan.zmp_knots[1])
         if np.linalg.norm(inside - plan.zmp_knots[1]) > 1e-9:
             zmp[1] = inside
-            plan = DCMPlan(self.omega, times, zmp, com[:2])
+            plan = self._plan_from_a_later_knot(times, zmp, com, dcm, stance, footsteps)
         self.plan, self.phases, self.phase_index = plan, phases, 0
         yaws = [self.feet[s][1] for s in self.soles]
         if footsteps:
             yaws = [footsteps[0].yaw, self.feet[stance][1]]
         self.base_yaw = (self._heading(), _mean_angle(yaws), t, t + first_ds + single)
+
+    def _plan_from_a_later_knot(self, times, zmp, com, dcm, stance: str, footsteps) -> DCMPlan:
+        """The plan when the first double support's knot would leave the soles: that knot held
+        inside them, the next one (where single support starts, under the stance sole) solved to
+        start the plan at the measured DCM if it stays inside the stance sole; else the plan
+        from the held knot (its DCM starts off the measured one)."""
+        if footsteps:
+            plan = DCMPlan(self.omega, times, zmp, com[:2], dcm0=dcm[:2], solve_knot=2)
+            sole = self.support([stance], self.config.cop_margin)
+            if np.linalg.norm(sole.project(plan.zmp_knots[2]) - plan.zmp_knots[2]) <= 1e-9:
+                return plan
+            log.debug("walking: the re-plan's knots cannot start at the measured DCM")
+        return DCMPlan(self.omega, times, zmp, com[:2])
 
     def _support_center(self) -> np.ndarray:
         return 0.5 * (self.feet[self.left][0][:2] + self.feet[self.right][0][:2])
