@@ -103,14 +103,14 @@ class StandingController:
             check_gain(kp, "kp", robot.na, matrix=False), robot.na).copy()
         self.kd = kd_rel if kd is None else np.broadcast_to(
             check_gain(kd, "kd", robot.na, matrix=False), robot.na).copy()
-        self.q_joint_ref = q_ref[7:].copy()
+        self.q_ref = np.array(q_ref, dtype=float)
 
     def compute(self, q, v, t: float = 0.0) -> ControlResult:
         robot = self.robot
         robot.update(q, v)
         tau, lam = gravity_compensation(robot)
         n = FREE_FLYER_NV
-        tau += self.kp * (self.q_joint_ref - robot.q[7:]) - self.kd * robot.v[n:]
+        tau += self.kp * robot.joint_error(robot.q, self.q_ref) - self.kd * robot.v[n:]
         tau, outcome, status = guard_torque(tau, *robot.torque_bounds(), Outcome.SOLVED, "solved")
         forces, start = {}, 0
         for c in robot.contacts:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import pinocchio as pin
 
-from ..robot import FREE_FLYER_NQ, GRAVITY, Robot
+from ..robot import GRAVITY, Robot
 from ..sim.sensors import SensorReading, SensorSpec
 from .kinematics import LegKinematics
 
@@ -296,7 +296,7 @@ class KinematicInertialEKF:
         q = np.empty(self.robot.nq)
         q[0:3] = self.position - lever
         q[3:7] = pin.Quaternion(R_base).normalized().coeffs()
-        q[FREE_FLYER_NQ:] = reading.joint_positions
+        q = self.robot.with_joint_angles(q, reading.joint_positions)
         v = np.empty(self.robot.nv)
         v[0:3] = R_base.T @ base_velocity_world
         v[3:6] = R_i @ self._omega

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..robot import FREE_FLYER_NQ, Robot
+from ..robot import Robot
 
 
 class LegKinematics:
@@ -40,7 +40,7 @@ class LegKinematics:
         """(positions, angular velocities), each (ncontact, 3) in the IMU frame: each contact
         frame's origin, and the angular velocity of its body given the IMU's own."""
         rotation, translation = self.imu_in_base.rotation, self.imu_in_base.translation
-        self._q[FREE_FLYER_NQ:] = joint_positions
+        self._q = self.robot.with_joint_angles(self._q, joint_positions)
         self._v[3:6] = rotation @ imu_angular_velocity
         self._v[6:] = joint_velocities
         model, data = self.robot.model, self._data

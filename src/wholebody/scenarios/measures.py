@@ -208,7 +208,7 @@ class BalanceMonitor:
         r["active"].append(active)
         r["support_p"].append(p_s)
         r["support_R"].append(R_s)
-        r["joints"].append(robot.q[7:] - robot.q_ref[7:])
+        r["joints"].append(robot.joint_error(robot.q_ref, robot.q))
         r["qdd"].append(np.asarray(sol.qdd)[6:])
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -217,9 +217,9 @@ class BalanceMonitor:
     def joint_limit_margin(self, deviations: np.ndarray, name: bool = False):
         """Smallest distance of any joint to its position limits over the run (rad), or with
         ``name`` the joint where it occurs."""
-        model = self.robot.model
-        q = deviations + self.robot.q_ref[7:]
-        lo, hi = model.lowerPositionLimit[7:], model.upperPositionLimit[7:]
+        robot = self.robot
+        q = deviations + robot.joint_angles(robot.q_ref)
+        lo, hi = robot.q_min, robot.q_max
         margin = np.minimum(q - lo, hi - q).min(axis=0)
         return self.robot.joint_names[int(margin.argmin())] if name else float(margin.min())
 

@@ -164,7 +164,7 @@ class Sensors:
         attitude = pin.Quaternion(pin.exp3(error) @ rotation)  # error about the world axes
         attitude.normalize()
 
-        joints = np.array(q[7:], dtype=float)
+        joints = self.robot.joint_angles(q)
         if spec.encoder_noise:
             joints += rng.normal(scale=spec.encoder_noise, size=robot.na)
         if spec.encoder_resolution:
