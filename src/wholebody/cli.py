@@ -207,6 +207,7 @@ def _run(args, held: contextlib.ExitStack) -> int:
     from .robots.check import load_fit_robot
     from .scenarios import get_scenario
     from .scenarios.base import ScenarioResult, parse_sets
+    from .sim.plant import PlantError, check_plant, plant_label, with_plant
     from .sim.simulator import SimulationDiverged
 
     try:  # every usage error surfaces here, before anything runs
@@ -218,8 +219,14 @@ def _run(args, held: contextlib.ExitStack) -> int:
                              f"controllers: {', '.join(scenario.controllers)}")
         _note_drafted(args.robot)
         robot = load_fit_robot(args.robot or scenario.default_robot)
+        if args.plant:
+            robot = with_plant(robot, args.plant)
+        check_plant(robot)  # the description's or --plant's file: mapped before anything runs
         params = scenario.validate(robot, overrides)
         _check_observed(args, scenario, params)
+    except PlantError as exc:  # named as given: the flag, or the description's field
+        return _usage_error(ValueError(f"--plant {args.plant}: {exc.reason}") if args.plant
+                            else exc)
     except (ValueError, OSError) as exc:
         return _usage_error(exc)
     out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"
@@ -246,14 +253,16 @@ def _run(args, held: contextlib.ExitStack) -> int:
         how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
         cut = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
                              [f"interrupted ({how}) after {elapsed:.1f} s of wall time; no "
-                              f"metrics or figures"], wall_time_s=elapsed, interrupted=True)
+                              f"metrics or figures"], wall_time_s=elapsed, interrupted=True,
+                             plant=plant_label(robot))
         _report_cut_short(cut, out_dir, f"INTERRUPTED ({how}) after {elapsed:.1f} s",
                           " (interrupted: true)")
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     except SimulationDiverged as exc:
         failed = ScenarioResult(scenario.name, robot.name, controller, False,
                                 {"diverged_at_s": exc.t}, params, [str(exc)],
-                                wall_time_s=time.perf_counter() - start)
+                                wall_time_s=time.perf_counter() - start,
+                                plant=plant_label(robot))
         failed.incidents = exc.incidents
         _print_incidents(failed.incidents)
         _report_cut_short(failed, out_dir, f"FAILED: {exc}")
@@ -266,7 +275,8 @@ def _run(args, held: contextlib.ExitStack) -> int:
         failed = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
                                 [f"the run ended with an error, no metrics: {error} (run with -v "
                                  f"for the traceback)"],
-                                wall_time_s=time.perf_counter() - start, error=error)
+                                wall_time_s=time.perf_counter() - start, error=error,
+                                plant=plant_label(robot))
         _report_cut_short(failed, out_dir, f"ERROR: {error}", " (completed: false)")
         return EXIT_SCENARIO_FAILED
     finally:
@@ -275,6 +285,7 @@ def _run(args, held: contextlib.ExitStack) -> int:
     status = "SUCCESS" if result.success else "FAILED"
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")
+    print(f"  plant: {result.plant}")
     _print_metrics(result.summary()["metrics"], indent=2)
     for note in result.notes:
         print(f"  note: {note}")
@@ -390,6 +401,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "file (run on the description init-robot drafts; default: "
                                    "the scenario's robot)")
     p.add_argument("--controller", help="controller variant (default: the scenario's first)")
+    p.add_argument("--plant", metavar="FILE.xml",
+                   help="simulate the robot's vendor MJCF instead of the exact twin (joints mapped "
+                        "by name; the controller keeps its own model; overrides the "
+                        "description's plant)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario parameter (repeatable)")
     p.add_argument("--out", help="output directory, created and checked to be writable before "
