@@ -229,10 +229,9 @@ def build_plant(robot: Robot, path: str | Path, environment: Environment | None 
     base, has_free = _base_body(m0, where)
     in_robot = [b for b in range(m0.nbody) if b and m0.body_rootid[b] == base]
     outside = [b for b in range(1, m0.nbody) if m0.body_rootid[b] != base]
-    moving = [m0.body(b).name for b in outside if m0.body_jntnum[b] > 0]
-    if moving:
-        raise PlantError(where, f"bodies {moving} outside the robot move; give the robot's own "
-                         f"file (the environment is the simulator's)")
+    # bodies outside the robot that move (a dummy on a hinge): removed with what they carry
+    moving = [b for b in outside if m0.body_parentid[b] == 0
+              and any(m0.body_rootid[c] == b and m0.body_jntnum[c] > 0 for c in outside)]
 
     # ---------------------------------------------------------------- joints by name
     plant_joints = {m0.joint(j).name: j for j in range(m0.njnt)
@@ -334,7 +333,13 @@ def build_plant(robot: Robot, path: str | Path, environment: Environment | None 
     if not has_free:
         spec.body(base_name).add_freejoint().name = "plant_root"
         notes.append(f"the file has no free joint: one added at body '{base_name}'")
-    world_geoms = [g for g in range(m0.ngeom) if m0.body_rootid[m0.geom_bodyid[g]] != base]
+    for b in moving:
+        spec.delete(spec.body(m0.body(b).name))
+    if moving:
+        notes.append(f"moving bodies outside the robot removed: "
+                     f"{[m0.body(b).name for b in moving]}")
+    world_geoms = [g for g in range(m0.ngeom) if m0.body_rootid[m0.geom_bodyid[g]] != base
+                   and m0.body_rootid[m0.geom_bodyid[g]] not in moving]
     for g in world_geoms:
         spec.delete(spec.geom(m0.geom(g).name))
     if world_geoms:
