@@ -75,11 +75,16 @@ def _cmd_check_robot(args) -> int:
         print(f"  contact {c['name']} ({c['role'] or 'no role'}): {c['type']} on frame "
               f"'{c['frame']}'{offset}, {size}{where}{tilt}; leg: "
               f"{', '.join(c['leg_joints']) or '-'}")
-    for finding in report.findings:
+    for finding in report.findings:  # errors on stderr, the report on stdout
         print(f"  {finding.level}: {finding.topic}: {finding.message}" +
-              (f"\n    fix: {finding.fix}" if finding.fix else ""))
-    print(f"{report.source}: {'OK' if report.ok else 'ERRORS'}")
-    return EXIT_OK if report.ok else EXIT_USAGE
+              (f"\n    fix: {finding.fix}" if finding.fix else ""),
+              file=sys.stderr if finding.level == "error" else sys.stdout)
+    if report.ok:
+        print(f"{report.source}: OK")
+        return EXIT_OK
+    errors = sum(f.level == "error" for f in report.findings)
+    print(f"wholebody: error: {report.source}: {errors} error(s) (above)", file=sys.stderr)
+    return EXIT_USAGE
 
 
 def _note_drafted(robot: str | None) -> None:
@@ -133,14 +138,24 @@ def _cmd_scenarios(args) -> int:
     from .scenarios.base import BASE_HEIGHT_LEGEND, RobotRelative
 
     if args.json:
+        if args.name is not None and args.name not in SCENARIOS:
+            return _usage_error(ValueError(f"unknown scenario '{args.name}'; scenarios: "
+                                           f"{', '.join(SCENARIOS)}"))
         print(json.dumps({s.name: {"summary": s.summary, "controllers": list(s.controllers),
                                    "default_robot": s.default_robot,
                                    "parameters": {p.name: _parameter_json(p)
                                                   for p in s.parameters}}
-                          for s in SCENARIOS.values()}, indent=2))
+                          for s in SCENARIOS.values()
+                          if args.name in (None, s.name)}, indent=2))
         return EXIT_OK
+    chosen = list(SCENARIOS.values())
+    if args.name is not None:
+        if args.name not in SCENARIOS:
+            return _usage_error(ValueError(f"unknown scenario '{args.name}'; scenarios: "
+                                           f"{', '.join(SCENARIOS)}"))
+        chosen = [SCENARIOS[args.name]]
     relative = False
-    for s in SCENARIOS.values():
+    for s in chosen:
         print(f"{s.name}  (robot {s.default_robot}; controllers: {', '.join(s.controllers)})")
         print(f"    {s.summary}")
         for p in s.parameters:
@@ -286,7 +301,11 @@ def _run(args, held: contextlib.ExitStack) -> int:
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")
     print(f"  plant: {result.plant}")
-    _print_metrics(result.summary()["metrics"], indent=2)
+    metrics = dict(result.summary()["metrics"])
+    claim = metrics.pop("claim", None)
+    _print_metrics(metrics, indent=2)
+    if isinstance(claim, dict) and "holds" in claim:
+        print(_claim_verdict(claim))
     for note in result.notes:
         print(f"  note: {note}")
     if not result.success:
@@ -296,6 +315,16 @@ def _run(args, held: contextlib.ExitStack) -> int:
     _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): {status}", out_dir,
                   result.incidents, result.summary())
     return EXIT_OK if result.success else EXIT_SCENARIO_FAILED
+
+
+def _claim_verdict(claim: dict) -> str:
+    """The paper's claim a run checks, as a verdict of its own (a run can succeed by its own
+    criterion while the claim does not hold, or fail while it holds)."""
+    numbers = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                        for k, v in claim.items() if k not in ("paper", "holds"))
+    verdict = "HOLDS" if claim["holds"] else "DOES NOT HOLD"
+    return (f"  paper's claim (a verdict of its own, not the run's success): {verdict}: "
+            f"{claim.get('paper', '')}" + (f" ({numbers})" if numbers else ""))
 
 
 #: how many of a failed run's first incidents the command line prints (summary.json has all)
@@ -391,7 +420,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.set_defaults(func=_cmd_init_robot)
 
-    p = sub.add_parser("scenarios", help="list the scenarios and their parameters")
+    p = sub.add_parser("scenarios", help="list the scenarios and their parameters (or one: "
+                                         "scenarios NAME)")
+    p.add_argument("name", nargs="?", help="show this scenario only")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_scenarios)
 

@@ -18,6 +18,13 @@ def check(capsys, *args):
     return code, capsys.readouterr().out
 
 
+def check_text(capsys, *args):
+    """(exit code, stdout, stderr) of the text report: errors go to stderr."""
+    code = main(["check-robot", *args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
 def write(tmp_path, text, name="robot.toml"):
     path = tmp_path / name
     path.write_text(text)
@@ -70,9 +77,10 @@ def test_torque_limits_too_low_to_hold_the_posture(tmp_path, capsys):
     """At 1 % of HyQ's limits its knees cannot carry it (a quarter of 87 kg on a ~0.3 m lever
     needs tens of Nm)."""
     text = HYQ.format(last="rh_foot") + "[torque_limits]\nscale = 0.01\n"
-    code, out = check(capsys, write(tmp_path, text))
+    code, out, err = check_text(capsys, write(tmp_path, text))
     assert code == 2
-    assert "holding the posture needs" in out and "_joint'" in out
+    assert "holding the posture needs" in err and "_joint'" in err
+    assert "error:" not in out and "holding the posture needs" not in out
 
 
 def test_zero_inertia_names_the_link(tmp_path, capsys):
@@ -86,9 +94,9 @@ contacts = [
   { name = "r", frame = "r_sole", type = "rectangle", half_size = [0.06, 0.03] },
 ]
 '''
-    code, out = check(capsys, write(tmp_path, text))
+    code, out, err = check_text(capsys, write(tmp_path, text))
     assert code == 2
-    assert "r_hip_pitch" in out and "inertia" in out
+    assert "r_hip_pitch" in err and "inertia" in err
 
 
 def test_placeholder_effort_limits_are_a_warning(tmp_path, capsys):
@@ -118,15 +126,16 @@ contacts = [
 [torque_limits]
 scale = 0.0027
 '''
-    code, out = check(capsys, write(tmp_path, text))
+    code, out, err = check_text(capsys, write(tmp_path, text))
     assert code == 2
-    assert "no support polygon" in out and "nan" not in out
-    assert "span no support area" in out
+    assert "no support polygon" in out and "nan" not in out + err
+    assert "span no support area" in err
 
 
 def test_unknown_robot_exits_2(capsys):
-    code, out = check(capsys, "no-such-robot")
-    assert code == 2 and "unknown robot" in out
+    code, out, err = check_text(capsys, "no-such-robot")
+    assert code == 2 and "unknown robot" in err and out == ""
+    assert err.rstrip().endswith("no-such-robot: 1 error(s) (above)")
 
 
 def test_holding_torques_balance_the_robot(robots):

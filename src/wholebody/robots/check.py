@@ -104,14 +104,43 @@ def check_robot(name_or_path) -> RobotCheck:
     for message in collect.messages:
         report.add("warning", "torque limits", message)
     inspect_robot(robot, report)
-    if report.ok and len(robot.contacts) == 2 and all(c.spec.type == "rectangle"
-                                                      for c in robot.contacts):
-        _single_support(robot, report)
-        _walking(robot, report)
-    if report.ok and len(robot.contacts) == 4 and all(c.spec.type == "point"
-                                                      for c in robot.contacts):
-        _legs_reach(robot, report)
+    _plant(robot, report)
+    # the planners' searches below log each attempt that fails; their findings say what it means
+    planning = logging.getLogger("wholebody.planning")
+    quiet = _Collect()
+    planning.addHandler(quiet)
+    propagate, planning.propagate = planning.propagate, False
+    try:
+        if report.ok and len(robot.contacts) == 2 and all(c.spec.type == "rectangle"
+                                                          for c in robot.contacts):
+            _single_support(robot, report)
+            _walking(robot, report)
+        if report.ok and len(robot.contacts) == 4 and all(c.spec.type == "point"
+                                                          for c in robot.contacts):
+            _legs_reach(robot, report)
+    finally:
+        planning.removeHandler(quiet)
+        planning.propagate = propagate
+    if quiet.messages:
+        log.debug("check-robot %s: %d planner message(s) summarised by the findings (first: %s)",
+                  name_or_path, len(quiet.messages), quiet.messages[0])
     return report
+
+
+def _plant(robot, report: RobotCheck) -> None:
+    """The description's ``plant`` (the vendor's MJCF simulated in place of the twin): mapped to
+    the robot as a run would (:func:`wholebody.sim.plant.check_plant`); an error naming what does
+    not fit, else a note of how it is joined."""
+    from ..sim.plant import PlantError, check_plant
+
+    try:
+        plant = check_plant(robot)
+    except PlantError as exc:
+        report.add("error", "plant", str(exc), "give the vendor's MJCF of this robot, or remove "
+                   "the field to simulate the exact twin")
+        return
+    if plant is not None:
+        report.add("note", "plant", f"{plant.label}: " + "; ".join(plant.notes))
 
 
 def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
