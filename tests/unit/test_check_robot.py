@@ -2,6 +2,7 @@
 that names the contact, joint or link, and exit code 2 for errors."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -400,3 +401,27 @@ def test_walking_torque_on_one_sole_is_the_static_equilibrium(robots):
         assert oracle == pytest.approx(share, rel=0.02)
     robots["romeo"].update(robots["romeo"].q_ref, np.zeros(robots["romeo"].nv))
     robots["talos14"].update(robots["talos14"].q_ref, np.zeros(robots["talos14"].nv))
+
+
+def test_five_joint_legs_are_named_with_what_they_cannot_do(tmp_path, capsys):
+    """talos14 with its ankle rolls locked has five-joint legs: check-robot says each sole cannot
+    roll relative to the trunk and what that means; talos14 itself (six joints) gets no such
+    warning. Independent evidence: the rank of the locked leg's Jacobian is 5 (Pinocchio)."""
+    text = (Path(wb.__file__).parent / "robots/presets/talos14.toml").read_text().replace(
+        '"head_1_joint", "head_2_joint",',
+        '"head_1_joint", "head_2_joint", "leg_left_6_joint", "leg_right_6_joint",')
+    path = write(tmp_path, text)
+    code, out = check(capsys, path, "--json")
+    legs = [f for f in json.loads(out)["findings"] if f["topic"] == "legs"]
+    assert code == 0 and len(legs) == 2
+    assert all("in 5 of 6 directions" in f["message"] and "no ankle roll" in f["message"]
+               and "lateral CoP" in f["message"] for f in legs)
+    robot = wb.robots.load_robot(path)
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, robot.q_ref)
+    c = robot.contacts[0]
+    J = pin.getFrameJacobian(robot.model, data, c.frame_id, pin.LOCAL)
+    assert np.linalg.matrix_rank(J[:, [6 + robot.joint_names.index(j)
+                                       for j in leg_joints(robot, c.name)]]) == 5
+    code, out = check(capsys, "talos14", "--json")
+    assert not [f for f in json.loads(out)["findings"] if f["topic"] == "legs"]
