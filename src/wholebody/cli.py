@@ -75,11 +75,16 @@ def _cmd_check_robot(args) -> int:
         print(f"  contact {c['name']} ({c['role'] or 'no role'}): {c['type']} on frame "
               f"'{c['frame']}'{offset}, {size}{where}{tilt}; leg: "
               f"{', '.join(c['leg_joints']) or '-'}")
-    for finding in report.findings:
+    for finding in report.findings:  # errors on stderr, the report on stdout
         print(f"  {finding.level}: {finding.topic}: {finding.message}" +
-              (f"\n    fix: {finding.fix}" if finding.fix else ""))
-    print(f"{report.source}: {'OK' if report.ok else 'ERRORS'}")
-    return EXIT_OK if report.ok else EXIT_USAGE
+              (f"\n    fix: {finding.fix}" if finding.fix else ""),
+              file=sys.stderr if finding.level == "error" else sys.stdout)
+    if report.ok:
+        print(f"{report.source}: OK")
+        return EXIT_OK
+    errors = sum(f.level == "error" for f in report.findings)
+    print(f"wholebody: error: {report.source}: {errors} error(s) (above)", file=sys.stderr)
+    return EXIT_USAGE
 
 
 def _note_drafted(robot: str | None) -> None:
@@ -133,14 +138,24 @@ def _cmd_scenarios(args) -> int:
     from .scenarios.base import BASE_HEIGHT_LEGEND, RobotRelative
 
     if args.json:
+        if args.name is not None and args.name not in SCENARIOS:
+            return _usage_error(ValueError(f"unknown scenario '{args.name}'; scenarios: "
+                                           f"{', '.join(SCENARIOS)}"))
         print(json.dumps({s.name: {"summary": s.summary, "controllers": list(s.controllers),
                                    "default_robot": s.default_robot,
                                    "parameters": {p.name: _parameter_json(p)
                                                   for p in s.parameters}}
-                          for s in SCENARIOS.values()}, indent=2))
+                          for s in SCENARIOS.values()
+                          if args.name in (None, s.name)}, indent=2))
         return EXIT_OK
+    chosen = list(SCENARIOS.values())
+    if args.name is not None:
+        if args.name not in SCENARIOS:
+            return _usage_error(ValueError(f"unknown scenario '{args.name}'; scenarios: "
+                                           f"{', '.join(SCENARIOS)}"))
+        chosen = [SCENARIOS[args.name]]
     relative = False
-    for s in SCENARIOS.values():
+    for s in chosen:
         print(f"{s.name}  (robot {s.default_robot}; controllers: {', '.join(s.controllers)})")
         print(f"    {s.summary}")
         for p in s.parameters:
@@ -207,6 +222,7 @@ def _run(args, held: contextlib.ExitStack) -> int:
     from .robots.check import load_fit_robot
     from .scenarios import get_scenario
     from .scenarios.base import ScenarioResult, parse_sets
+    from .sim.plant import PlantError, check_plant, plant_label, with_plant
     from .sim.simulator import SimulationDiverged
 
     try:  # every usage error surfaces here, before anything runs
@@ -218,8 +234,14 @@ def _run(args, held: contextlib.ExitStack) -> int:
                              f"controllers: {', '.join(scenario.controllers)}")
         _note_drafted(args.robot)
         robot = load_fit_robot(args.robot or scenario.default_robot)
+        if args.plant:
+            robot = with_plant(robot, args.plant)
+        check_plant(robot)  # the description's or --plant's file: mapped before anything runs
         params = scenario.validate(robot, overrides)
         _check_observed(args, scenario, params)
+    except PlantError as exc:  # named as given: the flag, or the description's field
+        return _usage_error(ValueError(f"--plant {args.plant}: {exc.reason}") if args.plant
+                            else exc)
     except (ValueError, OSError) as exc:
         return _usage_error(exc)
     out_dir = Path(args.out) if args.out else Path("results") / f"{scenario.name}-{robot.name}"
@@ -246,14 +268,16 @@ def _run(args, held: contextlib.ExitStack) -> int:
         how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
         cut = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
                              [f"interrupted ({how}) after {elapsed:.1f} s of wall time; no "
-                              f"metrics or figures"], wall_time_s=elapsed, interrupted=True)
+                              f"metrics or figures"], wall_time_s=elapsed, interrupted=True,
+                             plant=plant_label(robot))
         _report_cut_short(cut, out_dir, f"INTERRUPTED ({how}) after {elapsed:.1f} s",
                           " (interrupted: true)")
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     except SimulationDiverged as exc:
         failed = ScenarioResult(scenario.name, robot.name, controller, False,
                                 {"diverged_at_s": exc.t}, params, [str(exc)],
-                                wall_time_s=time.perf_counter() - start)
+                                wall_time_s=time.perf_counter() - start,
+                                plant=plant_label(robot))
         failed.incidents = exc.incidents
         _print_incidents(failed.incidents)
         _report_cut_short(failed, out_dir, f"FAILED: {exc}")
@@ -266,7 +290,8 @@ def _run(args, held: contextlib.ExitStack) -> int:
         failed = ScenarioResult(scenario.name, robot.name, controller, False, {}, params,
                                 [f"the run ended with an error, no metrics: {error} (run with -v "
                                  f"for the traceback)"],
-                                wall_time_s=time.perf_counter() - start, error=error)
+                                wall_time_s=time.perf_counter() - start, error=error,
+                                plant=plant_label(robot))
         _report_cut_short(failed, out_dir, f"ERROR: {error}", " (completed: false)")
         return EXIT_SCENARIO_FAILED
     finally:
@@ -275,7 +300,12 @@ def _run(args, held: contextlib.ExitStack) -> int:
     status = "SUCCESS" if result.success else "FAILED"
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")
-    _print_metrics(result.summary()["metrics"], indent=2)
+    print(f"  plant: {result.plant}")
+    metrics = dict(result.summary()["metrics"])
+    claim = metrics.pop("claim", None)
+    _print_metrics(metrics, indent=2)
+    if isinstance(claim, dict) and "holds" in claim:
+        print(_claim_verdict(claim))
     for note in result.notes:
         print(f"  note: {note}")
     if not result.success:
@@ -285,6 +315,16 @@ def _run(args, held: contextlib.ExitStack) -> int:
     _write_replay(recorder, f"{scenario.name} on {robot.name} ({controller}): {status}", out_dir,
                   result.incidents, result.summary())
     return EXIT_OK if result.success else EXIT_SCENARIO_FAILED
+
+
+def _claim_verdict(claim: dict) -> str:
+    """The paper's claim a run checks, as a verdict of its own (a run can succeed by its own
+    criterion while the claim does not hold, or fail while it holds)."""
+    numbers = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                        for k, v in claim.items() if k not in ("paper", "holds"))
+    verdict = "HOLDS" if claim["holds"] else "DOES NOT HOLD"
+    return (f"  paper's claim (a verdict of its own, not the run's success): {verdict}: "
+            f"{claim.get('paper', '')}" + (f" ({numbers})" if numbers else ""))
 
 
 #: how many of a failed run's first incidents the command line prints (summary.json has all)
@@ -380,7 +420,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.set_defaults(func=_cmd_init_robot)
 
-    p = sub.add_parser("scenarios", help="list the scenarios and their parameters")
+    p = sub.add_parser("scenarios", help="list the scenarios and their parameters (or one: "
+                                         "scenarios NAME)")
+    p.add_argument("name", nargs="?", help="show this scenario only")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_scenarios)
 
@@ -390,6 +432,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "file (run on the description init-robot drafts; default: "
                                    "the scenario's robot)")
     p.add_argument("--controller", help="controller variant (default: the scenario's first)")
+    p.add_argument("--plant", metavar="FILE.xml",
+                   help="simulate the robot's vendor MJCF instead of the exact twin (joints mapped "
+                        "by name; the controller keeps its own model; overrides the "
+                        "description's plant)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario parameter (repeatable)")
     p.add_argument("--out", help="output directory, created and checked to be writable before "

@@ -2,6 +2,7 @@
 that names the contact, joint or link, and exit code 2 for errors."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -16,6 +17,13 @@ from wholebody.robots.roles import leg_joints
 def check(capsys, *args):
     code = main(["check-robot", *args])
     return code, capsys.readouterr().out
+
+
+def check_text(capsys, *args):
+    """(exit code, stdout, stderr) of the text report: errors go to stderr."""
+    code = main(["check-robot", *args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
 
 
 def write(tmp_path, text, name="robot.toml"):
@@ -70,9 +78,10 @@ def test_torque_limits_too_low_to_hold_the_posture(tmp_path, capsys):
     """At 1 % of HyQ's limits its knees cannot carry it (a quarter of 87 kg on a ~0.3 m lever
     needs tens of Nm)."""
     text = HYQ.format(last="rh_foot") + "[torque_limits]\nscale = 0.01\n"
-    code, out = check(capsys, write(tmp_path, text))
+    code, out, err = check_text(capsys, write(tmp_path, text))
     assert code == 2
-    assert "holding the posture needs" in out and "_joint'" in out
+    assert "holding the posture needs" in err and "_joint'" in err
+    assert "error:" not in out and "holding the posture needs" not in out
 
 
 def test_zero_inertia_names_the_link(tmp_path, capsys):
@@ -86,9 +95,9 @@ contacts = [
   { name = "r", frame = "r_sole", type = "rectangle", half_size = [0.06, 0.03] },
 ]
 '''
-    code, out = check(capsys, write(tmp_path, text))
+    code, out, err = check_text(capsys, write(tmp_path, text))
     assert code == 2
-    assert "r_hip_pitch" in out and "inertia" in out
+    assert "r_hip_pitch" in err and "inertia" in err
 
 
 def test_placeholder_effort_limits_are_a_warning(tmp_path, capsys):
@@ -118,15 +127,16 @@ contacts = [
 [torque_limits]
 scale = 0.0027
 '''
-    code, out = check(capsys, write(tmp_path, text))
+    code, out, err = check_text(capsys, write(tmp_path, text))
     assert code == 2
-    assert "no support polygon" in out and "nan" not in out
-    assert "span no support area" in out
+    assert "no support polygon" in out and "nan" not in out + err
+    assert "span no support area" in err
 
 
 def test_unknown_robot_exits_2(capsys):
-    code, out = check(capsys, "no-such-robot")
-    assert code == 2 and "unknown robot" in out
+    code, out, err = check_text(capsys, "no-such-robot")
+    assert code == 2 and "unknown robot" in err and out == ""
+    assert err.rstrip().endswith("no-such-robot: 1 error(s) (above)")
 
 
 def test_holding_torques_balance_the_robot(robots):
@@ -391,3 +401,27 @@ def test_walking_torque_on_one_sole_is_the_static_equilibrium(robots):
         assert oracle == pytest.approx(share, rel=0.02)
     robots["romeo"].update(robots["romeo"].q_ref, np.zeros(robots["romeo"].nv))
     robots["talos14"].update(robots["talos14"].q_ref, np.zeros(robots["talos14"].nv))
+
+
+def test_five_joint_legs_are_named_with_what_they_cannot_do(tmp_path, capsys):
+    """talos14 with its ankle rolls locked has five-joint legs: check-robot says each sole cannot
+    roll relative to the trunk and what that means; talos14 itself (six joints) gets no such
+    warning. Independent evidence: the rank of the locked leg's Jacobian is 5 (Pinocchio)."""
+    text = (Path(wb.__file__).parent / "robots/presets/talos14.toml").read_text().replace(
+        '"head_1_joint", "head_2_joint",',
+        '"head_1_joint", "head_2_joint", "leg_left_6_joint", "leg_right_6_joint",')
+    path = write(tmp_path, text)
+    code, out = check(capsys, path, "--json")
+    legs = [f for f in json.loads(out)["findings"] if f["topic"] == "legs"]
+    assert code == 0 and len(legs) == 2
+    assert all("in 5 of 6 directions" in f["message"] and "no ankle roll" in f["message"]
+               and "lateral CoP" in f["message"] for f in legs)
+    robot = wb.robots.load_robot(path)
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, robot.q_ref)
+    c = robot.contacts[0]
+    J = pin.getFrameJacobian(robot.model, data, c.frame_id, pin.LOCAL)
+    assert np.linalg.matrix_rank(J[:, [6 + robot.joint_names.index(j)
+                                       for j in leg_joints(robot, c.name)]]) == 5
+    code, out = check(capsys, "talos14", "--json")
+    assert not [f for f in json.loads(out)["findings"] if f["topic"] == "legs"]

@@ -290,6 +290,29 @@ def test_parameter_ranges_unit():
     assert flag.parse("yes") is True and flag.parse(True) is True and flag.range_text() is None
 
 
+def test_scenarios_name_shows_that_scenario(capsys):
+    assert main(["scenarios", "crawl"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("crawl  (robot ") and "--set speed_start=" in out
+    assert "\nstand  (robot" not in out and "\npush  (robot" not in out
+    assert main(["scenarios", "crawl", "--json"]) == 0
+    assert list(json.loads(capsys.readouterr().out)) == ["crawl"]
+    assert main(["scenarios", "fly"]) == 2
+    captured = capsys.readouterr()
+    assert "unknown scenario 'fly'; scenarios: " in captured.err and captured.out == ""
+
+
+def test_a_papers_claim_is_a_verdict_of_its_own():
+    """crawl can succeed while the paper's claim does not hold: the claim is not printed as one
+    more metric under SUCCESS but as its own verdict."""
+    from wholebody.cli import _claim_verdict
+
+    line = _claim_verdict({"paper": "errors ~50 % lower", "linear_rms_reduction": 0.44,
+                           "holds": False})
+    assert "DOES NOT HOLD: errors ~50 % lower (linear_rms_reduction=0.44)" in line
+    assert "not the run's success" in line and "holds=" not in line
+
+
 def test_scenarios_lists_ranges(capsys):
     from wholebody.scenarios import SCENARIOS
 

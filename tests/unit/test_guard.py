@@ -23,6 +23,18 @@ def test_solved_torque_within_the_solver_tolerance_is_clipped_silently():
     assert got is Outcome.SOLVED and reason == "optimal"
 
 
+def test_tolerance_is_relative_to_the_limit():
+    """A 300 N m limit left by 1e-4 N m (3e-7 of it) is the solver's tolerance, not a failed
+    cycle; 1e-3 N m (3e-6 of it) is."""
+    lo, hi = np.array([-300.0, -1.0]), np.array([300.0, 1.0])
+    out, got, _ = guard_torque(np.array([300.0 + 1e-4, 0.0]), lo, hi, Outcome.SOLVED, "optimal")
+    assert got is Outcome.SOLVED and out[0] == 300.0
+    out, got, reason = guard_torque(np.array([300.0 + 1e-3, 0.0]), lo, hi, Outcome.SOLVED, "")
+    assert got is Outcome.CLIPPED and out[0] == 300.0 and "(joint 0)" in reason
+    _, got, _ = guard_torque(np.array([0.0, -1.0 - 5e-6]), lo, hi, Outcome.SOLVED, "")
+    assert got is Outcome.CLIPPED  # a small limit: the absolute tolerance
+
+
 def test_solved_torque_outside_is_clipped_and_flagged():
     out, got, reason = guard_torque(np.array([12.0, 0.0, -3.0]), LO, HI, Outcome.SOLVED, "optimal")
     np.testing.assert_array_equal(out, [10.0, 0.0, -1.0])

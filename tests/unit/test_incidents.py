@@ -19,11 +19,14 @@ class ConstantTorque:
     """A controller that sends ``tau`` every cycle; the cycles listed in ``failing`` (0-based)
     are reported as held with the status 'stub failure'."""
 
-    def __init__(self, tau, failing=()):
+    def __init__(self, tau, failing=(), clipping=()):
         self.tau, self.failing, self.cycle, self.times = np.asarray(tau, float), set(failing), 0, []
+        self.clipping = set(clipping)
 
     def compute(self, q, v, t=0.0):
         outcome = Outcome.HELD if self.cycle in self.failing else Outcome.SOLVED
+        if self.cycle in self.clipping:
+            outcome = Outcome.CLIPPED
         self.cycle += 1
         self.times.append(t)
         return Solution(qdd=np.zeros(0), lam=np.zeros(0), tau=self.tau, forces={},
@@ -110,6 +113,19 @@ def test_the_first_failed_cycle_is_reported_once_with_its_status(robots):
     assert log.incidents == []
     run_closed_loop(sim, ConstantTorque(hold), 0.05, control_period=0.004)
     assert log.incidents == []
+
+
+def test_a_clipped_cycle_does_not_hide_the_first_held_one(robots):
+    """Clipped at cycle 2, held from cycle 6: both are reported, each once, in time order."""
+    robot = robots["hyq"]
+    log = IncidentLog()
+    sim = Simulator(robot, observers=[log], label="stub")
+    controller = ConstantTorque(np.zeros(robot.na), failing=(6, 7), clipping=(2, 3, 8))
+    run_closed_loop(sim, controller, 0.05, control_period=0.004)
+    failures = [x for x in log.incidents if "controller" in x.what]
+    assert [(x.what.split(":")[0], x.t) for x in failures] == [
+        ("first failed controller cycle (clipped)", controller.times[2]),
+        ("first failed controller cycle (held)", controller.times[6])]
 
 
 def test_runs_are_kept_apart_by_label(robots):

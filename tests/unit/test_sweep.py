@@ -17,7 +17,7 @@ from wholebody.scenarios.base import Scenario, ScenarioResult, parse_sets
 from wholebody.sweep import (LocalPoolExecutor, SerialExecutor, SweepRun, expand, ordered,
                              parse_grid)
 from wholebody.sweep.executors import SINGLE_THREAD_ENV
-from wholebody.sweep.table import columns, write_csv, write_figure, write_json
+from wholebody.sweep.table import columns, default_metric, write_csv, write_figure, write_json
 from wholebody.sweep.worker import flatten_metrics
 
 
@@ -230,6 +230,28 @@ def test_table_rows_in_grid_order(tmp_path):
         list(range(6))
     assert write_figure(tmp_path / "t.png", shuffled, ["k", "m"], "t", metric="v").exists()
     assert write_figure(tmp_path / "u.png", [], [], "empty").exists()
+
+
+def test_a_flat_success_line_gives_way_to_a_metric_that_varies(tmp_path, monkeypatch):
+    """Every run succeeded: sweep.png plots the first metric that changes along the grid (not a
+    timing), not a line at 1."""
+    rows = [{"index": i, "repeat": 0, "grid": {"dv": dv}, "success": True, "error": None,
+             "metrics": {"cycle_time_median_us": 90.0 + i, "fell": False, "drift_m": 0.01 * dv},
+             "wall_time_s": 0.1} for i, dv in enumerate((0.1, 0.2, 0.3))]
+    assert default_metric(rows, ["dv"]) == "drift_m"
+    flat = [{**r, "metrics": {"fell": False, "cycle_time_median_us": 90.0 + r["index"]}}
+            for r in rows]
+    assert default_metric(flat, ["dv"]) is None
+    labels = []
+    from matplotlib.axes import Axes
+    real = Axes.set_ylabel
+    monkeypatch.setattr(Axes, "set_ylabel", lambda ax, text, *a, **k: (labels.append(text),
+                                                                        real(ax, text, *a, **k)))
+    write_figure(tmp_path / "a.png", rows, ["dv"], "t")
+    write_figure(tmp_path / "b.png", flat, ["dv"], "t")
+    mixed = [{**r, "success": r["index"] != 1} for r in rows]
+    write_figure(tmp_path / "c.png", mixed, ["dv"], "t")
+    assert labels == ["drift_m", "success rate", "success rate"]
 
 
 # ---------------------------------------------------------------- executors

@@ -104,14 +104,43 @@ def check_robot(name_or_path) -> RobotCheck:
     for message in collect.messages:
         report.add("warning", "torque limits", message)
     inspect_robot(robot, report)
-    if report.ok and len(robot.contacts) == 2 and all(c.spec.type == "rectangle"
-                                                      for c in robot.contacts):
-        _single_support(robot, report)
-        _walking(robot, report)
-    if report.ok and len(robot.contacts) == 4 and all(c.spec.type == "point"
-                                                      for c in robot.contacts):
-        _legs_reach(robot, report)
+    _plant(robot, report)
+    # the planners' searches below log each attempt that fails; their findings say what it means
+    planning = logging.getLogger("wholebody.planning")
+    quiet = _Collect()
+    planning.addHandler(quiet)
+    propagate, planning.propagate = planning.propagate, False
+    try:
+        if report.ok and len(robot.contacts) == 2 and all(c.spec.type == "rectangle"
+                                                          for c in robot.contacts):
+            _single_support(robot, report)
+            _walking(robot, report)
+        if report.ok and len(robot.contacts) == 4 and all(c.spec.type == "point"
+                                                          for c in robot.contacts):
+            _legs_reach(robot, report)
+    finally:
+        planning.removeHandler(quiet)
+        planning.propagate = propagate
+    if quiet.messages:
+        log.debug("check-robot %s: %d planner message(s) summarised by the findings (first: %s)",
+                  name_or_path, len(quiet.messages), quiet.messages[0])
     return report
+
+
+def _plant(robot, report: RobotCheck) -> None:
+    """The description's ``plant`` (the vendor's MJCF simulated in place of the twin): mapped to
+    the robot as a run would (:func:`wholebody.sim.plant.check_plant`); an error naming what does
+    not fit, else a note of how it is joined."""
+    from ..sim.plant import PlantError, check_plant
+
+    try:
+        plant = check_plant(robot)
+    except PlantError as exc:
+        report.add("error", "plant", str(exc), "give the vendor's MJCF of this robot, or remove "
+                   "the field to simulate the exact twin")
+        return
+    if plant is not None:
+        report.add("note", "plant", f"{plant.label}: " + "; ".join(plant.notes))
 
 
 def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
@@ -124,6 +153,7 @@ def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
     pin.framesForwardKinematics(robot.model, data, robot.q_ref)
     _contacts_on_the_floor(robot, data, report)
     _joints_that_leave_the_feet(robot, data, report)
+    _soles_the_legs_cannot_turn(robot, data, report)
     _support(robot, data, report)
     _gravity_torques(robot, report)
     return report
@@ -341,6 +371,51 @@ def _joints_that_leave_the_feet(robot, data, report: RobotCheck) -> None:
                    f"sphere's centre (the axis passes through it): no foot task moves them, only "
                    f"the posture regulariser holds them",
                    "lock them (locked_joints) unless the robot needs them")
+
+
+#: the sole motions a leg's Jacobian can miss, by the largest component (sole frame)
+_SOLE_MOTIONS = ("slide it along its x axis", "slide it along its y axis", "lift it",
+                 "roll it (about its x axis: no ankle roll)", "pitch it (about its y axis)",
+                 "yaw it (about its normal)")
+
+
+def _soles_the_legs_cannot_turn(robot, data, report: RobotCheck) -> None:
+    """A sole whose leg moves it in fewer than 6 directions (a five-joint leg: no ankle roll).
+    Along the missing direction u (the left null space of the leg's Jacobian in the sole frame) a
+    contact wrench costs no joint torque: the leg cannot set that part of the sole's wrench (with
+    no ankle roll, the sole's moment about its x axis, i.e. its lateral CoP), which then follows
+    from the trunk's motion; the sole cannot stay flat while the trunk moves along u relative to
+    it, so single support over it cannot hold the trunk's pose."""
+    pin.computeJointJacobians(robot.model, data, robot.q_ref)
+    height = float(robot.q_ref[2])
+    for c in robot.contacts:
+        if c.spec.type != "rectangle":
+            continue
+        joints = leg_joints(robot, c.name)
+        if not joints:
+            continue
+        J = pin.getFrameJacobian(robot.model, data, c.frame_id, pin.LOCAL)
+        columns = [6 + robot.joint_names.index(j) for j in joints]
+        leg = J[:, columns].copy()
+        leg[:3] /= height  # lengths in base heights: translations and rotations comparable
+        u, sv, _ = np.linalg.svd(leg)
+        rank = int(np.sum(sv > 1e-6 * sv[0])) if len(sv) else 0
+        if rank >= 6:
+            continue
+        missing = u[:, rank]
+        roll = abs(missing[3]) > 0.3  # a roll, possibly with a sideways slide
+        what = (_SOLE_MOTIONS[3] + (" with a sideways slide" if abs(missing[1]) > 0.3 else "")
+                if roll else _SOLE_MOTIONS[int(np.argmax(np.abs(missing)))])
+        report.add(
+            "warning", "legs",
+            f"sole '{c.name}': its leg ({len(joints)} joint(s): {', '.join(joints)}) moves the sole "
+            f"in {rank} of 6 directions; it cannot {what} relative to the trunk. A contact wrench "
+            f"along that direction costs the leg no torque, so the controllers cannot set it"
+            + (": this sole's lateral CoP follows the trunk, the lateral CoP moves only by "
+               "shifting weight to the other sole, and single support on it cannot hold the "
+               "trunk upright" if roll else "; single support on it cannot hold the trunk's pose"),
+            "expect double support only (stand, push); single support and stepping need a "
+            "6-joint leg")
 
 
 def _support(robot, data, report: RobotCheck) -> None:

@@ -31,6 +31,9 @@ Fields (``*`` = required)::
                    :mod:`wholebody.robots.torque_limits`)
     friction       nominal Coulomb friction coefficient of the feet used by controllers, default 0.8
     trunk_frame    the upper-body frame that pushes and trunk tasks address, default the base
+    plant          an MJCF file (path relative to the TOML) simulated in place of the exact twin:
+                   the vendor's own MuJoCo model of the robot, its joints mapped to the
+                   controller's by name (:mod:`wholebody.sim.plant`); default none (the twin)
 
 Every number is checked here, with a :class:`DescriptionError` naming its path (``posture.<joint>``,
 ``armature.<joint>``, ``contacts[i].radius``, ``torque_limits.overrides.<joint>``...) and the value:
@@ -220,6 +223,8 @@ class RobotDescription:
     torque_limits: dict[str, Any] = field(default_factory=dict)
     friction: float = 0.8
     trunk_frame: str | None = None
+    #: the vendor's MJCF simulated in place of the exact twin (None: the twin)
+    plant: str | None = None
     base_dir: Path | None = None
     #: the key the model file was given under ("model" or "urdf"), for messages
     model_key: str = field(default="urdf", compare=False)
@@ -245,7 +250,7 @@ class RobotDescription:
 
         known = {"name", "model", "urdf", "srdf", "posture", "posture_overrides", "locked_joints",
                  "armature", "inertia_overrides", "contacts", "torque_limits", "friction",
-                 "trunk_frame", "description"}
+                 "trunk_frame", "description", "plant"}
         unknown = sorted(str(k) for k in set(data) - known)
         if unknown:
             raise DescriptionError(f"{where}: unknown field(s) {unknown}; known: {sorted(known)}")
@@ -302,12 +307,15 @@ class RobotDescription:
         friction = _checked(validation.positive, data.get("friction", 0.8), "friction", where)
         trunk = data.get("trunk_frame")
         trunk = None if trunk is None else _name(trunk, "trunk_frame", where)
+        plant = data.get("plant")
+        plant = None if plant is None else _name(plant, "plant", where)
         return cls(
             name=name, urdf=urdf, srdf=srdf or None, posture=posture, contacts=contacts,
             posture_overrides=overrides,
             locked_joints=locked, armature=armature, inertia_overrides=inertias,
             torque_limits=check_torque_limits(data.get("torque_limits"), where),
-            friction=friction, trunk_frame=trunk, base_dir=base_dir, model_key=model_key,
+            friction=friction, trunk_frame=trunk, plant=plant, base_dir=base_dir,
+            model_key=model_key,
         )
 
     @classmethod

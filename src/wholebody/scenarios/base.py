@@ -18,6 +18,7 @@ import numpy as np
 from ..control.stacks import COM_PD, COP_MARGIN as COP_MARGIN_DEFAULT, POSTURE_PD, SWING_FOOT_PD
 from ..cycle import ENGINES
 from ..sim.incidents import IncidentLog
+from ..sim.plant import plant_label
 from ..sim.simulator import SimulationDiverged
 from ..tasks.momentum import MOMENTUM_D_ANGULAR, MOMENTUM_D_LINEAR, MOMENTUM_P
 
@@ -432,12 +433,15 @@ class ScenarioResult:
     incidents: list[dict] | None = None
     #: why the run ended without its result (an error in the scenario), None if it did not
     error: str | None = None
+    #: what was simulated: "exact twin" or "vendor MJCF <file>" (the robot's ``plant``)
+    plant: str = "exact twin"
 
     def summary(self) -> dict[str, Any]:
         out = {
             "scenario": self.scenario,
             "robot": self.robot,
             "controller": self.controller,
+            "plant": self.plant,
             "success": bool(self.success),
             "completed": bool(not self.interrupted and self.error is None),
             "interrupted": bool(self.interrupted),
@@ -586,6 +590,7 @@ class Scenario:
             exc.incidents = None if incidents is None else incidents.as_dicts()
             raise
         result.wall_time_s = time.perf_counter() - start
+        result.plant = plant_label(robot)
         missing = [f for f in result.figures if not Path(f).is_file()]
         if missing:  # save_figure logged why
             result.figures = [f for f in result.figures if f not in missing]

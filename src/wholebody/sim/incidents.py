@@ -33,7 +33,10 @@ class IncidentLog:
 
     * a joint of the twin arriving at or beyond a limit of its range, once per joint and side (a
       joint that starts on that limit is left out for the run);
-    * a controller cycle that failed (``Solution.ok`` false: held or clipped), with its status.
+    * a controller cycle that failed (``Solution.ok`` false), with its status: the first clipped
+      one (a torque beyond the limits by more than the solver's tolerance,
+      :data:`wholebody.guard.LIMIT_TOLERANCE`) and the first held one, each once, so that a
+      clipped cycle early in the run does not hide the first cycle with no solution at all.
 
     ``incidents`` lists them run by run (runs by their simulator's ``label``; a reset starts its
     run over), each run's in time order.
@@ -42,12 +45,12 @@ class IncidentLog:
     def __init__(self):
         self._runs: dict[str, list[Incident]] = {}
         self._label = ""
-        self._failure_seen = False
+        self._failure_seen: set = set()
 
     def start(self, sim) -> None:
         self._label = sim.label
         self._runs[self._label] = []
-        self._failure_seen = False
+        self._failure_seen: set = set()
         model = sim.model
         limited = np.flatnonzero(model.jnt_limited)
         self._names = [model.joint(int(j)).name for j in limited]
@@ -70,8 +73,8 @@ class IncidentLog:
                              f"position limit ({limit:.3f})")
 
     def controller_result(self, sim, result) -> None:
-        if not result.ok and not self._failure_seen:
-            self._failure_seen = True
+        if not result.ok and result.outcome not in self._failure_seen:
+            self._failure_seen.add(result.outcome)  # the first clipped and the first held apart
             self._add(sim.t, f"first failed controller cycle ({result.outcome.value}): "
                              f"{result.status}")
 

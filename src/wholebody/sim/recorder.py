@@ -169,7 +169,7 @@ def _scene(sim) -> tuple[list[int], list[SceneGeom]]:
     """The environment geoms of the twin (every geom not on a robot body) and the ids of the
     moving bodies that carry some of them."""
     m = sim.model
-    robot_bodies = set(sim.twin.joint_bodies.values())
+    robot_bodies = sim.twin.bodies()
     bodies: list[int] = []
     geoms = []
     for g in range(m.ngeom):

@@ -130,7 +130,7 @@ class Sensors:
         q, v = sim.state()
         a = np.zeros(self.robot.nv)
         if sim.t > 0.5 * sim.dt:
-            a[:] = sim.data.qacc[:self.robot.nv]
+            a[:] = sim.acceleration()
             # MuJoCo's free-joint linear acceleration is d/dt of the world velocity; Pinocchio's
             # is d/dt of the local one: R^T a_world - omega x v_local
             rotation = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()

@@ -87,6 +87,10 @@ class SimObserver(Protocol):
 class Simulator:
     """A MuJoCo twin of ``robot`` with an environment, optional model mismatch and pushes.
 
+    The plant is the exact twin (:mod:`wholebody.sim.twin`) unless the robot's description names
+    a ``plant``: the vendor's MJCF, loaded by :func:`wholebody.sim.plant.build_plant` with the
+    controller's joints mapped by name (``plant`` says which, for summaries).
+
     ``observers`` (:class:`SimObserver`) see every reset and step; ``label`` names the run for them
     (e.g. the controller of a comparison)."""
 
@@ -101,8 +105,24 @@ class Simulator:
         self.options = options or SimOptions()
         # an observer that draws the twin itself (the live view) asks for the robot's skeleton
         skeleton = any(getattr(o, "draws_twin", False) for o in self.observers)
-        self.twin: Twin = build_twin(robot, self.environment, self.mismatch, self.options,
-                                     skeleton)
+        from .plant import build_plant, plant_path
+
+        plant = plant_path(robot)
+        if plant is None:
+            self.twin: Twin = build_twin(robot, self.environment, self.mismatch, self.options,
+                                         skeleton)
+        else:  # the vendor's model draws itself
+            self.twin = build_plant(robot, plant, self.environment, self.mismatch, self.options)
+        twin = self.twin
+        #: what is simulated: "exact twin" or "vendor MJCF <file>"
+        self.plant = twin.label
+        self._qpos = (np.arange(robot.nq) if twin.qpos_index is None else twin.qpos_index)
+        self._qvel = (np.arange(robot.nv) if twin.dof_index is None else twin.dof_index)
+        self._ctrl = (np.arange(robot.na) if twin.actuator_index is None
+                      else twin.actuator_index)
+        self._ctrl_scale = (np.ones(robot.na) if twin.actuator_scale is None
+                            else twin.actuator_scale)
+        self._held = twin.held_qpos
         self.model = self.twin.model
         self.data = mujoco.MjData(self.model)
         self.dt = self.model.opt.timestep
@@ -133,7 +153,9 @@ class Simulator:
         v = np.zeros(robot.nv) if v is None else check_vector(v, robot.nv, "v")
         mujoco.mj_resetData(self.model, self.data)
         self._set_platform(0.0)
-        self.data.qpos[:robot.nq], self.data.qvel[:robot.nv] = convert.pin_to_mj(q, v)
+        self.data.qpos[self._qpos], self.data.qvel[self._qvel] = convert.pin_to_mj(q, v)
+        for address, value in self._held:
+            self.data.qpos[address] = value
         mujoco.mj_forward(self.model, self.data)
         self._delay = deque([np.zeros(robot.na)] * self.mismatch.torque_delay)
         self.log = SimLog(robot.contact_names)
@@ -148,8 +170,12 @@ class Simulator:
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         """(q, v) of the simulated robot in Pinocchio convention."""
-        n, nv = self.robot.nq, self.robot.nv
-        return convert.mj_to_pin(self.data.qpos[:n], self.data.qvel[:nv])
+        return convert.mj_to_pin(self.data.qpos[self._qpos], self.data.qvel[self._qvel])
+
+    def acceleration(self) -> np.ndarray:
+        """MuJoCo's generalised acceleration of the robot's coordinates (MuJoCo's convention:
+        the free joint's linear part is d/dt of its world velocity), in the controller's order."""
+        return self.data.qacc[self._qvel].copy()
 
     # ------------------------------------------------------------------ disturbances
     def add_push(self, push: Push) -> None:
@@ -159,10 +185,14 @@ class Simulator:
             raise ValueError(f"push.frame: '{push.frame}' is not a frame of robot "
                              f"'{self.robot.name}'")
         frame = model.frames[model.getFrameId(push.frame)]
-        body = self.twin.joint_bodies[model.names[frame.parentJoint]]
+        joint = model.names[frame.parentJoint]
+        body = self.twin.joint_bodies[joint]
+        local = frame.placement.act(np.asarray(push.offset, dtype=float))
+        if self.twin.joint_frames is not None:  # a plant: the joint's frame in the body's
+            local = self.twin.joint_frames[joint].act(local)
         self._pushes.append(push)
         self._push_bodies.append(body)
-        self._push_offsets.append(frame.placement.act(np.asarray(push.offset, dtype=float)))
+        self._push_offsets.append(local)
 
     def _apply_pushes(self, t: float) -> np.ndarray:
         """Apply the pushes acting at ``t``; their (point, force) in ``active_pushes`` (world)."""
@@ -207,9 +237,11 @@ class Simulator:
         if self.mismatch.torque_noise:
             applied = applied + self._rng.normal(scale=self.mismatch.torque_noise, size=robot.na)
         lo, hi = robot.torque_bounds(q)
+        if self.twin.torque_lower is not None:  # a plant's own actuator limits
+            lo, hi = np.maximum(lo, self.twin.torque_lower), np.minimum(hi, self.twin.torque_upper)
         clipped = np.clip(applied, lo, hi)
         self.last_clipped = applied - clipped
-        self.data.ctrl[:] = clipped
+        self.data.ctrl[self._ctrl] = clipped * self._ctrl_scale
         push_force = self._apply_pushes(self.t)
         self._set_platform(self.t)
         if self.record:

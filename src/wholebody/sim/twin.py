@@ -11,7 +11,7 @@ Pinocchio to machine precision (``tests/test_twin.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -42,7 +42,10 @@ class SimOptions:
 
 @dataclass
 class Twin:
-    """A compiled twin: the MuJoCo model plus the name maps the simulator needs."""
+    """A compiled twin: the MuJoCo model plus the name maps the simulator needs.
+
+    The exact twin has the controller's coordinate layout (the maps below are the identity); a
+    vendor's plant (:mod:`wholebody.sim.plant`) has its own, read and written through them."""
 
     model: mujoco.MjModel
     contact_geoms: dict[str, list[int]]  # contact name -> geom ids
@@ -50,6 +53,31 @@ class Twin:
     joint_bodies: dict[str, int]  # Pinocchio joint name -> MuJoCo body id
     platform_qpos: np.ndarray | None  # qpos addresses of the platform joints
     platform_qvel: np.ndarray | None
+    #: qpos address of each coordinate of the controller's q (free flyer, then the joints);
+    #: None: the first nq
+    qpos_index: np.ndarray | None = None
+    #: qvel address of each coordinate of the controller's v; None: the first nv
+    dof_index: np.ndarray | None = None
+    #: the actuator of each actuated joint and its control per N m (1 / (gear x gain)); None:
+    #: actuator i drives joint i with gear 1
+    actuator_index: np.ndarray | None = None
+    actuator_scale: np.ndarray | None = None
+    #: the plant's own actuator torque bounds per joint (None: none beyond the robot's)
+    torque_lower: np.ndarray | None = None
+    torque_upper: np.ndarray | None = None
+    #: Pinocchio joint name -> its frame in the MuJoCo body's frame (None: the same frames)
+    joint_frames: dict[str, pin.SE3] | None = None
+    #: the MuJoCo bodies of the robot (None: those of ``joint_bodies``)
+    robot_bodies: frozenset[int] | None = None
+    #: (qpos address, value) of the plant's joints held at the posture (locked joints)
+    held_qpos: list[tuple[int, float]] = field(default_factory=list)
+    #: what the simulated plant is, for summaries
+    label: str = "exact twin"
+    notes: list[str] = field(default_factory=list)
+
+    def bodies(self) -> frozenset[int]:
+        """The MuJoCo bodies of the robot."""
+        return self.robot_bodies or frozenset(self.joint_bodies.values())
 
 
 def _wxyz(rotation: np.ndarray) -> np.ndarray:
@@ -198,7 +226,7 @@ def _add_skeleton(robot: Robot, bodies: dict) -> None:
         geom.rgba = list(SKELETON_RGBA)
 
 
-def _env_geom(body, name: str, friction: float, options: SimOptions):
+def _env_geom(body, name: str, friction: float, options: SimOptions, geoms: list):
     geom = body.add_geom()
     geom.name = name
     geom.contype, geom.conaffinity = ENV_CONTYPE, ENV_CONAFFINITY
@@ -206,18 +234,21 @@ def _env_geom(body, name: str, friction: float, options: SimOptions):
     geom.priority = 1  # the environment's friction is the one used in a contact
     geom.solref = list(options.contact_solref)
     geom.rgba = [0.6, 0.6, 0.65, 1.0]
+    geoms.append(geom)
     return geom
 
 
-def _add_environment(spec: mujoco.MjSpec, env: Environment, options: SimOptions) -> None:
+def _add_environment(spec: mujoco.MjSpec, env: Environment, options: SimOptions) -> list:
+    """Add the environment's geoms (and the platform's body) to ``spec``; returns the geoms."""
     world = spec.worldbody
+    geoms: list = []
     if env.floor:
-        floor = _env_geom(world, "floor", env.floor_friction, options)
+        floor = _env_geom(world, "floor", env.floor_friction, options, geoms)
         floor.type = mujoco.mjtGeom.mjGEOM_PLANE
         floor.size = [0, 0, 1]
         floor.pos = [0, 0, env.ground_height]
     for i, box in enumerate(env.boxes):
-        geom = _env_geom(world, f"box{i}", box.friction or env.floor_friction, options)
+        geom = _env_geom(world, f"box{i}", box.friction or env.floor_friction, options, geoms)
         geom.type = mujoco.mjtGeom.mjGEOM_BOX
         geom.size = list(box.half_size)
         geom.pos = list(box.center)
@@ -237,10 +268,11 @@ def _add_environment(spec: mujoco.MjSpec, env: Environment, options: SimOptions)
             joint.type = (mujoco.mjtJoint.mjJNT_SLIDE if kind == "slide"
                           else mujoco.mjtJoint.mjJNT_HINGE)
             joint.axis = np.eye(3)[axis]
-        geom = _env_geom(body, "platform", p.friction or env.floor_friction, options)
+        geom = _env_geom(body, "platform", p.friction or env.floor_friction, options, geoms)
         geom.type = mujoco.mjtGeom.mjGEOM_BOX
         geom.size = list(p.half_size)
         geom.pos = [0, 0, -p.half_size[2]]
+    return geoms
 
 
 def build_twin(robot: Robot, environment: Environment | None = None,

@@ -86,15 +86,41 @@ def _series(rows: list[dict], grid_keys: list[str], value) -> tuple[list, dict[s
     return xs, out
 
 
+#: metrics that measure the computer, not the robot: never a sweep's default plot
+_TIMING = ("wall_time", "cycle_time", "_us")
+
+
+def default_metric(rows: list[dict], grid_keys: list[str]) -> str | None:
+    """The metric ``sweep.png`` plots when every run has the same success and no ``--metric`` is
+    given: the first (in the scenario's order) whose mean changes along the grid by more than
+    1e-9 of its size, timing metrics left out; None if none does."""
+    for name in metric_names(rows):
+        if any(part in name for part in _TIMING):
+            continue
+        _, lines = _series(rows, grid_keys, lambda r, n=name: _number(r["metrics"].get(n)))
+        values = [m for means in lines.values() for m in means if m is not None]
+        if len(values) > 1 and max(values) - min(values) > 1e-9 * max(1.0, *map(abs, values)):
+            return name
+    return None
+
+
 def write_figure(path: Path, rows: list[dict], grid_keys: list[str], title: str,
                  metric: str | None = None) -> Path:
     """``path``: success rate (and the mean of ``metric`` if given) vs the first grid key, one
-    line per value of the second key (means over the other keys and the repeats)."""
+    line per value of the second key (means over the other keys and the repeats). When every
+    run has the same success and no ``metric`` is given, the panel is :func:`default_metric`'s
+    instead (the title says the success), if a metric varies."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     rows = [r for r in sort_rows(rows) if r["error"] is None]
     panels = [("success rate", lambda r: float(r["success"]))]
+    if metric is None and rows and len({bool(r["success"]) for r in rows}) == 1:
+        chosen = default_metric(rows, grid_keys)  # a flat success line says nothing more
+        if chosen is not None:
+            rate = "every" if rows[0]["success"] else "no"
+            title = f"{title} (success in {rate} run)"
+            panels = [(chosen, lambda r: _number(r["metrics"].get(chosen)))]
     if metric is not None:
         panels.append((metric, lambda r: _number(r["metrics"].get(metric))))
     fig = Figure(figsize=(6.4 * len(panels), 4.2), layout="constrained")
@@ -116,7 +142,7 @@ def write_figure(path: Path, rows: list[dict], grid_keys: list[str], title: str,
             ax.set_xticks(positions, [str(x) for x in xs])
         ax.set_xlabel(grid_keys[0] if grid_keys else "")
         ax.set_ylabel(label)
-        if k == 0:
+        if label == "success rate":
             ax.set_ylim(-0.05, 1.05)
         if len(lines) > 1:
             ax.legend(fontsize="small")
