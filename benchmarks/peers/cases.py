@@ -185,13 +185,14 @@ def reduced_urdf(urdf_path: str, locked: dict[str, float], strip_geometry: bool 
 
 # --- the worker protocol shared by the three runners ----------------------------------------
 
-def serve(solve_one, acceleration_of_com, n_states: int, warmup: int = 50):
+def serve(solve_one, acceleration_of_com, n_states: int, solved: str = "", warmup: int = 50):
     """The runners' loop. ``solve_one(i) -> (seconds, tau, qdd, ok)`` solves state i (the time
     covers the whole cycle: model update from (q, v), task rows, QP, torques);
     ``acceleration_of_com(i, qdd)`` is the CoM acceleration that qdd gives at state i (not timed).
 
     Protocol, one line each on stdin: ``run START STOP`` -> one JSON line {"times": [...]} with
-    the seconds of states START..STOP-1; ``save PATH`` -> the last tau, CoM acceleration and
+    the seconds of states START..STOP-1 (after warm-up the runner prints {"ready": true,
+    "solved": SOLVED}, what it solves); ``save PATH`` -> the last tau, CoM acceleration and
     success flag of every state solved so far, to an .npz; ``quit``. Standalone (no driver):
     ``--all`` runs every state once and prints the JSON times."""
     import json
@@ -212,7 +213,7 @@ def serve(solve_one, acceleration_of_com, n_states: int, warmup: int = 50):
     if "--all" in sys.argv:
         print(json.dumps({"times": run(0, n_states)}))
         return
-    print(json.dumps({"ready": True}), flush=True)
+    print(json.dumps({"ready": True, "solved": solved}), flush=True)
     for line in sys.stdin:
         words = line.split()
         if not words:

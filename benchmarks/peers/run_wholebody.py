@@ -85,7 +85,8 @@ def main():
     cycle = HierarchyCycle(robot, stack, engine="native", method=method)
     Q, V = data["q"], data["v"]
     model, pdata = robot.model, robot.model.createData()
-    print(f"# wholebody {variant}: {describe(stack, method)[0]}", file=sys.stderr)
+    solved = describe(stack, method)[0]
+    print(f"# wholebody {variant}: {solved}", file=sys.stderr)
 
     def solve_one(i):
         t0 = time.perf_counter()
@@ -97,7 +98,7 @@ def main():
         pin.centerOfMass(model, pdata, Q[i], V[i], qdd)
         return pdata.acom[0].copy()
 
-    cases.serve(solve_one, acceleration_of_com, len(Q))
+    cases.serve(solve_one, acceleration_of_com, len(Q), solved)
 
 
 if __name__ == "__main__":
