@@ -39,7 +39,7 @@ CASES = {
             {"kind": "posture", "kp": 50.0, "kd": 14.0, "weight": 0.1, "base": False},
             {"kind": "force_regularizer", "weight": 1e-2},
         ],
-        "wholebody": ["weighted"],
+        "wholebody": ["weighted", "2level"],
     },
     "talos14": {
         "title": "talos14 (14 DoF), Table 2 tasks",
@@ -58,7 +58,7 @@ CASES = {
             {"kind": "posture", "kp": 50.0, "kd": 14.0, "weight": 0.1, "base": True},
             {"kind": "force_regularizer", "weight": 1e-4},
         ],
-        "wholebody": ["cascade", "weighted"],
+        "wholebody": ["cascade", "weighted", "2level"],
     },
     "talos": {
         "title": "Talos (32 DoF), Table 1 tasks (double support)",
@@ -75,7 +75,7 @@ CASES = {
             {"kind": "posture", "kp": 50.0, "kd": 14.0, "weight": 1.0, "base": True},
             {"kind": "force_regularizer", "weight": 1e-2},
         ],
-        "wholebody": ["cascade", "weighted"],
+        "wholebody": ["cascade", "weighted", "2level"],
     },
 }
 

@@ -2,9 +2,11 @@
 
     PYTHONPATH=src python benchmarks/peers/run_wholebody.py CASE VARIANT [--all]
 
-VARIANT: "cascade" (the strict stack of the case: Table 2 for talos14, Table 1 for talos) or
+VARIANT: "cascade" (the strict stack of the case: Table 2 for talos14, Table 1 for talos),
 "weighted" (one hard level — dynamics, torque limits, contacts, friction/CoP, joint-acceleration
-limits — and one weighted objective). Reads $PEERS_DIR/states/CASE.npz; see cases.serve for the
+limits — and one weighted objective, method "weighted": one QP) or "2level" (the same two levels
+solved by the compiled cascade: the hard level, then the objective in its solution set — the
+weighted variant's solution whenever the hard level is feasible). Reads $PEERS_DIR/states/CASE.npz; see cases.serve for the
 protocol on stdin.
 """
 
@@ -51,7 +53,7 @@ def hyq_stack(robot, case, data):
 def build(case_name: str, variant: str, robot, data):
     case = cases.CASES[case_name]
     if case_name == "hyq":
-        return hyq_stack(robot, case, data), "weighted"
+        return hyq_stack(robot, case, data), "cascade" if variant == "2level" else "weighted"
     if case_name == "talos14":
         stack = table2_stack(robot)
         stack.find("momentum").com_ref = data["com_ref"].copy()
@@ -68,11 +70,12 @@ def build(case_name: str, variant: str, robot, data):
         stack.find("posture").weight = w["posture"]
         stack.find("force regularizer").weight = w["force_regularizer"]
     return Stack([stack.levels[0] + stack.levels[1],
-                  [t for level in stack.levels[2:] for t in level]]), "weighted"
+                  [t for level in stack.levels[2:] for t in level]]), \
+        "cascade" if variant == "2level" else "weighted"
 
 
 def describe(stack: Stack, method: str) -> list[str]:
-    return [f"{method}: " + " > ".join(
+    return [f"{method} (native engine): " + " > ".join(
         "[" + ", ".join(t.name for t in level) + "]" for level in stack.levels)]
 
 
