@@ -72,7 +72,10 @@ def build(case, data, model, robot):
         contact.setKp(np.zeros(contact.n_motion))
         contact.setKd(np.zeros(contact.n_motion))
         contact.setReference(pose[f])
-        inv.addRigidContact(contact, w_reg, 1.0, 0)  # motion as a constraint (priority 0)
+        # a sole's force spread evenly over its 4 corners costs 1/4 of the same force as one
+        # wrench: the corner-force regulariser weighs 4x so that it costs as wholebody's
+        w = w_reg if c["type"] == "point" else 4.0 * w_reg
+        inv.addRigidContact(contact, w, 1.0, 0)  # motion as a constraint (priority 0)
         keep.append(contact)
     for t in case["tasks"]:
         w = cases.quadratic_weight(t, mass)

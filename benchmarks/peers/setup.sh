@@ -35,8 +35,9 @@ setup_tsid() {
     local cons="$HERE/tsid-constraints.txt"
     export PIP_CONSTRAINT="$cons"          # install (and build env on older pip)
     export PIP_BUILD_CONSTRAINT="$cons"    # build env on pip >= 25.3
-    # a 2-core machine: do not let the build take both cores from everyone
-    export CMAKE_BUILD_PARALLEL_LEVEL="${CMAKE_BUILD_PARALLEL_LEVEL:-2}"
+    # cmeel's build: 2 jobs (default 4) and without running libtsid's own test suite
+    export CMEEL_JOBS="${CMEEL_JOBS:-2}"
+    export CMEEL_RUN_TESTS="${CMEEL_RUN_TESTS:-OFF}"
     "$venv/bin/pip" install --constraint "$cons" numpy "tsid==1.10.0"
     "$venv/bin/python" -c "import pinocchio, tsid; print('tsid ok, pinocchio', pinocchio.__version__)"
 }
