@@ -67,15 +67,16 @@ def build(case, data, model, robot):
             hx, hy = hx * shrink, hy * shrink
             corners = np.array([[hx, hx, -hx, -hx], [hy, -hy, hy, -hy], [0.0, 0.0, 0.0, 0.0]])
             contact = tsid.Contact6d(f, robot, f, corners, normal, case["mu"], 0.0, 1e4)
+            # the regulariser acts on the sole's wrench (row scales; TSID's default 1e-3 on the
+            # normal force), scaled as wholebody's: 1 on forces, 1 / largest half-size on moments
+            h = max(c["half_size"])
+            contact.setRegularizationTaskWeightVector(np.array([1, 1, 1, 1 / h, 1 / h, 1 / h]))
             described.append(f"{f}: Contact6d (4 corner forces at {shrink:g} x sole, 4-facet "
                              f"cones mu {case['mu']})")
         contact.setKp(np.zeros(contact.n_motion))
         contact.setKd(np.zeros(contact.n_motion))
         contact.setReference(pose[f])
-        # a sole's force spread evenly over its 4 corners costs 1/4 of the same force as one
-        # wrench: the corner-force regulariser weighs 4x so that it costs as wholebody's
-        w = w_reg if c["type"] == "point" else 4.0 * w_reg
-        inv.addRigidContact(contact, w, 1.0, 0)  # motion as a constraint (priority 0)
+        inv.addRigidContact(contact, w_reg, 1.0, 0)  # motion as a constraint (priority 0)
         keep.append(contact)
     for t in case["tasks"]:
         w = cases.quadratic_weight(t, mass)
