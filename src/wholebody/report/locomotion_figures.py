@@ -274,10 +274,10 @@ def _leg_chains(robot, data, names) -> list[tuple[str, int, int, int, bool]]:
     return chains
 
 
-def steer_figure(path: Path, t, velocity, yaw_rate, command, valid, yaw, heading, path_xy,
-                 reference_xy, parts, title: str) -> Path:
+def steer_figure(path: Path, t, velocity, yaw_rate, command, valid, reference, yaw, heading,
+                 path_xy, reference_xy, parts, title: str) -> Path:
     """The ``steer`` scenario: commanded vs measured gait-period means of the heading-frame
-    velocity (forward, lateral) and of the yaw rate, the heading, and a top view of the CoM path
+    velocity (forward, lateral; dotted: the CoM reference's) and of the yaw rate, the heading, and a top view of the CoM path
     against the reference's. ``valid``: the samples whose mean window lies inside the run;
     ``parts``: (name, start, end) of the command schedule, marked on the time axes."""
     fig = plt.figure(figsize=(12, 7.5))
@@ -286,8 +286,10 @@ def steer_figure(path: Path, t, velocity, yaw_rate, command, valid, yaw, heading
     top = fig.add_subplot(grid[:, 1])
     tv = np.where(valid, t, np.nan)
     for k, (name, colour) in enumerate((("forward", "tab:blue"), ("lateral", "tab:orange"))):
-        axes[0].plot(t, command[:, k] if k < command.shape[1] else 0 * t, "--", color=colour,
+        axes[0].plot(t, command[:, k], "--", color=colour,
                      linewidth=1.0, label=f"{name} commanded")
+        axes[0].plot(tv, reference[:, k], ":", color=colour, linewidth=1.0,
+                     label=f"{name} CoM reference")
         axes[0].plot(tv, velocity[:, k], color=colour, linewidth=1.2, label=f"{name} measured")
     axes[0].set_ylabel("m/s", fontsize=8)
     axes[0].set_title("heading-frame CoM velocity (gait-period means)", fontsize=9)

@@ -166,20 +166,35 @@ def period_mean(t: np.ndarray, x: np.ndarray, window: float):
     return mask, (at(hi) - at(lo)) / window
 
 
+def heading_frame_mean(t: np.ndarray, xy: np.ndarray, yaw: np.ndarray, window: float):
+    """(velocity (n, 2), yaw rate (n,)): the mean over [t - window/2, t + window/2] of the
+    horizontal velocity of ``xy`` -- its displacement over the window's length -- in the frame of
+    the window's mean heading, and of the yaw rate (``yaw`` unwrapped)."""
+    at = lambda x, s: np.interp(s, t, x)  # noqa: E731
+    hi, lo = t + 0.5 * window, t - 0.5 * window
+    v = np.stack([(at(xy[:, k], hi) - at(xy[:, k], lo)) / window for k in range(2)], axis=1)
+    mid = 0.5 * (at(yaw, hi) + at(yaw, lo))
+    c, s = np.cos(mid), np.sin(mid)
+    return (np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1),
+            (at(yaw, hi) - at(yaw, lo)) / window)
+
+
+def rms(error: np.ndarray) -> float:
+    """Root mean square of scalars (n,) or of vectors' norms (n, k)."""
+    e = np.asarray(error, dtype=float)
+    return float(np.sqrt(np.mean(e ** 2 if e.ndim == 1 else np.sum(e ** 2, axis=1))))
+
+
 def tracking(rec: dict, schedule: CommandSchedule, period: float, ramp: float) -> dict:
-    """Per part: the RMS velocity and yaw-rate errors of the gait-period means (module docstring);
-    and the heading errors. ``rec``: per-cycle ``t``, ``com`` (m), ``yaw`` (rad, unwrapped),
-    ``command`` (forward, lateral, yaw rate), ``heading`` (the commanded heading)."""
-    t, com, yaw = rec["t"], rec["com"], rec["yaw"]
-    # the mean velocity over the window: its displacement over its length
-    hi = np.stack([np.interp(t + 0.5 * period, t, com[:, k]) for k in range(2)], axis=1)
-    lo = np.stack([np.interp(t - 0.5 * period, t, com[:, k]) for k in range(2)], axis=1)
-    v_world = (hi - lo) / period
-    yaw_mid = 0.5 * (np.interp(t + 0.5 * period, t, yaw) + np.interp(t - 0.5 * period, t, yaw))
-    c, s = np.cos(yaw_mid), np.sin(yaw_mid)
-    v_heading = np.stack([c * v_world[:, 0] + s * v_world[:, 1],
-                          -s * v_world[:, 0] + c * v_world[:, 1]], axis=1)
-    rate = (np.interp(t + 0.5 * period, t, yaw) - np.interp(t - 0.5 * period, t, yaw)) / period
+    """Per part: the RMS velocity and yaw-rate errors of the gait-period means (module docstring)
+    against the command, and, to tell the planner's share from the controller's, those of the CoM
+    reference against the command (``reference_*``: the crawl's sway turning with the heading
+    moves it) and of the measured CoM against the reference (``to_reference_*``); the heading
+    errors. ``rec``: per-cycle ``t``, ``com`` and ``com_ref`` (m), ``yaw`` and ``heading`` (rad,
+    unwrapped: measured and commanded), ``command`` (forward, lateral, yaw rate)."""
+    t, yaw = rec["t"], rec["yaw"]
+    v_heading, rate = heading_frame_mean(t, rec["com"][:, :2], yaw, period)
+    v_ref, _ = heading_frame_mean(t, rec["com_ref"][:, :2], rec["heading"], period)
     mask, cmd = period_mean(t, rec["command"], period)
     parts = {}
     for name, start, end in schedule.phases:
@@ -190,13 +205,15 @@ def tracking(rec: dict, schedule: CommandSchedule, period: float, ramp: float) -
         err = v_heading[sel] - cmd[sel, :2]
         speed = float(np.hypot(target[0], target[1]))
         row = {"command": [float(x) for x in target],
-               "forward_rms_mps": float(np.sqrt(np.mean(err[:, 0] ** 2))),
-               "lateral_rms_mps": float(np.sqrt(np.mean(err[:, 1] ** 2))),
-               "velocity_rms_mps": float(np.sqrt(np.mean(np.sum(err ** 2, axis=1)))),
-               "yaw_rate_rms": float(np.sqrt(np.mean((rate[sel] - cmd[sel, 2]) ** 2))),
+               "forward_rms_mps": rms(err[:, 0]), "lateral_rms_mps": rms(err[:, 1]),
+               "velocity_rms_mps": rms(err),
+               "yaw_rate_rms": rms(rate[sel] - cmd[sel, 2]),
+               "reference_velocity_rms_mps": rms(v_ref[sel] - cmd[sel, :2]),
+               "to_reference_velocity_rms_mps": rms(v_heading[sel] - v_ref[sel]),
                "mean_velocity_mps": [float(x) for x in v_heading[sel].mean(axis=0)],
                "mean_yaw_rate": float(rate[sel].mean())}
-        row["velocity_error_share"] = row["velocity_rms_mps"] / speed if speed > 0 else None
+        for key in ("velocity", "reference_velocity", "to_reference_velocity"):
+            row[f"{key}_error_share"] = row[f"{key}_rms_mps"] / speed if speed > 0 else None
         row["yaw_rate_error_share"] = (row["yaw_rate_rms"] / abs(target[2])
                                        if target[2] != 0 else None)
         parts[name] = row
@@ -210,7 +227,7 @@ def tracking(rec: dict, schedule: CommandSchedule, period: float, ramp: float) -
         out["commanded_heading_change_deg"] = float(np.degrees(rec["heading"][-1]
                                                                - rec["heading"][0]))
         out["heading_change_deg"] = float(np.degrees(yaw[-1] - yaw[0]))
-    return {**out, "velocity_mean": (v_heading, rate, cmd, mask)}
+    return {**out, "velocity_mean": (v_heading, rate, cmd, mask, v_ref)}
 
 
 def success_of(metrics: dict) -> tuple[bool, list[str]]:
@@ -262,7 +279,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     # the commanded heading from the measured start, unwrapped like the measured yaw
     rec["heading"] = rec["yaw"][0] + np.unwrap(rec["heading"] - rec["heading"][0])
     measured = tracking(rec, schedule, period, ramp)
-    v_heading, rate, cmd, mask = measured.pop("velocity_mean")
+    v_heading, rate, cmd, mask, v_ref = measured.pop("velocity_mean")
     path = rec["com"][:, :2]
     commanded = rec["com_ref"]
     metrics = {**outcome(r), **measured, **r.tracking(t_from=GAIT_START),
@@ -287,7 +304,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     result = ScenarioResult("steer", robot.name, controller, success, metrics, params, notes)
     if out_dir is not None:
         result.figures = [str(steer_figure(
-            Path(out_dir) / "steer.png", rec["t"], v_heading, rate, cmd, mask, rec["yaw"],
+            Path(out_dir) / "steer.png", rec["t"], v_heading, rate, cmd, mask, v_ref, rec["yaw"],
             rec["heading"], path, commanded, schedule.phases,
             f"steer — {robot.name} {params['gait']}, "
             f"{'fell' if r.fell else 'no fall'}, {r.failures} failed cycles"))]
