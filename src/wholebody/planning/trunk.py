@@ -388,8 +388,8 @@ class StartShift:
 
 
 class TrunkReference:
-    """Trunk reference from a :class:`VelocityCommand` or a :class:`CommandSchedule`, starting at time ``t0`` from CoM ``com0``
-    with heading ``yaw0``; held still before ``t0``.
+    """Trunk reference from a :class:`VelocityCommand` or a :class:`CommandSchedule`, starting
+    at time ``t0`` from CoM ``com0`` with heading ``yaw0``; held still before ``t0``.
 
     ``height``: CoM height kept above the terrain under the CoM (default: ``com0``'s);
     ``terrain_alignment``: how far roll and pitch follow the terrain under the CoM: the trunk's z
