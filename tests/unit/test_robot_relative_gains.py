@@ -280,7 +280,7 @@ def test_stand_scenario_declares_frequency_and_damping_ratio():
 
 
 QUADRUPED_SCENARIOS = ("crawl", "ramp", "friction-mismatch", "joint-limit", "weak-joint",
-                       "regularization", "unstable-foothold", "passivity")
+                       "regularization", "unstable-foothold", "passivity", "steer")
 
 
 @pytest.mark.parametrize("name", QUADRUPED_SCENARIOS)

@@ -23,10 +23,11 @@ from .gait import LEGS, GaitEvent, GaitSchedule, Swing, crawl, stand, trot
 from .planner import GaitPlanner, PlanState
 from .swing import SwingTrajectory, quintic_blend, swing_trajectory
 from .terrain import Terrain
-from .trunk import CrawlSway, StartShift, TrunkReference, TrunkState, VelocityCommand
+from .trunk import (CommandPhase, CommandSchedule, CrawlSway, StartShift, TrunkReference,
+                    TrunkState, VelocityCommand)
 
 __all__ = [
-    "Course", "CoursePlanner", "build_course", "gap_course", "ramp_course",
+    "CommandPhase", "CommandSchedule", "Course", "CoursePlanner", "build_course", "gap_course", "ramp_course",
     "CrawlSway", "Foothold", "Footprint", "GaitEvent", "GaitPlanner",
     "GaitSchedule", "LEGS", "PlanState", "StartShift", "Swing", "SwingTrajectory", "Terrain",
     "TrunkReference", "TrunkState", "VelocityCommand", "crawl", "quintic_blend",

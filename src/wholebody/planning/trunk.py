@@ -9,6 +9,8 @@ generates a reference motion online") into those signals:
 
 * horizontal CoM: the integral of the command (forward/lateral speed in the heading frame, yaw
   rate), in closed form, including a linear speed ramp such as the 0.04 -> 0.15 m/s ramp of Fig. 5;
+  a :class:`CommandSchedule` (walk, turn, side-step, stop) ramps the yaw rate too, and the
+  pieces where it does are integrated by quadrature;
 * CoM height: held at a constant height above the terrain under the CoM;
 * orientation: heading = integrated yaw, and, on inclined terrain, roll/pitch aligned with the
   terrain normal under the CoM (the ramps of Figs. 4, 7, 8);
@@ -20,6 +22,7 @@ generates a reference motion online") into those signals:
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -108,23 +111,149 @@ class VelocityCommand:
                              (self.v_end[1] - self.v_start[1]) / (tb - ta)])
         return np.zeros(2)
 
-    def _segments(self, t0: float, t1: float):
-        """[(start, length, a, b)]: on [start, start + length] the velocity (complex) is a + b s."""
-        ta, tb = self.ramp
-        vs = complex(*self.v_start)
-        ve = complex(*self.v_end)
-        out = []
-        cuts = sorted({t0, t1, min(max(ta, t0), t1), min(max(tb, t0), t1)})
-        for lo, hi in zip(cuts[:-1], cuts[1:]):
-            if hi <= lo:
-                continue
-            mid = 0.5 * (lo + hi)
-            if tb > ta and ta <= mid <= tb:
-                slope = (ve - vs) / (tb - ta)
-                out.append((lo, hi - lo, vs + slope * (lo - ta), slope))
-            else:
-                out.append((lo, hi - lo, vs if mid < ta else ve, 0.0j))
-        return out
+    def yaw_rate_at(self, t: float) -> float:
+        """The yaw rate at ``t``: the constant ``yaw_rate``."""
+        return self.yaw_rate
+
+    def yaw_acceleration_at(self, t: float) -> float:
+        return 0.0
+
+    @property
+    def breakpoints(self) -> tuple[float, ...]:
+        """The times where the command's linear pieces meet (the ramp's ends)."""
+        return tuple(sorted(set(self.ramp)))
+
+
+@dataclass(frozen=True)
+class CommandPhase:
+    """One part of a :class:`CommandSchedule`: ``duration`` s (the ramp into it included) of the
+    heading-frame command (``forward``, ``lateral`` [m/s], ``yaw_rate`` [rad/s])."""
+
+    name: str
+    duration: float
+    forward: float = 0.0
+    lateral: float = 0.0
+    yaw_rate: float = 0.0
+
+    def __post_init__(self):
+        values = (self.duration, self.forward, self.lateral, self.yaw_rate)
+        if not all(math.isfinite(float(x)) for x in values):
+            raise ValueError(f"phase '{self.name}': every field must be finite, got {values}")
+        if self.duration <= 0.0:
+            raise ValueError(f"phase '{self.name}': duration must be > 0, got {self.duration}")
+
+
+class CommandSchedule:
+    """A velocity command that changes over time: heading-frame forward and lateral speed and yaw
+    rate, linear between keyframes ``times[k]`` -> ``commands[k]`` = (forward, lateral, yaw_rate),
+    constant before the first keyframe and after the last. Unlike :class:`VelocityCommand` the
+    yaw rate varies too (a joystick's twist: walk, turn, side-step, stop), so the heading it
+    integrates to is piecewise quadratic in time.
+
+    :meth:`from_phases` builds one from named :class:`CommandPhase` s, each ramped into linearly;
+    ``phases`` then lists (name, start, end) of each.
+    """
+
+    def __init__(self, times, commands, phases=()):
+        t = np.array(times, dtype=float).reshape(-1)
+        c = np.array(commands, dtype=float).reshape(len(t), 3)
+        if len(t) < 1 or not (np.all(np.isfinite(t)) and np.all(np.isfinite(c))):
+            raise ValueError("CommandSchedule: expected >= 1 keyframe of finite times and commands")
+        if np.any(np.diff(t) < 0.0):
+            raise ValueError(f"times: must not decrease, got {t.tolist()}")
+        t.setflags(write=False)
+        c.setflags(write=False)
+        self.times, self.commands = t, c
+        self.phases = tuple((str(n), float(a), float(b)) for n, a, b in phases)
+
+    @classmethod
+    def from_phases(cls, phases, start: float = 0.0, ramp: float = 0.5) -> "CommandSchedule":
+        """Zero command until ``start``, then each phase in turn: the command goes linearly from
+        the previous phase's to this one's over the phase's first ``min(ramp, duration)`` s and
+        holds for the rest of it; the last phase's command holds after its end."""
+        if not (math.isfinite(ramp) and ramp >= 0.0):
+            raise ValueError(f"ramp: expected a finite time >= 0, got {ramp}")
+        times, commands, spans = [float(start)], [(0.0, 0.0, 0.0)], []
+        t = float(start)
+        for p in phases:
+            cmd = (float(p.forward), float(p.lateral), float(p.yaw_rate))
+            times.append(t + min(ramp, p.duration))
+            commands.append(cmd)
+            spans.append((p.name, t, t + p.duration))
+            t += p.duration
+            times.append(t)
+            commands.append(cmd)
+        return cls(times, commands, spans)
+
+    @property
+    def end(self) -> float:
+        return float(self.times[-1])
+
+    @property
+    def breakpoints(self) -> tuple[float, ...]:
+        return tuple(sorted(set(self.times.tolist())))
+
+    def command(self, t: float) -> np.ndarray:
+        """(forward, lateral, yaw_rate) at ``t``."""
+        ts, cs = self.times, self.commands
+        if t <= ts[0]:
+            return cs[0].copy()
+        if t >= ts[-1]:
+            return cs[-1].copy()
+        k = int(np.searchsorted(ts, t, side="right")) - 1
+        w = ts[k + 1] - ts[k]
+        u = (t - ts[k]) / w if w > 0.0 else 1.0
+        return cs[k] + u * (cs[k + 1] - cs[k])
+
+    def rate(self, t: float) -> np.ndarray:
+        """d/dt of :meth:`command` (piecewise constant; 0 outside the ramps)."""
+        ts, cs = self.times, self.commands
+        if t <= ts[0] or t >= ts[-1]:
+            return np.zeros(3)
+        k = int(np.searchsorted(ts, t, side="right")) - 1
+        w = ts[k + 1] - ts[k]
+        return (cs[k + 1] - cs[k]) / w if w > 0.0 else np.zeros(3)
+
+    def velocity(self, t: float) -> np.ndarray:
+        """Heading-frame (forward, lateral) velocity at ``t``."""
+        return self.command(t)[:2]
+
+    def acceleration(self, t: float) -> np.ndarray:
+        return self.rate(t)[:2]
+
+    def yaw_rate_at(self, t: float) -> float:
+        return float(self.command(t)[2])
+
+    def yaw_acceleration_at(self, t: float) -> float:
+        return float(self.rate(t)[2])
+
+    def heading_change(self, t0: float, t1: float) -> float:
+        """The integral of the yaw rate over [t0, t1] (trapezoids: exact, it is piecewise
+        linear)."""
+        cuts = [t0] + [b for b in self.breakpoints if t0 < b < t1] + [t1]
+        return float(sum(0.5 * (self.yaw_rate_at(a) + self.yaw_rate_at(b)) * (b - a)
+                         for a, b in zip(cuts[:-1], cuts[1:]) if b > a))
+
+
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(16)
+
+
+def _heading_integral_quadratic(psi: float, w0: float, w1: float, a: complex, b: complex,
+                                length: float) -> complex:
+    """int_0^L exp(i (psi + w0 s + w1 s^2 / 2)) (a + b s) ds: :func:`_heading_integral` when the
+    yaw rate is constant (w1 = 0), else (a Fresnel integral) Gauss-Legendre quadrature on pieces
+    over which the heading turns by at most 0.25 rad (16 nodes: exact to rounding)."""
+    if w1 == 0.0:
+        return _heading_integral(psi, w0, a, b, length)
+    turn = max(abs(w0), abs(w0 + w1 * length)) * length
+    n = max(1, math.ceil(turn / 0.25))
+    h = length / n
+    z = 0.0j
+    for k in range(n):
+        s = (k + 0.5 * (_GL_NODES + 1.0)) * h
+        phase = psi + w0 * s + 0.5 * w1 * s * s
+        z += 0.5 * h * complex(np.dot(_GL_WEIGHTS, np.exp(1j * phase) * (a + b * s)))
+    return z
 
 
 @dataclass
@@ -259,8 +388,8 @@ class StartShift:
 
 
 class TrunkReference:
-    """Trunk reference from a :class:`VelocityCommand`, starting at time ``t0`` from CoM ``com0``
-    with heading ``yaw0``; held still before ``t0``.
+    """Trunk reference from a :class:`VelocityCommand` or a :class:`CommandSchedule`, starting
+    at time ``t0`` from CoM ``com0`` with heading ``yaw0``; held still before ``t0``.
 
     ``height``: CoM height kept above the terrain under the CoM (default: ``com0``'s);
     ``terrain_alignment``: how far roll and pitch follow the terrain under the CoM: the trunk's z
@@ -270,7 +399,7 @@ class TrunkReference:
     horizontal CoM; ``start_shift``: optional :class:`StartShift` added to it too.
     """
 
-    def __init__(self, command: VelocityCommand | None, com0, yaw0: float = 0.0,
+    def __init__(self, command: VelocityCommand | CommandSchedule | None, com0, yaw0: float = 0.0,
                  height: float | None = None, terrain: Terrain | None = None, t0: float = 0.0,
                  sway: CrawlSway | None = None, terrain_alignment: float = 1.0,
                  fd_step: float = 1e-3, start_shift: StartShift | None = None):
@@ -290,20 +419,63 @@ class TrunkReference:
         self.fd_step = float(fd_step)
 
     # ------------------------------------------------------------------ nominal path
+    def _path_pieces(self):
+        """(cuts, pieces, headings, displacements): the command's linear pieces from ``t0`` on
+        (piece k on [cuts[k], cuts[k + 1]), the last one unbounded), each as (a, b, w0, w1) --
+        heading-frame velocity a + b s and yaw rate w0 + w1 s, s the time into the piece -- and the
+        heading and displacement (complex) at each cut. Cached; rebuilt if the command, ``t0`` or
+        ``yaw0`` change."""
+        cache = getattr(self, "_pieces_cache", None)
+        if cache is not None and cache[0][0] is self.command and cache[0][1:] == (self.t0,
+                                                                                  self.yaw0):
+            return cache[1]
+        cmd = self.command
+        cuts = [self.t0] + [b for b in cmd.breakpoints if b > self.t0]
+        pieces, headings, displacements = [], [self.yaw0], [0.0j]
+        for k, lo in enumerate(cuts):
+            hi = cuts[k + 1] if k + 1 < len(cuts) else lo + 2.0
+            mid = 0.5 * (lo + hi)
+            acc = cmd.acceleration(mid)
+            vel = cmd.velocity(mid)
+            b = complex(acc[0], acc[1])
+            a = complex(vel[0], vel[1]) - b * (mid - lo)
+            w1 = float(cmd.yaw_acceleration_at(mid))
+            w0 = float(cmd.yaw_rate_at(mid)) - w1 * (mid - lo)
+            pieces.append((a, b, w0, w1))
+            if k + 1 < len(cuts):
+                L = hi - lo
+                displacements.append(displacements[-1] + _heading_integral_quadratic(
+                    headings[-1], w0, w1, a, b, L))
+                headings.append(headings[-1] + w0 * L + 0.5 * w1 * L * L)
+        value = (cuts, pieces, headings, displacements)
+        self._pieces_cache = ((cmd, self.t0, self.yaw0), value)
+        return value
+
+    def _piece_at(self, t: float):
+        cuts, pieces, headings, displacements = self._path_pieces()
+        k = bisect.bisect_right(cuts, t) - 1
+        return t - cuts[k], pieces[k], headings[k], displacements[k]
+
     def heading(self, t: float) -> float:
         """Integrated yaw at ``t``."""
-        return self.yaw0 + self.command.yaw_rate * max(t - self.t0, 0.0)
+        if t <= self.t0:
+            return self.yaw0
+        s, (_, _, w0, w1), psi, _ = self._piece_at(t)
+        return psi + w0 * s + 0.5 * w1 * s * s
 
     def _displacement(self, t: float) -> complex:
-        """int_{t0}^{t} R(yaw(s)) v(s) ds as a complex number (x + i y), in closed form over the (at
-        most three) pieces where the command is constant or ramping: O(1) whatever ``t``."""
-        z = 0.0j
+        """int_{t0}^{t} R(yaw(s)) v(s) ds as a complex number (x + i y): in closed form over the
+        pieces where the command is constant or ramping with a constant yaw rate, by quadrature
+        where the yaw rate ramps (:func:`_heading_integral_quadratic`); the integrals up to each
+        piece are cached, so O(1) whatever ``t``."""
         if t <= self.t0:
-            return z
-        om = self.command.yaw_rate
-        for lo, length, a, b in self.command._segments(self.t0, t):
-            z += _heading_integral(self.heading(lo), om, a, b, length)
-        return z
+            return 0.0j
+        s, (a, b, w0, w1), psi, z = self._piece_at(t)
+        return z + _heading_integral_quadratic(psi, w0, w1, a, b, s)
+
+    def yaw_acceleration(self, t: float) -> float:
+        """d/dt of the commanded yaw rate at ``t`` (0 before ``t0``)."""
+        return 0.0 if t < self.t0 else float(self.command.yaw_acceleration_at(t))
 
     def nominal(self, t: float):
         """Horizontal CoM path without sway: (xy, v_xy, a_xy, yaw, yaw_rate), world axes."""
@@ -312,7 +484,7 @@ class TrunkReference:
         if t < self.t0:
             return xy, np.zeros(2), np.zeros(2), self.yaw0, 0.0
         psi = self.heading(t)
-        om = self.command.yaw_rate
+        om = float(self.command.yaw_rate_at(t))
         c, s = math.cos(psi), math.sin(psi)
         u = self.command.velocity(t)
         du = self.command.acceleration(t)
@@ -325,16 +497,17 @@ class TrunkReference:
     def _horizontal(self, t: float):
         """Horizontal CoM reference with sway: (xy, v, a, yaw, yaw_rate)."""
         xy, v, a, psi, om = self.nominal(t)
+        dom = self.yaw_acceleration(t) if (self.sway or self.start_shift) else 0.0
         for offset in (self.sway, self.start_shift):
             if offset is None:
                 continue
             o, do, ddo = offset(t)
             # heading-frame offset o rotated by R(psi):  d/dt (R o) = R (o' + om J o),
-            # d2/dt2 (R o) = R (o'' + 2 om J o' - om^2 o)   (J = 90 deg rotation, yaw rate constant)
+            # d2/dt2 (R o) = R (o'' + 2 om J o' + om' J o - om^2 o)   (J = 90 deg rotation)
             Jo = np.array([-o[1], o[0]])
             Jdo = np.array([-do[1], do[0]])
             dv = do + om * Jo
-            da = ddo + 2.0 * om * Jdo - om * om * o
+            da = ddo + 2.0 * om * Jdo + dom * Jo - om * om * o
             c, s = math.cos(psi), math.sin(psi)
             R = np.array([[c, -s], [s, c]])
             xy = xy + R @ o
@@ -392,13 +565,15 @@ class TrunkReference:
         out.yaw = psi
         if self.terrain_alignment == 0.0 or ter.is_flat:
             out.angular_velocity[:] = (0.0, 0.0, om if t >= self.t0 else 0.0)
-            out.angular_acceleration[:] = 0.0
+            out.angular_acceleration[:] = (0.0, 0.0, self.yaw_acceleration(t))
         else:
             # terrain-aligned: central differences of the orientation over 5 samples (O(d^2) error),
             # the CoM path near t taken from its Taylor expansion (the orientation depends on t
             # through the CoM position, which selects the terrain normal, and the heading)
             d = self.fd_step
-            R = [self._rotation(xy + (k * d) * v + (0.5 * (k * d) ** 2) * a, psi + om * k * d)
+            dom = self.yaw_acceleration(t)
+            R = [self._rotation(xy + (k * d) * v + (0.5 * (k * d) ** 2) * a,
+                                psi + om * k * d + 0.5 * dom * (k * d) ** 2)
                  if k else out.rotation for k in (-2, -1, 0, 1, 2)]
             out.angular_velocity[:] = self._vee_rate(R[1], R[2], R[3], d)
             w_p = self._vee_rate(R[2], R[3], R[4], d)

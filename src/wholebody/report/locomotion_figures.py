@@ -272,3 +272,55 @@ def _leg_chains(robot, data, names) -> list[tuple[str, int, int, int, bool]]:
         left = bool(base.actInv(data.oMf[foot]).translation[1] > 0.0)
         chains.append((name, foot, knee, model.parents[knee], left))
     return chains
+
+
+def steer_figure(path: Path, t, velocity, yaw_rate, command, valid, reference, yaw, heading,
+                 path_xy, reference_xy, parts, title: str) -> Path:
+    """The ``steer`` scenario: commanded vs measured gait-period means of the heading-frame
+    velocity (forward, lateral; dotted: the CoM reference's) and of the yaw rate, the heading, and a top view of the CoM path
+    against the reference's. ``valid``: the samples whose mean window lies inside the run;
+    ``parts``: (name, start, end) of the command schedule, marked on the time axes."""
+    fig = plt.figure(figsize=(12, 7.5))
+    grid = fig.add_gridspec(3, 2, width_ratios=(1.4, 1.0))
+    axes = [fig.add_subplot(grid[k, 0]) for k in range(3)]
+    top = fig.add_subplot(grid[:, 1])
+    tv = np.where(valid, t, np.nan)
+    for k, (name, colour) in enumerate((("forward", "tab:blue"), ("lateral", "tab:orange"))):
+        axes[0].plot(t, command[:, k], "--", color=colour,
+                     linewidth=1.0, label=f"{name} commanded")
+        axes[0].plot(tv, reference[:, k], ":", color=colour, linewidth=1.0,
+                     label=f"{name} CoM reference")
+        axes[0].plot(tv, velocity[:, k], color=colour, linewidth=1.2, label=f"{name} measured")
+    axes[0].set_ylabel("m/s", fontsize=8)
+    axes[0].set_title("heading-frame CoM velocity (gait-period means)", fontsize=9)
+    axes[1].plot(t, command[:, 2], "k--", linewidth=1.0, label="commanded")
+    axes[1].plot(tv, yaw_rate, color="tab:green", linewidth=1.2, label="measured")
+    axes[1].set_ylabel("rad/s", fontsize=8)
+    axes[1].set_title("yaw rate (gait-period means)", fontsize=9)
+    axes[2].plot(t, np.degrees(heading), "k--", linewidth=1.0, label="commanded")
+    axes[2].plot(t, np.degrees(yaw), color="tab:red", linewidth=1.2, label="measured (base)")
+    axes[2].set_ylabel("deg", fontsize=8)
+    axes[2].set_title("heading", fontsize=9)
+    axes[2].set_xlabel("time (s)")
+    for ax in axes:
+        for name, start, end in parts:
+            ax.axvline(start, color="0.6", linewidth=0.6, linestyle=":")
+            ax.text(0.5 * (start + end), 1.0, name, transform=ax.get_xaxis_transform(),
+                    ha="center", va="bottom", fontsize=7, color="0.4")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, ncol=2, loc="best")
+    top.plot(reference_xy[:, 0], reference_xy[:, 1], "k--", linewidth=1.0, label="CoM reference")
+    top.plot(path_xy[:, 0], path_xy[:, 1], color="tab:blue", linewidth=1.2, label="CoM measured")
+    for name, start, _ in parts:
+        k = min(int(np.searchsorted(t, start)), len(t) - 1)
+        top.plot(path_xy[k, 0], path_xy[k, 1], "o", color="tab:blue", markersize=3)
+        top.annotate(name, path_xy[k], fontsize=7, color="0.3", xytext=(3, 3),
+                     textcoords="offset points")
+    top.set_aspect("equal", adjustable="datalim")
+    top.set_xlabel("x (m)")
+    top.set_ylabel("y (m)")
+    top.set_title("top view", fontsize=9)
+    top.grid(True, alpha=0.3)
+    top.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    return save_figure(fig, path)
