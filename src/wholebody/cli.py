@@ -301,6 +301,7 @@ def _run(args, held: contextlib.ExitStack) -> int:
     print(f"{scenario.name} on {robot.name} ({result.controller}): {status} "
           f"in {result.wall_time_s:.1f} s")
     print(f"  plant: {result.plant}")
+    print(f"  realism: {result.realism}")
     metrics = dict(result.summary()["metrics"])
     claim = metrics.pop("claim", None)
     _print_metrics(metrics, indent=2)

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..control.stacks import COM_PD, COP_MARGIN as COP_MARGIN_DEFAULT, POSTURE_PD, SWING_FOOT_PD
 from ..cycle import ENGINES
+from .conditions import LEVELS, conditions_for
 from ..sim.incidents import IncidentLog
 from ..sim.plant import plant_label
 from ..sim.simulator import SimulationDiverged
@@ -304,6 +305,15 @@ ENGINE = Parameter("engine", "auto", "controller engine: 'native' (wholebody.cyc
                    choices=ENGINES)
 
 
+#: real-robot conditions (wholebody.scenarios.conditions), on every scenario that declares its
+#: simulations
+REALISM = Parameter("realism", "exact", "what the controller reads and drives: 'exact' (the twin's "
+                                        "state, the twin its model), 'sensors' (the state estimate "
+                                        "from the IMU, encoders and contact flags) or 'robot' "
+                                        "(sensors, plus model, delay, lag and noise errors)",
+                    choices=LEVELS)
+
+
 def check_engine(params: dict) -> None:
     """ValueError naming ``--set engine`` if it is not a HierarchyCycle engine."""
     engine = params.get("engine", ENGINE.default)
@@ -435,6 +445,8 @@ class ScenarioResult:
     error: str | None = None
     #: what was simulated: "exact twin" or "vendor MJCF <file>" (the robot's ``plant``)
     plant: str = "exact twin"
+    #: what the controller read and drove (``--set realism``; "exact": the twin's state)
+    realism: str = "exact"
 
     def summary(self) -> dict[str, Any]:
         out = {
@@ -442,6 +454,7 @@ class ScenarioResult:
             "robot": self.robot,
             "controller": self.controller,
             "plant": self.plant,
+            "realism": self.realism,
             "success": bool(self.success),
             "completed": bool(not self.interrupted and self.error is None),
             "interrupted": bool(self.interrupted),
@@ -529,6 +542,11 @@ class Scenario:
     validate_function: Callable[[Any, dict], None] | None = None
     simulations: int | Callable[[dict, str], int] | None = None
 
+    def __post_init__(self):
+        # a scenario that takes observers runs under any realism level (its loop asks them)
+        if self.simulations is not None and all(p.name != REALISM.name for p in self.parameters):
+            object.__setattr__(self, "parameters", (*self.parameters, REALISM))
+
     def simulation_count(self, params: dict, controller: str | None = None) -> int | None:
         """How many simulations a run with ``params`` and ``controller`` makes (None: not
         declared)."""
@@ -582,7 +600,8 @@ class Scenario:
                              f"takes no observers")
         if self.simulations is not None:
             incidents = IncidentLog()
-            extra["observers"] = (*observers, incidents)
+            conditions = conditions_for(robot, params["realism"])
+            extra["observers"] = (*observers, incidents, *([conditions] if conditions else []))
         start = time.perf_counter()
         try:
             result = self.run_function(robot, controller, params, out_dir, progress, **extra)
@@ -591,6 +610,7 @@ class Scenario:
             raise
         result.wall_time_s = time.perf_counter() - start
         result.plant = plant_label(robot)
+        result.realism = params.get("realism", "exact")
         missing = [f for f in result.figures if not Path(f).is_file()]
         if missing:  # save_figure logged why
             result.figures = [f for f in result.figures if f not in missing]

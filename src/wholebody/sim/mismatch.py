@@ -21,6 +21,8 @@ class Mismatch:
     torque_delay    commanded torques applied this many simulation steps late
     torque_noise    Gaussian noise (std, Nm) added to every applied torque
     joint_damping   viscous friction (Nm s/rad) on every actuated joint
+    torque_bandwidth  the actuators' torque tracking as a first-order lag of this cut-off
+                    frequency (Hz), exactly discretised at the simulator's step; 0: ideal
     seed            seed of the random draws above
     """
 
@@ -30,6 +32,7 @@ class Mismatch:
     torque_delay: int = 0
     torque_noise: float = 0.0
     joint_damping: float = 0.0
+    torque_bandwidth: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -37,11 +40,18 @@ class Mismatch:
             raise ValueError(f"mismatch.mass_scale must be > 0, got {self.mass_scale}")
         if not 0 <= self.mass_noise < 1:
             raise ValueError(f"mismatch.mass_noise must be in [0, 1), got {self.mass_noise}")
-        for name in ("com_offset", "torque_noise", "joint_damping"):
+        for name in ("com_offset", "torque_noise", "joint_damping", "torque_bandwidth"):
             if getattr(self, name) < 0:
                 raise ValueError(f"mismatch.{name} must be >= 0, got {getattr(self, name)}")
         if self.torque_delay < 0 or int(self.torque_delay) != self.torque_delay:
             raise ValueError("mismatch.torque_delay must be a whole number of steps >= 0")
+
+    def lag_gain(self, dt: float) -> float:
+        """The share of the remaining torque error the actuators close in one step of ``dt``:
+        1 - exp(-2 pi f dt) (the exact discretisation of a first-order lag; 1 when ideal)."""
+        if not self.torque_bandwidth:
+            return 1.0
+        return float(1.0 - np.exp(-2.0 * np.pi * self.torque_bandwidth * dt))
 
     def link_perturbations(self, n_links: int) -> tuple[np.ndarray, np.ndarray]:
         """Per-link (mass factor, CoM offset vector) drawn from ``seed``."""

@@ -101,7 +101,9 @@ class Simulator:
         self.observers = tuple(observers)
         self.label = label
         self.environment = environment or Environment()
-        self.mismatch = mismatch or Mismatch()
+        # a mismatch given here, else one an observer brings (real-robot conditions), else none
+        self.mismatch = mismatch or next((o.mismatch for o in self.observers
+                                          if getattr(o, "mismatch", None) is not None), Mismatch())
         self.options = options or SimOptions()
         # an observer that draws the twin itself (the live view) asks for the robot's skeleton
         skeleton = any(getattr(o, "draws_twin", False) for o in self.observers)
@@ -158,6 +160,7 @@ class Simulator:
             self.data.qpos[address] = value
         mujoco.mj_forward(self.model, self.data)
         self._delay = deque([np.zeros(robot.na)] * self.mismatch.torque_delay)
+        self._lagged = None  # the actuators' torque (Mismatch.torque_bandwidth), from the first
         self.log = SimLog(robot.contact_names)
         self.last_clipped = np.zeros(robot.na)
         self.active_pushes: list[tuple[np.ndarray, np.ndarray]] = []
@@ -234,6 +237,11 @@ class Simulator:
             applied = self._delay.popleft()
         else:
             applied = tau
+        if self.mismatch.torque_bandwidth:
+            if self._lagged is None:
+                self._lagged = np.array(applied, dtype=float)
+            self._lagged += self.mismatch.lag_gain(self.dt) * (applied - self._lagged)
+            applied = self._lagged.copy()
         if self.mismatch.torque_noise:
             applied = applied + self._rng.normal(scale=self.mismatch.torque_noise, size=robot.na)
         lo, hi = robot.torque_bounds(q)

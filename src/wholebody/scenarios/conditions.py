@@ -1,0 +1,71 @@
+"""Real-robot conditions for any scenario (``--set realism=exact|sensors|robot``).
+
+* ``exact``: the controller reads the twin's exact state; the twin is the controller's model.
+* ``sensors``: the controller reads the state estimate of
+  :class:`~wholebody.estimation.KinematicInertialEKF` (Bloesch et al. 2013) fed by the twin's
+  sensors (:class:`~wholebody.sim.sensors.SensorSpec`'s defaults: a noisy, biased IMU with a
+  drifting attitude filter, quantised encoders, differenced joint velocities, contact flags from
+  a force threshold), updated at every simulator step.
+* ``robot``: ``sensors`` plus a twin that differs from the controller's model
+  (:class:`~wholebody.sim.mismatch.Mismatch`): link masses within ±5 %, link centres of mass moved
+  by 0.5 % of the standing base height, torques applied one step late, through a 50 Hz
+  first-order torque lag, with noise of 1 % of the median torque limit.
+
+A :class:`RobotConditions` is a simulator observer: the simulator takes its mismatch, the closed
+loop (:func:`~wholebody.scenarios.loop.run_closed_loop`) gives the controller
+:meth:`RobotConditions.controller_state` instead of the exact state. The measures of a scenario
+still read the twin's true state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..estimation.twin import TwinEstimation
+from ..sim.mismatch import Mismatch
+
+LEVELS = ("exact", "sensors", "robot")
+#: the ``robot`` level's model and actuator errors (see the module docstring)
+MASS_NOISE, COM_OFFSET_SHARE, TORQUE_DELAY_STEPS = 0.05, 0.005, 1
+TORQUE_BANDWIDTH_HZ, TORQUE_NOISE_SHARE = 50.0, 0.01
+
+
+def robot_mismatch(robot, seed: int = 0) -> Mismatch:
+    """The ``robot`` level's twin: the errors of the module docstring, sized by ``robot``."""
+    limits = np.abs(robot.torque_bounds(robot.q_ref)[1])
+    return Mismatch(mass_noise=MASS_NOISE, com_offset=COM_OFFSET_SHARE * float(robot.q_ref[2]),
+                    torque_delay=TORQUE_DELAY_STEPS, torque_bandwidth=TORQUE_BANDWIDTH_HZ,
+                    torque_noise=TORQUE_NOISE_SHARE * float(np.median(limits)), seed=seed)
+
+
+class RobotConditions:
+    """The sensors and estimator between the twin and the controller, and the twin's mismatch,
+    of one realism level (:data:`LEVELS` but ``exact``) for ``robot``; seeded."""
+
+    def __init__(self, robot, level: str, seed: int = 0):
+        if level not in LEVELS[1:]:
+            raise ValueError(f"realism: expected one of {LEVELS[1:]}, got {level!r}")
+        self.level = level
+        self.estimation = TwinEstimation.for_robot(robot, seed=seed)
+        self.estimation.record = False
+        self.mismatch = robot_mismatch(robot, seed) if level == "robot" else None
+
+    def controller_state(self, sim) -> tuple[np.ndarray, np.ndarray]:
+        """What the controller reads at the simulator's present time: the estimate (q̂, v̂)."""
+        estimate = self.estimation.current()
+        return estimate.q, estimate.v
+
+    # the simulator observer's protocol (SimObserver)
+    def start(self, sim) -> None:
+        self.estimation.start(sim)
+
+    def step(self, sim) -> None:
+        self.estimation.step(sim)
+
+    def controller_result(self, sim, result) -> None:
+        pass
+
+
+def conditions_for(robot, level: str, seed: int = 0) -> RobotConditions | None:
+    """The observer of ``level`` for ``robot`` (None for ``exact``: nothing between)."""
+    return None if level == "exact" else RobotConditions(robot, level, seed)
