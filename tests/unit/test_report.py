@@ -269,3 +269,32 @@ def test_docs_have_both_report_regions():
     text = (ROOT / "docs" / "results.md").read_text()
     for paper in C.PAPERS:
         runner.check_markers(text, paper)
+
+
+def test_report_under_real_robot_conditions(tmp_path, capsys, monkeypatch, fake_registry):
+    """--realism robot: every run gets --set realism=robot (its command says so), the tables are
+    results-PAPER-robot.md, and --update-docs fills the paper's robot region only."""
+    seen = []
+    real_validate = Scenario.validate
+
+    def validate(self, robot, overrides=None):
+        params = real_validate(self, robot, overrides)
+        seen.append(params["realism"])
+        return params
+    monkeypatch.setattr(Scenario, "validate", validate)
+    docs = tmp_path / "results.md"
+    begin, end = runner.markers("herzog2016-robot")
+    docs.write_text(f"intro\n{begin}\nold\n{end}\nafter\n")
+    out = tmp_path / "o"
+    assert main(["report", "--paper", "herzog2016", "--only", "a", "--serial", "--out", str(out),
+                 "--realism", "robot", "--update-docs", "--docs", str(docs)]) == 0
+    assert seen and set(seen) == {"robot"}
+    md = (out / "results-herzog2016-robot.md").read_text()
+    assert "under 'robot' conditions" in md and "--set realism=robot" in md
+    text = docs.read_text()
+    assert text.startswith("intro\n") and text.endswith("after\n") and "old" not in text
+    assert "| `a` strong push (Table 3)" in text
+    assert main(["report", "--paper", "herzog2016", "--realism", "perfect", "--out",
+                 str(out)]) == 2
+    assert "--realism" in capsys.readouterr().err
+    assert C.under_conditions(C.CLAIMS, "exact") == tuple(C.CLAIMS)

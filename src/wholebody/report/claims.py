@@ -34,7 +34,7 @@ Not generated (rows of docs/results.md's paper tables whose number does not come
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from ..scenarios.measures import Thresholds
@@ -622,6 +622,25 @@ FAHMI = (
 )
 
 CLAIMS: tuple[Claim, ...] = HERZOG + FAHMI
+
+
+def under_conditions(claims, level: str) -> tuple[Claim, ...]:
+    """``claims`` with each run under real-robot conditions ``level`` (``--set realism``, on the
+    scenarios that take it; :mod:`wholebody.scenarios.conditions`); unchanged for ``exact``."""
+    from ..scenarios import SCENARIOS
+    from ..scenarios.conditions import LEVELS
+
+    if level not in LEVELS:
+        raise ValueError(f"--realism: expected one of {', '.join(LEVELS)}, got '{level}'")
+    if level == "exact":
+        return tuple(claims)
+
+    def moved(spec: RunSpec) -> RunSpec:
+        scenario = SCENARIOS.get(spec.scenario)
+        if scenario is None or all(p.name != "realism" for p in scenario.parameters):
+            return spec
+        return replace(spec, sets=(*spec.sets, ("realism", level)))
+    return tuple(replace(c, run=moved(c.run)) for c in claims)
 
 
 def claims_for(paper: str) -> tuple[Claim, ...]:

@@ -31,6 +31,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--out", default="results/report",
                    help="output directory (default: results/report)")
     add_executor_options(p)
+    p.add_argument("--realism", default="exact",
+                   help="run every claim under real-robot conditions: exact (default), sensors "
+                        "or robot (--set realism on each run; tables results-PAPER-LEVEL.md)")
     p.add_argument("--update-docs", action="store_true",
                    help="also rewrite the generated table of each paper in the docs file "
                         "(between its <!-- report:PAPER:begin/end --> markers)")
@@ -49,18 +52,18 @@ def command(args) -> int:
     from ..outputs import prepare_output
     from ..sweep.executors import make_executor
     from . import runner
-    from .claims import PAPERS, claims_for, select
+    from .claims import PAPERS, claims_for, select, under_conditions
 
     try:  # every usage error before anything runs
         only = [i.strip() for i in args.only.split(",") if i.strip()] if args.only else None
         if args.only is not None and not only:
             raise ValueError("--only: no claim id given")
-        claims = select(args.paper, only)
+        claims = under_conditions(select(args.paper, only), args.realism)
         docs = Path(args.docs)
         if args.update_docs:
             text = docs.read_text(encoding="utf-8")
             for paper in dict.fromkeys(c.paper for c in claims):
-                runner.check_markers(text, paper)
+                runner.check_markers(text, runner.table_key(paper, args.realism))
     except (ValueError, OSError) as exc:
         return _usage_error(exc)
     out_dir = Path(args.out)
@@ -91,13 +94,13 @@ def command(args) -> int:
         print(f"wholebody: report interrupted after {len(done)} of {len(specs)} runs",
               file=sys.stderr)
         return EXIT_INTERRUPTED
-    paths = runner.write_outputs(report, out_dir)
+    paths = runner.write_outputs(report, out_dir, args.realism)
     for row in report.rows:
         print(f"  {row.claim.id}: {row.verdict} — {row.ours}")
     if args.update_docs:
         for paper in report.papers():
             order = [c.id for c in claims_for(paper)]
-            runner.update_docs(docs, paper, report.rows, order)
+            runner.update_docs(docs, paper, report.rows, order, args.realism)
         print(f"updated {docs} ({', '.join(PAPERS[p] for p in report.papers())})")
     print(f"report: {len(specs)} runs in {report.wall_time_s:.0f} s, {report.errors} errors; "
           f"wrote {', '.join(str(p) for p in paths)}")

@@ -151,13 +151,15 @@ def table(rows: list[Row]) -> str:
     return "".join(lines)
 
 
-def write_outputs(report: Report, out_dir: Path) -> list[Path]:
-    """``out_dir/results-<paper>.md`` per paper and ``out_dir/report.json``."""
+def write_outputs(report: Report, out_dir: Path, realism: str = "exact") -> list[Path]:
+    """``out_dir/results-<paper>.md`` per paper (``results-<paper>-<realism>.md`` under real-robot
+    conditions) and ``out_dir/report.json``."""
     paths = []
     for paper in report.papers():
         rows = [r for r in report.rows if r.claim.paper == paper]
-        path = out_dir / f"results-{paper}.md"
-        path.write_text(f"# {PAPERS[paper]}: generated results\n\n" + table(rows),
+        path = out_dir / f"results-{table_key(paper, realism)}.md"
+        conditions = "" if realism == "exact" else f" under '{realism}' conditions"
+        path.write_text(f"# {PAPERS[paper]}: generated results{conditions}\n\n" + table(rows),
                         encoding="utf-8")
         paths.append(path)
     path = out_dir / "report.json"
@@ -170,6 +172,12 @@ def write_outputs(report: Report, out_dir: Path) -> list[Path]:
 
 
 # ---------------------------------------------------------------------------- docs/results.md
+def table_key(paper: str, realism: str = "exact") -> str:
+    """A table's name: the paper's, with the realism level unless ``exact``
+    (``herzog2016-robot``; its docs markers ``<!-- report:herzog2016-robot:begin -->``...)."""
+    return paper if realism == "exact" else f"{paper}-{realism}"
+
+
 def markers(paper: str) -> tuple[str, str]:
     return f"<!-- report:{paper}:begin -->", f"<!-- report:{paper}:end -->"
 
@@ -184,13 +192,14 @@ def check_markers(text: str, paper: str) -> None:
 _ROW_ID = re.compile(r"^\| `([^`]+)`")
 
 
-def update_docs(path: Path, paper: str, rows: list[Row], order: list[str]) -> None:
+def update_docs(path: Path, paper: str, rows: list[Row], order: list[str],
+                realism: str = "exact") -> None:
     """Replace the table between ``paper``'s markers in ``path`` by the generated one; rows of
     claims not in ``rows`` (a run with ``--only``) are kept from the old table if their id is in
     ``order`` (the paper's claim ids, the table's order). Nothing outside the markers changes."""
     text = path.read_text(encoding="utf-8")
-    check_markers(text, paper)
-    begin, end = markers(paper)
+    check_markers(text, table_key(paper, realism))
+    begin, end = markers(table_key(paper, realism))
     head, rest = text.split(begin, 1)
     old, tail = rest.split(end, 1)
     kept = {}
