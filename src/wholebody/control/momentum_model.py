@@ -27,10 +27,10 @@ log = logging.getLogger(__name__)
 STATE_DIM = 9
 
 
-def _weighted_least_norm(G: np.ndarray, w: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable)."""
-    L = np.linalg.cholesky(W)  # W = L L^T; lambda = L^-T mu, min |mu|
-    GL = np.linalg.solve(L, G.T).T  # G L^-T
+def _weighted_least_norm(G: np.ndarray, w: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable), with
+    ``W = L L^T`` given by its Cholesky factor ``L``."""
+    GL = np.linalg.solve(L, G.T).T  # G L^-T; lambda = L^-T mu, min |mu|
     mu, *_ = np.linalg.lstsq(GL, w, rcond=None)
     return np.linalg.solve(L.T, mu)
 
@@ -60,17 +60,29 @@ def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | 
     n = sum(dims)
     W = np.eye(n) if weight is None else weight_matrix(weight, n, "weight", definite=True)
     hdot = np.zeros(6) if hdot is None else vector(hdot, 6, "hdot")
+    return balancing_forces_factored(X, com, mass, dims, gravity, np.linalg.cholesky(W), hdot)
+
+
+def balancing_forces_factored(X: np.ndarray, com: np.ndarray, mass: float, dims: tuple[int, ...],
+                              gravity: float, L: np.ndarray, hdot: np.ndarray) -> np.ndarray:
+    """:func:`balancing_forces` on arguments already checked (``X`` (n_c, 3) and ``com`` finite,
+    ``dims`` a tuple of 3 and 6, ``hdot`` a 6-vector), with the weight given by its Cholesky factor
+    ``L`` (``W = L L^T``, e.g. kept from one call to the next while ``W`` does not change): the
+    same computation without the checks, for a control loop."""
     G = centroidal_map(X, com, dims)
     w = hdot - _gravity_wrench(mass, gravity)
-    lam = _weighted_least_norm(G, w, W)
+    lam = _weighted_least_norm(G, w, L)
     residual = float(np.linalg.norm(G @ lam - w))
     if residual > 1e-6 * max(1.0, float(np.linalg.norm(w))):
         log.debug("balancing_forces: the contacts cannot balance the wrench %s exactly "
-                    "(residual %.3g)", np.round(w, 3), residual)
-    fz = [lam[s + 2] for s in np.cumsum((0,) + dims[:-1])]
+                  "(residual %.3g)", np.round(w, 3), residual)
+    start, fz = 0, []
+    for d in dims:
+        fz.append(float(lam[start + 2]))
+        start += d
     if min(fz) < 0.0:
         log.debug("balancing_forces: negative normal force %s (CoM outside the support?)",
-                    np.round(fz, 3))
+                  np.round(fz, 3))
     return lam
 
 
