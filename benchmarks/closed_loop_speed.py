@@ -12,8 +12,8 @@ the median, the fastest and the slowest of ``--repeats`` runs are printed, and t
 (simulated / wall) of the median. ``--profile`` adds one run under cProfile per scenario and prints
 its top functions by cumulative and by own time. ``--metrics`` writes each run's summary metrics
 (the first repeat's); ``--compare`` reads such a file and prints, per run, the largest difference
-of any metric (absolute and relative), so that a change meant to leave the results unchanged can be
-checked.
+of any metric but the controller's own wall-clock times (absolute and relative), so that a change
+meant to leave the results unchanged can be checked.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import json  # noqa: E402
 import logging  # noqa: E402
 import math  # noqa: E402
 import pstats  # noqa: E402
+import re  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
 
@@ -94,10 +95,15 @@ def _numbers(value, prefix=""):
         yield prefix, float(value)
 
 
+#: metrics that are wall-clock times of the controller (they differ from run to run)
+WALL_CLOCK = re.compile(r"cycle_time|controller_cycle|_us$|_ms$")
+
+
 def compare(before: dict, after: dict) -> tuple[float, float, str, list[str]]:
     """(largest absolute difference, largest relative difference, its key, keys that differ in
-    kind: missing, or booleans/None that changed) between two metrics dicts."""
-    a, b = dict(_numbers(before)), dict(_numbers(after))
+    kind: missing, or booleans/None that changed) between two metrics dicts, leaving out the
+    controller's wall-clock times (:data:`WALL_CLOCK`)."""
+    a, b = ({k: v for k, v in _numbers(m) if not WALL_CLOCK.search(k)} for m in (before, after))
     worst_abs = worst_rel = 0.0
     worst_key = ""
     odd = sorted(set(a) ^ set(b))

@@ -310,14 +310,17 @@ class Part:
         return (1.0 - s) * np.asarray(self.begin) + s * np.asarray(self.finish)
 
 
-def step_period(robot, params: dict) -> float:
-    c = config(robot, params)
+def step_period(robot, params: dict, walking: WalkingConfig | None = None) -> float:
+    """A step's duration with the walking settings of ``params`` (``walking``: those settings,
+    when already made with :func:`config`: they take a search over the robot's stances)."""
+    c = config(robot, params) if walking is None else walking
     return c.single_support + c.double_support
 
 
-def schedule(robot, params: dict) -> list[Part]:
-    """The command schedule, in order; the last part is the settling (zero command)."""
-    period = step_period(robot, params)
+def schedule(robot, params: dict, walking: WalkingConfig | None = None) -> list[Part]:
+    """The command schedule, in order; the last part is the settling (zero command).
+    ``walking``: as in :func:`step_period`."""
+    period = step_period(robot, params, walking)
     parts, t = [Part("stand", 0.0, STAND_TIME, (0, 0, 0), (0, 0, 0))], STAND_TIME
     v = params["speed"]
 
@@ -367,15 +370,16 @@ def config(robot, params: dict) -> WalkingConfig:
     return WalkingConfig.for_robot(robot, cop_margin=params["cop_margin"])
 
 
-def walk_metrics(robot, params: dict, parts: list[Part], run: WalkRun) -> dict:
+def walk_metrics(robot, params: dict, parts: list[Part], run: WalkRun,
+                 walking: WalkingConfig | None = None) -> dict:
     """Distance, speed, heading, side-step, tracking, slip, torque continuity and timing of a
-    run of the command schedule ``parts``."""
+    run of the command schedule ``parts`` (``walking``: as in :func:`step_period`)."""
     a, t, base = run.a, run.a["t"], run.a["base_position"]
     yaw = np.unwrap(a["yaw"])
     commanded_net = float(np.linalg.norm(commanded_path(parts)[:2]))
     net = float(np.linalg.norm(base[-1, :2] - base[0, :2]))
     by_name = {p.name: p for p in parts}
-    period = step_period(robot, params)
+    period = step_period(robot, params, walking)
 
     def index(time):
         return min(int(np.searchsorted(t, time)), len(t) - 1)
@@ -477,8 +481,7 @@ def validate_walk(robot, params: dict) -> None:
     """The robot a biped, the settings valid, the schedule within the longest simulation."""
     check_engine(params)
     biped_soles(robot)  # ValueError unless two rectangular soles
-    config(robot, params)
-    end = schedule(robot, params)[-1].end
+    end = schedule(robot, params, config(robot, params))[-1].end
     if end > Parameter.MAX_TIME:
         raise ValueError(f"the command schedule lasts {end:.0f} s, more than "
                          f"{Parameter.MAX_TIME:g} s: fewer --set steps, a larger turn yaw_rate "
