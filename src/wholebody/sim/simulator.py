@@ -120,6 +120,7 @@ class Simulator:
         self._geom_contact = np.full(self.model.ngeom, -1, dtype=np.intp)
         for g, i in self._geom_to_contact.items():
             self._geom_contact[g] = i
+        self._geom_owner = self._geom_contact.tolist()
         self._contact_site = np.array([self.twin.contact_sites[n] for n in robot.contact_names],
                                       dtype=np.intp).reshape(-1)
         # MuJoCo's data is computed anew by each reset and step: ``_generation`` counts them, and
@@ -127,6 +128,8 @@ class Simulator:
         self._generation = 0
         self._wrenches_generation = -1
         self._wrenches = np.zeros((len(robot.contact_names), 6))
+        self._state_key: tuple[bytes, bytes] | None = None  # see state()
+        self._state: tuple[np.ndarray, np.ndarray] | None = None
         self._pin_data = robot.model.createData()
         self._platform_body = (None if self.environment.platform is None else
                                mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, "platform"))
@@ -162,9 +165,16 @@ class Simulator:
         return float(self.data.time)
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
-        """(q, v) of the simulated robot in Pinocchio convention."""
-        n, nv = self.robot.nq, self.robot.nv
-        return convert.mj_to_pin(self.data.qpos[:n], self.data.qvel[:nv])
+        """(q, v) of the simulated robot in Pinocchio convention (new arrays). The conversion is
+        kept with the bytes of MuJoCo's qpos and qvel it came from: asked again for the same
+        numbers (the controller, the simulator's log and a scenario's measures all read the
+        state of one step), it is not redone."""
+        key = (self.data.qpos[:self.robot.nq].tobytes(), self.data.qvel[:self.robot.nv].tobytes())
+        if key != self._state_key:
+            self._state = convert.mj_to_pin(self.data.qpos[:self.robot.nq],
+                                            self.data.qvel[:self.robot.nv])
+            self._state_key = key
+        return self._state[0].copy(), self._state[1].copy()
 
     # ------------------------------------------------------------------ disturbances
     def add_push(self, push: Push) -> None:
@@ -271,22 +281,23 @@ class Simulator:
         con = d.contact
         if self.model.opt.cone == _PYRAMIDAL:  # the pyramid's forces need MuJoCo's decoding
             return self._contact_wrenches_pyramidal()
-        owner = self._geom_contact[con.geom].tolist()  # [[contact of geom1, of geom2], ...]
-        address, dim = con.efc_address.tolist(), con.dim.tolist()
+        owners = self._geom_owner
+        geoms, address, dim = con.geom.tolist(), con.efc_address.tolist(), con.dim.tolist()
         frames, points = con.frame.tolist(), con.pos.tolist()
-        efc = d.efc_force
+        efc = d.efc_force.tolist()
         sites = d.site_xpos[self._contact_site].tolist()
         for k in range(n):
-            j, sign = owner[k][0], -1.0  # geom1 is the robot's: the force on it is minus MuJoCo's
+            g1, g2 = geoms[k]
+            j, sign = owners[g1], -1.0  # geom1 is the robot's: the force on it is minus MuJoCo's
             if j < 0:
-                j, sign = owner[k][1], 1.0
+                j, sign = owners[g2], 1.0
             a = address[k]
             if j < 0 or a < 0:  # not a robot contact, or excluded (no force)
                 continue
             if dim[k] >= 3:  # normal, two tangential forces (then, condim 4 or 6, torques)
-                f0, f1, f2 = efc[a:a + 3].tolist()
+                f0, f1, f2 = efc[a], efc[a + 1], efc[a + 2]
             else:  # condim 1: a normal force only
-                f0, f1, f2 = float(efc[a]), 0.0, 0.0
+                f0, f1, f2 = efc[a], 0.0, 0.0
             r = frames[k]  # rows: the contact frame's axes (normal first), world
             fx = sign * (f0 * r[0] + f1 * r[3] + f2 * r[6])
             fy = sign * (f0 * r[1] + f1 * r[4] + f2 * r[7])

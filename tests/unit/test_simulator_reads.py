@@ -1,11 +1,14 @@
-"""The simulator's contact wrenches are MuJoCo's contact forces (``mj_contactForce``, contact by
-contact) summed per robot contact, whatever the friction cone and contact dimension, and are
-computed anew after every step and reset."""
+"""What the simulator reads from MuJoCo's data. The contact wrenches are MuJoCo's contact forces
+(``mj_contactForce``, contact by contact) summed per robot contact, whatever the friction cone and
+contact dimension, and are computed anew after every step and reset. The state is the conversion
+of MuJoCo's qpos and qvel (:mod:`wholebody.sim.convert`) of the moment, also when they were
+written directly, and each call returns arrays of its own."""
 
 import mujoco
 import numpy as np
 import pytest
 
+from wholebody.sim import convert
 from wholebody.sim.disturbance import Push
 from wholebody.sim.simulator import Simulator
 
@@ -83,3 +86,24 @@ def test_contact_wrenches_follow_each_step_and_reset(robots, rng):
     sim.reset(q)
     np.testing.assert_array_equal(sim.contact_wrenches_array(), np.zeros((4, 6)))
     assert set(sim.contact_wrenches()) == set(robot.contact_names)
+
+
+def test_state_is_mujocos_of_the_moment(robots, rng):
+    robot = robots["talos14"]
+    sim = Simulator(robot, record=False)
+
+    def converted():
+        return convert.mj_to_pin(sim.data.qpos[:robot.nq].copy(), sim.data.qvel[:robot.nv].copy())
+
+    for _ in shaken(sim, rng, 10):
+        q, v = sim.state()
+        for got, expected in zip((q, v), converted()):
+            np.testing.assert_array_equal(got, expected)
+        q[:] = np.nan  # the caller's arrays
+        v[:] = np.nan
+        assert np.isfinite(np.concatenate(sim.state())).all()
+    sim.data.qvel[0] += 0.5  # written directly, without a step
+    sim.data.qpos[7] += 0.1
+    q, v = sim.state()
+    np.testing.assert_array_equal(q, converted()[0])
+    np.testing.assert_array_equal(v, converted()[1])
