@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 import wholebody as wb
 from wholebody.control.lqr import ContactGains, MomentumLQR, blend_gains
-from wholebody.control.momentum_model import balancing_forces
+from wholebody.control.momentum_model import _momentum_map, balancing_forces
+from wholebody.tasks.momentum import centroidal_map
 
 G0 = 9.81
 
@@ -65,6 +66,18 @@ def test_balancing_forces_solve_the_weighted_least_norm_problem(seed, dims, diag
         S = np.linalg.cholesky(W)
         expected = np.linalg.solve(S.T, np.linalg.pinv(G @ np.linalg.inv(S.T)) @ w)
     np.testing.assert_allclose(lam, expected, rtol=1e-8, atol=1e-8 * max(1.0, np.abs(w).max()))
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1),
+       dims=st.lists(st.sampled_from([3, 6]), min_size=1, max_size=5))
+def test_the_loops_momentum_map_is_the_tasks(seed, dims):
+    """The feedforward's own G is tasks.momentum.centroidal_map to the bit (and eq. 21's map)."""
+    rng = np.random.default_rng(seed)
+    X, com = rng.normal(size=(len(dims), 3)), rng.normal(size=3)
+    G = _momentum_map(X, com, tuple(dims))
+    np.testing.assert_array_equal(G, centroidal_map(X, com, dims))
+    np.testing.assert_allclose(G, momentum_rows(X, com, dims), atol=1e-15)
 
 
 @pytest.fixture(scope="module")

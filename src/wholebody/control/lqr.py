@@ -48,7 +48,7 @@ import numpy as np
 import scipy.linalg
 
 from ..validation import contact_dims, positive, vector, weight_matrix
-from .momentum_model import (STATE_DIM, MomentumModel, balancing_forces,
+from .momentum_model import (STATE_DIM, MomentumModel, WeightFactor, balancing_forces,
                              balancing_forces_factored, momentum_model)
 
 log = logging.getLogger(__name__)
@@ -416,7 +416,7 @@ class MomentumLQR:
         self.integral_limit = positive(integral_limit, "integral_limit")
         self.q_orientation = _orientation_weight(q_orientation)
         self._cache: dict[tuple[str, ...], ContactGains] = {}
-        self._factors: dict[tuple, np.ndarray] = {}  # weight's (shape, bytes) -> its Cholesky L
+        self._factors: dict[tuple, WeightFactor] = {}  # weight's (shape, bytes) -> its factors
 
     @property
     def integral(self) -> bool:
@@ -526,16 +526,15 @@ class MomentumLQR:
             lam += w * (lam_g if g is gains else _embed(g, gains.contacts, gains.dims, lam_g))
         return lam
 
-    def _weight_factor(self, weight) -> np.ndarray:
-        """The Cholesky factor of an input weight (checked as :func:`balancing_forces` checks
-        it), kept by the weight's numbers: a configuration's weight does not change from one
-        cycle to the next."""
+    def _weight_factor(self, weight) -> WeightFactor:
+        """An input weight factored (checked as :func:`balancing_forces` checks it), kept by the
+        weight's numbers: a configuration's weight does not change from one cycle to the next."""
         arr = np.asarray(weight, dtype=float)
         key = (arr.shape, arr.tobytes())
         factor = self._factors.get(key)
         if factor is None:
             n = arr.shape[0] if arr.ndim else 0
-            factor = np.linalg.cholesky(weight_matrix(arr, n, "weight", definite=True))
+            factor = WeightFactor(weight_matrix(arr, n, "weight", definite=True))
             self._factors[key] = factor
         return factor
 
