@@ -48,7 +48,8 @@ import numpy as np
 import scipy.linalg
 
 from ..validation import contact_dims, positive, vector, weight_matrix
-from .momentum_model import STATE_DIM, MomentumModel, balancing_forces, momentum_model
+from .momentum_model import (STATE_DIM, MomentumModel, WeightFactor, balancing_forces,
+                             balancing_forces_factored, momentum_model)
 
 log = logging.getLogger(__name__)
 
@@ -415,6 +416,7 @@ class MomentumLQR:
         self.integral_limit = positive(integral_limit, "integral_limit")
         self.q_orientation = _orientation_weight(q_orientation)
         self._cache: dict[tuple[str, ...], ContactGains] = {}
+        self._factors: dict[tuple, WeightFactor] = {}  # weight's (shape, bytes) -> its factors
 
     @property
     def integral(self) -> bool:
@@ -455,6 +457,7 @@ class MomentumLQR:
     def clear(self) -> None:
         """Forget every cached configuration (gains are recomputed at the next request)."""
         self._cache.clear()
+        self._factors.clear()
 
     def model(self, robot, contacts: Sequence[str] | None = None) -> MomentumModel:
         """The linearised model (eq. 21) at the robot's current pose for ``contacts``."""
@@ -508,17 +511,32 @@ class MomentumLQR:
         sum of its components' re-balanced forces (a leaving contact keeps its fading share).
         """
         com_ref = vector(com_ref, 3, "com_ref")
-        if hdot_ref is not None:
-            hdot_ref = vector(hdot_ref, 6, "hdot_ref")
+        hdot_ref = np.zeros(6) if hdot_ref is None else vector(hdot_ref, 6, "hdot_ref")
         parts = gains.components or ((1.0, gains),)
         lam = np.zeros(gains.n_lambda)
         for w, g in parts:
             X = np.array([robot.contact_point(n) for n in g.contacts])
             weight = g.weight if g.weight is not None else contact_cost(g.dims, self.R)
-            lam_g = balancing_forces(X, com_ref, robot.mass, g.dims, self.gravity, weight=weight,
-                                   hdot=hdot_ref)
-            lam += w * _embed(g, gains.contacts, gains.dims, lam_g)
+            if np.isfinite(X).all():
+                lam_g = balancing_forces_factored(X, com_ref, robot.mass, g.dims, self.gravity,
+                                                  self._weight_factor(weight), hdot_ref)
+            else:  # the checks say what is wrong
+                lam_g = balancing_forces(X, com_ref, robot.mass, g.dims, self.gravity,
+                                         weight=weight, hdot=hdot_ref)
+            lam += w * (lam_g if g is gains else _embed(g, gains.contacts, gains.dims, lam_g))
         return lam
+
+    def _weight_factor(self, weight) -> WeightFactor:
+        """An input weight factored (checked as :func:`balancing_forces` checks it), kept by the
+        weight's numbers: a configuration's weight does not change from one cycle to the next."""
+        arr = np.asarray(weight, dtype=float)
+        key = (arr.shape, arr.tobytes())
+        factor = self._factors.get(key)
+        if factor is None:
+            n = arr.shape[0] if arr.ndim else 0
+            factor = WeightFactor(weight_matrix(arr, n, "weight", definite=True))
+            self._factors[key] = factor
+        return factor
 
     def feedback(self, robot, com_ref, h_ref=None, *, contacts: Sequence[str] | None = None,
                  gains: ContactGains | None = None, hdot_ref=None, rebalance: bool = True,

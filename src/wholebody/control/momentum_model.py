@@ -27,12 +27,64 @@ log = logging.getLogger(__name__)
 STATE_DIM = 9
 
 
-def _weighted_least_norm(G: np.ndarray, w: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable)."""
-    L = np.linalg.cholesky(W)  # W = L L^T; lambda = L^-T mu, min |mu|
+class WeightFactor:
+    """A positive-definite weight ``W`` factored for :func:`balancing_forces`: its Cholesky factor
+    ``L`` (``W = L L^T``) and its inverse ``inverse`` (``L^-T L^-1``). Made once per weight (a
+    contact configuration's input cost), used every cycle."""
+
+    __slots__ = ("L", "inverse")
+
+    def __init__(self, W: np.ndarray):
+        self.L = np.linalg.cholesky(W)
+        L_inv = np.linalg.solve(self.L, np.eye(len(W)))
+        self.inverse = L_inv.T @ L_inv
+
+
+#: a Cholesky pivot of the normal equations below this share of the largest: G is taken as rank
+#: deficient or ill-conditioned (G W^-1 G^T worse than about 1e8, where the closed form would
+#: lose more than ~1e-8 of its digits) and the least-squares solve is used. A humanoid's soles
+#: and a quadruped's three or four feet give shares above 0.05; two point feet (rank 5) 1e-8
+RANK_PIVOT_SHARE = 1e-4
+
+
+def _weighted_least_norm(G: np.ndarray, w: np.ndarray, factor: WeightFactor) -> np.ndarray:
+    """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable).
+
+    With G of full row rank, the closed form lambda = W^-1 G^T (G W^-1 G^T)^-1 w (the 6 x 6
+    normal equations of the constraint, checked positive definite by their Cholesky pivots);
+    otherwise the least-squares solution of minimum weighted norm: lambda = L^-T mu with mu the
+    minimum-norm least-squares solution of (G L^-T) mu = w (LAPACK's SVD-based solver)."""
+    A = G @ factor.inverse  # G W^-1
+    S = A @ G.T
+    try:
+        pivots = np.diagonal(np.linalg.cholesky(S))
+        full_rank = pivots.min() > RANK_PIVOT_SHARE * pivots.max()
+    except np.linalg.LinAlgError:
+        full_rank = False
+    if full_rank:
+        return A.T @ np.linalg.solve(S, w)
+    L = factor.L
     GL = np.linalg.solve(L, G.T).T  # G L^-T
     mu, *_ = np.linalg.lstsq(GL, w, rcond=None)
     return np.linalg.solve(L.T, mu)
+
+
+def _momentum_map(X: np.ndarray, com: np.ndarray, dims: tuple[int, ...]) -> np.ndarray:
+    """:func:`~wholebody.tasks.momentum.centroidal_map` (the same numbers), filled as Python
+    numbers in one pass: cheaper for the few contacts of a control cycle."""
+    n = sum(dims)
+    rows = [[0.0] * n for _ in range(6)]
+    start = 0
+    for (rx, ry, rz), d in zip((X - com).tolist(), dims):
+        c = start
+        rows[0][c] = rows[1][c + 1] = rows[2][c + 2] = 1.0
+        rows[3][c + 1], rows[3][c + 2] = -rz, ry
+        rows[4][c], rows[4][c + 2] = rz, -rx
+        rows[5][c], rows[5][c + 1] = -ry, rx
+        if d == 6:
+            rows[3][c + 3] = rows[4][c + 4] = rows[5][c + 5] = 1.0
+        start += d
+    return np.array(rows).reshape(6, n)
 
 
 def _gravity_wrench(mass: float, gravity: float) -> np.ndarray:
@@ -60,17 +112,29 @@ def balancing_forces(contact_positions, com, mass: float, dims: Sequence[int] | 
     n = sum(dims)
     W = np.eye(n) if weight is None else weight_matrix(weight, n, "weight", definite=True)
     hdot = np.zeros(6) if hdot is None else vector(hdot, 6, "hdot")
-    G = centroidal_map(X, com, dims)
+    return balancing_forces_factored(X, com, mass, dims, gravity, WeightFactor(W), hdot)
+
+
+def balancing_forces_factored(X: np.ndarray, com: np.ndarray, mass: float, dims: tuple[int, ...],
+                              gravity: float, factor: WeightFactor, hdot: np.ndarray) -> np.ndarray:
+    """:func:`balancing_forces` on arguments already checked (``X`` (n_c, 3) and ``com`` finite,
+    ``dims`` a tuple of 3 and 6, ``hdot`` a 6-vector), with the weight factored
+    (:class:`WeightFactor`, kept from one call to the next while the weight does not change): the
+    same computation without the checks, for a control loop."""
+    G = _momentum_map(X, com, dims)
     w = hdot - _gravity_wrench(mass, gravity)
-    lam = _weighted_least_norm(G, w, W)
+    lam = _weighted_least_norm(G, w, factor)
     residual = float(np.linalg.norm(G @ lam - w))
     if residual > 1e-6 * max(1.0, float(np.linalg.norm(w))):
         log.debug("balancing_forces: the contacts cannot balance the wrench %s exactly "
-                    "(residual %.3g)", np.round(w, 3), residual)
-    fz = [lam[s + 2] for s in np.cumsum((0,) + dims[:-1])]
+                  "(residual %.3g)", np.round(w, 3), residual)
+    start, fz = 0, []
+    for d in dims:
+        fz.append(float(lam[start + 2]))
+        start += d
     if min(fz) < 0.0:
         log.debug("balancing_forces: negative normal force %s (CoM outside the support?)",
-                    np.round(fz, 3))
+                  np.round(fz, 3))
     return lam
 
 

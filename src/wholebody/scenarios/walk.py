@@ -55,12 +55,13 @@ PARAMETERS = (
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
         observers=()) -> ScenarioResult:
-    parts = schedule(robot, params)
-    ctrl = Walking(robot, config(robot, params), engine=params["engine"])
+    walking = config(robot, params)
+    parts = schedule(robot, params, walking)
+    ctrl = Walking(robot, walking, engine=params["engine"])
     run_ = simulate(robot, ctrl, parts[-1].end, command=lambda t: command_at(parts, t),
                     progress=progress, observers=observers, label=controller)
-    metrics = walk_metrics(robot, params, parts, run_)
-    period = step_period(robot, params)
+    metrics = walk_metrics(robot, params, parts, run_, walking)
+    period = step_period(robot, params, walking)
     notes = [f"success = no fall, no failed cycle, sole slip per stance < "
              f"{1e3 * Thresholds.for_robot(robot).max_slip:.1f} mm, net displacement >= "
              f"{DISTANCE_SHARE:.0%} of the commanded "

@@ -72,8 +72,9 @@ def validate(robot, params: dict) -> None:
 def trial(robot, params: dict, angle: float, progress: bool = False, observers=()):
     """One walk pushed along ``angle``: (metrics, run)."""
     wp = walk_params(params)
-    parts = schedule(robot, wp)
-    ctrl = Walking(robot, config(robot, wp), engine=params["engine"])
+    walking = config(robot, wp)
+    parts = schedule(robot, wp, walking)
+    ctrl = Walking(robot, walking, engine=params["engine"])
 
     def push(run, t):
         ph = ctrl.phase
@@ -85,7 +86,7 @@ def trial(robot, params: dict, angle: float, progress: bool = False, observers=(
     run = simulate(robot, ctrl, parts[-1].end, command=lambda t: command_at(parts, t),
                    push=push, progress=progress, observers=observers,
                    label=f"push {angle:g} deg")
-    metrics = walk_metrics(robot, wp, parts, run)
+    metrics = walk_metrics(robot, wp, parts, run, walking)
     metrics = {"angle_deg": angle, "dv_mps": params["dv"],
                "pushed_at_s": run.pushes[0].start if run.pushes else None,
                "recovered": walked(robot, metrics) and bool(run.pushes), **metrics}

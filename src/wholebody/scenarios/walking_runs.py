@@ -15,6 +15,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
 from matplotlib.patches import Polygon  # noqa: E402
 
 from ..control.walking import SupportPolygon, Walking, WalkingConfig  # noqa: E402
@@ -94,6 +95,7 @@ def simulate(robot, ctrl: Walking, duration: float,
     rec = {k: [] for k in RECORDED}
     run.poses = {s: ([], []) for s in ctrl.soles}
     h0 = float(robot.q_ref[2])
+    pin_data = robot.model.createData()
 
     def compute(q, v, t):
         if command is not None:
@@ -107,12 +109,15 @@ def simulate(robot, ctrl: Walking, duration: float,
 
     def observe(t, sol):
         q, v = sim.state()
-        robot.update(q, v)  # the simulator's state through the exact model
+        # the simulator's CoM and its velocity through the exact model (the numbers of
+        # Robot.update's, without its other terms; on data of its own, the robot untouched)
+        com = pin.centerOfMass(robot.model, pin_data, q, v).copy()
+        vcom = pin_data.vcom[0].copy()
         yaw, tilt = base_yaw_tilt(q)
-        dcm = robot.com[:2] + robot.vcom[:2] / ctrl.omega
+        dcm = com[:2] + vcom[:2] / ctrl.omega
         frames = sim.contact_frame_poses()
         for key, value in (("t", t), ("base_position", q[:3].copy()), ("yaw", yaw),
-                           ("com", robot.com.copy()), ("com_ref", np.array(ctrl.com_ref)),
+                           ("com", com), ("com_ref", np.array(ctrl.com_ref)),
                            ("dcm", dcm), ("dcm_ref", np.array(ctrl.dcm_ref)),
                            ("zmp", np.array(ctrl.zmp_command)),
                            ("tau", np.array(sol.tau, dtype=float)),
@@ -310,14 +315,17 @@ class Part:
         return (1.0 - s) * np.asarray(self.begin) + s * np.asarray(self.finish)
 
 
-def step_period(robot, params: dict) -> float:
-    c = config(robot, params)
+def step_period(robot, params: dict, walking: WalkingConfig | None = None) -> float:
+    """A step's duration with the walking settings of ``params`` (``walking``: those settings,
+    when already made with :func:`config`: they take a search over the robot's stances)."""
+    c = config(robot, params) if walking is None else walking
     return c.single_support + c.double_support
 
 
-def schedule(robot, params: dict) -> list[Part]:
-    """The command schedule, in order; the last part is the settling (zero command)."""
-    period = step_period(robot, params)
+def schedule(robot, params: dict, walking: WalkingConfig | None = None) -> list[Part]:
+    """The command schedule, in order; the last part is the settling (zero command).
+    ``walking``: as in :func:`step_period`."""
+    period = step_period(robot, params, walking)
     parts, t = [Part("stand", 0.0, STAND_TIME, (0, 0, 0), (0, 0, 0))], STAND_TIME
     v = params["speed"]
 
@@ -367,15 +375,16 @@ def config(robot, params: dict) -> WalkingConfig:
     return WalkingConfig.for_robot(robot, cop_margin=params["cop_margin"])
 
 
-def walk_metrics(robot, params: dict, parts: list[Part], run: WalkRun) -> dict:
+def walk_metrics(robot, params: dict, parts: list[Part], run: WalkRun,
+                 walking: WalkingConfig | None = None) -> dict:
     """Distance, speed, heading, side-step, tracking, slip, torque continuity and timing of a
-    run of the command schedule ``parts``."""
+    run of the command schedule ``parts`` (``walking``: as in :func:`step_period`)."""
     a, t, base = run.a, run.a["t"], run.a["base_position"]
     yaw = np.unwrap(a["yaw"])
     commanded_net = float(np.linalg.norm(commanded_path(parts)[:2]))
     net = float(np.linalg.norm(base[-1, :2] - base[0, :2]))
     by_name = {p.name: p for p in parts}
-    period = step_period(robot, params)
+    period = step_period(robot, params, walking)
 
     def index(time):
         return min(int(np.searchsorted(t, time)), len(t) - 1)
@@ -477,8 +486,7 @@ def validate_walk(robot, params: dict) -> None:
     """The robot a biped, the settings valid, the schedule within the longest simulation."""
     check_engine(params)
     biped_soles(robot)  # ValueError unless two rectangular soles
-    config(robot, params)
-    end = schedule(robot, params)[-1].end
+    end = schedule(robot, params, config(robot, params))[-1].end
     if end > Parameter.MAX_TIME:
         raise ValueError(f"the command schedule lasts {end:.0f} s, more than "
                          f"{Parameter.MAX_TIME:g} s: fewer --set steps, a larger turn yaw_rate "

@@ -10,6 +10,8 @@ So ``v_mj = T v_pin`` with ``T = diag(R, I, I)`` (R the base rotation). Generali
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -22,13 +24,14 @@ def quat_wxyz_to_xyzw(quat: np.ndarray) -> np.ndarray:
 
 
 def quat_to_matrix(quat_xyzw: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion given as (x, y, z, w)."""
-    x, y, z, w = quat_xyzw / np.linalg.norm(quat_xyzw)
+    """Rotation matrix of a unit quaternion given as (x, y, z, w) (normalised first)."""
+    quat = np.asarray(quat_xyzw, dtype=float)
+    x, y, z, w = (quat / math.sqrt(quat.dot(quat))).tolist()  # np.linalg.norm's sqrt(q . q)
     return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+        1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
+    ]).reshape(3, 3)
 
 
 def pin_to_mj(q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,10 +46,12 @@ def pin_to_mj(q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def mj_to_pin(qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(qpos, qvel) of the robot's MuJoCo joints -> (q, v) in Pinocchio convention."""
     q = np.array(qpos, dtype=float)
-    q[3:7] = quat_wxyz_to_xyzw(qpos[3:7])
-    q[3:7] /= np.linalg.norm(q[3:7])
+    quat = q[3:7]
+    quat[:3] = qpos[4:7]
+    quat[3] = qpos[3]
+    quat /= math.sqrt(quat.dot(quat))  # np.linalg.norm's sqrt(q . q)
     v = np.array(qvel, dtype=float)
-    v[:3] = quat_to_matrix(q[3:7]).T @ qvel[:3]
+    v[:3] = quat_to_matrix(quat).T @ qvel[:3]
     return q, v
 
 

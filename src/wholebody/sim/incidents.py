@@ -62,6 +62,8 @@ class IncidentLog:
 
     def step(self, sim) -> None:
         q = sim.data.qpos[self._qpos]
+        if not ((q <= self._lower).any() or (q >= self._upper).any()):  # no joint on a limit
+            return
         low = (q <= self._lower) & ~self._seen[:, 0]
         high = (q >= self._upper) & ~self._seen[:, 1]
         if not (low.any() or high.any()):

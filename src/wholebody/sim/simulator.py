@@ -29,6 +29,9 @@ _DIVERGENCE_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWA
                         mujoco.mjtWarning.mjWARN_BADQACC)
 
 
+_PYRAMIDAL = mujoco.mjtCone.mjCONE_PYRAMIDAL
+
+
 class SimulationDiverged(RuntimeError):
     """MuJoCo found NaN, inf or huge values in the state or its accelerations during a step (and
     reset its data); ``t`` is the simulated time at which that step started."""
@@ -135,6 +138,20 @@ class Simulator:
         self._push_offsets: list[np.ndarray] = []
         self._geom_to_contact = {g: i for i, c in enumerate(robot.contact_names)
                                  for g in self.twin.contact_geoms[c]}
+        # geom id -> index of the robot contact it belongs to (-1: not a contact geom)
+        self._geom_contact = np.full(self.model.ngeom, -1, dtype=np.intp)
+        for g, i in self._geom_to_contact.items():
+            self._geom_contact[g] = i
+        self._geom_owner = self._geom_contact.tolist()
+        self._contact_site = np.array([self.twin.contact_sites[n] for n in robot.contact_names],
+                                      dtype=np.intp).reshape(-1)
+        # MuJoCo's data is computed anew by each reset and step: ``_generation`` counts them, and
+        # the contact wrenches are kept for the generation they were computed in
+        self._generation = 0
+        self._wrenches_generation = -1
+        self._wrenches = np.zeros((len(robot.contact_names), 6))
+        self._state_key: tuple[bytes, bytes] | None = None  # see state()
+        self._state: tuple[np.ndarray, np.ndarray] | None = None
         self._pin_data = robot.model.createData()
         self._platform_body = (None if self.environment.platform is None else
                                mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, "platform"))
@@ -159,6 +176,7 @@ class Simulator:
         for address, value in self._held:
             self.data.qpos[address] = value
         mujoco.mj_forward(self.model, self.data)
+        self._generation += 1
         self._delay = deque([np.zeros(robot.na)] * self.mismatch.torque_delay)
         self._lagged = None  # the actuators' torque (Mismatch.torque_bandwidth), from the first
         self.log = SimLog(robot.contact_names)
@@ -172,8 +190,16 @@ class Simulator:
         return float(self.data.time)
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
-        """(q, v) of the simulated robot in Pinocchio convention."""
-        return convert.mj_to_pin(self.data.qpos[self._qpos], self.data.qvel[self._qvel])
+        """(q, v) of the simulated robot in Pinocchio convention (new arrays). The conversion is
+        kept with the bytes of MuJoCo's qpos and qvel it came from: asked again for the same
+        numbers (the controller, the simulator's log and a scenario's measures all read the
+        state of one step), it is not redone."""
+        qpos, qvel = self.data.qpos[self._qpos], self.data.qvel[self._qvel]
+        key = (qpos.tobytes(), qvel.tobytes())
+        if key != self._state_key:
+            self._state = convert.mj_to_pin(qpos, qvel)
+            self._state_key = key
+        return self._state[0].copy(), self._state[1].copy()
 
     def acceleration(self) -> np.ndarray:
         """MuJoCo's generalised acceleration of the robot's coordinates (MuJoCo's convention:
@@ -259,6 +285,7 @@ class Simulator:
         for observer in self.observers:
             observer.step(self)
         t_start = self.data.time
+        self._generation += 1
         mujoco.mj_step(self.model, self.data)
         if self.data.time < t_start + 0.5 * self.dt:  # MuJoCo reset its data: it diverged
             raise SimulationDiverged(t_start, self._divergence_reason())
@@ -271,26 +298,80 @@ class Simulator:
 
     # ------------------------------------------------------------------ contact forces
     def contact_wrenches_array(self) -> np.ndarray:
-        """(ncontact, 6): force on the robot and torque about each contact frame origin (world)."""
-        out = np.zeros((len(self.robot.contact_names), 6))
+        """(ncontact, 6): force on the robot and torque about each contact frame origin (world).
+
+        Each MuJoCo contact of a robot contact geom adds its force (that of MuJoCo's
+        ``mj_contactForce``: the contact-frame force in ``efc_force``, rotated to the world, with
+        the sign of the force on the robot's geom) and that force's moment about the contact
+        frame's origin. Computed once per step (MuJoCo's data changes only when it steps or
+        resets) and returned as a copy."""
+        if self._wrenches_generation != self._generation:
+            self._wrenches = self._contact_wrenches()
+            self._wrenches_generation = self._generation
+        return self._wrenches.copy()
+
+    def _contact_wrenches(self) -> np.ndarray:
+        """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts, in plain floats: with
+        the few contacts of a robot's feet a loop over Python numbers costs less than numpy's
+        per-call overhead (the same products and sums as ``frame.T @ f`` and ``np.cross``)."""
+        d = self.data
+        out = [[0.0] * 6 for _ in self.robot.contact_names]
+        n = d.ncon
+        if n == 0:
+            return np.array(out).reshape(-1, 6)
+        con = d.contact
+        if self.model.opt.cone == _PYRAMIDAL:  # the pyramid's forces need MuJoCo's decoding
+            return self._contact_wrenches_pyramidal()
+        owners = self._geom_owner
+        geoms, address, dim = con.geom.tolist(), con.efc_address.tolist(), con.dim.tolist()
+        frames, points = con.frame.tolist(), con.pos.tolist()
+        efc = d.efc_force.tolist()
+        sites = d.site_xpos[self._contact_site].tolist()
+        for k in range(n):
+            g1, g2 = geoms[k]
+            j, sign = owners[g1], -1.0  # geom1 is the robot's: the force on it is minus MuJoCo's
+            if j < 0:
+                j, sign = owners[g2], 1.0
+            a = address[k]
+            if j < 0 or a < 0:  # not a robot contact, or excluded (no force)
+                continue
+            if dim[k] >= 3:  # normal, two tangential forces (then, condim 4 or 6, torques)
+                f0, f1, f2 = efc[a], efc[a + 1], efc[a + 2]
+            else:  # condim 1: a normal force only
+                f0, f1, f2 = efc[a], 0.0, 0.0
+            r = frames[k]  # rows: the contact frame's axes (normal first), world
+            fx = sign * (f0 * r[0] + f1 * r[3] + f2 * r[6])
+            fy = sign * (f0 * r[1] + f1 * r[4] + f2 * r[7])
+            fz = sign * (f0 * r[2] + f1 * r[5] + f2 * r[8])
+            p, o = points[k], sites[j]
+            lx, ly, lz = p[0] - o[0], p[1] - o[1], p[2] - o[2]
+            w = out[j]
+            w[0] += fx
+            w[1] += fy
+            w[2] += fz
+            w[3] += ly * fz - lz * fy
+            w[4] += lz * fx - lx * fz
+            w[5] += lx * fy - ly * fx
+        return np.array(out).reshape(-1, 6)
+
+    def _contact_wrenches_pyramidal(self) -> np.ndarray:
+        """:meth:`_contact_wrenches` through ``mj_contactForce``, contact by contact."""
         d, m = self.data, self.model
+        out = np.zeros((len(self.robot.contact_names), 6))
         buf = np.zeros(6)
         for i in range(d.ncon):
             con = d.contact[i]
             g1, g2 = int(con.geom[0]), int(con.geom[1])
-            if g1 in self._geom_to_contact:
-                idx, sign = self._geom_to_contact[g1], -1.0
-            elif g2 in self._geom_to_contact:
-                idx, sign = self._geom_to_contact[g2], 1.0
-            else:
+            j, sign = int(self._geom_contact[g1]), -1.0
+            if j < 0:
+                j, sign = int(self._geom_contact[g2]), 1.0
+            if j < 0:
                 continue
             mujoco.mj_contactForce(m, d, i, buf)
-            # buf[:3] is in the contact frame (rows of con.frame), the force geom1 exerts on geom2
             force = sign * (con.frame.reshape(3, 3).T @ buf[:3])
-            site = self.twin.contact_sites[self.robot.contact_names[idx]]
-            lever = con.pos - d.site_xpos[site]
-            out[idx, :3] += force
-            out[idx, 3:] += np.cross(lever, force)
+            lever = con.pos - d.site_xpos[self._contact_site[j]]
+            out[j, :3] += force
+            out[j, 3:] += np.cross(lever, force)
         return out
 
     def contact_wrenches(self) -> dict[str, np.ndarray]:
