@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from wholebody.scenarios import SCENARIOS
+
 from wholebody.cli import main
 from wholebody.report import claims as C
 from wholebody.report import runner
@@ -298,3 +300,6 @@ def test_report_under_real_robot_conditions(tmp_path, capsys, monkeypatch, fake_
                  str(out)]) == 2
     assert "--realism" in capsys.readouterr().err
     assert C.under_conditions(C.CLAIMS, "exact") == tuple(C.CLAIMS)
+    kept = C.under_conditions(C.CLAIMS, "sensors")  # only the runs that can take it, all moved
+    assert kept and all(("realism", "sensors") in c.run.sets for c in kept)
+    assert all(SCENARIOS[c.run.scenario].simulations is not None for c in kept)

@@ -625,8 +625,9 @@ CLAIMS: tuple[Claim, ...] = HERZOG + FAHMI
 
 
 def under_conditions(claims, level: str) -> tuple[Claim, ...]:
-    """``claims`` with each run under real-robot conditions ``level`` (``--set realism``, on the
-    scenarios that take it; :mod:`wholebody.scenarios.conditions`); unchanged for ``exact``."""
+    """``claims`` with each run under real-robot conditions ``level`` (``--set realism``,
+    :mod:`wholebody.scenarios.conditions`); a claim whose scenario cannot run under them (it takes
+    no simulator observers) is left out. Unchanged for ``exact``."""
     from ..scenarios import SCENARIOS
     from ..scenarios.conditions import LEVELS
 
@@ -635,12 +636,11 @@ def under_conditions(claims, level: str) -> tuple[Claim, ...]:
     if level == "exact":
         return tuple(claims)
 
-    def moved(spec: RunSpec) -> RunSpec:
+    def takes_realism(spec: RunSpec) -> bool:
         scenario = SCENARIOS.get(spec.scenario)
-        if scenario is None or all(p.name != "realism" for p in scenario.parameters):
-            return spec
-        return replace(spec, sets=(*spec.sets, ("realism", level)))
-    return tuple(replace(c, run=moved(c.run)) for c in claims)
+        return scenario is not None and any(p.name == "realism" for p in scenario.parameters)
+    return tuple(replace(c, run=replace(c.run, sets=(*c.run.sets, ("realism", level))))
+                 for c in claims if takes_realism(c.run))
 
 
 def claims_for(paper: str) -> tuple[Claim, ...]:
