@@ -10,13 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from wholebody.scenarios import SCENARIOS
 
 from wholebody.cli import main
 from wholebody.report import claims as C
 from wholebody.report import runner
 from wholebody.report.claims import CLAIMS, Claim, RunSpec, claims_for, run, select
-from wholebody.scenarios import get_scenario
+from wholebody.scenarios import SCENARIOS, get_scenario
 from wholebody.scenarios.base import Scenario, ScenarioResult
 from wholebody.sweep import SerialExecutor
 
