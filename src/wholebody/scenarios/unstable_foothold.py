@@ -76,6 +76,10 @@ def validate(robot, params: dict) -> None:
     check_gait(params)
     if not params["duration"] > params["release_time"] > 3.0:
         raise ValueError("--set release_time: must lie between 3 s and the duration")
+    try:  # the stone's foot must stand at the release (a trot's stances differ from a crawl's)
+        stone_site(robot, params)
+    except ValueError as exc:
+        raise ValueError(f"--set release_time: {exc}") from None
 
 
 def stone_foot(robot) -> str:

@@ -142,8 +142,11 @@ def build_spec(robot: Robot, environment: Environment | None = None,
         is_hinge = np.linalg.norm(motion[3:]) > 0.5
         joint.type = mujoco.mjtJoint.mjJNT_HINGE if is_hinge else mujoco.mjtJoint.mjJNT_SLIDE
         joint.axis = motion[3:] if is_hinge else motion[:3]
-        idx_v = model.joints[jid].idx_v
-        lo, hi = robot.q_min[jid - 2], robot.q_max[jid - 2]  # a continuous joint: none
+        idx_q, idx_v = model.joints[jid].idx_q, model.joints[jid].idx_v
+        # the model's own (URDF/MJCF) limits, not the controller's (a scenario may move those);
+        # a continuous joint (two coordinates) has none
+        lo, hi = ((model.lowerPositionLimit[idx_q], model.upperPositionLimit[idx_q])
+                  if model.joints[jid].nq == 1 else (-np.inf, np.inf))
         if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
             joint.range = [lo, hi]
             joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
