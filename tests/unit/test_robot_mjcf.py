@@ -445,28 +445,52 @@ def test_continuous_joints_have_angles(tmp_path, rng):
     assert np.all(hi == 40.0 * (np.arange(12) % 3 == 2) + 30.0 * (np.arange(12) % 3 != 2))
 
 
-def test_continuous_joints_are_refused_for_simulation_and_lock(tmp_path):
-    """Until the controllers and the twin run them, a simulation refuses continuous joints with
-    the way out; locked, the robot simulates."""
-    from wholebody.robots.check import load_fit_robot
-    from wholebody.sim.twin import build_twin
+def test_continuous_joints_in_the_twin(tmp_path, rng):
+    """The twin simulates continuous joints as hinges: MuJoCo's qpos holds the angle where
+    Pinocchio's q holds (cos, sin), and a state set into the simulator reads back the same (q, v)
+    (the angles wrap into (-pi, pi]); the MuJoCo mass matrix equals Pinocchio's at that state."""
+    from wholebody.sim.simulator import Simulator
 
-    data = _continuous_quadruped(tmp_path)
-    robot = wb.load_robot(data)
-    with pytest.raises(ValueError, match="continuous joints yet.*locked_joints"):
-        build_twin(robot)
-    path = tmp_path / "wheels.toml"
-    path.write_text(f'name = "wheels"\nmodel = "{data["model"]}"\n[posture]\n'
-                    + "".join(f"{k} = {v}\n" for k, v in data["posture"].items())
-                    + "".join(f'[[contacts]]\nname = "{leg}"\nframe = "{leg}_foot"\n'
-                              f'type = "point"\nradius = 0.02\n' for leg in LEGS))
-    with pytest.raises(ValueError, match=r"continuous joint\(s\).*locked_joints"):
-        load_fit_robot(str(path))
-    locked = wb.load_robot({**data, "locked_joints": [f"{leg}_kfe" for leg in LEGS],
-                            "posture": {f"{leg}_hfe": 0.6 for leg in LEGS}
-                            | {f"{leg}_kfe": -1.2 for leg in LEGS}})
-    assert locked.angles_are_coordinates and locked.na == 8
-    build_twin(locked)
+    robot = wb.load_robot(_continuous_quadruped(tmp_path))
+    sim = Simulator(robot, record=False)
+    knees = [robot.joint_names.index(f"{leg}_kfe") for leg in LEGS]
+    for _ in range(5):
+        q, v = robot.random_state(rng, velocity_scale=0.5)
+        angles = robot.joint_angles(q)
+        angles[knees] += 2 * np.pi * rng.integers(-2, 3, len(knees))  # one wrap or two
+        q = robot.with_joint_angles(q, angles)
+        sim.reset(q, v)
+        q2, v2 = sim.state()
+        np.testing.assert_allclose(q2, q, atol=1e-12)
+        np.testing.assert_allclose(v2, v, atol=1e-12)
+        np.testing.assert_allclose(sim.data.qpos[7:7 + robot.na], robot.joint_angles(q), atol=1e-12)
+        M_mj = np.zeros((sim.model.nv, sim.model.nv))
+        mujoco.mj_fullM(sim.model, sim.data, M_mj)
+        M_pin = pin.crba(robot.model, robot.model.createData(), q)
+        M_pin = np.triu(M_pin) + np.triu(M_pin, 1).T
+        q_mujoco = np.r_[q[:7], robot.joint_angles(q)]  # the velocity map needs only the base
+        np.testing.assert_allclose(convert.mass_matrix_to_pin(q_mujoco, M_mj[:robot.nv, :robot.nv]),
+                                   M_pin, atol=1e-9 * np.abs(M_pin).max())
+
+
+@pytest.mark.slow
+def test_continuous_knees_simulate_as_the_same_revolute_knees(tmp_path):
+    """The quadruped with continuous knees and the same quadruped with revolute knees (their
+    limits far from the motion) in the same closed loop (`stand`, 1 s): the same run to
+    round-off, every metric — the (cos, sin) coordinates, the hinge conversion and the
+    controllers' angle handling change nothing but the representation."""
+    from wholebody.scenarios import SCENARIOS
+
+    continuous = _continuous_quadruped(tmp_path)
+    revolute_urdf = tmp_path / "revolute.urdf"
+    revolute_urdf.write_text(quadruped_urdf())
+    revolute = {**continuous, "name": "revolute", "model": str(revolute_urdf)}
+    runs = [SCENARIOS["stand"].run(wb.load_robot(d), None, {"duration": "1"}).metrics
+            for d in (continuous, revolute)]
+    numbers = [k for k, v in runs[1].items() if isinstance(v, float)]
+    assert len(numbers) >= 4
+    for key in numbers:
+        assert runs[0][key] == pytest.approx(runs[1][key], rel=1e-6, abs=1e-9), key
 
 
 @pytest.mark.parametrize("mode", ["braking", "tanh"])

@@ -481,11 +481,6 @@ def load_fit_robot(name_or_path: str):
     except OSError as exc:
         raise ValueError(f"robot {name_or_path}: {exc.strerror or exc}"
                          f"{f' ({exc.filename})' if exc.filename else ''}") from None
-    if not robot.angles_are_coordinates:
-        joints = [n for n, j in zip(robot.joint_names, robot.model.joints[2:]) if j.nq == 2]
-        raise ValueError(f"robot '{robot.name}': continuous joint(s) {joints}: the controllers "
-                         f"and the MuJoCo twin do not run them yet; lock them with "
-                         f"locked_joints to simulate the robot")
     errors = [f for f in inspect_robot(robot).findings if f.level == "error"]
     if errors:
         raise ValueError(f"robot '{robot.name}': {errors[0].topic}: {errors[0].message} (see "

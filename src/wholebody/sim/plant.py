@@ -124,12 +124,12 @@ def _load_spec(path: Path, where: str) -> mujoco.MjSpec:
     from ..robots.mjcf import is_mjcf
 
     if not path.exists():
-        raise PlantError(where, f"no such file")
+        raise PlantError(where, "no such file")
     if not path.is_file():
-        raise PlantError(where, f"not a file")
+        raise PlantError(where, "not a file")
     if not is_mjcf(path):
-        raise PlantError(where, f"not an MJCF file (its root element is not <mujoco>); the "
-                         f"plant is the vendor's MuJoCo model")
+        raise PlantError(where, "not an MJCF file (its root element is not <mujoco>); the "
+                         "plant is the vendor's MuJoCo model")
     try:
         return mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:
@@ -354,8 +354,8 @@ def build_plant(robot: Robot, path: str | Path, environment: Environment | None 
     colliding = [g for g in range(m0.ngeom) if m0.body_rootid[m0.geom_bodyid[g]] == base
                  and (m0.geom_contype[g] & 1 or m0.geom_conaffinity[g] & 1)]
     if not colliding:
-        raise PlantError(where, f"no geom of the robot collides with the floor (contype or "
-                         f"conaffinity bit 0); the plant's contacts are its own geoms")
+        raise PlantError(where, "no geom of the robot collides with the floor (contype or "
+                         "conaffinity bit 0); the plant's contacts are its own geoms")
     for env in env_geoms:
         env.contype = env.conaffinity = 0  # the explicit pairs below only
         mu = float(env.friction[0])

@@ -121,7 +121,9 @@ class Simulator:
         twin = self.twin
         #: what is simulated: "exact twin" or "vendor MJCF <file>"
         self.plant = twin.label
-        self._qpos = (np.arange(robot.nq) if twin.qpos_index is None else twin.qpos_index)
+        # MuJoCo's qpos of the robot holds the joints' angles (a continuous joint's one angle
+        # where Pinocchio's q has its (cos, sin)): 7 + na numbers
+        self._qpos = (np.arange(7 + robot.na) if twin.qpos_index is None else twin.qpos_index)
         self._qvel = (np.arange(robot.nv) if twin.dof_index is None else twin.dof_index)
         self._ctrl = (np.arange(robot.na) if twin.actuator_index is None
                       else twin.actuator_index)
@@ -172,7 +174,7 @@ class Simulator:
         v = np.zeros(robot.nv) if v is None else check_vector(v, robot.nv, "v")
         mujoco.mj_resetData(self.model, self.data)
         self._set_platform(0.0)
-        self.data.qpos[self._qpos], self.data.qvel[self._qvel] = convert.pin_to_mj(q, v)
+        self.data.qpos[self._qpos], self.data.qvel[self._qvel] = self._to_mujoco(q, v)
         for address, value in self._held:
             self.data.qpos[address] = value
         mujoco.mj_forward(self.model, self.data)
@@ -197,9 +199,26 @@ class Simulator:
         qpos, qvel = self.data.qpos[self._qpos], self.data.qvel[self._qvel]
         key = (qpos.tobytes(), qvel.tobytes())
         if key != self._state_key:
-            self._state = convert.mj_to_pin(qpos, qvel)
+            self._state = self._to_pinocchio(qpos, qvel)
             self._state_key = key
         return self._state[0].copy(), self._state[1].copy()
+
+    def _to_mujoco(self, q, v) -> tuple[np.ndarray, np.ndarray]:
+        """(qpos, qvel) of the robot's MuJoCo joints from Pinocchio's (q, v)."""
+        robot = self.robot
+        if not robot.angles_are_coordinates:  # (cos, sin) pairs -> hinge angles
+            q = np.concatenate([np.asarray(q, dtype=float)[:7], robot.joint_angles(q)])
+        return convert.pin_to_mj(q, v)
+
+    def _to_pinocchio(self, qpos, qvel) -> tuple[np.ndarray, np.ndarray]:
+        """Pinocchio's (q, v) from the robot's MuJoCo (qpos, qvel)."""
+        q, v = convert.mj_to_pin(qpos, qvel)
+        robot = self.robot
+        if not robot.angles_are_coordinates:  # hinge angles -> (cos, sin) pairs
+            full = robot.q_ref.copy()
+            full[:7] = q[:7]
+            q = robot.with_joint_angles(full, q[7:])
+        return q, v
 
     def acceleration(self) -> np.ndarray:
         """MuJoCo's generalised acceleration of the robot's coordinates (MuJoCo's convention:

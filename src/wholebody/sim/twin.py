@@ -17,7 +17,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
-from ..robot import FREE_FLYER_NQ, FREE_FLYER_NV, Robot
+from ..robot import FREE_FLYER_NV, Robot
 from .environment import Environment
 from .mismatch import Mismatch
 
@@ -98,13 +98,6 @@ def build_spec(robot: Robot, environment: Environment | None = None,
     mismatch = mismatch or Mismatch()
     options = options or SimOptions()
     model = robot.model
-    if not robot.angles_are_coordinates:
-        # MuJoCo's hinge has one qpos where Pinocchio's continuous joint has (cos, sin): the
-        # twin's state conversion (sim/convert.py) maps q[7:] one to one
-        joints = [n for n, j in zip(robot.joint_names, model.joints[2:]) if j.nq == 2]
-        raise ValueError(f"robot '{robot.name}': the MuJoCo twin does not simulate continuous "
-                         f"joints yet ({', '.join(joints)}); lock them with locked_joints to "
-                         f"simulate the robot")
     spec = mujoco.MjSpec()
     spec.modelname = robot.name
     spec.compiler.degree = False
@@ -288,10 +281,12 @@ def build_twin(robot: Robot, environment: Environment | None = None,
         name = robot.model.names[jid]
         mj = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
         pj = robot.model.joints[jid]
-        # MuJoCo and Pinocchio both order bodies depth-first, so joint addresses coincide
-        if m.jnt_qposadr[mj] != pj.idx_q or m.jnt_dofadr[mj] != pj.idx_v:
+        # MuJoCo and Pinocchio both order bodies depth-first, so joint addresses coincide; a
+        # hinge has one qpos per velocity (a continuous joint's angle, where Pinocchio keeps
+        # its (cos, sin)), so MuJoCo's qpos after the free joint is the joints' angles
+        if m.jnt_qposadr[mj] != pj.idx_v + 1 or m.jnt_dofadr[mj] != pj.idx_v:
             raise RuntimeError(f"twin: joint '{name}' has MuJoCo address {m.jnt_qposadr[mj]}, "
-                               f"Pinocchio {pj.idx_q}")
+                               f"Pinocchio's angle {pj.idx_v + 1}")
     contact_geoms = {c.name: [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, c.name)]
                      for c in robot.contacts}
     contact_sites = {c.name: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, c.name)
@@ -304,6 +299,6 @@ def build_twin(robot: Robot, environment: Environment | None = None,
         ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n, _, _ in PLATFORM_JOINTS]
         platform_qpos = np.array([m.jnt_qposadr[i] for i in ids])
         platform_qvel = np.array([m.jnt_dofadr[i] for i in ids])
-    assert m.nu == robot.na and FREE_FLYER_NQ + robot.na == robot.nq
+    assert m.nu == robot.na
     assert FREE_FLYER_NV + robot.na == robot.nv
     return Twin(m, contact_geoms, contact_sites, joint_bodies, platform_qpos, platform_qvel)
