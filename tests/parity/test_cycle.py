@@ -317,10 +317,11 @@ def test_every_kernel_is_registered_by_name():
 
 
 @native
-@pytest.mark.parametrize("change", ["renamed", "resized", "missing", "unknown kernel"])
+@pytest.mark.parametrize("change", ["renamed", "resized", "missing", "unknown kernel", "bad axis"])
 def test_compile_checks_the_layout_by_name(robots, change):
-    """A slot whose parameters do not match its kernel's (a name, a size, one left out) or that
-    names no kernel is refused at compile, the error naming the kernel and the parameter."""
+    """A slot whose parameters do not match its kernel's (a name, a size, one left out), that
+    names no kernel, or that selects a CoM axis beyond z is refused at compile, the error naming
+    the kernel and the parameter or selection."""
     robot = robots["talos14"]
     stack = Stack([[NewtonEuler()], [CoMTask(kp=10.0, kd=5.0)]])
     cycle = HierarchyCycle(robot, stack, engine="native")
@@ -338,6 +339,9 @@ def test_compile_checks_the_layout_by_name(robots, change):
     elif change == "missing":
         del slot["params"]["kd"]
         match = "kernel 'com'.*parameters"
+    elif change == "bad axis":
+        slot["selection"]["rows"] = [0, 3]  # the CoM has three axes
+        match = "kernel 'com': selection 'rows' has 3"
     else:
         slot["kernel"] = "cmo"
         match = "no kernel named 'cmo'"

@@ -34,7 +34,7 @@ namespace
   using Segment = Eigen::Ref<VectorXd>;
 
   // what a kernel's parameter size counts (wholebody.tasks.schema.UNITS)
-  enum class Unit { Fixed, Nq, Na, Nv, Contact, ContactDim, Rows };
+  enum class Unit { Fixed, Nq, Na, Nv, Contact, ContactDim, Rows, Frames };
 
   // a kernel's parameter: its name and k entries per unit (wholebody.tasks.schema.Param)
   struct ParamSpec
@@ -317,11 +317,12 @@ private:
 
   // A task's compiled counterpart: equality or inequality rows, its parameters and selection
   // (by name, in the order its fill reads them: s.p(0), s.pick(0)...), its row count and fill.
+  // A selection's ParamSpec bounds its entries: each in [0, k * count(per)) (a flag: k = 2).
   struct Kernel
   {
     bool eq;
     std::vector<ParamSpec> params;
-    std::vector<std::string> selection;
+    std::vector<ParamSpec> selection;
     RowCount rows;
     Fill fill;
   };
@@ -342,7 +343,7 @@ private:
         &C::fill_contact_constraint}},
       {"center_of_pressure", {false, {{"margin"}}, {}, &C::rows_cop, &C::fill_center_of_pressure}},
       {"friction_cone",
-       {false, {{"mu"}, {"normals", 3, Unit::Contact}}, {"torsion"}, &C::rows_friction, &C::fill_friction_cone}},
+       {false, {{"mu"}, {"normals", 3, Unit::Contact}}, {{"torsion", 2}}, &C::rows_friction, &C::fill_friction_cone}},
       {"normal_force_bounds",
        {false, {{"f_min"}, {"f_max"}, {"normals", 3, Unit::Contact}}, {}, &C::rows_contacts,
         &C::fill_normal_force_bounds}},
@@ -353,14 +354,14 @@ private:
        {true, {{"K", 9, Unit::ContactDim}, {"k", 1, Unit::ContactDim}}, {}, &C::rows_fixed<6>,
         &C::fill_momentum_force}},
       {"com",
-       {true, {{"position", 3}, {"velocity", 3}, {"acceleration", 3}, {"kp", 3}, {"kd", 3}}, {"rows"},
+       {true, {{"position", 3}, {"velocity", 3}, {"acceleration", 3}, {"kp", 3}, {"kd", 3}}, {{"rows", 3}},
         &C::rows_picked, &C::fill_com}},
       {"frame",
        {true, {{"position", 3}, {"rotation", 9}, {"velocity", 6}, {"acceleration", 6}, {"kp", 6}, {"kd", 6}},
-        {"rows", "frame"}, &C::rows_picked, &C::fill_frame}},
+        {{"rows", 6}, {"frame", 1, Unit::Frames}}, &C::rows_picked, &C::fill_frame}},
       {"posture",
        {true, {{"q_ref", 1, Unit::Nq}, {"kp", 1, Unit::Na}, {"kd", 1, Unit::Na}, {"base_kp", 6}, {"base_kd", 6}},
-        {"with_base"}, &C::rows_posture, &C::fill_posture}},
+        {{"with_base", 2}}, &C::rows_posture, &C::fill_posture}},
       {"force_regularizer",
        {true, {{"targets", 1, Unit::ContactDim}}, {}, &C::rows_contact_dims, &C::fill_force_regularizer}},
       {"acceleration_regularizer", {true, {}, {}, &C::rows_nv, &C::fill_acceleration_regularizer}},
@@ -368,7 +369,7 @@ private:
       {"joint_trajectory",
        {true, {{"position", 1, Unit::Rows}, {"velocity", 1, Unit::Rows}, {"acceleration", 1, Unit::Rows},
                {"kp", 1, Unit::Rows}, {"kd", 1, Unit::Rows}},
-        {"rows"}, &C::rows_picked, &C::fill_joint_trajectory}}};
+        {{"rows", 1, Unit::Na}}, &C::rows_picked, &C::fill_joint_trajectory}}};
     return registry;
   }
 
@@ -394,24 +395,29 @@ private:
       if (c < 0 || c >= Index(P.contacts.size()))
         throw std::invalid_argument(where + ": names an inactive contact");
     const py::dict selection = get<py::dict>(s, "selection");
+    std::vector<std::string> picked;
+    for (const ParamSpec & spec : kernel.selection)
+      picked.push_back(spec.name);
     bool same_selection = py::len(selection) == kernel.selection.size();
-    for (const std::string & name : kernel.selection)
+    for (const std::string & name : picked)
       same_selection = same_selection && selection.contains(name);
     if (!same_selection)
-      throw std::invalid_argument(where + ": expected the selection " + joined(kernel.selection));
-    for (const std::string & name : kernel.selection)
-      slot.picks.push_back(get<std::vector<Index>>(selection, name.c_str()));
-    if (slot.kernel == "frame")
+      throw std::invalid_argument(where + ": expected the selection " + joined(picked));
+    for (const ParamSpec & spec : kernel.selection)
     {
-      const auto & frame = slot.picks[1];
-      if (frame.size() != 1 || frame[0] < 0 || frame[0] >= Index(frames_.size()))
-        throw std::invalid_argument(where + ": frame index out of range");
-      slot.frame = frame[0];
+      slot.picks.push_back(get<std::vector<Index>>(selection, spec.name.c_str()));
+      const Index bound = spec.k * count(spec.per, slot, P);
+      for (Index i : slot.picks.back())
+        if (i < 0 || i >= bound)
+          throw std::invalid_argument(where + ": selection '" + spec.name + "' has "
+                                      + std::to_string(i) + ", outside [0, " + std::to_string(bound) + ")");
+      if (spec.name == "frame") // the cycle's frame the kernel reads
+      {
+        if (slot.picks.back().size() != 1)
+          throw std::invalid_argument(where + ": selection 'frame' must name one frame");
+        slot.frame = slot.picks.back()[0];
+      }
     }
-    for (Index r : (kernel.selection.empty() || kernel.selection[0] != "rows") ? std::vector<Index>{}
-                                                                              : slot.picks[0])
-      if (r < 0 || r >= (slot.kernel == "joint_trajectory" ? na_ : 6))
-        throw std::invalid_argument(where + ": selected row " + std::to_string(r) + " out of range");
     if (slot.kernel == "full_dynamics" && P.reduced)
       throw std::invalid_argument(where + ": FullDynamics belongs to the full formulation");
     const py::dict params = get<py::dict>(s, "params");
@@ -468,6 +474,7 @@ private:
       case Unit::Contact: return Index(s.contacts.size());
       case Unit::ContactDim: return contact_dims(s, P);
       case Unit::Rows: return Index(s.picks.empty() ? 0 : s.picks[0].size());
+      case Unit::Frames: return Index(frames_.size());
     }
     return -1;
   }
