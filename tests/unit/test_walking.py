@@ -123,6 +123,41 @@ def test_in_double_support_the_soles_forces_put_the_cop_at_the_commanded_zmp():
     assert checked > 500
 
 
+def test_the_weight_is_handed_over_continuously_at_touchdown_and_lift_off():
+    """Side-steps in the twin (the commanded ZMP leaves the soles' centres most): at every touchdown (the first double-support cycle) the leaving
+    sole still carries the stance's whole wrench — at least 99 % of the soles' normal force and
+    the landed sole at most 1 % of the weight in any force component (a ZMP-proportional split
+    handed it 4 % at once when the ZMP stood off the stance sole's centre) — and in the last cycle
+    before its lift-off at most 2 % of the weight, tangential forces included; so no wrench
+    jumps from one sole to the other at a contact switch (the solution's forces, not the
+    controller's targets)."""
+    from wholebody.sim.simulator import Simulator
+
+    robot = wb.load_robot("talos14")
+    ctrl, sim = Walking(robot), Simulator(robot)
+    ctrl.set_command(0.0, 0.12, 0.0)
+    weight = robot.mass * 9.81
+    touchdowns = lift_offs = 0
+    previous = None
+    while sim.t < 3.4:
+        q, v = sim.state()
+        sol = ctrl.compute(q, v, sim.t)
+        ph = ctrl.phase
+        if ph.kind == "double" and ph.leaving is not None and ph.stance is not None:
+            leaving, landed = sol.forces[ph.leaving], sol.forces[ph.stance]
+            if previous == "single":
+                total = leaving[2] + landed[2]
+                assert leaving[2] >= 0.99 * total, sim.t
+                assert np.abs(landed[:3]).max() <= 0.01 * weight, sim.t
+                touchdowns += 1
+            if sim.t + sim.dt >= ph.end:
+                assert np.abs(leaving[:3]).max() <= 0.02 * weight, sim.t
+                lift_offs += 1
+        previous = ph.kind
+        sim.step(sol.tau)
+    assert touchdowns >= 2 and lift_offs >= 3
+
+
 @pytest.mark.parametrize("turn, yaw_rate, side, lateral",
                          [(90.0, 0.35, 1.0, 0.12), (-45.0, 0.5, -0.3, 0.1), (30.0, 2.0, 0.01, 1.0)])
 def test_the_walk_schedule_turns_and_side_steps_exactly_in_whole_step_periods(

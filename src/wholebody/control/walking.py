@@ -68,10 +68,12 @@ log = logging.getLogger(__name__)
 
 GRAVITY = 9.81
 #: weights of the unloading regulariser's rows [fx, fy, fz, mx, my, mz] of the leaving sole: its
-#: normal force and its tilting moments (so its CoP) follow the ramp; the tangential forces and
-#: the yaw moment stay free (holding the touchdown's tangential force while the normal force
-#: ramps down squeezes the soles against each other up to their friction limit)
-UNLOAD_ROWS = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+#: force follows its share of the commanded net force; the tangential rows keep the soles from
+#: squeezing each other sideways, which handed the landed sole a tangential force at once, and
+#: are light (a recovery step's weight shift needs them to give way: at weight 1 a 0.6 m/s push
+#: from the front falls); the moments stay free (a CoP target for the leaving sole fights the
+#: momentum task's angular rows)
+UNLOAD_ROWS = np.array([0.01, 0.01, 1.0, 0.0, 0.0, 0.0])
 #: weight of the posture task's base-orientation rows (as the Table 2/4 stacks of
 #: :class:`ContactSwitch`)
 BASE_ORIENTATION_WEIGHT = 1.0
@@ -216,7 +218,7 @@ class WalkingConfig:
                    com_drop=(overrides["com_drop"] if "com_drop" in overrides
                              else walking_com_drop(robot)),
                    clearance=_scaled(robot, 0.05, 1.0),
-                   touchdown_depth=_scaled(robot, 0.005, 1.0),
+                   touchdown_depth=_scaled(robot, 0.002, 1.0),
                    joint_braking=_scaled(robot, 0.05, 0.5))
         return replace(base, **overrides).checked()
 
@@ -349,6 +351,7 @@ class Walking:
         self._capture_polygon: tuple = (None, None)  # (the feet it is of, the polygon)
         self._support_polygon: SupportPolygon | None = None
         self.zmp_command = self.com_ref[:2].copy()
+        self._start_share: tuple | None = None  # (carried, ZMP's) shares as a double support began
         self.cycle_times: list[float] = []
         self.events: list[tuple[float, str]] = []
         self._stand(0.0)
@@ -662,25 +665,66 @@ class Walking:
             self._stand(t)
 
     def _setup_unload(self, ph: Phase) -> None:
-        """The leaving sole's regulariser on (its target: :meth:`_leaving_wrench`)."""
+        """The leaving sole's regulariser on (its target: :meth:`_leaving_force`)."""
         for s in self.soles:
             self.unload[s].weight = 0.0
         if ph.leaving is not None:
             self.unload[ph.leaving].weight = UNLOAD_ROWS
+            measured = self._measured_share(ph.leaving)
+            self._start_share = None if measured is None else (
+                measured, self._along(ph, self.zmp_command))
 
-    def _leaving_wrench(self, ph: Phase, com, vcom) -> np.ndarray:
-        """The leaving sole's share of the normal force: the commanded ZMP's position between
-        the soles' centres (1 at the leaving sole, 0 at the other), times the vertical force of
-        the momentum task's height law. The soles' forces then split as the ZMP asks, which
-        carries the weight over continuously at touchdown (all of it on the stance sole) and at
-        lift-off (none on the leaving sole)."""
+    def _along(self, ph: Phase, point) -> float:
+        """``point``'s position on the line between the soles' centres, 1 at ``ph``'s leaving
+        sole and 0 at the other."""
         a = self.feet[ph.leaving][0][:2]
         b = self.feet[self._other(ph.leaving)][0][:2]
-        d = a - b
-        share = float(np.clip((self.zmp_command - b) @ d / max(d @ d, 1e-12), 0.0, 1.0))
+        return float((point - b) @ (a - b)) / max(float((a - b) @ (a - b)), 1e-18)
+
+    def _measured_share(self, sole: str) -> float | None:
+        """``sole``'s share of the soles' normal force in the last solution (None: none yet)."""
+        forces = {} if self.last is None else self.last.forces
+        total = sum(max(float(w[2]), 0.0) for w in forces.values())
+        if total <= 0.0:
+            return None
+        return max(float(forces[sole][2]), 0.0) / total if sole in forces else 0.0
+
+    def _leaving_share(self, ph: Phase, t: float) -> float:
+        """The leaving sole's share of the contact force: the commanded ZMP's position between
+        the soles' centres (:meth:`_along`), plus the difference to the share the sole carried
+        as the double support began, fading linearly over it (1 after a touchdown, about half
+        when walking starts from standing: the ZMP stands off the sole's centre, and without
+        this the other sole would take that difference at once). Kept within the shares the
+        commanded ZMP admits (both soles' CoPs inside them, along the line between their
+        centres)."""
+        share = self._along(ph, self.zmp_command)
+        if self._start_share is not None:
+            carried, zmp_share = self._start_share
+            share += (carried - zmp_share) * max(0.0, 1.0 - (t - ph.start)
+                                                   / max(ph.end - ph.start, 1e-9))
+        a = self.feet[ph.leaving][0][:2]
+        b = self.feet[self._other(ph.leaving)][0][:2]
+        length = max(float(np.linalg.norm(a - b)), 1e-9)
+        u = (a - b) / length
+        x = float((self.zmp_command - b) @ u)
+        margin = self.config.cop_margin
+        reach_a = float(np.max((self._sole_corners(ph.leaving, margin) - a) @ -u))
+        reach_b = float(np.max((self._sole_corners(self._other(ph.leaving), margin) - b) @ u))
+        low = max(0.0, (x - reach_b) / max(length + reach_a - reach_b, 1e-9))
+        high = min(1.0, (x + reach_b) / max(length - reach_a + reach_b, 1e-9))
+        return float(np.clip(share, low, max(low, high)))
+
+    def _leaving_force(self, ph: Phase, t: float, com, vcom, horizontal) -> np.ndarray:
+        """The leaving sole's force target (its wrench's moments untargeted): its share
+        (:meth:`_leaving_share`) of the vertical force of the momentum task's height law and of
+        the commanded horizontal force ``horizontal``. The soles' forces then split as the ZMP
+        asks and the whole force is handed over continuously at touchdown (all of it on the
+        stance sole) and at lift-off (none on the leaving sole)."""
+        share = self._leaving_share(ph, t)
         kp_z, kd_z = self.config.height_gains
         vertical = self.robot.mass * (GRAVITY + kp_z * (self.com_ref[2] - com[2]) - kd_z * vcom[2])
-        return np.array([0.0, 0.0, share * max(vertical, 0.0), 0.0, 0.0, 0.0])
+        return np.array([share * horizontal[0], share * horizontal[1],
+                         share * max(vertical, 0.0), 0.0, 0.0, 0.0])
 
     def _touchdown(self, t, com, dcm, cycle) -> None:
         """Re-plan from the measured state at a touchdown: keep walking while there is a command
@@ -753,7 +797,8 @@ class Walking:
         momentum.h_ref = np.array([m * vel[0], m * vel[1], m * vel[2], 0.0, 0.0, 0.0])
         momentum.hdot_ref = np.array([m * a[0], m * a[1], 0.0, 0.0, 0.0, 0.0])
         if ph.kind == "double" and ph.leaving is not None:
-            self.unload[ph.leaving].targets[ph.leaving] = self._leaving_wrench(ph, com, vcom)
+            self.unload[ph.leaving].targets[ph.leaving] = self._leaving_force(
+                ph, t, com, vcom, m * a)
         posture = stack.find("posture")
         q_ref = robot.q_ref.copy()
         # the standing base pose relative to the soles, turned with the heading
