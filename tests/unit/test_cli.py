@@ -128,16 +128,6 @@ def test_output_cut_short_by_its_reader_is_not_an_error():
 
 
 # ---------------------------------------------------------------- checked before simulating
-@pytest.fixture
-def no_simulation(monkeypatch):
-    """Scenario.run fails the test: the checks under test must come before any simulation."""
-    from wholebody.scenarios.base import Scenario
-
-    def run(self, *args, **kwargs):
-        pytest.fail(f"scenario '{self.name}' was run: the bad input was not caught before it")
-    monkeypatch.setattr(Scenario, "run", run)
-
-
 @pytest.mark.parametrize("argv,needle", [
     (["run", "stand", "--set", "duration=0"],
      "--set duration: expected a finite number in (0, 600], got '0'"),
