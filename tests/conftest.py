@@ -15,6 +15,16 @@ import fuzz  # noqa: E402  (the fuzz harness's state and plan samplers)
 PRESETS = ("talos14", "talos", "hyq", "anymal_c", "romeo")
 
 
+@pytest.fixture
+def no_simulation(monkeypatch):
+    """Scenario.run fails the test: the checks under test must come before any simulation."""
+    from wholebody.scenarios.base import Scenario
+
+    def run(self, *args, **kwargs):
+        pytest.fail(f"scenario '{self.name}' was run: the bad input was not caught before it")
+    monkeypatch.setattr(Scenario, "run", run)
+
+
 @pytest.fixture(scope="session")
 def robots():
     """Each preset loaded once per test session."""

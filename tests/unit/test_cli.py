@@ -128,16 +128,6 @@ def test_output_cut_short_by_its_reader_is_not_an_error():
 
 
 # ---------------------------------------------------------------- checked before simulating
-@pytest.fixture
-def no_simulation(monkeypatch):
-    """Scenario.run fails the test: the checks under test must come before any simulation."""
-    from wholebody.scenarios.base import Scenario
-
-    def run(self, *args, **kwargs):
-        pytest.fail(f"scenario '{self.name}' was run: the bad input was not caught before it")
-    monkeypatch.setattr(Scenario, "run", run)
-
-
 @pytest.mark.parametrize("argv,needle", [
     (["run", "stand", "--set", "duration=0"],
      "--set duration: expected a finite number in (0, 600], got '0'"),
@@ -165,6 +155,9 @@ def no_simulation(monkeypatch):
     (["run", "push-series", "--set", "locations=front,nose"], "--set locations: expected one of "),
     (["run", "robust-push", "--set", "torque_delay=1,-2"], "--set torque_delay: expected a whole "
                                                            "number in [0, 1000], got item '-2'"),
+    (["run", "robust-push", "--set", "locations=hip-right"],
+     "no measured nominal force for pd at 'hip-right' (known: front, back, left, right); pass "
+     "--set nominal_force=N"),
     (["run", "squat", "--set", "variant=deep"], "--set variant: expected one of tracking, "
                                                 "cop-active, got 'deep'"),
     (["run", "ramp", "--set", "speed=0.001"], "--set speed: expected 0 or a finite number in "

@@ -480,3 +480,35 @@ def test_quasi_static_baseline_redistributes_forces_within_torque_limits(robots,
     sol = weak.solve(plan)
     assert sol.outcome is Outcome.CLIPPED and "out of reach" in sol.status
     assert np.all(np.abs(sol.tau) <= 0.1)
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("gain", [0.0, 0.3])
+def test_footholds_get_the_measured_com_velocity(robots, engine, gain):
+    """The Raibert feedback of the footholds (``feedback_gain`` k) is fed the CoM velocity of the
+    state the controller reads: a foot lifting off is sent to the feedback-free target plus k
+    times the measured minus the commanded CoM velocity, the measured one from Pinocchio's CoM
+    velocity at that state (not the controller's)."""
+    from wholebody.planning import GaitPlanner, VelocityCommand, trot
+    robot = robots["hyq"]
+    command = VelocityCommand((0.2, 0.0), (0.2, 0.0), (0.0, 1.0))
+    planner = GaitPlanner.for_robot(robot, trot(0.8, start=0.5, legs=robot.contact_names),
+                                    command, feedback_gain=gain, start_shift=False)
+    free = GaitPlanner.for_robot(robot, trot(0.8, start=0.5, legs=robot.contact_names),
+                                 command, start_shift=False)
+    wbc = PassiveWBC(robot, planner, engine=engine)
+    q, v = robot.q_ref.copy(), np.zeros(robot.nv)
+    v[:3] = (0.05, -0.3, 0.02)  # base linear velocity (local = world at q_ref's orientation)
+    t = 0.5 + 1e-4  # just after the first diagonal's lift-off
+    wbc.compute(q, v, t)
+    plan = wbc.last_plan
+    data = robot.model.createData()
+    pin.centerOfMass(robot.model, data, q, v)
+    measured = data.vcom[0][:2]
+    _, v_ref, _, _, _ = free.trunk.nominal(t)
+    swinging = [i for i, leg in enumerate(planner.legs) if not plan.contact[i]]
+    assert len(swinging) == 2
+    for i in swinging:
+        base = free.touchdown_target(planner.legs[i], plan.touchdown_time[i]).position
+        expected = base[:2] + gain * (measured - v_ref)
+        np.testing.assert_allclose(plan.touchdown_position[i][:2], expected, atol=1e-9)

@@ -279,6 +279,44 @@ def test_forward_command_moves_the_foothold_by_half_the_stance_travel(v):
     assert np.linalg.norm(clamped.point[:2] - hip) == pytest.approx(0.05)
 
 
+def test_raibert_feedback_is_read_at_lift_off_and_held_through_the_swing(hyq):
+    """The planner's foothold feedback (Fahmi et al. 2019's planner, ref. [20]): a foot lifting
+    off at t is sent k (v_measured(t) - v_cmd(t)) beyond its feedback-free target (the hip at
+    touchdown plus v_cmd T_stance / 2, tested above), touching down (1 - duty) periods later; a
+    velocity measured during the swing does not move it, the next lift-off reads a new one."""
+    k, period, start = 0.3, 0.8, 0.5
+    command = VelocityCommand((0.2, 0.0), (0.2, 0.0), (0.0, 1.0))
+    planner = GaitPlanner.for_robot(hyq, trot(period, start=start), command, feedback_gain=k,
+                                    start_shift=False)
+    free = GaitPlanner.for_robot(hyq, trot(period, start=start), command, start_shift=False)
+    measured = np.array([0.25, -0.3, 0.0])
+
+    def expected(leg, t_td, t):
+        return (free.touchdown_target(leg, t_td).position[:2]
+                + k * (measured[:2] - np.array([0.2, 0.0])))
+
+    t = start + 1e-4
+    plan = planner.update(t, com_velocity=measured)
+    swinging = [i for i in range(4) if not plan.contact[i]]
+    assert swinging == [0, 3]  # the first diagonal: left-front, right-hind
+    targets = {}
+    for i in swinging:
+        assert plan.touchdown_time[i] == pytest.approx(start + 0.5 * period)
+        targets[i] = plan.touchdown_position[i].copy()
+        np.testing.assert_allclose(targets[i][:2], expected(planner.legs[i],
+                                                            plan.touchdown_time[i], t),
+                                   atol=1e-9)
+    plan = planner.update(t + 0.2, com_velocity=np.array([-1.0, 2.0, 0.0]))  # mid-swing
+    for i in swinging:
+        np.testing.assert_allclose(plan.touchdown_position[i], targets[i], atol=1e-12)
+    t = start + period + 1e-4  # the same legs' next lift-off
+    plan = planner.update(t, com_velocity=measured)
+    for i in swinging:
+        np.testing.assert_allclose(plan.touchdown_position[i][:2], expected(
+            planner.legs[i], plan.touchdown_time[i], t), atol=1e-9)
+        assert not np.allclose(plan.touchdown_position[i], targets[i])
+
+
 @pytest.mark.parametrize("with_normal", [False, True])
 def test_foothold_on_a_ramp_lies_on_it_with_the_ramp_normal(with_normal):
     a = math.radians(20.0)  # ramp climbing along +x, rotated 30 deg about z

@@ -22,14 +22,6 @@ from wholebody.sweep.worker import flatten_metrics
 
 
 @pytest.fixture
-def no_simulation(monkeypatch):
-    """Scenario.run fails the test: the checks under test must come before any simulation."""
-    def run(self, *args, **kwargs):
-        pytest.fail(f"scenario '{self.name}' was run: the bad input was not caught before it")
-    monkeypatch.setattr(Scenario, "run", run)
-
-
-@pytest.fixture
 def fake_runs(monkeypatch):
     """Scenario.run returns at once: metrics from the parameters; ``peak_force=666`` raises,
     ``peak_force=777`` is Ctrl-C."""

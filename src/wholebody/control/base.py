@@ -33,9 +33,9 @@ class ControlResult:
 
 class PlannedController:
     """A controller driven by a gait planner: ``compute(q, v, t)`` updates the robot's cycle
-    cache, asks ``self.planner`` for the plan at ``t`` (with the measured foot-frame positions)
-    and returns ``self.solve(plan)``. Subclasses set ``robot`` and ``planner`` and define
-    ``solve``."""
+    cache, asks ``self.planner`` for the plan at ``t`` (with the measured foot-frame positions
+    and CoM velocity, for the footholds' Raibert feedback) and returns ``self.solve(plan)``.
+    Subclasses set ``robot`` and ``planner`` and define ``solve``."""
 
     def compute(self, q, v, t: float = 0.0):
         """Torques for the state (q, v) (Pinocchio convention) at time ``t``."""
@@ -43,7 +43,7 @@ class PlannedController:
         robot.update(q, v)
         feet = np.array([robot.data.oMf[robot.contact(n).frame_id].translation
                          for n in self.planner.legs])
-        return self.solve(self.planner.update(t, feet=feet))
+        return self.solve(self.planner.update(t, feet=feet, com_velocity=robot.vcom))
 
 
 

@@ -677,7 +677,10 @@ class PassiveWBC(PlannedController):
         if self._native is None:
             return super().compute(q, v, t)
         self._native.update(q, v)
-        return self._solve_native(self.planner.update(t, feet=self._nb["feet"].copy()), q)
+        nb = self._nb  # the compiled update wrote the feet and h_G (its linear part m v_com)
+        plan = self.planner.update(t, feet=nb["feet"].copy(),
+                                   com_velocity=nb["h_G"][:3] / self.robot.mass)
+        return self._solve_native(plan, q)
 
     def cycle(self, q, v, plan) -> Solution:
         """One cycle at the state (q, v) for a given ``plan``: update + QP + torques."""

@@ -184,6 +184,9 @@ class PaperSpeed(RobotRelative):
 COURSE_BOX_THICKNESS = 1.0  # thickness of the simulator's level ground boxes of a course (m)
 COURSE_SLOPE_THICKNESS = 0.1  # thickness of the simulator's ramp boxes of a course (m)
 
+#: the trot's forward speed on HyQ (m/s; ``steer``, ``trot-push``), Froude-scaled on other robots
+TROT_SPEED = 0.4
+
 #: parameters declared alike by several quadruped scenarios
 GAIT = Parameter("gait", "crawl", "crawl or trot", choices=("crawl", "trot"))
 CRAWL_SPEED = Parameter("speed", PaperSpeed(0.11),
@@ -404,7 +407,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              planner_options: dict | None = None, start: float = 1.0, progress: bool = False,
              on_cycle=None, planner=None, observers=(), q0=None,
              gains: dict | None = None, after_fall: float | None = FALL_GRACE,
-             shape: dict | None = None) -> GaitRun:
+             shape: dict | None = None, pushes=()) -> GaitRun:
     """Walk ``robot`` with ``controller`` in the twin for ``duration`` s (see module docstring).
 
     ``terrain`` is the controller's/planner's view (footholds, normals, trunk height); the simulator
@@ -417,7 +420,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     (:func:`wbc_gains`; :func:`gain_options` says which each takes), unless ``controller_options``
     gives the same keyword. ``after_fall``: once the robot has fallen,
     the run stops this many seconds later (None: it runs its whole ``duration``). ``shape``: the
-    :data:`GAIT_SHAPE` parameters (step height, period) for the planner built here.
+    :data:`GAIT_SHAPE` parameters (step height, period) for the planner built here. ``pushes``:
+    the simulator applies these (:class:`~wholebody.sim.disturbance.Push`).
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()
@@ -430,6 +434,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         options.setdefault("control_period", control_period)
     ctrl = make_controller(robot, controller, planner, **options)
     sim = Simulator(robot, environment, observers=observers, label=controller)
+    for push in pushes:
+        sim.add_push(push)
     if q0 is not None:
         q0[2] += sim.environment.support_height()
         sim.reset(q0)

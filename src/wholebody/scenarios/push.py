@@ -9,8 +9,6 @@ returns within 5 mm of its reference within 3 s after the push.
 
 from __future__ import annotations
 
-import math
-
 from pathlib import Path
 
 from ..report.balance_figures import push_figure
@@ -18,7 +16,8 @@ from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGU
                    Parameter, Scenario, ScenarioResult, duration_parameter, paper_q_notes)
 from .measures import RECORD_TAIL_S, Thresholds
 from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, Q_ORIENTATION,
-                     HumanoidScaled, check_push, ignored_option_notes, push_trial)
+                     HumanoidScaled, check_push, ignored_option_notes, peak_force_for,
+                     push_trial)
 
 PARAMETERS = (
     Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')",
@@ -63,8 +62,8 @@ def with_peak_force(robot, params: dict) -> dict:
     carries the impulse 2 F T / pi, which is m dv."""
     if params["dv"] <= 0.0:
         return params
-    return {**params, "peak_force": 0.5 * math.pi * robot.mass * params["dv"]
-            / params["push_duration"]}
+    return {**params, "peak_force": peak_force_for(robot.mass, params["dv"],
+                                                   params["push_duration"])}
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,

@@ -30,8 +30,9 @@ from ..control.walking import Walking, WalkingConfig
 from ..report.plots import grouped_bar_figure, save_figure
 from ..robots.roles import biped_soles
 from .base import (COP_MARGIN, ENGINE, TIME_SPAN, Parameter, Scenario,
-                   ScenarioResult, check_engine, duration_parameter, parse_list)
-from .pushes import FroudeScaled
+                   ScenarioResult, check_engine, duration_parameter)
+from .pushes import (FroudeScaled, bisect_dv, check_bisection, push_angles, push_series,
+                     series_parameters, series_simulations)
 from .walking_runs import (WalkRun, capture_point_outside_support,
                            draw_torque_steps, push_of, shade_swings, simulate, step_rows,
                            torque_jumps, walking_figure)
@@ -53,43 +54,24 @@ PARAMETERS = (
     Parameter("start", 1.0, "time of the push (s)", low=0.0, high=Parameter.MAX_TIME),
     duration_parameter(5.0, "simulated time per push (s)"),
     Parameter("stepping", True, "recover by stepping (false: feet-flat balance only)"),
-    Parameter("angles", "", "series: comma-separated push angles (deg), one trial (or bisection) "
-                            "each ('': the single angle)", low=-360.0, high=360.0, items=float),
-    Parameter("bisect", False, "per angle, bisect the strongest survived dv between bisect_low "
-                               "and bisect_high"),
-    Parameter("bisect_low", FroudeScaled(0.2, "m/s", height_power=0.5),
-              "lower end of the bisection (m/s)", low=0.0, low_open=True, high=5.0),
-    Parameter("bisect_high", FroudeScaled(1.5, "m/s", height_power=0.5),
-              "upper end of the bisection (m/s)", low=0.0, low_open=True, high=5.0),
-    Parameter("bisect_steps", 6, "bisection iterations per angle (each one simulation)",
-              low=1, high=30),
+    *series_parameters(FroudeScaled(0.2, "m/s", height_power=0.5),
+                       FroudeScaled(1.5, "m/s", height_power=0.5)),
     COP_MARGIN,
     ENGINE,
 )
-
-
-def angles(params: dict) -> list[float]:
-    text = str(params["angles"]).strip()
-    return parse_list(text, float, "angles") if text else [float(params["angle"])]
-
-
-def simulations(params: dict, controller: str) -> int:
-    return len(angles(params)) * (int(params["bisect_steps"]) if params["bisect"] else 1)
 
 
 def validate(robot, params: dict) -> None:
     check_engine(params)
     biped_soles(robot)  # ValueError unless two rectangular soles
     WalkingConfig.for_robot(robot, cop_margin=params["cop_margin"])
-    for angle in angles(params):
+    for angle in push_angles(params):
         push_of(robot, params, params["dv"], angle)
     if params["start"] + params["push_duration"] >= params["duration"]:
         raise ValueError(f"--set duration: {params['duration']:g} s ends before the push does "
                          f"(start {params['start']:g} s + push_duration "
                          f"{params['push_duration']:g} s)")
-    if params["bisect"] and not params["bisect_low"] < params["bisect_high"]:
-        raise ValueError(f"--set bisect_low ({params['bisect_low']:g}) must be below bisect_high "
-                         f"({params['bisect_high']:g})")
+    check_bisection(params)
 
 
 def trial(robot, params: dict, dv: float, angle: float, progress: bool = False,
@@ -123,61 +105,41 @@ def trial(robot, params: dict, dv: float, angle: float, progress: bool = False,
 
 def bisection(robot, params: dict, angle: float, progress: bool, observers) -> dict:
     """The strongest survived dv along ``angle`` between ``bisect_low`` and ``bisect_high``
-    (None if no trial survived) and every trial's (dv, survived)."""
-    low, high = float(params["bisect_low"]), float(params["bisect_high"])
-    best, trials = None, []
-    for _ in range(int(params["bisect_steps"])):
-        dv = 0.5 * (low + high)
-        ok = trial(robot, params, dv, angle, progress, observers)[0]["survived"]
-        trials.append({"dv_mps": dv, "survived": ok})
-        if ok:
-            best, low = dv, dv
-        else:
-            high = dv
-    return {"strongest_survived_dv_mps": best, "weakest_fallen_dv_mps":
-            min((x["dv_mps"] for x in trials if not x["survived"]), default=None),
-            "trials": trials}
+    (:func:`~.pushes.bisect_dv`)."""
+    return bisect_dv(
+        lambda dv: trial(robot, params, dv, angle, progress, observers)[0]["survived"],
+        float(params["bisect_low"]), float(params["bisect_high"]), int(params["bisect_steps"]))
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
         observers=()) -> ScenarioResult:
-    angle_list = angles(params)
+    angle_list = push_angles(params)
     notes = [f"survived = no fall, standing again at the end, the base within "
              f"{HEIGHT_TOLERANCE:.0%} of its initial height; angle 0 pushes the front "
              f"backwards, 90 the left side"]
-    if params["bisect"]:
-        per_angle = {f"{a:g}": bisection(robot, params, a, progress, observers)
-                     for a in angle_list}
-        metrics = {"angles": per_angle}
-        success = all(r["strongest_survived_dv_mps"] is not None for r in per_angle.values())
-        figure = ("push_step_bisection.png", "strongest survived dv (cm/s)",
-                  [100 * (r["strongest_survived_dv_mps"] or 0.0) for r in per_angle.values()])
-        log = None
-    else:
-        trials = {f"{a:g}": trial(robot, params, params["dv"], a, progress, observers)
-                  for a in angle_list}
-        public = {k: m for k, (m, _) in trials.items()}
-        metrics = next(iter(public.values())) if len(trials) == 1 else {"angles": public}
-        success = all(m["survived"] for m in public.values())
-        figure = ("push_step_series.png", "max capture-point distance outside the support (cm)",
-                  [100 * (m["max_capture_point_distance_from_support_m"] or 0.0)
-                   for m in public.values()])
-        log = next(iter(trials.values()))[1].sim.log if len(trials) == 1 else None
-    result = ScenarioResult("push-step", robot.name, controller, bool(success), metrics, params,
-                            notes, log=log)
+    series = push_series(params, lambda a: bisection(robot, params, a, progress, observers),
+                         lambda dv, a: trial(robot, params, dv, a, progress, observers))
+    single = series.single()
+    result = ScenarioResult("push-step", robot.name, controller, bool(series.success),
+                            series.metrics, params, notes,
+                            log=single[1].sim.log if single else None)
     if out_dir is not None:
-        if not params["bisect"] and len(angle_list) == 1:
-            ((only, run_),) = trials.values()
+        if single:
+            only, run_ = single
             path = push_step_figure(
                 Path(out_dir) / "push_step.png", robot, run_,
                 title=f"push-step — {robot.name}, dv {params['dv']:.2f} m/s at "
                       f"{angle_list[0]:g} deg, stepping {'on' if params['stepping'] else 'off'}: "
                       f"{'survived' if only['survived'] else 'not survived'}")
         else:
-            name, label, values = figure
-            path = grouped_bar_figure(Path(out_dir) / name, [f"{a:g} deg" for a in angle_list],
-                                      {label: values}, title=f"push-step — {robot.name}",
-                                      ylabel=label)
+            name, label = (("push_step_bisection.png", "strongest survived dv (cm/s)")
+                           if params["bisect"] else
+                           ("push_step_series.png",
+                            "max capture-point distance outside the support (cm)"))
+            path = grouped_bar_figure(
+                Path(out_dir) / name, [f"{a:g} deg" for a in angle_list],
+                {label: series.bar_values("max_capture_point_distance_from_support_m")},
+                title=f"push-step — {robot.name}", ylabel=label)
         result.figures = [str(path)]
     return result
 
@@ -216,5 +178,5 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=validate,
-    simulations=simulations,
+    simulations=series_simulations,
 )

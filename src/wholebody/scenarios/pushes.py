@@ -1,6 +1,8 @@
 """Pushes on the standing humanoid (Herzog et al. 2016 Sect. 5.2.2), shared by ``push``,
 ``push-series``, ``robust-push`` and ``single-support``: the paper's push points, the push itself,
-the momentum-balance options and one push trial.
+the momentum-balance options and one push trial; and what every push scenario shares (the
+direction of an ``angle``, the force of a ``dv``, a series of angles and the bisection of the
+strongest survived ``dv``: ``push-step``, ``walk-push``, ``trot-push``).
 
 The push is a half-sine force applied at one of the paper's 7 points (front, right, back, left on
 the torso above the hip; front, right, left at the hip) or along any ``angle`` and ``height``.
@@ -20,7 +22,7 @@ from ..robots.roles import biped_soles
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter,
-                   RobotRelative, check_engine, momentum_gains, task_gains)
+                   RobotRelative, check_engine, momentum_gains, parse_list, task_gains)
 from .loop import run_closed_loop
 from .measures import Thresholds, rotation_angle_deg, sole_slip, tilt_deg
 
@@ -154,13 +156,119 @@ def ignored_option_notes(controller: str, params: dict) -> list[str]:
             for p in options if p.name in params and params[p.name] != p.default]
 
 
+def push_direction(angle: float) -> tuple[float, float, float]:
+    """The world direction of a push along ``angle`` (deg) in the horizontal plane: the force
+    along (-cos, -sin), so 0 pushes the front backwards (toward -x), 90 the left side toward -y,
+    180 the back forwards."""
+    a = np.radians(angle)
+    return (-float(np.cos(a)), -float(np.sin(a)), 0.0)
+
+
+def peak_force_for(mass: float, dv: float, duration: float) -> float:
+    """The peak of the half-sine force of ``duration`` s that gives ``mass`` the velocity change
+    ``dv``: its impulse 2 F T / pi is m dv."""
+    return 0.5 * np.pi * mass * dv / duration
+
+
+def series_parameters(low, high) -> tuple[Parameter, ...]:
+    """The parameters of a series of pushes along ``angles`` and of a bisection of the strongest
+    survived dv per angle between ``bisect_low`` and ``bisect_high`` (defaults ``low``, ``high``;
+    :func:`push_angles`, :func:`bisect_dv`)."""
+    return (
+        Parameter("angles", "", "series: comma-separated push angles (deg), one trial (or "
+                  "bisection) each ('': the single angle)", low=-360.0, high=360.0, items=float),
+        Parameter("bisect", False, "per angle, bisect the strongest survived dv between "
+                                   "bisect_low and bisect_high"),
+        Parameter("bisect_low", low, "lower end of the bisection (m/s)", low=0.0, high=5.0),
+        Parameter("bisect_high", high, "upper end of the bisection (m/s)", low=0.0,
+                  low_open=True, high=5.0),
+        Parameter("bisect_steps", 6, "bisection iterations per angle (each one simulation)",
+                  low=1, high=30),
+    )
+
+
+def push_angles(params: dict) -> list[float]:
+    """The angles of :func:`series_parameters`' ``angles``, or the single ``angle``."""
+    text = str(params["angles"]).strip()
+    return parse_list(text, float, "angles") if text else [float(params["angle"])]
+
+
+def series_simulations(params: dict, controller: str) -> int:
+    """Simulations of a series (one per angle) or of its bisections (``bisect_steps`` each)."""
+    return len(push_angles(params)) * (int(params["bisect_steps"]) if params["bisect"] else 1)
+
+
+def check_bisection(params: dict) -> None:
+    """ValueError unless ``bisect_low`` < ``bisect_high`` when ``bisect`` is on."""
+    if params["bisect"] and not params["bisect_low"] < params["bisect_high"]:
+        raise ValueError(f"--set bisect_low ({params['bisect_low']:g}) must be below bisect_high "
+                         f"({params['bisect_high']:g})")
+
+
+@dataclass
+class PushSeries:
+    """What :func:`push_series` found: ``metrics`` (a single trial's own, else per angle under
+    ``angles``), ``success``, and ``runs``, angle text -> (metrics, run) of each trial (empty when
+    bisecting)."""
+
+    metrics: dict
+    success: bool
+    runs: dict
+    bisected: bool
+
+    def single(self):
+        """The (metrics, run) of the only trial, None when bisecting or with several angles."""
+        return next(iter(self.runs.values())) if len(self.runs) == 1 else None
+
+    def bar_values(self, key: str) -> list[float]:
+        """Per angle, 100 x the strongest survived dv when bisecting, else 100 x ``key`` of each
+        trial's metrics (0 where it is None or missing): the bars of a series figure."""
+        if self.bisected:
+            return [100 * (r["strongest_survived_dv_mps"] or 0.0)
+                    for r in self.metrics["angles"].values()]
+        return [100 * (m.get(key) or 0.0) for m, _ in self.runs.values()]
+
+
+def push_series(params: dict, bisection, trial) -> PushSeries:
+    """Pushes along each of :func:`push_angles`: with ``bisect`` ``bisection(angle)`` each
+    (success: every angle survived some push), else ``trial(dv, angle)`` -> (metrics with
+    ``survived``, run) each (success: every one survived)."""
+    angles = push_angles(params)
+    if params["bisect"]:
+        per_angle = {f"{a:g}": bisection(a) for a in angles}
+        return PushSeries({"angles": per_angle}, all(
+            r["strongest_survived_dv_mps"] is not None for r in per_angle.values()), {}, True)
+    runs = {f"{a:g}": trial(params["dv"], a) for a in angles}
+    public = {k: m for k, (m, _) in runs.items()}
+    metrics = next(iter(public.values())) if len(runs) == 1 else {"angles": public}
+    return PushSeries(metrics, all(m["survived"] for m in public.values()), runs, False)
+
+
+def bisect_dv(survives, low: float, high: float, steps: int) -> dict:
+    """The strongest velocity change ``survives(dv)`` (one simulation each) holds for, bisecting
+    [``low``, ``high``] ``steps`` times from its middle: the strongest survived dv (None if no trial
+    survived), the weakest not survived (None if all did) and every trial's (dv, survived)."""
+    best, trials = None, []
+    for _ in range(int(steps)):
+        dv = 0.5 * (low + high)
+        ok = bool(survives(dv))
+        trials.append({"dv_mps": dv, "survived": ok})
+        if ok:
+            best, low = dv, dv
+        else:
+            high = dv
+    return {"strongest_survived_dv_mps": best, "weakest_fallen_dv_mps":
+            min((x["dv_mps"] for x in trials if not x["survived"]), default=None),
+            "trials": trials}
+
+
 def make_push(params: dict, robot) -> Push:
     """The half-sine push on ``robot`` at ``location`` (or along ``angle``, ``height`` m above the
     base), ``peak_force``, ``start``, ``push_duration``."""
     location = params["location"]
     if location == "angle":
         a = np.radians(params["angle"])
-        direction = (-np.cos(a), -np.sin(a), 0.0)
+        direction = push_direction(params["angle"])
         frame, offset = push_point(robot, "base_frame", (SURFACE * np.cos(a), SURFACE * np.sin(a), 0.0))
         offset[2] = params["height"]
     elif location in LOCATIONS:

@@ -128,7 +128,11 @@ def mismatch_for(params: dict, i: int) -> Mismatch:
 
 
 def validate(robot, params: dict) -> None:
-    check_locations(parse_list(params["locations"], str, "locations"))
+    locations = parse_list(params["locations"], str, "locations")
+    check_locations(locations)
+    for controller in NOMINAL:  # every location has a nominal force, or --set nominal_force
+        for location in locations:
+            nominal_force(controller, location, params, robot)
     if not 0 < params["fraction"]:
         raise ValueError("--set fraction: must be > 0")
     if params["seeds"] < 1:

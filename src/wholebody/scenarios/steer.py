@@ -49,8 +49,8 @@ from ..report.locomotion_figures import steer_figure
 from ..robots.reference import froude_ratio
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (GAIT_SHAPE, PAPER_BASE_HEIGHT, REGULARIZATION, WBC_GAINS, check_gait,
-                         check_quadruped, make_schedule, run_gait, wbc_gains)
+from .locomotion import (GAIT_SHAPE, PAPER_BASE_HEIGHT, REGULARIZATION, TROT_SPEED, WBC_GAINS,
+                         check_gait, check_quadruped, make_schedule, run_gait, wbc_gains)
 
 #: the robot stands this long before its gait starts (s)
 GAIT_START = 1.0
@@ -58,7 +58,6 @@ GAIT_START = 1.0
 MAX_HEADING_ERROR_DEG = 5.0
 MAX_VELOCITY_ERROR_SHARE = 0.10
 #: the trot's default speeds on HyQ, Froude-scaled on any other robot
-TROT_SPEED = 0.4          # m/s
 TROT_YAW_RATE = 0.5       # rad/s
 SIDE_SHARE = 0.3          # lateral speed over the forward speed
 PARTS = ("forward", "turn", "side", "stop")

@@ -26,7 +26,7 @@ from ..sim.simulator import Simulator  # noqa: E402
 from .base import Parameter, check_engine  # noqa: E402
 from .loop import run_closed_loop  # noqa: E402
 from .measures import Thresholds, fallen, tilt_deg  # noqa: E402
-from .pushes import make_push  # noqa: E402
+from .pushes import make_push, peak_force_for  # noqa: E402
 
 #: a sole counts in the measured support while it carries this share of the weight
 SUPPORT_FORCE_SHARE = 0.05
@@ -498,6 +498,6 @@ def push_of(robot, params: dict, dv: float, angle: float, start: float | None = 
     """The half-sine push giving ``dv`` along ``angle`` (see the module docstring), ``height``
     above the base, from ``start`` (default the ``start`` parameter)."""
     return make_push({"location": "angle", "angle": angle, "height": params["height"],
-                      "peak_force": 0.5 * math.pi * robot.mass * dv / params["push_duration"],
+                      "peak_force": peak_force_for(robot.mass, dv, params["push_duration"]),
                       "start": params["start"] if start is None else start,
                       "push_duration": params["push_duration"]}, robot)
