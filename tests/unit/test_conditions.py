@@ -10,7 +10,8 @@ import pytest
 
 import wholebody as wb
 from wholebody.scenarios import SCENARIOS
-from wholebody.scenarios.conditions import LEVELS, RobotConditions, robot_mismatch
+from wholebody.scenarios.conditions import (LEVELS, RobotConditions, job_observers,
+                                            robot_mismatch)
 from wholebody.scenarios.loop import run_closed_loop
 from wholebody.sim.mismatch import Mismatch
 from wholebody.sim.simulator import Simulator
@@ -172,6 +173,17 @@ def test_each_simulation_gets_its_own_estimator(talos14):
                                       alone.controller_state(single)[0])
     assert abs(shared.controller_state(first)[0][0] - first.state()[0][0]) < 0.05
     assert abs(shared.controller_state(second)[0][0] - second.state()[0][0]) < 0.05
+
+
+def test_a_pool_worker_makes_the_level_conditions(talos14):
+    """In a pool's worker (no observers shipped) a run gets the realism level's own conditions,
+    none for exact; in the scenario's process the observers it was given."""
+    made = job_observers(talos14, {"realism": "robot"})
+    assert len(made) == 1 and made[0].level == "robot"
+    assert made[0].mismatch == robot_mismatch(talos14)
+    assert job_observers(talos14, {"realism": "exact"}) == ()
+    given = (object(),)
+    assert job_observers(talos14, {"realism": "robot"}, given) == given
 
 
 @pytest.mark.slow
