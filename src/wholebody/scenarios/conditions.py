@@ -19,6 +19,8 @@ still read the twin's true state.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from ..estimation.twin import TwinEstimation
@@ -40,27 +42,38 @@ def robot_mismatch(robot, seed: int = 0) -> Mismatch:
 
 class RobotConditions:
     """The sensors and estimator between the twin and the controller, and the twin's mismatch,
-    of one realism level (:data:`LEVELS` but ``exact``) for ``robot``; seeded."""
+    of one realism level (:data:`LEVELS` but ``exact``) for ``robot``; seeded.
+
+    Every simulation it watches gets its own sensors and estimator, made anew at each reset with
+    the same seed: a scenario's simulations (run one after the other or side by side) each start
+    as a single run would, none inheriting another's biases, filters or noise draws. The
+    mismatch is the same robot for all of them."""
 
     def __init__(self, robot, level: str, seed: int = 0):
         if level not in LEVELS[1:]:
             raise ValueError(f"realism: expected one of {LEVELS[1:]}, got {level!r}")
-        self.level = level
-        self.estimation = TwinEstimation.for_robot(robot, seed=seed)
-        self.estimation.record = False
+        self.robot, self.level, self.seed = robot, level, seed
         self.mismatch = robot_mismatch(robot, seed) if level == "robot" else None
+        self._runs: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    def estimation(self, sim) -> TwinEstimation:
+        """The sensors and estimator of the simulation ``sim`` (since its last reset)."""
+        return self._runs[sim]
 
     def controller_state(self, sim) -> tuple[np.ndarray, np.ndarray]:
         """What the controller reads at the simulator's present time: the estimate (q̂, v̂)."""
-        estimate = self.estimation.current()
+        estimate = self._runs[sim].current()
         return estimate.q, estimate.v
 
     # the simulator observer's protocol (SimObserver)
     def start(self, sim) -> None:
-        self.estimation.start(sim)
+        estimation = TwinEstimation.for_robot(self.robot, seed=self.seed)
+        estimation.record = False
+        self._runs[sim] = estimation
+        estimation.start(sim)
 
     def step(self, sim) -> None:
-        self.estimation.step(sim)
+        self._runs[sim].step(sim)
 
     def controller_result(self, sim, result) -> None:
         pass
@@ -69,3 +82,14 @@ class RobotConditions:
 def conditions_for(robot, level: str, seed: int = 0) -> RobotConditions | None:
     """The observer of ``level`` for ``robot`` (None for ``exact``: nothing between)."""
     return None if level == "exact" else RobotConditions(robot, level, seed)
+
+
+def job_observers(robot, params: dict, observers=None) -> tuple:
+    """The observers of one simulation of a scenario that farms its runs out (a ``workers``
+    pool): ``observers`` as given in the scenario's own process; None in a pool's worker, where
+    the parent's observers cannot follow, so the realism level's conditions are made there
+    (``params["realism"]``; none for ``exact``)."""
+    if observers is not None:
+        return tuple(observers)
+    conditions = conditions_for(robot, params.get("realism", "exact"))
+    return () if conditions is None else (conditions,)

@@ -113,27 +113,30 @@ def validate(robot, params: dict) -> None:
 def crawl_run(robot, floor_mu: float, controller_mu: float, speed: float, duration: float,
               K_st: float, D_st: float, progress: bool = False, gains: dict | None = None,
               sway_gain: float = 1.0, regularization: str = "force-normal",
-              shape: dict | None = None):
+              shape: dict | None = None, observers=()):
     """One passive-WBC crawl at constant ``speed`` on a floor of ``floor_mu`` (see module doc);
     ``gains``: the trunk and swing impedances' gains
     (:func:`~wholebody.scenarios.locomotion.wbc_gains`),
     ``sway_gain`` the crawl's lateral sway (:data:`~wholebody.scenarios.locomotion.SWAY_GAIN`),
     ``regularization`` the passive WBC's force regulariser (default: the paper's), ``shape``
-    the gait's step height and period (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`)."""
+    the gait's step height and period (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`);
+    ``observers`` watch the simulation."""
     return run_gait(robot, "passive", "crawl", steady_command(speed), duration,
                     environment=Environment(floor_friction=floor_mu),
                     controller_options={"mu": controller_mu, "K_st": K_st, "D_st": D_st,
                                         "regularization": regularization},
                     progress=progress, gains=gains,
-                    planner_options=sway_options({SWAY_GAIN.name: sway_gain}), shape=shape)
+                    planner_options=sway_options({SWAY_GAIN.name: sway_gain}), shape=shape,
+                    observers=observers)
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
-    p = params
+def setups(p: dict) -> dict[str, tuple]:
+    """The runs (see module docstring): name -> (controller mu, speed, K_st, D_st, the passive
+    WBC's force regulariser)."""
     K_st, D_st = p["stance_stiffness"], p["stance_damping"]
     inscribed = p["floor_mu"] / np.sqrt(2.0)
     paper, default = "force-normal", PassiveConfig.regularization
-    setups = {
+    return {
         "mismatch": (p["controller_mu"], p["speed"], K_st, D_st, paper),
         "mismatch, no stance task": (p["controller_mu"], p["speed"], 0.0, 0.0, paper),
         "corrected, paper's regulariser": (p["floor_mu"], p["speed"], K_st, D_st, paper),
@@ -143,13 +146,20 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         "corrected mu": (p["floor_mu"], p["speed"], K_st, D_st, default),
         "mismatch, force-parallel": (p["controller_mu"], p["speed"], K_st, D_st, default),
     }
+
+
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
+    p = params
+    inscribed = p["floor_mu"] / np.sqrt(2.0)
     runs, metrics = {}, {}
-    for name, (mu, speed, K, D, regularization) in setups.items():
+    for name, (mu, speed, K, D, regularization) in setups(p).items():
         log.info("friction-mismatch: run '%s' (controller mu %.3f, %.2f m/s, K_st %.0f, %s)",
                  name, mu, speed, K, regularization)
         floor = p["controller_mu"] if name.startswith("reference") else p["floor_mu"]
         runs[name] = crawl_run(robot, floor, mu, speed, p["duration"], K, D, progress,
-                               wbc_gains(p), p["sway_gain"], regularization, shape=p)
+                               wbc_gains(p), p["sway_gain"], regularization, shape=p,
+                               observers=observers)
         metrics[name] = {"floor_mu": floor, "controller_mu": mu, "speed_m_s": speed, "K_st": K,
                          "D_st": D, "regularization": regularization,
                          **slip_metrics(runs[name], p, _commanded(speed, p["duration"]))}
@@ -221,4 +231,5 @@ SCENARIO = Scenario(
     default_robot="hyq",
     run_function=run,
     validate_function=validate,
+    simulations=lambda params, controller: len(setups(params)),
 )

@@ -138,11 +138,11 @@ def validate(robot, params: dict) -> None:
 
 def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duration: float,
               slack_weight: float = 1e4, progress: bool = False, gains: dict | None = None,
-              shape: dict | None = None):
+              shape: dict | None = None, observers=()):
     """One crawl with ``joint``'s limits replaced in the controller (None: real limits);
     ``gains``: the controller's gains (:func:`~wholebody.scenarios.locomotion.wbc_gains`);
     ``shape``: the gait's step height and period
-    (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`).
+    (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`); ``observers`` watch the simulation.
 
     Returns the :class:`GaitRun` with two extra per-cycle arrays in its log: ``foot_ref`` (legs, 3)
     the planner's foot references and ``swing_residual`` (legs,) the swing-task residuals."""
@@ -165,7 +165,8 @@ def limit_run(robot, joint: str, lower, upper, slack: str, speed: float, duratio
     with ctx:
         r = run_gait(robot, "passive", "crawl", command, duration,
                      controller_options={"swing_slack": slack, "slack_weight": slack_weight},
-                     on_cycle=record, progress=progress, gains=gains, shape=shape)
+                     on_cycle=record, progress=progress, gains=gains, shape=shape,
+                     observers=observers)
     r.log["foot_ref"] = np.array(refs)
     r.log["swing_residual"] = np.array(residuals)
     return r
@@ -199,7 +200,8 @@ def run_metrics(r, i: int, leg: int, lim_lo: float, lim_hi: float, p: dict) -> d
             "swing_residual_max": float(res.max())}
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     p = params
     joint = limited_joint(robot, p["joint"])
     i = robot.joint_names.index(joint)
@@ -215,14 +217,16 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     runs = {}
     for key, alpha in alphas.items():
         runs[(key, "nominal")] = limit_run(robot, joint, None, None, "per-direction", p["speed"],
-                                           p["duration"], alpha, progress, wbc_gains(p), p)
+                                           p["duration"], alpha, progress, wbc_gains(p), p,
+                                           observers)
         for mode in ("per-direction", "single"):
             log.info("joint-limit: %s limit changed, swing_slack=%s, alpha=%g", joint, mode, alpha)
             runs[(key, mode)] = limit_run(robot, joint, lower, upper, mode, p["speed"],
-                                          p["duration"], alpha, progress, wbc_gains(p), p)
+                                          p["duration"], alpha, progress, wbc_gains(p), p,
+                                          observers)
     runs[("hard", "none")] = limit_run(robot, joint, lower, upper, "none", p["speed"],
                                        p["duration"], alphas["high"], progress,
-                                       wbc_gains(p), p)
+                                       wbc_gains(p), p, observers)
     some = runs[("high", "per-direction")]
     leg = list(some.controller.planner.legs).index(contact)
     sim_model = some.sim.model
@@ -316,4 +320,5 @@ SCENARIO = Scenario(
     default_robot="hyq",
     run_function=run,
     validate_function=validate,
+    simulations=7,
 )

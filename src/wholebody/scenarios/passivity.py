@@ -165,10 +165,11 @@ def validate(robot, params: dict) -> None:
 
 def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10.0,
             feedforward: bool = False, progress: bool = False, gains: dict | None = None,
-            shape: dict | None = None):
+            shape: dict | None = None, observers=()):
     """Run the gait and return (run, storage arrays, energy balance); ``gains``: the controller's
     gains (:func:`~wholebody.scenarios.locomotion.wbc_gains`); ``shape``: the gait's step height
-    and period (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`)."""
+    and period (:data:`~wholebody.scenarios.locomotion.GAIT_SHAPE`); ``observers`` watch the
+    simulation."""
     planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, 1.0, shape),
                                     ramped_command(speed), **gait_options(robot, shape))
     if not feedforward:
@@ -180,16 +181,17 @@ def measure(robot, gait: str = "crawl", speed: float = 0.1, duration: float = 10
     meter = StorageMeter(robot, impedance, swing.K, swing.D)
     run = run_gait(robot, "passive", duration=duration, planner=planner, progress=progress,
                    controller_options={"impedance": impedance, "swing": swing},
-                   on_cycle=meter, gains=gains or None)
+                   on_cycle=meter, gains=gains or None, observers=observers)
     storage = meter.log.arrays()
     balance = energy_balance(storage, run.sim.log.arrays())
     return run, storage, balance
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     gait_run, storage, balance = measure(robot, params["gait"], params["speed"],
                                          params["duration"], params["feedforward"], progress,
-                                         wbc_gains(params), params)
+                                         wbc_gains(params), params, observers)
     stats = summarize(balance, t_from=0.5)
     we = storage["wrench_error"]
     metrics = {
@@ -265,4 +267,5 @@ SCENARIO = Scenario(
     default_robot="hyq",
     run_function=run,
     validate_function=validate,
+    simulations=1,
 )

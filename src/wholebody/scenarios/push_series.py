@@ -20,6 +20,7 @@ from ..robots import load_robot
 from ..sweep.executors import ordered, scenario_executor
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
                    Parameter, Scenario, ScenarioResult, duration_parameter, parse_list)
+from .conditions import job_observers
 from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS,
                      Q_INTEGRAL, Q_ORIENTATION, HumanoidScaled, check_locations, check_push,
                      push_trial)
@@ -53,6 +54,14 @@ PARAMETERS = (
 CONTROLLERS = ("pd", "lqr")
 
 
+def simulation_count(params: dict) -> int:
+    """The pushes one run simulates: every point and force with each controller, and the
+    bisections' steps."""
+    points = len(CONTROLLERS) * len(parse_list(params["locations"], str, "locations"))
+    forces = len(parse_list(params["forces"], float, "forces"))
+    return points * (forces + (int(params["bisection_steps"]) if params["bisection"] else 0))
+
+
 def validate(robot, params: dict) -> None:
     check_locations(parse_list(params["locations"], str, "locations"))
     forces = parse_list(params["forces"], float, "forces")
@@ -62,12 +71,14 @@ def validate(robot, params: dict) -> None:
                        "push_duration": params["push_duration"]})
 
 
-def _one(robot, controller, location, force, params):
-    """One push trial: (survived, metrics)."""
+def _one(robot, controller, location, force, params, observers=None):
+    """One push trial: (survived, metrics); ``observers`` watch it (None: those of
+    :func:`~wholebody.scenarios.conditions.job_observers`)."""
     p = {**FIXED_PUSH, "location": location, "peak_force": force,
          "push_duration": params["push_duration"], "start": 0.5, "duration": params["duration"],
          **{option.name: params[option.name] for option in CONTROLLER_PARAMETERS}}
-    trial = push_trial(robot, controller, p)
+    trial = push_trial(robot, controller, p,
+                       observers=job_observers(robot, params, observers))
     return trial.success, trial.metrics
 
 
@@ -77,20 +88,20 @@ def _robot(robot):
 
 
 def _trial_job(job):
-    """One push of a job ``(robot, controller, location, force, params)``."""
-    robot, c, loc, f, params = job
-    return _one(_robot(robot), c, loc, f, params)
+    """One push of a job ``(robot, controller, location, force, params, observers)``."""
+    robot, c, loc, f, params, observers = job
+    return _one(_robot(robot), c, loc, f, params, observers)
 
 
 def _bisection_job(job):
     """The largest survived peak force of one point: ``steps`` sequential pushes, bisecting
-    [0, ``high``]; job ``(robot, controller, location, high, steps, params)``."""
-    robot, c, loc, high, steps, params = job
+    [0, ``high``]; job ``(robot, controller, location, high, steps, params, observers)``."""
+    robot, c, loc, high, steps, params, observers = job
     robot = _robot(robot)
     lo, hi = 0.0, high
     for _ in range(steps):
         mid = 0.5 * (lo + hi)
-        ok, _ = _one(robot, c, loc, mid, params)
+        ok, _ = _one(robot, c, loc, mid, params, observers)
         lo, hi = (mid, hi) if ok else (lo, mid)
     return lo
 
@@ -101,14 +112,17 @@ def _map(executor, function, jobs, progress: bool, desc: str) -> list:
         return ordered(executor, function, jobs, progress=lambda i, r: bar.update(1))
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     locations = parse_list(params["locations"], str, "locations")
     forces = sorted(parse_list(params["forces"], float, "forces"))
     jobs = [(c, loc, f) for c in CONTROLLERS for loc in locations for f in forces]
     with scenario_executor(params["workers"]) as executor:
         # the robot itself in this process; its (picklable) description for a pool's workers
         shipped = robot if params["workers"] == 1 else robot.description
-        results = _map(executor, _trial_job, [(shipped, c, loc, f, params) for c, loc, f in jobs],
+        watched = observers if params["workers"] == 1 else None  # see job_observers
+        results = _map(executor, _trial_job,
+                       [(shipped, c, loc, f, params, watched) for c, loc, f in jobs],
                        progress, "pushes")
         trials = [(c, loc, f, survived, m)  # (controller, location, force, survived, metrics)
                   for (c, loc, f), (survived, m) in zip(jobs, results)]
@@ -116,7 +130,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         if params["bisection"]:  # the points are independent, each bisection sequential
             lows = _map(executor, _bisection_job,
                         [(shipped, c, loc, forces[-1] * 2.0, int(params["bisection_steps"]),
-                          params) for c, loc in points], progress, "bisections")
+                          params, watched) for c, loc in points], progress, "bisections")
 
     table = {}
     for c in CONTROLLERS:
@@ -176,4 +190,5 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=validate,
+    simulations=lambda params, controller: simulation_count(params),
 )

@@ -329,7 +329,10 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
     base_quat0 = robot.q_ref[3:7]
 
     def observe(t, result):
-        trunk.append(rotation_angle_deg(sim.state()[0][3:7], base_quat0))
+        q, v = sim.state()
+        if not (np.array_equal(robot.q, q) and np.array_equal(robot.v, v)):
+            robot.update(q, v)  # the controller read an estimate; the measures read the twin
+        trunk.append(rotation_angle_deg(q[3:7], base_quat0))
         com.append(robot.com - ctrl.com_ref)
         momentum.append(robot.h_G.copy())
         poses = sim.contact_frame_poses()

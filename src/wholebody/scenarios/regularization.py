@@ -107,27 +107,31 @@ def grf_measures(run, robot, window: float) -> dict:
 
 
 def regularization_run(robot, scheme: str, weights: np.ndarray | None, params: dict,
-                       progress: bool = False):
-    """One run with ``regularization=scheme`` (and ``torque_weights`` for the torque scheme)."""
+                       progress: bool = False, observers=()):
+    """One run with ``regularization=scheme`` (and ``torque_weights`` for the torque scheme),
+    watched by ``observers``."""
     options = {"regularization": scheme}
     if weights is not None:
         options["torque_weights"] = weights
     command = steady_command(params["speed"]) if params["gait"] == "crawl" else None
     return run_gait(robot, "passive", params["gait"], command, params["duration"],
                     controller_options=options, progress=progress, gains=wbc_gains(params),
-                    shape=params)
+                    shape=params, observers=observers)
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     p = params
     kfe_weights = parse_positive_floats(p["kfe_weights"], "kfe_weights")
     knees = {knee_joints(robot, foot)[1] for foot in robot.contact_names}
     kfe = np.array([j in knees for j in robot.joint_names])
     runs, metrics = {}, {}
-    runs["force-normal"] = regularization_run(robot, "force-normal", None, p, progress)
+    runs["force-normal"] = regularization_run(robot, "force-normal", None, p, progress,
+                                                observers)
     for w in kfe_weights:
         weights = np.where(kfe, w, p["other_weight"])
-        runs[f"torque, w_kfe={w:g}"] = regularization_run(robot, "torque", weights, p, progress)
+        runs[f"torque, w_kfe={w:g}"] = regularization_run(robot, "torque", weights, p, progress,
+                                                                observers)
     for name, r in runs.items():
         metrics[name] = {"fell": r.fell, "failed_cycles": int(np.sum(~r.log["ok"].astype(bool))),
                          **grf_measures(r, robot, p["window"]), **r.tracking(t_from=0.5)}
@@ -180,4 +184,5 @@ SCENARIO = Scenario(
     default_robot="hyq",
     run_function=run,
     validate_function=validate,
+    simulations=lambda params, controller: 1 + len(parse_positive_floats(params["kfe_weights"], "kfe_weights")),
 )

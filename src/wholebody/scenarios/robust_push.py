@@ -39,6 +39,7 @@ from ..sim.true_com import TrueCoM
 from ..sweep.executors import ordered, scenario_executor
 from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, TIME_SPAN, Parameter,
                    Scenario, ScenarioResult, duration_parameter, parse_list)
+from .conditions import job_observers
 from .loop import run_closed_loop
 from .measures import Thresholds, sole_slip, tilt_deg
 from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
@@ -145,12 +146,15 @@ def validate(robot, params: dict) -> None:
 
 
 def one_run(robot, controller: str, location: str, force: float, mismatch: Mismatch,
-            params: dict) -> dict:
-    """One push on one mismatched twin; returns the metrics and the time series."""
+            params: dict, observers=None) -> dict:
+    """One push on one mismatched twin; returns the metrics and the time series. ``observers``
+    watch it (None: :func:`~wholebody.scenarios.conditions.job_observers`); under
+    ``realism=robot`` the draw is on top of that level's twin (:meth:`Mismatch.on_top_of`)."""
     push = make_push({"location": location, "peak_force": force, "start": params["start"],
                       "push_duration": params["push_duration"]}, robot)
     ctrl = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
-    sim = Simulator(robot, mismatch=mismatch, record=False)
+    sim = Simulator(robot, mismatch=mismatch, record=False,
+                    observers=job_observers(robot, params, observers), label=controller)
     sim.add_push(push)
     true_com = TrueCoM(sim)
     start_feet = sim.contact_frame_poses()
@@ -178,7 +182,7 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
     recovered, recovery = thresholds.cog_recovered(t, err, push.start + push.duration)
     metrics = {
         "seed": mismatch.seed,
-        "torque_delay_ms": mismatch.torque_delay * sim.dt * 1e3,
+        "torque_delay_ms": sim.mismatch.torque_delay * sim.dt * 1e3,
         "true_mass_kg": true_com.mass,
         "peak_force_N": force,
         "impulse_Ns": push.impulse,
@@ -206,23 +210,25 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
 
 
 def _run_job(job) -> dict:
-    """:func:`one_run` of a job ``(robot, controller, location, force, mismatch, params)``; the
-    robot itself in this process, its description in a pool's worker."""
-    robot, controller, location, force, mismatch, params = job
+    """:func:`one_run` of a job ``(robot, controller, location, force, mismatch, params,
+    observers)``; the robot itself in this process, its description in a pool's worker."""
+    robot, controller, location, force, mismatch, params, observers = job
     robot = robot if isinstance(robot, Robot) else load_robot(robot)
-    return one_run(robot, controller, location, force, mismatch, params)
+    return one_run(robot, controller, location, force, mismatch, params, observers)
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     locations = parse_list(params["locations"], str, "locations")
     seeds = range(int(params["seeds"]))
     shipped = robot if params["workers"] == 1 else robot.description
+    watched = observers if params["workers"] == 1 else None  # see job_observers
     nominal = {loc: nominal_force(controller, loc, params, robot) for loc in locations}
     jobs = [(shipped, controller, loc, params["fraction"] * nominal[loc], mismatch_for(params, i),
-             params) for loc in locations for i in seeds]
+             params, watched) for loc in locations for i in seeds]
     if params["baseline"]:  # the same draws, no push (a zero-force push keeps the timeline)
-        jobs += [(shipped, controller, locations[0], 0.0, mismatch_for(params, i), params)
-                 for i in seeds]
+        jobs += [(shipped, controller, locations[0], 0.0, mismatch_for(params, i), params,
+                  watched) for i in seeds]
     with scenario_executor(params["workers"]) as executor, \
             tqdm(total=len(jobs), disable=not progress, desc="mismatch runs", leave=False) as bar:
         results = ordered(executor, _run_job, jobs, progress=lambda i, r: bar.update(1))
@@ -309,4 +315,7 @@ SCENARIO = Scenario(
     default_robot="talos14",
     run_function=run,
     validate_function=validate,
+    simulations=lambda params, controller: (
+        len(parse_list(params["locations"], str, "locations")) + bool(params["baseline"]))
+    * int(params["seeds"]),
 )

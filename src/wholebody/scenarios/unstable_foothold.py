@@ -138,13 +138,14 @@ def environment(point: np.ndarray, params: dict, moving: bool = True) -> Environ
     return Environment(floor=True, ground_height=-d, boxes=boxes, platform=stone)
 
 
-def walk(robot, params: dict, moving: bool = True, progress: bool = False):
-    """One run (stone rolling or not); returns (run, stone point, touchdown time)."""
+def walk(robot, params: dict, moving: bool = True, progress: bool = False, observers=()):
+    """One run (stone rolling or not), watched by ``observers``; returns (run, stone point,
+    touchdown time)."""
     point, t_td = stone_site(robot, params)
     env = environment(point, params, moving)
     run = run_gait(robot, "passive", duration=params["duration"], environment=env,
                    planner=_planner(robot, params), progress=progress,
-                   gains=wbc_gains(params))
+                   gains=wbc_gains(params), observers=observers)
     return run, point, t_td
 
 
@@ -159,9 +160,10 @@ def window_errors(run, t0: float, t1: float) -> dict:
                                                         axis=1).max())}
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
-    disturbed, point, t_td = walk(robot, params, True, progress)
-    reference, _, _ = walk(robot, params, False, progress)
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
+    disturbed, point, t_td = walk(robot, params, True, progress, observers)
+    reference, _, _ = walk(robot, params, False, progress, observers)
     t_r, foot = params["release_time"], stone_foot(robot)
     leg = robot.contact_names.index(foot)
     sim = disturbed.sim.log.arrays()
@@ -230,4 +232,5 @@ SCENARIO = Scenario(
     default_robot="hyq",
     run_function=run,
     validate_function=validate,
+    simulations=2,
 )

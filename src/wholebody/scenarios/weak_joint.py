@@ -245,12 +245,13 @@ def post_solve_clipped(solution) -> bool:
 
 def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
                     progress: bool = False, q0=None, controller_options: dict | None = None,
-                    gains: dict | None = None, shape: dict | None = None) -> dict:
+                    gains: dict | None = None, shape: dict | None = None,
+                    observers=()) -> dict:
     """The nominal crawl and one crawl per torque limit of ``joint`` (see module docstring), from
     the configuration ``q0`` (default: the standing posture): name -> :class:`GaitRun`, each with
     ``post_solve_clips`` (cycles counted by :func:`post_solve_clipped`) and ``sim_saturation_max``
     (largest torque the simulator had to cut to the real actuator limits). ``controller_options``
-    are passed to every run's controller."""
+    are passed to every run's controller; ``observers`` watch every run."""
     command = steady_command(speed)
     setups = [("nominal", {})] + [(f"limit {lim:g} Nm", {"torque_limit_override": {joint: lim}})
                                   for lim in limits]
@@ -260,6 +261,7 @@ def weak_joint_runs(robot, joint: str, limits, speed: float, duration: float,
         runs[name] = run_gait(robot, "passive", "crawl", command, duration,
                               controller_options={**(controller_options or {}), **options},
                               progress=progress, q0=q0, gains=gains, shape=shape,
+                              observers=observers,
                               on_cycle=lambda t, res, ctrl, sim, c=seen: c.append(
                                   (post_solve_clipped(res), float(np.abs(sim.last_clipped).max()))))
         runs[name].post_solve_clips = int(sum(c for c, _ in seen))
@@ -289,12 +291,18 @@ def leg_load(run, robot, joints: list[str], contact: str, t_from: float = 1.0,
             "stance_time_s": float(stance.sum() * run.sim.dt)}
 
 
-def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool) -> ScenarioResult:
+def torque_limits(params: dict) -> list[float]:
+    """The knee's torque limits of the runs: ``limit``, then the ``sweep``'s others."""
+    sweep = parse_positive_floats(params["sweep"], "sweep", allow_empty=True)
+    return [params["limit"]] + [x for x in sweep if x != params["limit"]]
+
+
+def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
+        observers=()) -> ScenarioResult:
     p = params
     joint, limit = weakened_joint(robot, p["joint"]), p["limit"]
     joints, contact = weak_leg(robot, joint)
-    sweep = parse_positive_floats(p["sweep"], "sweep", allow_empty=True)
-    limits = [limit] + [x for x in sweep if x != limit]
+    limits = torque_limits(p)
     q0 = stance_posture(robot, p["knee_flexion"])
     statics = {}
     for label, q in (("stance", q0), ("standing posture", robot.q_ref)):
@@ -306,7 +314,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                                                        default=None),
                           "infeasible_supports": sum(x is None for x in lp)}
     runs = weak_joint_runs(robot, joint, limits, p["speed"], p["duration"], progress, q0=q0,
-                           gains=wbc_gains(p), shape=p)
+                           gains=wbc_gains(p), shape=p, observers=observers)
     j = robot.joint_names.index(joint)
     metrics = {"static_lp": statics}
     for name, r in runs.items():
@@ -405,4 +413,5 @@ SCENARIO = Scenario(
     default_robot="hyq",
     run_function=run,
     validate_function=validate,
+    simulations=lambda params, controller: len(torque_limits(params)) + 1,
 )

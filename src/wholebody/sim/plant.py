@@ -317,7 +317,7 @@ def build_plant(robot: Robot, path: str | Path, environment: Environment | None 
             joint.damping = float(m0.dof_damping[m0.jnt_dofadr[plant_joints[n]]]) + \
                 mismatch.joint_damping
     factors, offsets = mismatch.link_perturbations(m0.nbody)
-    if mismatch.mass_scale != 1.0 or mismatch.mass_noise or mismatch.com_offset:
+    if mismatch.moves_links:
         for b in in_robot:
             body = spec.body(m0.body(b).name)
             rot = _matrix(m0.body_iquat[b])

@@ -95,7 +95,9 @@ class Simulator:
     controller's joints mapped by name (``plant`` says which, for summaries).
 
     ``observers`` (:class:`SimObserver`) see every reset and step; ``label`` names the run for them
-    (e.g. the controller of a comparison)."""
+    (e.g. the controller of a comparison). An observer may bring a ``mismatch`` (real-robot
+    conditions): it is the twin's, with ``mismatch`` given here on top of it
+    (:meth:`Mismatch.on_top_of`)."""
 
     def __init__(self, robot: Robot, environment: Environment | None = None,
                  mismatch: Mismatch | None = None, options: SimOptions | None = None,
@@ -104,9 +106,13 @@ class Simulator:
         self.observers = tuple(observers)
         self.label = label
         self.environment = environment or Environment()
-        # a mismatch given here, else one an observer brings (real-robot conditions), else none
-        self.mismatch = mismatch or next((o.mismatch for o in self.observers
-                                          if getattr(o, "mismatch", None) is not None), Mismatch())
+        # a mismatch given here on top of one an observer brings (real-robot conditions)
+        brought = next((o.mismatch for o in self.observers
+                        if getattr(o, "mismatch", None) is not None), None)
+        if mismatch is not None and brought is not None:
+            self.mismatch = mismatch.on_top_of(brought)
+        else:
+            self.mismatch = mismatch or brought or Mismatch()
         self.options = options or SimOptions()
         # an observer that draws the twin itself (the live view) asks for the robot's skeleton
         skeleton = any(getattr(o, "draws_twin", False) for o in self.observers)
