@@ -702,17 +702,26 @@ class Walking:
             carried, zmp_share = self._start_share
             share += (carried - zmp_share) * max(0.0, 1.0 - (t - ph.start)
                                                    / max(ph.end - ph.start, 1e-9))
-        a = self.feet[ph.leaving][0][:2]
-        b = self.feet[self._other(ph.leaving)][0][:2]
-        length = max(float(np.linalg.norm(a - b)), 1e-9)
-        u = (a - b) / length
-        x = float((self.zmp_command - b) @ u)
-        margin = self.config.cop_margin
-        reach_a = float(np.max((self._sole_corners(ph.leaving, margin) - a) @ -u))
-        reach_b = float(np.max((self._sole_corners(self._other(ph.leaving), margin) - b) @ u))
+        a = self.feet[ph.leaving][0]
+        b = self.feet[self._other(ph.leaving)][0]
+        dx, dy = float(a[0] - b[0]), float(a[1] - b[1])
+        length = max(math.hypot(dx, dy), 1e-9)
+        ux, uy = dx / length, dy / length
+        x = float(self.zmp_command[0] - b[0]) * ux + float(self.zmp_command[1] - b[1]) * uy
+        reach_a = self._sole_reach(ph.leaving, ux, uy)
+        reach_b = self._sole_reach(self._other(ph.leaving), ux, uy)
         low = max(0.0, (x - reach_b) / max(length + reach_a - reach_b, 1e-9))
         high = min(1.0, (x + reach_b) / max(length - reach_a + reach_b, 1e-9))
-        return float(np.clip(share, low, max(low, high)))
+        return min(max(share, low), max(low, high))
+
+    def _sole_reach(self, sole: str, ux: float, uy: float) -> float:
+        """How far ``sole``'s CoP may go from its centre along the unit (ux, uy): its rectangle's
+        support function, the half-lengths shrunk by the CoP margin."""
+        yaw = self.feet[sole][1]
+        hx, hy = self.robot.contact(sole).spec.half_size
+        c, s = math.cos(yaw), math.sin(yaw)
+        return (1.0 - self.config.cop_margin) * (hx * abs(c * ux + s * uy)
+                                                 + hy * abs(-s * ux + c * uy))
 
     def _leaving_force(self, ph: Phase, t: float, com, vcom, horizontal) -> np.ndarray:
         """The leaving sole's force target (its wrench's moments untargeted): its share
