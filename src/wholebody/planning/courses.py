@@ -10,9 +10,9 @@ level ground at z = 0 and continuing level after the last segment:
 * ``("step", height)`` — a vertical step of ``height`` (m; negative: down) at the current x;
 * ``("gap", length)`` — a hole (nothing underneath; the ground after it continues at the current
   height, so a step after a gap is ``("gap", 0.22), ("step", 0.07)``);
-* ``("rough", length, amplitude, cell, seed)`` — rough ground: a :class:`HeightField` of square-ish
-  cells (about ``cell`` wide) across the course's whole width, each cell a level top at the current
-  height plus a height drawn uniformly in [−amplitude, amplitude] (``numpy.random.default_rng(seed)``).
+* ``("rough", length, amplitude, cell, seed)`` — rough ground: a :class:`HeightField` of cells
+  about ``cell`` wide across the course's whole width, each a level top at the current height
+  plus a height uniform in [−amplitude, amplitude] (``numpy.random.default_rng(seed)``).
 
 Stairs are steps and flats (:func:`stairs_course`).
 

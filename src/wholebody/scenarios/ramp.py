@@ -128,12 +128,14 @@ def build(params: dict, robot) -> Course:
     if course == "ramp":
         up, top = (paper_length(x).value(robot) for x in (1.4, 1.0))
         return ramp_course(params["angle"], up=up, top=top, down=up)
+    # the trunk's window: HyQ's hip-to-hip length, in proportion (the ramp and gap keep 0.75 m)
+    smoothing = paper_length(0.75).value(robot)
     if course == "stairs":
         return stairs_course(params["steps"], params["step_height"], params["tread"],
-                             params["landing"])
+                             params["landing"], smoothing=smoothing)
     if course == "rough":
         return rough_course(params["rough_length"], params["roughness"], params["cell"],
-                            params["seed"])
+                            params["seed"], smoothing=smoothing)
     return gap_course(params["gap"], params["step"])
 
 
@@ -162,8 +164,9 @@ def validate(robot, params: dict) -> None:
     margin = EDGE_MARGIN.value(robot)
     if params["course"] == "stairs":
         if params["tread"] <= 2.0 * margin:
-            raise ValueError(f"--set tread: {params['tread']:g} m leaves no foothold {margin:.3g} m "
-                             f"from both risers (needs > {2 * margin:.3g} m on {robot.name})")
+            raise ValueError(f"--set tread: {params['tread']:g} m leaves no foothold "
+                             f"{margin:.3g} m from both risers (needs > {2 * margin:.3g} m on "
+                             f"{robot.name})")
         top = highest_step(robot)
         if params["step_height"] > top:
             raise ValueError(f"--set step_height: {params['step_height']:g} m is more than "
@@ -286,10 +289,11 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                 f"{p['tread'] * 100:.0f} cm) up and down" if p["course"] == "stairs" else
                 f"rough ground of +-{p['roughness'] * 100:.1f} cm (cells {p['cell'] * 100:.0f} cm, "
                 f"seed {p['seed']})")
+        nearest = metrics[p["course"]]["nearest_stance_to_an_edge_m"]
         notes.append(f"{p['gait']} at {p['speed']:.3g} m/s over {what}: {planner.adjusted} Raibert "
                      f"footholds within {planner.gap_margin * 100:.1f} cm of an edge moved; "
-                     f"simulator stance feet at least {metrics[p['course']]['nearest_stance_to_an_edge_m'] * 100:.1f} cm "
-                     f"from an edge ({on_edge} of {edges.size} stances over one); crossed: {crossed}")
+                     f"simulator stance feet at least {nearest * 100:.1f} cm from an edge "
+                     f"({on_edge} of {edges.size} stances over one); crossed: {crossed}")
     else:
         # nothing in the hole: every foot, whenever it is over the gap, stays above the surface
         # level of the gap's edges (a foot that stepped in would be well below)
