@@ -23,7 +23,8 @@ Stairs are steps and flats (:func:`stairs_course`).
 * a :class:`~wholebody.planning.terrain.Terrain` with the exact height (gaps ``GAP_DEPTH`` below the
   lowest surface) and exact per-strip normals, for the footholds and friction cones (footnote 17:
   the real terrain normal under each foot);
-* a smoothed ``trunk_terrain`` for the trunk reference: the course profile with gaps bridged,
+* a smoothed ``trunk_terrain`` for the trunk reference: the course profile with gaps bridged
+  and rough ground at its strip's level (its cells' mean is about that level),
   averaged over a window of the robot's hip-to-hip length, so that the desired trunk pitch is the
   slope of the line between the terrain under the hind and the front hips (a kink of the course
   does not become a jump of the desired pitch) and its height the mean terrain height under the

@@ -39,8 +39,7 @@ import pinocchio as pin
 
 from ..planning.courses import (Course, CoursePlanner, gap_course, ramp_course, rough_course,
                                 stairs_course)
-from ..planning.reach import foot_lift
-from ..planning.reach import terrain_alignment_for
+from ..planning.reach import foot_lift, terrain_alignment_for
 from ..report.locomotion_figures import course_side_view, ramp_figure
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
@@ -111,8 +110,11 @@ def resolve(params: dict, robot) -> dict:
         p["speed"] = d["speed"].value(robot)
     if p["terrain_alignment"] == AUTO:
         p["terrain_alignment"] = 1.0
-        angle = {"ramp": p["angle"],  # stairs: their mean slope, which the trunk follows
-                 "stairs": math.degrees(math.atan2(p["step_height"], p["tread"]))}.get(p["course"])
+        angle = None
+        if p["course"] == "ramp":
+            angle = p["angle"]
+        elif p["course"] == "stairs":  # their mean slope, which the trunk follows
+            angle = math.degrees(math.atan2(p["step_height"], p["tread"]))
         if angle is not None:
             p["terrain_alignment"], changes = terrain_alignment_for(robot, math.radians(angle))
             log.info("terrain_alignment %g: standing on %.3g deg up or down moves a leg joint by "
@@ -141,7 +143,7 @@ def build(params: dict, robot) -> Course:
 
 def highest_step(robot) -> float:
     """The highest rise a stairs course takes on ``robot``: a riser is crossed at mid-swing with
-    the trunk reference midway between the two treads (the course smoothed, Sect. V-G), so the
+    the trunk reference midway between the two treads (it follows the smoothed course), so the
     foot's bottom must rise half a step above its standing height: 2 (lift − r), with the lift the
     least :func:`~wholebody.planning.reach.foot_lift` of the legs and r the foot radius."""
     lift = min(foot_lift(robot, c.name, up_to=float(robot.q_ref[2])) for c in robot.contacts)
