@@ -324,7 +324,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                 "gap": f"{p['gap'] * 100:.0f} cm gap + {p['step'] * 100:.0f} cm step",
                 "stairs": f"staircase ({p['steps']} steps of {p['step_height'] * 100:.1f} cm up "
                           "and down)",
-                "rough": f"field of +-{p['roughness'] * 100:.1f} cm cells (seed {p['seed']})"
+                "rough": f"field of +-{p['roughness'] * 100:.1f} cm cells (seed {p['seed']}; "
+                         "drawn along y = 0)"
                 }[p["course"]]
         figures.append(str(course_side_view(
             out_dir / f"{p['course']}_side_view.png", robot, gait_run, course,
