@@ -287,6 +287,14 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                                 "nearest_stance_to_an_edge_m": float(edges.min(initial=np.inf)),
                                 "stances_over_an_edge": on_edge,
                                 "final_feet_z_m": feet[-1, :, 2]}
+        if p["course"] == "stairs":  # the trunk's linear error going up and going down
+            risers = course.edges
+            middle = 0.5 * (risers[p["steps"] - 1] + risers[p["steps"]])  # of the landing
+            error = np.linalg.norm(L["com_error"], axis=1)
+            for part, sel in (("up", (com[:, 0] >= risers[0]) & (com[:, 0] < middle)),
+                              ("down", (com[:, 0] >= middle) & (com[:, 0] < risers[-1]))):
+                metrics["stairs"][f"linear_rms_{part}_m"] = float(np.sqrt(np.mean(
+                    error[sel] ** 2))) if np.any(sel) else float("nan")
         what = (f"{p['steps']} steps of {p['step_height'] * 100:.1f} cm (tread "
                 f"{p['tread'] * 100:.0f} cm) up and down" if p["course"] == "stairs" else
                 f"rough ground of +-{p['roughness'] * 100:.1f} cm (cells {p['cell'] * 100:.0f} cm, "
