@@ -93,7 +93,8 @@ class HeightField:
         return out[0], out[1]
 
     def highest(self, a, b) -> float:
-        """The highest cell top crossed by the segment from (x, y) ``a`` to ``b``."""
+        """The highest cell top under the segment from (x, y) ``a`` to ``b`` (sampled at least
+        every quarter cell)."""
         length = float(np.hypot(b[0] - a[0], b[1] - a[1]))
         n = 2 + int(4.0 * length / min(self.cx, self.cy))
         return max(self.offset(a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]))
