@@ -139,6 +139,17 @@ def rng():
     return np.random.default_rng(12345)
 
 
+def ray_height(sim, x: float, y: float, top: float = 3.0) -> float:
+    """Height of the twin's surface under (x, y): a MuJoCo ray cast straight down from ``top``
+    onto its static geoms (-inf where nothing is hit)."""
+    import mujoco
+
+    geom = np.zeros(1, dtype=np.int32)
+    d = mujoco.mj_ray(sim.model, sim.data, np.array([x, y, top]), np.array([0.0, 0.0, -1.0]),
+                      None, 1, -1, geom)
+    return top - d if d >= 0 else -np.inf
+
+
 def native_cycle_or_skip(module: str = "_passive_cycle"):
     """Import a compiled part of wholebody (``_passive_cycle``, ``_cascade``). Skip only where it
     cannot have been built (no C++ compiler on this machine, or WHOLEBODY_NO_NATIVE set at

@@ -5,10 +5,10 @@ bookkeeping, and short closed-loop runs judged on simulator measurements."""
 import logging
 import math
 
-import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import ray_height
 
 from wholebody.control.passivity import (StorageMeter, SwingFeedForwardOff,
                                          desired_generalized_velocity)
@@ -36,13 +36,6 @@ def _quiet():
     logging.disable(logging.NOTSET)
 
 
-def _ray_height(sim, x, y, top=3.0):
-    geom = np.zeros(1, dtype=np.int32)
-    d = mujoco.mj_ray(sim.model, sim.data, np.array([x, y, top]), np.array([0.0, 0.0, -1.0]),
-                      None, 1, -1, geom)
-    return top - d if d >= 0 else -np.inf
-
-
 # ---------------------------------------------------------------- courses (no closed loop)
 @pytest.mark.parametrize("course", [ramp_course(15.0), gap_course(0.22, 0.07),
                                     build_course([("slope", 0.5, 0.2), ("step", -0.05),
@@ -54,7 +47,7 @@ def test_simulator_surface_is_the_planner_terrain(hyq, course):
     sim = Simulator(hyq, course_environment(course))
     for x in np.linspace(-1.5, 6.0, 301):
         for y in (-0.7, 0.3):
-            z = _ray_height(sim, x, y)
+            z = ray_height(sim, x, y)
             if any(abs(x - e) < 1e-3 for s in course.strips for e in (s.x0, s.x1)):
                 continue  # on an edge between strips
             if course.in_gap(x):  # a hole: nothing within 5 cm of the edges' level
@@ -65,7 +58,7 @@ def test_simulator_surface_is_the_planner_terrain(hyq, course):
                 assert z == pytest.approx(course.terrain.height(x, y), abs=1e-6), x
                 h = 1e-3
                 if not course.in_gap(x, 2 * h) and all(abs(x - s.x0) > 2 * h for s in course.strips):
-                    slope = (_ray_height(sim, x + h, y) - _ray_height(sim, x - h, y)) / (2 * h)
+                    slope = (ray_height(sim, x + h, y) - ray_height(sim, x - h, y)) / (2 * h)
                     n = course.terrain.normal(x, y)
                     assert -n[0] / n[2] == pytest.approx(slope, abs=1e-6)
 

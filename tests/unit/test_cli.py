@@ -168,6 +168,9 @@ def test_output_cut_short_by_its_reader_is_not_an_error():
      "(h = 1.02 m), got 0.6"),
     (["run", "ramp", "--set", "step=0.3"],
      "--set step: expected a finite number in (-0.25 h, 0.25 h) = (-0.15, 0.15) for robot 'hyq'"),
+    # in range, but beyond what the robot's legs reach (HyQ lifts a foot 0.145 m, r 0.022 m)
+    (["run", "ramp", "--set", "course=stairs", "--set", "step_height=0.28"],
+     "--set step_height: 0.28 m is more than hyq's legs reach"),
     # in range, but not together: each crashed after simulating or reported a push that never came
     (["run", "crawl", "--controller", "passive", "--set", "duration=1.0"],
      "--set duration: 1 s ends before the gait starts (at 1 s)"),

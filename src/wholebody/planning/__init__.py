@@ -17,7 +17,8 @@ Typical use::
     plan.contact, plan.foot_position, plan.trunk.position, plan.trunk.rotation, ...
 """
 
-from .courses import Course, CoursePlanner, build_course, gap_course, ramp_course
+from .courses import (Course, CoursePlanner, HeightField, build_course, gap_course, ramp_course,
+                      rough_course, stairs_course)
 from .footholds import Foothold, Footprint, raibert_foothold
 from .gait import LEGS, GaitEvent, GaitSchedule, Swing, crawl, stand, trot
 from .planner import GaitPlanner, PlanState
@@ -28,6 +29,7 @@ from .trunk import (CommandPhase, CommandSchedule, CrawlSway, StartShift, TrunkR
 
 __all__ = [
     "CommandPhase", "CommandSchedule", "Course", "CoursePlanner", "build_course", "gap_course", "ramp_course",
+    "HeightField", "rough_course", "stairs_course",
     "CrawlSway", "Foothold", "Footprint", "GaitEvent", "GaitPlanner",
     "GaitSchedule", "LEGS", "PlanState", "StartShift", "Swing", "SwingTrajectory", "Terrain",
     "TrunkReference", "TrunkState", "VelocityCommand", "crawl", "quintic_blend",

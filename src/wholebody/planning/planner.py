@@ -219,18 +219,21 @@ class GaitPlanner:
                                 velocity, self.feedback_gain, float(self._radius[i]),
                                 self.max_step)
 
-    def swing_clearance(self, leg: str | int, p0, p1, swing) -> float:
-        """The clearance of ``swing`` of ``leg`` from ``p0`` to ``p1``: :attr:`clearance`, capped
-        so that the apex is at most ``reach`` above the standing foot's height at mid-swing (the
-        trunk reference there, the footprint's foot in the trunk's frame), and at least 0."""
+    def swing_clearance(self, leg: str | int, p0, p1, swing, clearance: float | None = None
+                        ) -> float:
+        """The clearance of ``swing`` of ``leg`` from ``p0`` to ``p1``: ``clearance`` (default
+        :attr:`clearance`), capped so that the apex is at most ``reach`` above the standing foot's
+        height at mid-swing (the trunk reference there, the footprint's foot in the trunk's
+        frame), and at least 0."""
         i = self.schedule.index(leg)
+        clearance = self.clearance if clearance is None else float(clearance)
         if not np.isfinite(self.reach[i]):
-            return self.clearance
+            return clearance
         trunk = self.trunk.evaluate(0.5 * (swing.liftoff + swing.touchdown))
         R = trunk.rotation
         standing = trunk.position[2] + R[2] @ (self.footprint.feet[i] - self.footprint.com)
         top = standing + self.reach[i] * R[2, 2]
-        return float(min(self.clearance, max(0.0, top - max(p0[2], p1[2]))))
+        return float(min(clearance, max(0.0, top - max(p0[2], p1[2]))))
 
     # ------------------------------------------------------------------ gait start
     def start_shift(self, t_begin: float | None = None) -> StartShift | None:

@@ -293,9 +293,19 @@ def course_environment(course) -> Environment:
     """The simulator's world for a :class:`~wholebody.planning.courses.Course`: no floor plane, one
     box per surface strip (so a gap is a real hole) with the course's width and friction. Level
     strips are deep boxes, slopes thin ones (a tilted box's end face leans over its neighbour; next
-    to a gap it narrows the hole, but only below 5 cm under the surface)."""
-    boxes = [_strip_box(s, course.width, COURSE_BOX_THICKNESS if s.z0 == s.z1
-                        else COURSE_SLOPE_THICKNESS) for s in course.strips]
+    to a gap it narrows the hole, but only below 5 cm under the surface); rough ground is one deep
+    box per cell of its height field."""
+    boxes = []
+    for s in course.strips:
+        if s.field is None:
+            boxes.append(_strip_box(s, course.width, COURSE_BOX_THICKNESS if s.z0 == s.z1
+                                    else COURSE_SLOPE_THICKNESS))
+            continue
+        f, half = s.field, 0.5 * COURSE_BOX_THICKNESS
+        for (i, j), dz in np.ndenumerate(f.heights):
+            top = s.z0 + float(dz)
+            boxes.append(Box((f.x0 + (i + 0.5) * f.cx, f.y0 + (j + 0.5) * f.cy, top - half),
+                             (0.5 * f.cx, 0.5 * f.cy, half)))
     return Environment(floor_friction=course.friction, floor=False, boxes=boxes)
 
 
