@@ -1,6 +1,6 @@
 """``wholebody run ... --replay`` writes a replay.html that headless Chromium opens from disk and
-renders: not blank, no page or console errors, no network request, and moving the time slider
-moves the robot. Without /usr/bin/chromium (or playwright) the test skips, unless
+renders: not blank, no page or console errors, no network request, moving the time slider
+moves the robot, and the legend lists a push only in a run with one. Without /usr/bin/chromium (or playwright) the test skips, unless
 WHOLEBODY_REQUIRE_BROWSER=1 (CI) makes that a failure."""
 
 from __future__ import annotations
@@ -85,6 +85,9 @@ def test_replay_renders_and_the_slider_moves_the_robot(scenario, robot, settings
             browser.show_robots(page, True)
         shown = page.evaluate("document.getElementById('wb-clock').textContent")
         assert f"t = {times[-1]:.2f}" in shown
+        legend = page.evaluate("document.getElementById('wb-legend').textContent")
+        assert "contact forces" in legend
+        assert ("push (" in legend) == (scenario == "push")  # the push's entry only with a push
     assert not problems, problems
     for image in shots:  # not blank: varied, many colours
         assert image.std() > 20

@@ -59,9 +59,10 @@ _SCRIPT = r"""
     const c = settings.colors, s = settings.scale;
     const item = (color, text) =>
       `<span class="item"><span class="swatch" style="background:${color}"></span>${text}</span>`;
+    const pushed = (settings.push_magnitude || []).some((x) => x > 0);  // a run with a push
     let out = item(c.contact, `contact forces (weight ${s.weight_N.toFixed(0)} N = ` +
                    `${s.weight_length_m.toFixed(2)} m)`) +
-              item(c.push, `push (&times;${s.push_gain})`) +
+              (pushed ? item(c.push, `push (&times;${s.push_gain})`) : "") +
               item(c.com, "CoM") + item(c.cop, "CoP") + item(c.capture_point, "capture point");
     const steps = (settings.footsteps || []).flat();
     if (steps.length) {
