@@ -510,3 +510,24 @@ def test_footsteps_for_another_number_of_runs_are_refused(standing_talos, tmp_pa
 ])
 def test_summary_footsteps(metrics, expected):
     assert summary_footsteps({"metrics": metrics}) == expected
+
+
+def test_a_replay_opens_at_the_first_frame_whose_feet_carry_load():
+    """HyQ's twin starts with its feet not yet pressing on the floor (the first frame's contact
+    forces are zero, nothing to draw): the page opens at the first frame where the simulator's
+    contact forces hold a share of the weight, not at t = 0."""
+    from wholebody.report.replay import opening_frame
+
+    import wholebody as wb
+
+    robot = wb.load_robot("hyq")
+    recorder = ReplayRecorder(fps=FPS)
+    run_closed_loop(Simulator(robot, observers=[recorder]), StandingController(robot), DURATION)
+    (rec,) = recorder.recordings
+    forces = np.linalg.norm(rec.arrays()["contact_forces"], axis=2).sum(axis=1)
+    weight = robot.mass * 9.81
+    k = opening_frame(rec)
+    assert forces[0] < 0.05 * weight  # the case this is for
+    assert k > 0 and forces[k] > 0.05 * weight and np.all(forces[:k] < 0.05 * weight)
+    _, settings = build_commands([rec])
+    assert settings["opening"] == pytest.approx(k * rec.frame_period)

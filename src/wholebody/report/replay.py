@@ -462,6 +462,14 @@ def _draw_footsteps(vis, animation, root: str, robot, footsteps: Sequence[dict],
     return drawn
 
 
+def opening_frame(recording: Recording) -> int:
+    """The frame a replay opens at: the first where a contact carries load (the twin's first
+    step may come before the feet press on the floor: nothing to draw), else the first."""
+    loaded = np.flatnonzero(np.asarray(recording.loaded, dtype=bool).reshape(recording.frames, -1)
+                            .any(axis=1))
+    return int(loaded[0]) if loaded.size else 0
+
+
 def build_commands(recordings: Sequence[Recording],
                    footsteps: Sequence[Sequence[dict]] | None = None
                    ) -> tuple[list[bytes], dict]:
@@ -587,6 +595,7 @@ def build_commands(recordings: Sequence[Recording],
               for acting in max(recordings, key=lambda r: r.frames).pushes]
     settings = {
         "t0": t0, "frame_period": period, "frames": frames, "duration": (frames - 1) * period,
+        "opening": opening_frame(recordings[0]) * period,
         "camera": _camera(recordings, offsets, bounds), "push_magnitude": pushes,
         "runs": [{"label": r.label or f"run {i + 1}", "offset_y": float(o[1])}
                  for i, (r, o) in enumerate(zip(recordings, offsets))],

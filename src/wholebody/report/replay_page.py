@@ -176,7 +176,7 @@ _SCRIPT = r"""
       requestAnimationFrame(tick);
     }
     incidents((t) => { setPlaying(false); show(t); });
-    show(0);
+    show(settings.opening || 0);
     requestAnimationFrame(tick);
     requestAnimationFrame(() => requestAnimationFrame(() => {
       status.textContent = failed.length ?
