@@ -65,6 +65,18 @@ def quadruped_urdf(floating: bool = False, mujoco_tags: bool = False) -> str:
     return "".join(parts)
 
 
+def _with_continuous(text: str, joint: str, limits: str) -> str:
+    """The quadruped URDF ``text`` with each leg's ``joint`` (``hfe``, ``kfe``) continuous: its
+    type changed and its ``limits`` attributes removed."""
+    for leg in LEGS:
+        start = text.index(f'<joint name="{leg}_{joint}" type="revolute">')
+        end = text.index("</joint>", start)
+        changed = text[start:end].replace('type="revolute"', 'type="continuous"').replace(
+            limits, "")
+        text = text[:start] + changed + text[end:]
+    return text
+
+
 def _mapped(q_from, model_from, model_to):
     """``q_from`` (a configuration of ``model_from``) as a configuration of ``model_to``: the
     base's 7 coordinates, then each joint by name."""
@@ -373,13 +385,7 @@ def test_init_robot_drafts_continuous_hips_and_knees_bent_at_zero(tmp_path):
     from wholebody.robots.check import check_robot
     from wholebody.robots.draft import draft_description
 
-    text = quadruped_urdf()
-    for leg in LEGS:
-        start = text.index(f'<joint name="{leg}_hfe" type="revolute">')
-        end = text.index("</joint>", start)
-        joint = text[start:end].replace('type="revolute"', 'type="continuous"').replace(
-            'lower="-1.5" upper="1.5" ', "")
-        text = text[:start] + joint + text[end:]
+    text = _with_continuous(quadruped_urdf(), "hfe", 'lower="-1.5" upper="1.5" ')
     text = text.replace('lower="-2.5" upper="-0.2"', 'lower="-2.5" upper="-0.6"')
     text = text.replace("</robot>", '<gazebo><plugin name="contact"><link>base</link>'
                         '<joint>lf_haa</joint></plugin></gazebo><transmission name="t">'
@@ -449,13 +455,7 @@ def test_init_robot_cli(tmp_path, biped_xml, capsys):
 # ------------------------------------------------------------------ continuous joints
 def _continuous_quadruped(tmp_path):
     """The quadruped with its knees as continuous joints (unbounded revolute: nq = 2, nv = 1)."""
-    text = quadruped_urdf()
-    for leg in LEGS:
-        start = text.index(f'<joint name="{leg}_kfe" type="revolute">')
-        end = text.index("</joint>", start)
-        joint = text[start:end].replace('type="revolute"', 'type="continuous"').replace(
-            'lower="-2.5" upper="-0.2" ', "")
-        text = text[:start] + joint + text[end:]
+    text = _with_continuous(quadruped_urdf(), "kfe", 'lower="-2.5" upper="-0.2" ')
     path = tmp_path / "wheels.urdf"
     path.write_text(text)
     return {"name": "wheels", "model": str(path),
