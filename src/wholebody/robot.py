@@ -107,7 +107,7 @@ def urdf_with_inertias(path, overrides: dict, where: str = "robot") -> str:
         tree = ET.parse(path)
     except ET.ParseError as exc:
         raise ValueError(f"not XML: {exc}") from None
-    links = {link.get("name"): link for link in tree.getroot().iter("link")}
+    links = {link.get("name"): link for link in tree.getroot().findall("link")}
     for name, (ixx, iyy, izz) in overrides.items():
         if name not in links:
             raise DescriptionError(f"{where}: inertia_overrides.{name}: not a link of the URDF")

@@ -65,6 +65,18 @@ def quadruped_urdf(floating: bool = False, mujoco_tags: bool = False) -> str:
     return "".join(parts)
 
 
+def _with_continuous(text: str, joint: str, limits: str) -> str:
+    """The quadruped URDF ``text`` with each leg's ``joint`` (``hfe``, ``kfe``) continuous: its
+    type changed and its ``limits`` attributes removed."""
+    for leg in LEGS:
+        start = text.index(f'<joint name="{leg}_{joint}" type="revolute">')
+        end = text.index("</joint>", start)
+        changed = text[start:end].replace('type="revolute"', 'type="continuous"').replace(
+            limits, "")
+        text = text[:start] + changed + text[end:]
+    return text
+
+
 def _mapped(q_from, model_from, model_to):
     """``q_from`` (a configuration of ``model_from``) as a configuration of ``model_to``: the
     base's 7 coordinates, then each joint by name."""
@@ -341,7 +353,8 @@ def test_urdf_parser_noise_is_collected(tmp_path, caplog):
 # ------------------------------------------------------------------ init-robot
 def test_init_robot_drafts_a_quadruped_from_a_urdf(tmp_path):
     """The quadruped URDF: four point feet at the foot links with the collision spheres' radius,
-    a computed posture with the feet under the hips (legs bent, inside the limits) that stands on
+    a computed posture with the feet where the legs at zero put them (legs bent, inside the
+    limits) that stands on
     all four (check-robot finds no error); the URDF given as the robot loads the same draft."""
     from wholebody.robots.check import check_robot
     from wholebody.robots.draft import draft_description
@@ -359,12 +372,52 @@ def test_init_robot_drafts_a_quadruped_from_a_urdf(tmp_path):
     path.write_text(draft.text)
     report = check_robot(str(path))
     assert report.ok, [f.message for f in report.findings]
-    robot = wb.load_robot(str(path))
-    for c in robot.contacts:  # each foot below its leg's hip (the thigh's joint)
-        hip = robot.data.oMi[robot.model.getJointId(c.frame[:2] + "_hfe")].translation
-        foot = robot.contact_point(c.name)
-        assert np.linalg.norm(foot[:2] - hip[:2]) < 0.02
+    _assert_feet_where_the_legs_at_zero_put_them(wb.load_robot(str(path)))
     assert wb.load_robot(str(urdf)).na == 12  # a model file loads through the same draft
+
+
+def test_init_robot_drafts_continuous_hips_and_knees_bent_at_zero(tmp_path):
+    """A URDF as vendors ship it: continuous hip flexion joints, knees whose range excludes 0
+    (straight legs are out of reach) and Gazebo plugin elements holding ``<link>`` and
+    ``<joint>`` tags of their own. The draft bends the continuous joints too (their angles in the
+    posture) and puts each foot where the legs at zero put it (not where a knee held at its stop
+    does), as the kinematics of the loaded robot show."""
+    from wholebody.robots.check import check_robot
+    from wholebody.robots.draft import draft_description
+
+    text = _with_continuous(quadruped_urdf(), "hfe", 'lower="-1.5" upper="1.5" ')
+    text = text.replace('lower="-2.5" upper="-0.2"', 'lower="-2.5" upper="-0.6"')
+    text = text.replace("</robot>", '<gazebo><plugin name="contact"><link>base</link>'
+                        '<joint>lf_haa</joint></plugin></gazebo><transmission name="t">'
+                        '<joint name="lf_haa"/></transmission></robot>')
+    urdf = tmp_path / "vendor.urdf"
+    urdf.write_text(text)
+    draft = draft_description(urdf)
+    posture = draft.data["posture"]
+    assert {f"{leg}_hfe" for leg in LEGS} <= set(posture)
+    assert all(-2.5 <= posture[f"{leg}_kfe"] <= -0.6 for leg in LEGS)
+    path = tmp_path / "vendor.toml"
+    path.write_text(draft.text)
+    report = check_robot(str(path))
+    assert report.ok, [f.message for f in report.findings]
+    robot = wb.load_robot(str(path))
+    angles = robot.joint_angles(robot.q_ref)
+    for leg in LEGS:
+        assert angles[robot.joint_names.index(f"{leg}_hfe")] == pytest.approx(
+            posture[f"{leg}_hfe"], abs=1e-6)
+    _assert_feet_where_the_legs_at_zero_put_them(robot)
+
+
+def _assert_feet_where_the_legs_at_zero_put_them(robot):
+    """Each foot of the posture is, in the horizontal plane, where it is with the base in its
+    posture pose and every joint at zero (the zero configuration's kinematics, Pinocchio's)."""
+    model, data = robot.model, robot.model.createData()
+    q_zero = pin.neutral(model)
+    q_zero[:7] = robot.q_ref[:7]
+    pin.framesForwardKinematics(model, data, q_zero)
+    for c in robot.contacts:
+        at_zero = data.oMf[c.frame_id].translation
+        np.testing.assert_allclose(robot.contact_point(c.name)[:2], at_zero[:2], atol=0.005)
 
 
 def test_init_robot_drafts_a_biped_from_an_mjcf(biped_xml, tmp_path):
@@ -402,13 +455,7 @@ def test_init_robot_cli(tmp_path, biped_xml, capsys):
 # ------------------------------------------------------------------ continuous joints
 def _continuous_quadruped(tmp_path):
     """The quadruped with its knees as continuous joints (unbounded revolute: nq = 2, nv = 1)."""
-    text = quadruped_urdf()
-    for leg in LEGS:
-        start = text.index(f'<joint name="{leg}_kfe" type="revolute">')
-        end = text.index("</joint>", start)
-        joint = text[start:end].replace('type="revolute"', 'type="continuous"').replace(
-            'lower="-2.5" upper="-0.2" ', "")
-        text = text[:start] + joint + text[end:]
+    text = _with_continuous(quadruped_urdf(), "kfe", 'lower="-2.5" upper="-0.2" ')
     path = tmp_path / "wheels.urdf"
     path.write_text(text)
     return {"name": "wheels", "model": str(path),

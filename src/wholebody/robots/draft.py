@@ -127,7 +127,7 @@ def _urdf_geometries(source: ModelSource) -> list[Geometry]:
     model = source.model
     root = ET.parse(source.path).getroot()
     out = []
-    for link in root.iter("link"):
+    for link in root.findall("link"):
         name = link.get("name")
         if not model.existFrame(name, pin.FrameType.BODY):
             continue
@@ -344,9 +344,11 @@ def _computed_posture(model: pin.Model, feet: list[Foot]) -> dict[str, float]:
     data = model.createData()
     q = _seed(model)
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
-    pin.framesForwardKinematics(model, data, _neutral(model))
+    # every joint at zero, even one whose range excludes it (a knee held at its stop would put
+    # the foot ahead of or behind where the straight leg does)
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
     hips = {id(f): data.oMi[f.chain[0]].translation.copy() for f in feet}
-    # where each foot is with the legs at neutral (hanging straight below their hips)
+    # where each foot is with the legs at zero (hanging straight below their hips)
     below = {id(f): (data.oMf[model.getFrameId(f.frame, pin.FrameType.BODY)]
                      * pin.SE3(np.eye(3), np.array(f.offset))).translation.copy() for f in feet}
     # one sole level for every foot: the hips' mean height less a fraction of the shortest leg
@@ -370,11 +372,26 @@ def _computed_posture(model: pin.Model, feet: list[Foot]) -> dict[str, float]:
             A = np.vstack([lin, J[3:]]) if flat else lin
             A = A[:, idx_v]
             step = A.T @ np.linalg.solve(A @ A.T + 1e-4 * np.eye(A.shape[0]), err)
-            for k, j in enumerate(foot.chain):
-                i = model.joints[j].idx_q
-                q[i] = np.clip(q[i] + 0.5 * step[k], lo[i], hi[i])
-    return {model.names[j]: round(float(q[model.joints[j].idx_q]), 6)
-            for j in range(2, model.njoints) if model.joints[j].nq == 1}
+            dv = np.zeros(model.nv)
+            dv[idx_v] = 0.5 * step
+            q = pin.integrate(model, q, dv)  # a continuous joint's (cos, sin) stays on the circle
+            for j in foot.chain:
+                if model.joints[j].nq == 1:
+                    i = model.joints[j].idx_q
+                    q[i] = np.clip(q[i], lo[i], hi[i])
+    return {model.names[j]: round(_angle(model.joints[j], q), 6) for j in range(2, model.njoints)
+            if model.joints[j].nq == 1 or _continuous(model.joints[j])}
+
+
+def _continuous(joint) -> bool:
+    """A URDF continuous joint: one velocity, its angle as (cos, sin) in q."""
+    return joint.nq == 2 and joint.nv == 1
+
+
+def _angle(joint, q: np.ndarray) -> float:
+    if _continuous(joint):
+        return float(np.arctan2(q[joint.idx_q + 1], q[joint.idx_q]))
+    return float(q[joint.idx_q])
 
 
 QUADRUPED_TAGS = {("left", "front"): "LF", ("right", "front"): "RF", ("left", "hind"): "LH",

@@ -79,7 +79,7 @@ def urdf_floating_joint(path: Path) -> str | None:
         root = ET.parse(path).getroot()
     except ET.ParseError:
         return None  # Pinocchio's parser says what is wrong
-    joints = list(root.iter("joint"))
+    joints = root.findall("joint")
     children = {j.find("child").get("link") for j in joints if j.find("child") is not None}
     floating = [j for j in joints if j.get("type") == "floating"]
     if not floating:
