@@ -602,3 +602,31 @@ def test_continuous_joints_in_both_engines(tmp_path, rng, mode):
         lo, hi = limits.lower[-robot.na:], limits.upper[-robot.na:]
         bound = np.inf if mode == "braking" else JointAccelerationLimits().a_max
         assert np.all(lo[knees] == -bound) and np.all(hi[knees] == bound)
+
+
+def test_a_continuous_thigh_lifts_its_foot_as_the_same_revolute_thigh(tmp_path):
+    """How high each foot can rise (:func:`~wholebody.planning.reach.foot_lift`, which caps the
+    swings) and how a 10° slope moves the legs (``slope_stance_change``): the quadruped with
+    continuous thighs gives what the same quadruped gives with revolute thighs whose limits are
+    far from the motion (±100 rad) — the continuous joints move in the search (they were left
+    out: every foot 'rose at most 0 m' and the swings stayed on the floor)."""
+    from wholebody.planning.reach import foot_lift, slope_stance_change
+
+    posture = {**{f"{leg}_kfe": -1.2 for leg in LEGS}, **{f"{leg}_hfe": 0.6 for leg in LEGS}}
+    contacts = [{"name": leg, "frame": f"{leg}_foot", "type": "point", "radius": 0.02}
+                for leg in LEGS]
+    limits = 'lower="-1.5" upper="1.5" '
+    continuous = tmp_path / "continuous.urdf"
+    continuous.write_text(_with_continuous(quadruped_urdf(), "hfe", limits))
+    wide = tmp_path / "wide.urdf"
+    wide.write_text(quadruped_urdf().replace(limits, 'lower="-100" upper="100" '))
+    robots = [wb.load_robot({"name": p.stem, "model": str(p), "posture": posture,
+                             "contacts": contacts}) for p in (continuous, wide)]
+    assert robots[0].nq == robots[1].nq + 4  # the thighs' (cos, sin)
+    for leg in LEGS:
+        lifts = [foot_lift(r, leg) for r in robots]
+        assert lifts[1] > 0.02
+        assert lifts[0] == pytest.approx(lifts[1], abs=1e-6), leg
+    changes = [slope_stance_change(r, np.radians(10.0)) for r in robots]
+    assert np.isfinite(changes[1])
+    assert changes[0] == pytest.approx(changes[1], abs=1e-6)

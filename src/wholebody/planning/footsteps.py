@@ -65,7 +65,7 @@ import pinocchio as pin
 from scipy.optimize import linprog, lsq_linear
 
 from ..robots.roles import biped_soles, joint_axis
-from .reach import REACH_MARGIN, _leg
+from .reach import REACH_MARGIN, _angles, _leg, _moved
 from .support_shift import joint_range
 
 __all__ = ["Footstep", "FootstepPlanner", "SoleReach", "StepLimits", "clamp_step", "sole_reach"]
@@ -136,7 +136,7 @@ def _stance_configuration(robot, com_height_drop: float, margin: float):
     q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, 0.0, yaw)).coeffs()
     for contact, target in soles.items():
         frame = robot.contact(contact).frame_id
-        iq, iv, ranges = _leg(robot, contact)
+        iv, ranges, joints = _leg(robot, contact)
         lo, hi = ranges[:, 0], ranges[:, 1]
         for _ in range(100):
             pin.computeJointJacobians(model, data, q)
@@ -145,8 +145,9 @@ def _stance_configuration(robot, com_height_drop: float, margin: float):
             if np.max(np.abs(error)) < 1e-12:
                 break
             J = pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:, iv]
-            step = lsq_linear(J, error, bounds=(lo - q[iq], hi - q[iq] + 1e-12))
-            q[iq] = np.clip(q[iq] + step.x, lo, hi)
+            angles = _angles(q, joints)
+            step = lsq_linear(J, error, bounds=(lo - angles, hi - angles + 1e-12))
+            q = _moved(model, q, iv, np.clip(angles + step.x, lo, hi) - angles)
         pin.framesForwardKinematics(model, data, q)
         if np.max(np.abs(pin.log6(data.oMf[frame].actInv(target)).vector)) > 1e-6:
             raise ValueError(f"com_height_drop: {com_height_drop} m lower, {contact} cannot stand "
@@ -181,14 +182,14 @@ def _slide(robot, contact: str, q, bounds, direction, iterations: int = 100) -> 
     model = robot.model
     data = model.createData()
     q = q.copy()
-    iq, iv, _ = _leg(robot, contact)
+    iv, _, joints = _leg(robot, contact)
     lo, hi = bounds[0][iv - 6], bounds[1][iv - 6]
     frame = robot.contact(contact).frame_id
     pin.framesForwardKinematics(model, data, q)
     start = data.oMf[frame].copy()
     d = np.array([direction[0], direction[1], 0.0])
     held = np.array([[-direction[1], direction[0], 0.0], [0.0, 0.0, 1.0]])  # lateral, height
-    n = len(iq)
+    n = len(iv)
     # variables: joint steps (n), drift slacks s+ (5), s- (5); minimise -reach + cost * |drift|
     cost = np.concatenate([np.zeros(n), np.full(10, _DRIFT_COST)])
     for _ in range(iterations):
@@ -200,12 +201,13 @@ def _slide(robot, contact: str, q, bounds, direction, iterations: int = 100) -> 
                                 pin.log3(M.rotation @ start.rotation.T)])
         cost[:n] = -(d @ J[:3])
         A_eq = np.hstack([np.vstack([held @ J[:3], J[3:]]), -np.eye(5), np.eye(5)])
+        angles = _angles(q, joints)
         step = linprog(cost, A_eq=A_eq, b_eq=-drift, method="highs",
-                       bounds=[(max(lo[k] - q[i], -_TRUST), min(hi[k] - q[i], _TRUST))
-                               for k, i in enumerate(iq)] + [(0.0, None)] * 10)
+                       bounds=[(max(lo[k] - a, -_TRUST), min(hi[k] - a, _TRUST))
+                               for k, a in enumerate(angles)] + [(0.0, None)] * 10)
         if step.status != 0:
             break
-        q[iq] = np.clip(q[iq] + step.x[:n], lo, hi)
+        q = _moved(model, q, iv, np.clip(angles + step.x[:n], lo, hi) - angles)
         if np.max(np.abs(step.x[:n])) < 1e-9:
             break
     pin.framesForwardKinematics(model, data, q)
@@ -252,7 +254,7 @@ def _hip_yaw_joint(robot, contact: str):
     base = data.oMi[1].rotation
     best, best_z = None, math.cos(_YAW_AXIS_ANGLE)
     for i in _leg(robot, contact)[0]:
-        jid = next(j for j in range(1, model.njoints) if model.joints[j].idx_q == i)
+        jid = next(j for j in range(1, model.njoints) if model.joints[j].idx_v == i)
         z = abs((base.T @ data.oMi[jid].rotation @ joint_axis(robot, model.names[jid], data))[2])
         if z >= best_z:
             best, best_z = jid, z

@@ -42,14 +42,29 @@ _DRIFT_COST = 100.0
 
 
 def _leg(robot, contact: str):
-    """``contact``'s one-coordinate leg joints: (idx_q, idx_v, their ranges as (n, 2), None rows
-    as (-inf, inf) for a joint without limits)."""
+    """``contact``'s one-direction leg joints (revolute, prismatic, continuous): (idx_v, their
+    ranges as (n, 2), (-inf, inf) rows for a joint without limits)."""
     model = robot.model
     joints = [model.joints[model.getJointId(j)] for j in leg_joints(robot, contact)]
-    joints = [j for j in joints if j.nq == 1 and j.nv == 1]
+    joints = [j for j in joints if j.nv == 1]
     ranges = [joint_range(model, j) or (-np.inf, np.inf) for j in joints]
-    return (np.array([j.idx_q for j in joints], dtype=int),
-            np.array([j.idx_v for j in joints], dtype=int), np.array(ranges).reshape(-1, 2))
+    return (np.array([j.idx_v for j in joints], dtype=int), np.array(ranges).reshape(-1, 2),
+            joints)
+
+
+def _angles(q, joints) -> np.ndarray:
+    """The joints' coordinates in ``q``: a one-coordinate joint's entry, a continuous joint's
+    angle from its (cos, sin)."""
+    return np.array([q[j.idx_q] if j.nq == 1 else np.arctan2(q[j.idx_q + 1], q[j.idx_q])
+                     for j in joints])
+
+
+def _moved(model, q, iv, step) -> np.ndarray:
+    """``q`` moved by ``step`` of the joints at velocity indices ``iv`` (pin.integrate, so a
+    continuous joint's (cos, sin) stays on its circle)."""
+    dv = np.zeros(model.nv)
+    dv[iv] = step
+    return pin.integrate(model, q, dv)
 
 
 def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
@@ -62,16 +77,17 @@ def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
     model = robot.model
     data = model.createData()
     q = robot.q_ref.copy() if q is None else np.array(q, dtype=float)
-    iq, iv, _ = _leg(robot, contact)
-    if len(iq) == 0:
+    iv, _, _ = _leg(robot, contact)
+    if len(iv) == 0:
         return 0.0
     lower, upper = joint_step_bounds(robot, margin, q)
-    lo, hi = q[iq] + lower[iv], q[iq] + upper[iv]
+    lo, hi = lower[iv], upper[iv]  # of the total step from q
+    moved = np.zeros(len(iv))
     frame = robot.contact(contact).frame_id
     axes = pin.Quaternion(q[3:7]).normalized().toRotationMatrix()  # base x, y, z in world
     pin.framesForwardKinematics(model, data, q)
     start = data.oMf[frame].translation.copy()
-    n = len(iq)
+    n = len(iv)
     # variables: joint steps (n), drift slacks s+ (2), s- (2); minimise -rise + cost * |drift|
     cost = np.concatenate([np.zeros(n), np.full(4, _DRIFT_COST)])
     for _ in range(iterations):
@@ -81,13 +97,14 @@ def foot_lift(robot, contact: str, q=None, margin: float = REACH_MARGIN,
         drift = axes[:, :2].T @ (data.oMf[frame].translation - start)
         cost[:n] = -(axes[:, 2] @ J)
         A_eq = np.hstack([axes[:, :2].T @ J, -np.eye(2), np.eye(2)])
-        bounds = [(max(lo[k] - q[i], -_TRUST), min(hi[k] - q[i], _TRUST))
-                  for k, i in enumerate(iq)] + [(0.0, None)] * 4
+        bounds = [(max(lo[k] - moved[k], -_TRUST), min(hi[k] - moved[k], _TRUST))
+                  for k in range(n)] + [(0.0, None)] * 4
         step = linprog(cost, A_eq=A_eq, b_eq=-drift, bounds=bounds, method="highs")
         if step.status != 0:
             break
-        dq = step.x[:n]
-        q[iq] = np.clip(q[iq] + dq, lo, hi)
+        dq = np.clip(moved + step.x[:n], lo, hi) - moved
+        moved += dq
+        q = _moved(model, q, iv, dq)
         pin.framesForwardKinematics(model, data, q)
         if (np.max(np.abs(dq)) < 1e-6
                 or axes[:, 2] @ (data.oMf[frame].translation - start) >= up_to):
@@ -120,8 +137,8 @@ def slope_stance_change(robot, angle: float, alignment: float = 1.0, q=None,
     change = 0.0
     feet = footprint.feet_from_com()
     for k, leg in enumerate(footprint.legs):
-        iq, iv, ranges = _leg(robot, leg)
-        if len(iq) == 0:
+        iv, ranges, joints = _leg(robot, leg)
+        if len(iv) == 0:
             continue
         lo, hi = ranges[:, 0], ranges[:, 1]
         x, y = feet[k]
@@ -134,13 +151,15 @@ def slope_stance_change(robot, angle: float, alignment: float = 1.0, q=None,
             if np.linalg.norm(error) < 1e-6:
                 break
             J = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)[:3, iv]
-            step = lsq_linear(J, error, bounds=(lo - q[iq], hi - q[iq] + 1e-12))
-            q[iq] = np.clip(q[iq] + step.x, lo, hi)
+            angles = _angles(q, joints)
+            step = lsq_linear(J, error, bounds=(lo - angles, hi - angles + 1e-12))
+            q = _moved(model, q, iv, np.clip(angles + step.x, lo, hi) - angles)
         pin.framesForwardKinematics(model, data, q)
         if np.linalg.norm(target - data.oMf[frame].translation) > 1e-3:
             return np.inf
         # a joint without limits moves no share of a range
-        change = max(change, float(np.max(np.abs(q[iq] - q0[iq]) / (hi - lo))))
+        change = max(change, float(np.max(np.abs(_angles(q, joints) - _angles(q0, joints))
+                                           / (hi - lo))))
     return change
 
 
