@@ -24,24 +24,30 @@ class TwinEstimation:
     twin's true base position. :meth:`current` gives the estimate of the present state (a
     controller calls it before the step, the observer's ``step`` then finds it done)."""
 
-    def __init__(self, sensors: Sensors, estimator: KinematicInertialEKF, record: bool = True):
+    def __init__(self, sensors: Sensors, estimator: KinematicInertialEKF, record: bool = True,
+                 ground_map: bool = False):
         self.sensors, self.estimator, self.record = sensors, estimator, record
+        self.ground_map = ground_map  # the estimator knows the twin's ground (ground_height)
         self.sim = None
         self.log = EstimationLog()
 
     @classmethod
     def for_robot(cls, robot, spec: SensorSpec | None = None, seed: int = 0,
-                  **noise_overrides) -> "TwinEstimation":
+                  ground_map: bool = False, **noise_overrides) -> "TwinEstimation":
         """Sensors of ``spec`` (default :class:`SensorSpec`) seeded with ``seed`` and a filter
-        whose noise model matches them (:meth:`EstimatorNoise.for_sensors`)."""
+        whose noise model matches them (:meth:`EstimatorNoise.for_sensors`); ``ground_map``: the
+        filter measures its stance feet on the twin's ground
+        (:meth:`~wholebody.sim.simulator.Simulator.ground_height`)."""
         spec = spec or SensorSpec()
         sensors = Sensors(robot, spec, np.random.default_rng(seed))
         return cls(sensors, KinematicInertialEKF(robot, EstimatorNoise.for_sensors(
-            spec, **noise_overrides)))
+            spec, **noise_overrides)), ground_map=ground_map)
 
     def start(self, sim) -> None:
         self.sim = sim
         self.log = EstimationLog()
+        if self.ground_map:
+            self.estimator.ground = sim.ground_height
         self.estimator.reset(self.sensors.read(sim), sim.state()[0][:3])
         self._record(sim, self.estimator.estimate)
 

@@ -312,6 +312,12 @@ REALISM = Parameter("realism", "exact", "what the controller reads and drives: '
                                         "from the IMU, encoders and contact flags) or 'robot' "
                                         "(sensors, plus model, delay, lag and noise errors)",
                     choices=LEVELS)
+#: with realism 'sensors' or 'robot': the estimator also measures each stance foot on the known
+#: ground (the twin's surfaces: the terrain map of the robot's planner)
+GROUND_MAP = Parameter("ground_map", False, "with realism sensors/robot: the state estimator "
+                                            "knows the ground under the feet (the terrain map) "
+                                            "and measures each stance foot's height on it")
+REAL_ROBOT_PARAMETERS = (REALISM, GROUND_MAP)
 
 
 def check_engine(params: dict) -> None:
@@ -544,8 +550,10 @@ class Scenario:
 
     def __post_init__(self):
         # a scenario that takes observers runs under any realism level (its loop asks them)
-        if self.simulations is not None and all(p.name != REALISM.name for p in self.parameters):
-            object.__setattr__(self, "parameters", (*self.parameters, REALISM))
+        if self.simulations is not None:
+            names = {p.name for p in self.parameters}
+            added = tuple(p for p in REAL_ROBOT_PARAMETERS if p.name not in names)
+            object.__setattr__(self, "parameters", (*self.parameters, *added))
 
     def simulation_count(self, params: dict, controller: str | None = None) -> int | None:
         """How many simulations a run with ``params`` and ``controller`` makes (None: not
@@ -566,6 +574,9 @@ class Scenario:
             raise ValueError(f"--set duration: {duration:g} s is shorter than {MIN_DURATION:g} s "
                              f"(fewer than {MIN_DURATION / 1e-3:.0f} cycles of the 1 kHz twin "
                              f"measure nothing)")
+        if params.get("ground_map") and params.get("realism") == "exact":
+            raise ValueError("--set ground_map: true needs --set realism=sensors or robot (the "
+                             "exact state has no estimator to measure the ground)")
         if self.validate_function is not None:
             self.validate_function(robot, params)
         return params
@@ -600,7 +611,8 @@ class Scenario:
                              f"takes no observers")
         if self.simulations is not None:
             incidents = IncidentLog()
-            conditions = conditions_for(robot, params["realism"])
+            conditions = conditions_for(robot, params["realism"],
+                                        ground_map=params["ground_map"])
             extra["observers"] = (*observers, incidents, *([conditions] if conditions else []))
         start = time.perf_counter()
         try:

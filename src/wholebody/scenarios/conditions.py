@@ -49,10 +49,11 @@ class RobotConditions:
     as a single run would, none inheriting another's biases, filters or noise draws. The
     mismatch is the same robot for all of them."""
 
-    def __init__(self, robot, level: str, seed: int = 0):
+    def __init__(self, robot, level: str, seed: int = 0, ground_map: bool = False):
         if level not in LEVELS[1:]:
             raise ValueError(f"realism: expected one of {LEVELS[1:]}, got {level!r}")
         self.robot, self.level, self.seed = robot, level, seed
+        self.ground_map = bool(ground_map)
         self.mismatch = robot_mismatch(robot, seed) if level == "robot" else None
         self._runs: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -67,7 +68,8 @@ class RobotConditions:
 
     # the simulator observer's protocol (SimObserver)
     def start(self, sim) -> None:
-        estimation = TwinEstimation.for_robot(self.robot, seed=self.seed)
+        estimation = TwinEstimation.for_robot(self.robot, seed=self.seed,
+                                              ground_map=self.ground_map)
         estimation.record = False
         self._runs[sim] = estimation
         estimation.start(sim)
@@ -79,9 +81,11 @@ class RobotConditions:
         pass
 
 
-def conditions_for(robot, level: str, seed: int = 0) -> RobotConditions | None:
-    """The observer of ``level`` for ``robot`` (None for ``exact``: nothing between)."""
-    return None if level == "exact" else RobotConditions(robot, level, seed)
+def conditions_for(robot, level: str, seed: int = 0,
+                   ground_map: bool = False) -> RobotConditions | None:
+    """The observer of ``level`` for ``robot`` (None for ``exact``: nothing between);
+    ``ground_map``: its estimator measures the stance feet on the twin's ground."""
+    return None if level == "exact" else RobotConditions(robot, level, seed, ground_map)
 
 
 def job_observers(robot, params: dict, observers=None) -> tuple:
@@ -91,5 +95,6 @@ def job_observers(robot, params: dict, observers=None) -> tuple:
     (``params["realism"]``; none for ``exact``)."""
     if observers is not None:
         return tuple(observers)
-    conditions = conditions_for(robot, params.get("realism", "exact"))
+    conditions = conditions_for(robot, params.get("realism", "exact"),
+                                ground_map=params.get("ground_map", False))
     return () if conditions is None else (conditions,)
