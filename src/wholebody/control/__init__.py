@@ -1,5 +1,5 @@
 """Controllers and their building blocks: each controller turns a robot state into joint torques
-(``compute(q, v, t)``).
+(``compute(q, v, t) -> Solution``, the :class:`Controller` protocol).
 
 - humanoid (Herzog et al. 2016): :class:`MomentumBalance` (Tables 1/2/4 with PD or LQR momentum
   gains), :class:`ContactSwitch` (double -> single support), :class:`Stepping`; ``stacks`` builds
@@ -11,7 +11,7 @@
 """
 
 from .balance import MomentumBalance, lqr_q
-from .base import ControlResult
+from .base import Controller
 from .contact_switch import ContactSwitch, ContactSwitchConfig
 from .lqr import MomentumLQR, lqr_gains
 from .momentum_model import momentum_model
@@ -24,7 +24,7 @@ from .standing import StandingController
 from .stepping import Stepping, SteppingConfig
 from .walking import Walking, WalkingConfig
 
-__all__ = ["ContactSwitch", "ContactSwitchConfig", "ControlResult", "MomentumBalance",
+__all__ = ["ContactSwitch", "ContactSwitchConfig", "Controller", "MomentumBalance",
            "MomentumLQR", "MomentumObserver", "PassiveConfig", "PassiveWBC",
            "QuasiStaticController", "StandingController", "StorageMeter", "SwingFeedForwardOff", "Stepping", "SteppingConfig",
            "SwingGains", "Walking", "WalkingConfig", "lqr_gains", "lqr_q", "momentum_model", "table1_stack", "table2_stack",

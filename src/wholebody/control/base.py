@@ -1,34 +1,29 @@
-"""What every controller returns, and the loop shared by the quadruped controllers."""
+"""What every controller is (:class:`Controller`), and the loop shared by the quadruped
+controllers."""
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
 from ..guard import Outcome
 
+if TYPE_CHECKING:
+    from ..formulation import Solution
+
 log = logging.getLogger(__name__)
 
 
-@dataclass
-class ControlResult:
-    """Joint torques plus what the controller assumed (contact forces) and what happened.
+@runtime_checkable
+class Controller(Protocol):
+    """What every controller is: ``compute(q, v, t)`` turns the robot's state (Pinocchio's
+    conventions) at time ``t`` into a :class:`~wholebody.formulation.Solution`, whose ``tau`` is
+    finite and within the torque limits whatever happened (:func:`wholebody.guard.guard_torque`)
+    and whose ``outcome`` and ``status`` say what happened."""
 
-    ``tau`` is finite and within the torque limits whatever happened (made by
-    :func:`wholebody.guard.guard_torque`); ``outcome`` (:class:`~wholebody.guard.Outcome`) says
-    what happened and ``status`` why; ``ok`` is True for a solved outcome.
-    """
-
-    tau: np.ndarray
-    contact_forces: dict[str, np.ndarray] = field(default_factory=dict)
-    outcome: Outcome = Outcome.SOLVED
-    status: str = "solved"
-
-    @property
-    def ok(self) -> bool:
-        return self.outcome.ok
+    def compute(self, q: np.ndarray, v: np.ndarray, t: float) -> "Solution": ...
 
 
 class PlannedController:

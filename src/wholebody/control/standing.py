@@ -18,11 +18,11 @@ import math
 import numpy as np
 import pinocchio as pin
 
+from ..formulation import Solution
 from ..guard import Outcome, guard_torque
 from ..robot import FREE_FLYER_NV, Robot
 from ..tasks.base import check_gain
 from ..validation import finite_array, nonnegative, positive
-from .base import ControlResult
 
 #: natural frequency of every joint's PD loop (Hz) and its damping ratio, the defaults of
 #: :class:`StandingController` (see :func:`relative_joint_gains` for why these values)
@@ -105,7 +105,7 @@ class StandingController:
             check_gain(kd, "kd", robot.na, matrix=False), robot.na).copy()
         self.q_ref = np.array(q_ref, dtype=float)
 
-    def compute(self, q, v, t: float = 0.0) -> ControlResult:
+    def compute(self, q, v, t: float = 0.0) -> Solution:
         robot = self.robot
         robot.update(q, v)
         tau, lam = gravity_compensation(robot)
@@ -116,4 +116,5 @@ class StandingController:
         for c in robot.contacts:
             forces[c.name] = lam[start:start + c.dim]
             start += c.dim
-        return ControlResult(tau, forces, outcome, status)
+        return Solution(qdd=np.zeros(robot.nv), lam=lam, tau=tau, forces=forces, outcome=outcome,
+                        status=status, level_costs=np.zeros(0), contacts=tuple(forces))
