@@ -1,6 +1,6 @@
-"""HyQ trots at 1.5 m/s (Froude 0.38) in the MuJoCo twin with the stride-capped trot period: no fall,
-every WBC cycle solved, the simulator's base within 10 % of the commanded speed, and the stance
-phases as long as the timing law's formula asks (T_stance = max_stride / v)."""
+"""HyQ trots at 1.5 m/s (Froude 0.38) in the MuJoCo twin with the stride-capped trot period: no
+fall, every WBC cycle solved, the simulator's base within 10 % of the commanded speed, and the
+stance phases as long as the timing law's formula asks (T_stance = max_stride / v)."""
 
 import numpy as np
 import pytest

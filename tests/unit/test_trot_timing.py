@@ -8,11 +8,10 @@ import math
 import numpy as np
 import pytest
 
-import wholebody as wb
 from wholebody.planning.gait import stride_capped, trot
 from wholebody.planning.planner import GaitPlanner
 from wholebody.planning.trunk import VelocityCommand
-from wholebody.scenarios.locomotion import TROT_SPEED, make_schedule, paper_length, MAX_STRIDE
+from wholebody.scenarios.locomotion import MAX_STRIDE, TROT_SPEED, make_schedule, paper_length
 
 T0, DUTY, L = 0.8, 0.5, 0.2  # period (s), duty factor, stride cap (m)
 V_CAP = L / (DUTY * T0)  # the speed where the fixed period's stance travel reaches L

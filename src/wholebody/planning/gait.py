@@ -101,6 +101,9 @@ class GaitSchedule:
         object.__setattr__(self, "legs", tuple(self.legs))
         object.__setattr__(self, "period", float(self.period))
         object.__setattr__(self, "start", float(self.start))
+        if self.period_at is not None and not callable(self.period_at):
+            raise ValueError(f"period_at: expected a function of time or None, "
+                             f"got {self.period_at!r}")
         object.__setattr__(self, "_segments", [(self.start, 0, self.period)])
         object.__setattr__(self, "_horizon", [self.start, 0])  # the next boundary to decide
 

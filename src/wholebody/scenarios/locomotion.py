@@ -276,11 +276,12 @@ def gait_options(robot, shape: dict | None = None) -> dict:
 
 
 def make_schedule(robot, gait: str, start: float = 1.0, shape: dict | None = None,
-                  command: VelocityCommand | None = None):
+                  command=None):
     """The ``gait`` schedule (crawl, trot or stand) of ``robot``'s four feet, addressed by role
     (:func:`~wholebody.robots.roles.quadruped_legs`), starting at ``start`` s, its period the
     :data:`GAIT_SHAPE` parameter in ``shape`` if given and > 0, else HyQ's times
-    :func:`froude_ratio` (dynamically similar steps). Given the ``command``, a trot's period
+    :func:`froude_ratio` (dynamically similar steps). Given the ``command`` (a
+    :class:`VelocityCommand` or a ``CommandSchedule``: its ``velocity(t)``), a trot's period
     shortens with its speed so that its stride stays within ``max_stride``
     (:func:`~wholebody.planning.gait.stride_capped`)."""
     legs = quadruped_legs(robot)
@@ -440,8 +441,8 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     (:func:`wbc_gains`; :func:`gain_options` says which each takes), unless ``controller_options``
     gives the same keyword. ``after_fall``: once the robot has fallen,
     the run stops this many seconds later (None: it runs its whole ``duration``). ``shape``: the
-    :data:`GAIT_SHAPE` parameters (step height, period, stride cap) for the planner built here. ``pushes``:
-    the simulator applies these (:class:`~wholebody.sim.disturbance.Push`).
+    :data:`GAIT_SHAPE` parameters (step height, period, stride cap) for the planner built here.
+    ``pushes``: the simulator applies these (:class:`~wholebody.sim.disturbance.Push`).
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()
