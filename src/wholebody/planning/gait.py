@@ -15,13 +15,18 @@ lifts off at ``start + (k + offset_i) * period`` for ``k = 0, 1, ...``, swings f
 lift-off) is ``phi = frac((t - start) / period - offset_i)`` and it swings iff ``phi < 1 - duty_i``.
 Event instants belong to the new phase: at its lift-off time a leg is swinging, at its touchdown
 time it is in stance (a tolerance of 1e-9 cycle absorbs rounding).
+
+A schedule may let its period change from one gait cycle to the next (``period_at``, e.g.
+:func:`stride_capped`): ``(t - start) / period`` above is then the number of cycles elapsed, the
+integral of 1 / period, so the phase stays continuous where the period changes.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
-from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -59,7 +64,9 @@ class Swing(NamedTuple):
 class GaitSchedule:
     """A periodic contact schedule: cycle ``period`` [s], per-leg phase ``offsets`` (lift-off phase,
     in cycles) and ``duty`` factors (stance fraction, in (0, 1]; a scalar applies to every leg),
-    optional ``start`` time before which all legs are in stance.
+    optional ``start`` time before which all legs are in stance. ``period_at(t)``, if given, is the
+    period of the cycle that begins at time ``t`` (cycle boundaries: phase 0 of the cycle count);
+    before ``start`` and without it the period is ``period``.
 
     Legs are addressed by name (``"left-front"``, or a robot's contact name) or index into ``legs``.
     """
@@ -70,6 +77,10 @@ class GaitSchedule:
     legs: Sequence[str] = LEGS
     start: float = 0.0
     name: str = "gait"
+    period_at: Callable[[float], float] | None = None
+    # (t_j, c_j, T_j): from time t_j (cycle c_j, an integer) on, the period is T_j; grown lazily
+    _segments: list = field(init=False, repr=False, compare=False, default=None)
+    _horizon: list = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self):
         n = len(self.legs)
@@ -90,6 +101,50 @@ class GaitSchedule:
         object.__setattr__(self, "legs", tuple(self.legs))
         object.__setattr__(self, "period", float(self.period))
         object.__setattr__(self, "start", float(self.start))
+        if self.period_at is not None and not callable(self.period_at):
+            raise ValueError(f"period_at: expected a function of time or None, "
+                             f"got {self.period_at!r}")
+        object.__setattr__(self, "_segments", [(self.start, 0, self.period)])
+        object.__setattr__(self, "_horizon", [self.start, 0])  # the next boundary to decide
+
+    # ------------------------------------------------------------------ the cycle clock
+    def _grow(self, t: float = -math.inf, c: float = -math.inf) -> None:
+        """Decide the periods of the cycles beginning up to time ``t`` and cycle ``c``."""
+        if self.period_at is None:
+            return
+        seg, hz = self._segments, self._horizon
+        while (hz[0] <= t < math.inf) or (hz[1] <= c < math.inf):
+            t_k, k = hz
+            T = float(self.period_at(t_k))
+            if not (math.isfinite(T) and T > 0.0):
+                T = seg[-1][2]  # a law without an answer: keep the period
+            if T != seg[-1][2]:
+                seg.append((t_k, k, T))
+            t_j, c_j, T_j = seg[-1]
+            hz[0], hz[1] = t_j + (k + 1 - c_j) * T_j, k + 1
+
+    def _segment_at_time(self, t: float) -> tuple[float, int, float]:
+        self._grow(t=t)
+        seg = self._segments
+        return seg[max(0, bisect.bisect_right(seg, (t, math.inf, math.inf)) - 1)]
+
+    def cycles(self, t: float) -> float:
+        """Gait cycles elapsed since ``start`` at time ``t`` (negative before it)."""
+        t_j, c_j, T_j = self._segment_at_time(t)
+        return c_j + (t - t_j) / T_j
+
+    def cycle_time(self, c: float) -> float:
+        """The time at which ``c`` cycles have elapsed since ``start`` (the inverse of
+        :meth:`cycles`)."""
+        self._grow(c=c)
+        seg = self._segments
+        j = max(0, bisect.bisect_right([s[1] for s in seg], c) - 1)
+        t_j, c_j, T_j = seg[j]
+        return t_j + (c - c_j) * T_j
+
+    def period_of(self, t: float) -> float:
+        """The period of the gait cycle in progress at ``t``."""
+        return self._segment_at_time(t)[2]
 
     # ------------------------------------------------------------------ basics
     @property
@@ -111,12 +166,24 @@ class GaitSchedule:
         """(1 - duty) * period: how long one swing of ``leg`` lasts."""
         return (1.0 - self.duty[self.index(leg)]) * self.period
 
-    def stance_duration(self, leg: str | int) -> float:
-        """duty * period: how long ``leg`` stays in stance between two swings (T_stance)."""
-        return self.duty[self.index(leg)] * self.period
+    def stance_duration(self, leg: str | int, t: float | None = None) -> float:
+        """duty * period: how long ``leg`` stays in stance between two swings (T_stance). With
+        ``t`` and a changing period: the stance in progress at ``t``, or the one after the swing
+        in progress."""
+        i = self.index(leg)
+        if t is None or self.period_at is None or self.duty[i] >= 1.0:
+            return self.duty[i] * self.period
+        k = self.swing_index(i, t)
+        if self.in_swing(i, t):
+            k += 1
+        touchdown, liftoff = self.touchdown_time(i, k - 1), self.liftoff_time(i, k)
+        segment = self._segment_at_time(touchdown)
+        if segment is self._segment_at_time(liftoff):  # one period throughout
+            return self.duty[i] * segment[2]
+        return liftoff - touchdown
 
     def _cycle(self, i: int, t: float) -> tuple[int, float]:
-        x = (t - self.start) / self.period - self.offsets[i] + _EPS
+        x = self.cycles(t) - self.offsets[i] + _EPS
         k = math.floor(x)
         return k, x - k
 
@@ -163,12 +230,16 @@ class GaitSchedule:
     def liftoff_time(self, leg: str | int, k: int) -> float:
         """Lift-off time of swing number ``k`` (k = 0 is the first swing after ``start``)."""
         i = self.index(leg)
-        return self.start + (k + self.offsets[i]) * self.period
+        if self.period_at is None:
+            return self.start + (k + self.offsets[i]) * self.period
+        return self.cycle_time(k + self.offsets[i])
 
     def touchdown_time(self, leg: str | int, k: int) -> float:
         """Touchdown time ending swing number ``k``."""
         i = self.index(leg)
-        return self.start + (k + self.offsets[i] + 1.0 - self.duty[i]) * self.period
+        if self.period_at is None:
+            return self.start + (k + self.offsets[i] + 1.0 - self.duty[i]) * self.period
+        return self.cycle_time(k + self.offsets[i] + 1.0 - self.duty[i])
 
     def swing_index(self, leg: str | int, t: float) -> int | None:
         """Index of the current swing of ``leg`` if it swings at ``t``, else of its next swing;
@@ -221,12 +292,13 @@ class GaitSchedule:
             if self.duty[i] >= 1.0:
                 continue
             sw = 1.0 - self.duty[i]
-            k = max(0, math.floor((t0 - self.start) / self.period - self.offsets[i] - sw))
+            k = max(0, math.floor(self.cycles(t0) - self.offsets[i] - sw))
             while True:
                 lo = self.liftoff_time(i, k)
                 if lo >= t1:
                     break
-                td = lo + sw * self.period
+                td = (lo + sw * self.period if self.period_at is None
+                      else self.touchdown_time(i, k))
                 if td > t0:
                     out.append(Swing(lo, td, self.legs[i], k))
                 k += 1
@@ -237,7 +309,9 @@ class GaitSchedule:
         """Lift-offs and touchdowns with time in [t0, t1), sorted by time (touchdowns first at equal
         times, then leg order)."""
         out: list[GaitEvent] = []
-        for s in self.swings(t0 - self.period, t1):
+        back = (t0 - self.period if self.period_at is None
+                else self.cycle_time(self.cycles(t0) - 1.0))
+        for s in self.swings(back, t1):
             if t0 <= s.liftoff < t1:
                 out.append(GaitEvent(s.liftoff, s.leg, "liftoff", s.index))
             if t0 <= s.touchdown < t1:
@@ -308,3 +382,28 @@ def trot(period: float = TROT_PERIOD, duty: float = 0.5, start: float = 0.0,
 def stand(legs: Sequence[str] = LEGS, period: float = 1.0) -> GaitSchedule:
     """All legs in stance forever (duty 1)."""
     return GaitSchedule(period, (0.0,) * len(legs), 1.0, legs, 0.0, "stand")
+
+
+def stride_capped(schedule: GaitSchedule, speed: Callable[[float], float], max_stride: float,
+                  min_period: float = 0.0) -> GaitSchedule:
+    """``schedule`` with a period that shortens with the commanded ``speed(t)`` [m/s] so that a
+    stance foot travels at most ``max_stride`` [m] relative to its hip (the Raibert footholds put
+    it v T_stance / 2 ahead of the hip at touchdown and as far behind at lift-off): each cycle's
+    period is ``min(period, max_stride / (duty v))``, no shorter than ``min_period``, ``v`` the
+    larger commanded speed at the cycle's two ends. Below ``max_stride / (duty period)`` the
+    period is ``period`` exactly; above it the stride ``v T`` stays ``max_stride / duty``.
+    """
+    if not (math.isfinite(max_stride) and max_stride > 0.0):
+        raise ValueError(f"max_stride: must be a positive length, got {max_stride}")
+    base, duty = schedule.period, max(schedule.duty)
+
+    def capped(v: float) -> float:
+        if duty * v * base <= max_stride:
+            return base
+        return max(max_stride / (duty * v), min_period)
+
+    def period_at(t: float) -> float:
+        v = abs(float(speed(t)))
+        return capped(max(v, abs(float(speed(t + capped(v))))))
+
+    return replace(schedule, period_at=period_at)

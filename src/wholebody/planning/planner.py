@@ -207,17 +207,18 @@ class GaitPlanner:
     def touchdown_target(self, leg: str | int, t_touchdown: float, com_velocity=None,
                          t_now: float | None = None) -> Foothold:
         """Raibert foothold of ``leg`` for a touchdown at ``t_touchdown``: the hip at touchdown plus
-        its commanded velocity times T_stance / 2, plus ``feedback_gain`` times the error between
-        ``com_velocity`` (measured, if given) and the commanded CoM velocity at ``t_now``."""
+        its commanded velocity times T_stance / 2 (of the stance that begins there), plus
+        ``feedback_gain`` times the error between ``com_velocity`` (measured, if given) and the
+        commanded CoM velocity at ``t_now``."""
         i = self.schedule.index(leg)
         hip, v_hip = self.hip(i, t_touchdown)
         velocity = None
         if com_velocity is not None and self.feedback_gain != 0.0:
             _, v_ref, _, _, _ = self.trunk.nominal(t_touchdown if t_now is None else t_now)
             velocity = v_hip + (np.asarray(com_velocity, dtype=float)[:2] - v_ref)
-        return raibert_foothold(hip, v_hip, self.schedule.stance_duration(i), self.terrain,
-                                velocity, self.feedback_gain, float(self._radius[i]),
-                                self.max_step)
+        return raibert_foothold(hip, v_hip, self.schedule.stance_duration(i, t_touchdown),
+                                self.terrain, velocity, self.feedback_gain,
+                                float(self._radius[i]), self.max_step)
 
     def swing_clearance(self, leg: str | int, p0, p1, swing, clearance: float | None = None
                         ) -> float:

@@ -61,6 +61,23 @@ def commanded_distance(params: dict) -> float:
     return 0.5 * (v0 + v0 + (v1 - v0) * ramp / T) * ramp + v1 * max(D - GAIT_START - T, 0.0)
 
 
+def hold_velocity(run, params: dict) -> dict:
+    """Over the hold at ``speed_end`` after the ramp: the RMS error of the CoM's forward velocity,
+    each sample the mean over one gait period around it, against the command, and its share of the
+    command (empty if the hold is shorter than a gait period or the run fell)."""
+    t, x = run.log["t"], run.log["com"][:, 0]
+    t_hold = GAIT_START + params["ramp_time"]
+    period = run.controller.planner.schedule.period_of(t_hold)
+    sel = (t >= t_hold + 0.5 * period) & (t <= t[-1] - 0.5 * period)
+    if run.fell or not np.any(sel):
+        return {}
+    v = (np.interp(t[sel] + 0.5 * period, t, x) - np.interp(t[sel] - 0.5 * period, t, x)) / period
+    error = float(np.sqrt(np.mean((v - params["speed_end"]) ** 2)))
+    share = error / params["speed_end"] if params["speed_end"] > 0 else None
+    return {"hold_velocity_rms_mps": error, "hold_velocity_error_share": share,
+            "hold_period_s": period}
+
+
 def validate(robot, params: dict) -> None:
     check_gait(params)
     if params["duration"] <= GAIT_START:
@@ -93,7 +110,8 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     for name, r in runs.items():
         metrics[name] = {**r.tracking(t_from=1.0), **outcome(r), "commanded_distance_m": expected,
                          "max_stance_slip_m": float(r.stance_slip().max()),
-                         "cycle_time_median_us": float(np.median(r.log["cycle_time"]) * 1e6)}
+                         "cycle_time_median_us": float(np.median(r.log["cycle_time"]) * 1e6),
+                         **hold_velocity(r, params)}
         walked[name] = (not r.fell) and r.failures == 0 and r.distance > 0.5 * expected
     success = all(walked.values())
     if len(runs) == 2 and walked["passive"] and not walked["quasi-static"]:

@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from ..control.passive import REGULARIZATIONS, PassiveConfig, PassiveWBC, SwingGains
 from ..control.quasi_static import QuasiStaticController
-from ..planning.gait import CRAWL_PERIOD, TROT_PERIOD, crawl, stand, trot
+from ..planning.gait import CRAWL_PERIOD, TROT_PERIOD, crawl, stand, stride_capped, trot
 from ..planning.planner import GaitPlanner
 from ..planning.terrain import Terrain
 from ..planning.trunk import VelocityCommand
@@ -155,13 +155,23 @@ def paper_length(metres: float) -> PaperLength:
     return PaperLength(metres / PAPER_BASE_HEIGHT, float(metres))
 
 
-#: the gait's step height and period: HyQ's, kept in proportion on any robot (:func:`gait_options`,
-#: :func:`make_schedule`)
+#: the trot's longest stance travel of a foot relative to its hip on HyQ (m; :func:`make_schedule`),
+#: 2/3 of its base height: the default trot period reaches it at 1.0 m/s. Chosen by the speed ramps
+#: to Froude 0.5 of docs/results.md ("Top speed of the trot"): the only cap of 0.2, 0.25, 0.3, 0.35
+#: and 0.4 m with which all six quadrupeds got there
+MAX_STRIDE = 0.4
+
+#: the gait's step height, period and stride cap: HyQ's, kept in proportion on any robot
+#: (:func:`gait_options`, :func:`make_schedule`)
 GAIT_SHAPE = (
     Parameter("clearance", paper_length(0.1), "swing feet's highest point above the higher of "
               "their lift-off and touchdown points (m)", low=0.0, high=0.5 * Parameter.H),
     Parameter("period", 0.0, "gait period (s; 0: HyQ's crawl or trot period times "
               "sqrt(h / 0.599))", low=0.0, high=Parameter.MAX_TIME),
+    Parameter("max_stride", paper_length(MAX_STRIDE), "trot: longest travel of a stance foot "
+              "relative to its hip (m; duty x speed x period); above the speed where the period "
+              "reaches it, the period shortens as max_stride / (duty x speed); 0: fixed period",
+              low=0.0, high=Parameter.H),
 )
 
 
@@ -265,17 +275,28 @@ def gait_options(robot, shape: dict | None = None) -> dict:
     return {"clearance": paper_length(0.1).value(robot) if clearance is None else clearance}
 
 
-def make_schedule(robot, gait: str, start: float = 1.0, shape: dict | None = None):
+def make_schedule(robot, gait: str, start: float = 1.0, shape: dict | None = None,
+                  command=None):
     """The ``gait`` schedule (crawl, trot or stand) of ``robot``'s four feet, addressed by role
     (:func:`~wholebody.robots.roles.quadruped_legs`), starting at ``start`` s, its period the
     :data:`GAIT_SHAPE` parameter in ``shape`` if given and > 0, else HyQ's times
-    :func:`froude_ratio` (dynamically similar steps)."""
+    :func:`froude_ratio` (dynamically similar steps). Given the ``command`` (a
+    :class:`VelocityCommand` or a ``CommandSchedule``: its ``velocity(t)``), a trot's period
+    shortens with its speed so that its stride stays within ``max_stride``
+    (:func:`~wholebody.planning.gait.stride_capped`)."""
     legs = quadruped_legs(robot)
     period = (shape or {}).get("period") or None
     if gait == "crawl":
         return crawl(period or CRAWL_PERIOD * froude_ratio(robot), start=start, legs=legs)
     if gait == "trot":
-        return trot(period or TROT_PERIOD * froude_ratio(robot), start=start, legs=legs)
+        schedule = trot(period or TROT_PERIOD * froude_ratio(robot), start=start, legs=legs)
+        max_stride = (shape or {}).get("max_stride")
+        if max_stride is None:
+            max_stride = paper_length(MAX_STRIDE).value(robot)
+        if command is None or max_stride == 0.0:
+            return schedule
+        return stride_capped(schedule, lambda t: float(np.linalg.norm(command.velocity(t))),
+                             max_stride, MIN_GAIT_PERIOD)
     if gait == "stand":
         return stand(legs=legs)
     raise ValueError(f"gait: expected one of {GAITS}, got '{gait}'")
@@ -430,14 +451,14 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     (:func:`wbc_gains`; :func:`gain_options` says which each takes), unless ``controller_options``
     gives the same keyword. ``after_fall``: once the robot has fallen,
     the run stops this many seconds later (None: it runs its whole ``duration``). ``shape``: the
-    :data:`GAIT_SHAPE` parameters (step height, period) for the planner built here. ``pushes``:
-    the simulator applies these (:class:`~wholebody.sim.disturbance.Push`).
+    :data:`GAIT_SHAPE` parameters (step height, period, stride cap) for the planner built here.
+    ``pushes``: the simulator applies these (:class:`~wholebody.sim.disturbance.Push`).
     """
     if q0 is not None:
         q0 = np.asarray(q0, dtype=float).copy()
     if planner is None:
-        planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start, shape), command,
-                                        terrain, q=q0, t0=0.0,
+        planner = GaitPlanner.for_robot(robot, make_schedule(robot, gait, start, shape, command),
+                                        command, terrain, q=q0, t0=0.0,
                                         **{**gait_options(robot, shape), **(planner_options or {})})
     options = gain_options(robot, controller, gains or {}, controller_options or {})
     if controller == "passive":
