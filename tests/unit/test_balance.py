@@ -256,7 +256,7 @@ def test_push_series_hands_every_controller_option_to_its_trials(monkeypatch):
     from wholebody.scenarios.pushes import CONTROLLER_PARAMETERS
 
     seen = []
-    monkeypatch.setattr(push_series, "push_trial", lambda robot, controller, p: (
+    monkeypatch.setattr(push_series, "push_trial", lambda robot, controller, p, observers=(): (
         seen.append(p) or SimpleNamespace(success=True, metrics={})))
     params = {"push_duration": 0.1, "duration": 3.5, "q_angular": 2.0, "angular_weight": 1e-3,
               "q_integral": 0.0, "integral_limit": 0.01, "q_orientation": 5.0, "pd_stiffness": 14.0,
