@@ -5,7 +5,11 @@ passive WBC, talos14 standing under the standing controller), then replayed thro
 one cycle = forward kinematics of the measured joints + IMU prediction + kinematic update + the
 estimate in Pinocchio's conventions. A benchmark, not a test.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/estimator.py [--seconds 2] [--repeat 3]
+``--against REV``: the estimator as it was at git revision REV (``estimation/ekf.py`` and
+``kinematics.py`` read with ``git show``) timed on the same readings, cycle by cycle alternating
+with the current one, so that both see the same load on a shared machine.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/estimator.py [--seconds 2] [--repeat 3] [--against REV]
 """
 
 from __future__ import annotations
@@ -15,7 +19,12 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import importlib  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -59,29 +68,61 @@ def record(name: str, seconds: float):
     return robot, recorder.readings
 
 
-def time_cycles(robot, readings) -> np.ndarray:
-    ekf = KinematicInertialEKF(robot, EstimatorNoise.for_sensors(SensorSpec()))
-    ekf.reset(readings[0], np.zeros(3))
-    times = np.empty(len(readings) - 1)
+def estimator_at(revision: str, folder: Path):
+    """The ``wholebody.estimation`` filter class as at git ``revision``, loaded as a package
+    ``estimation_at_revision`` beside the current one (its ``..`` imports point to wholebody)."""
+    root = Path(__file__).resolve().parent.parent
+    package = folder / "estimation_at_revision"
+    package.mkdir()
+    for name in ("ekf.py", "kinematics.py"):
+        text = subprocess.run(["git", "show", f"{revision}:src/wholebody/estimation/{name}"],
+                              cwd=root, check=True, capture_output=True, text=True).stdout
+        (package / name).write_text(text.replace("from ..", "from wholebody."))
+    (package / "__init__.py").write_text("")
+    sys.path.insert(0, str(folder))
+    module = importlib.import_module("estimation_at_revision.ekf")
+    return module.KinematicInertialEKF, module.EstimatorNoise
+
+
+def time_cycles(robot, readings, filters) -> list[np.ndarray]:
+    """Per-cycle times of each of ``filters`` ((class, noise class) pairs) on ``readings``, the
+    filters taking turns at every reading."""
+    ekfs = [cls(robot, noise.for_sensors(SensorSpec())) for cls, noise in filters]
+    for ekf in ekfs:
+        ekf.reset(readings[0], np.zeros(3))
+    times = np.empty((len(ekfs), len(readings) - 1))
     for i, reading in enumerate(readings[1:]):
-        start = time.perf_counter()
-        ekf.update(reading)
-        times[i] = time.perf_counter() - start
-    return times
+        for k, ekf in enumerate(ekfs):
+            start = time.perf_counter()
+            ekf.update(reading)
+            times[k, i] = time.perf_counter() - start
+    return list(times)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="simulated seconds recorded")
-    parser.add_argument("--repeat", type=int, default=3, help="replays; the fastest median kept")
+    parser.add_argument("--repeat", type=int, default=3,
+                        help="replays; the median of their medians is reported")
+    parser.add_argument("--against", default=None, metavar="REV",
+                        help="also time the estimator of git revision REV, interleaved")
     args = parser.parse_args()
-    for name in ("hyq", "talos14"):
-        robot, readings = record(name, args.seconds)
-        runs = [time_cycles(robot, readings) for _ in range(args.repeat)]
-        best = min(runs, key=np.median)
-        print(f"{name:8s} ({len(robot.contact_names)} contacts, state {15 + 3 * len(robot.contact_names)}):"
-              f" {len(best)} cycles, median {np.median(best) * 1e6:6.1f} µs, "
-              f"p99 {np.percentile(best, 99) * 1e6:6.1f} µs")
+    filters = [("current", (KinematicInertialEKF, EstimatorNoise))]
+    with tempfile.TemporaryDirectory() as folder:
+        if args.against:
+            filters.append((args.against, estimator_at(args.against, Path(folder))))
+        for name in ("hyq", "talos14"):
+            robot, readings = record(name, args.seconds)
+            runs = [time_cycles(robot, readings, [f for _, f in filters])
+                    for _ in range(args.repeat)]
+            for k, (label, _) in enumerate(filters):
+                medians = [np.median(run[k]) * 1e6 for run in runs]
+                p99 = np.median([np.percentile(run[k], 99) * 1e6 for run in runs])
+                print(f"{name:8s} ({len(robot.contact_names)} contacts, state "
+                      f"{15 + 3 * len(robot.contact_names)}) {label:10s}: {len(runs[0][k])} "
+                      f"cycles, median {np.median(medians):6.1f} µs (runs "
+                      f"{', '.join(f'{m:.1f}' for m in medians)}), p99 {p99:6.1f} µs",
+                      flush=True)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,12 @@ estimate lag 2-3 % of the distance trotted).
 
 The filter works on the error state [dr, dv, dphi, dp_1 .. dp_n, db_f, db_w] with the orientation
 error about the world axes (R = exp(dphi) R_hat), which gives the linearisations below in the
-world frame instead of the paper's body-frame form; the models are the same.
+world frame instead of the paper's body-frame form; the models are the same. The measurement
+Jacobian is taken in world axes too (the IMU-frame one rotated by the orthogonal blockdiag(R),
+which leaves the gain, the correction and the normalised innovations as they are). Each cycle costs
+a few dense products: the prediction touches only the rows and columns of r, v and phi, the update
+solves with one Cholesky factor and subtracts W W^T (W = P H^T L^-T), the symmetric form of the
+Joseph update for the optimal gain.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from ..robot import GRAVITY, Robot
 from ..sim.sensors import SensorReading, SensorSpec
@@ -32,6 +38,17 @@ from .kinematics import LegKinematics
 log = logging.getLogger(__name__)
 
 _GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY])
+_MINUS_ONES3 = -np.ones(3)
+# [x]x's off-diagonal entries (0,1) (0,2) (1,0) (1,2) (2,0) (2,1): sign * x[component]
+_SKEW_ROWS, _SKEW_COLUMNS = np.array([0, 0, 1, 1, 2, 2]), np.array([1, 2, 0, 2, 0, 1])
+_SKEW_COMPONENT = np.array([2, 1, 2, 0, 1, 0])
+_SKEW_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+
+
+def _skew_at(columns: int, row: int, column: int) -> np.ndarray:
+    """Flat indices of a [x]x block's off-diagonal entries at (row, column) of a C-ordered
+    matrix with ``columns`` columns."""
+    return (row + _SKEW_ROWS) * columns + column + _SKEW_COLUMNS
 
 
 def _skew(x: np.ndarray) -> np.ndarray:
@@ -154,13 +171,54 @@ class KinematicInertialEKF:
         self._feet = slice(9, 9 + 3 * n_feet)
         self._accel_bias = slice(9 + 3 * n_feet, 12 + 3 * n_feet)
         self._gyro_bias = slice(12 + 3 * n_feet, 15 + 3 * n_feet)
-        self._H = np.zeros((3 * n_feet, self.size))
-        self._F = np.eye(self.size)
+        size, m = self.size, 3 * n_feet
+        noise = self.noise
+        # the measurement Jacobian in world axes: foot i's rows [-I, 0, [p_i - r]x, .. I ..]
+        self._G = np.zeros((m, size))
+        for i in range(n_feet):
+            self._G[3 * i:3 * i + 3, 0:3] = -np.eye(3)
+            self._G[3 * i:3 * i + 3, 9 + 3 * i:12 + 3 * i] = np.eye(3)
+        # G's [p_i - r]x entries: where, from which component of (p - r).ravel(), which sign
+        self._skew_at = np.concatenate([_skew_at(size, 3 * i, 6) for i in range(n_feet)])
+        self._skew_from = np.concatenate([3 * i + _SKEW_COMPONENT for i in range(n_feet)])
+        self._skew_sign = np.tile(_SKEW_SIGN, n_feet)
+        # the rows of r, v and phi of the transition matrix F (the others are the identity's)
+        self._F9 = np.zeros((9, size))
+        self._F9[:, 0:9] = np.eye(9)
+        # flat indices in F9 of dt I (r from v), [f]x (v from phi), R (v from b_f, phi from b_w)
+        ab, gb = 9 + 3 * n_feet, 12 + 3 * n_feet
+        block = np.arange(3)[:, None] * size + np.arange(3)  # a 3x3 block's flat offsets
+        self._transition_at = np.concatenate((
+            [3, size + 4, 2 * size + 5], _skew_at(size, 3, 6),
+            (3 * size + ab + block).ravel(), (6 * size + gb + block).ravel()))
+        # Q's diagonal = basis @ (dt^4, dt^2, dt, dt * swinging_1 .. dt * swinging_n)
+        basis = np.zeros((size, 3 + n_feet))
+        basis[0:3, 0] = 0.25 * noise.accel_noise ** 2
+        basis[3:6, 1] = noise.accel_noise ** 2
+        basis[6:9, 1] = noise.gyro_noise ** 2
+        basis[self._feet, 2] = noise.stance_foot_walk ** 2
+        basis[self._accel_bias, 2] = noise.accel_bias_walk ** 2
+        basis[self._gyro_bias, 2] = noise.gyro_bias_walk ** 2
+        for i in range(n_feet):
+            basis[9 + 3 * i:12 + 3 * i, 3 + i] = (noise.swing_foot_walk ** 2
+                                                  - noise.stance_foot_walk ** 2)
+        self._noise_basis = basis
+        self._noise_coefficients = np.zeros(3 + n_feet)
+        # [P G^T ; innovation^T]: the right-hand sides of the triangular solve
+        self._right_sides = np.zeros((size + 1, m))
+        self._blocks = np.zeros((m, m))
+        self._block_mask = np.kron(np.eye(n_feet, dtype=bool), np.ones((3, 3), dtype=bool))
         self._radii = self.kinematics.radii
-        self._identity = np.eye(self.size)
-        self._R_meas = self.noise.kinematics_noise ** 2 * np.eye(3 * n_feet)
+        self._rolls = bool(np.any(self._radii > 0.0))
+        self._kinematics_variance = noise.kinematics_noise ** 2
         imu = self.kinematics.imu_in_base
         self._imu_rotation, self._imu_translation = imu.rotation.copy(), imu.translation.copy()
+        self._lever_imu = self._imu_rotation.T @ self._imu_translation  # base -> IMU, IMU axes
+        # the base's twist (base frame) from the IMU's velocity and angular velocity (IMU frame):
+        # v_base = R_i (v_imu - omega x lever), omega_base = R_i omega
+        self._twist_from_imu = np.zeros((6, 6))
+        self._twist_from_imu[0:3, 0:3] = self._twist_from_imu[3:6, 3:6] = self._imu_rotation
+        self._twist_from_imu[0:3, 3:6] = self._imu_rotation @ _skew(self._lever_imu)
         self.estimate: StateEstimate | None = None
         self._t = 0.0
         self._warned = False
@@ -211,18 +269,21 @@ class KinematicInertialEKF:
             raise RuntimeError("KinematicInertialEKF.update before reset: call reset(reading, "
                                "base_position) with the first reading")
         dt = float(reading.t) - self._t
-        if not (dt > 0.0 and np.isfinite(reading.gyro).all() and np.isfinite(reading.accel).all()
-                and np.isfinite(reading.joint_positions).all()):
+        gyro = np.asarray(reading.gyro, dtype=float)
+        accel = np.asarray(reading.accel, dtype=float)
+        joints = np.asarray(reading.joint_positions, dtype=float)
+        # a sum is finite when every term is (short of overflowing past 1e308)
+        if not (dt > 0.0 and math.isfinite(gyro.sum() + accel.sum() + joints.sum())):
             self._warn(f"reading at t = {reading.t!r} skipped (not finite or not after "
                        f"t = {self._t:.6f})")
             return self.estimate
-        gyro = np.asarray(reading.gyro, dtype=float)
         contact = np.asarray(reading.contact, bool)
         if contact.shape != (self.n_feet,):
             contact = np.zeros(self.n_feet, bool)
-        measured, foot_rates = self.kinematics.feet_in_imu(
-            reading.joint_positions, gyro - self.gyro_bias, reading.joint_velocities)
-        self._predict(gyro, np.asarray(reading.accel, dtype=float), contact, foot_rates, dt)
+        omega = gyro - self.gyro_bias
+        measured, foot_rates = self.kinematics.feet_in_imu(joints, omega,
+                                                           reading.joint_velocities)
+        self._predict(omega, accel, contact, foot_rates, dt)
         self._correct(measured)
         if self.ground is not None:
             self._correct_ground(contact)
@@ -230,74 +291,71 @@ class KinematicInertialEKF:
         self.estimate = self._output(reading)
         return self.estimate
 
-    def _predict(self, gyro: np.ndarray, accel: np.ndarray, contact: np.ndarray,
+    def _predict(self, omega: np.ndarray, accel: np.ndarray, contact: np.ndarray,
                  foot_rates: np.ndarray, dt: float) -> None:
-        """Bloesch et al. 2013, eqs. 5-11: IMU integration and the error-state covariance; the
-        stance feet roll by their angular velocity ``foot_rates`` (IMU frame)."""
-        noise, R = self.noise, self.rotation
-        omega = gyro - self.gyro_bias
+        """Bloesch et al. 2013, eqs. 5-11: IMU integration (``omega`` the bias-corrected gyro)
+        and the error-state covariance; the stance feet roll by their angular velocity
+        ``foot_rates`` (IMU frame)."""
+        R = self.rotation
         force_world = R @ (accel - self.accel_bias)
         acc = force_world + _GRAVITY_WORLD
         self.position = self.position + dt * self.velocity + 0.5 * dt * dt * acc
         self.velocity = self.velocity + dt * acc
-        # omega x (radius z) = radius (omega_y, -omega_x, 0), world axes; zero for soles
-        rates_world = foot_rates @ R.T
-        rolling = np.zeros((self.n_feet, 3))
-        rolling[:, 0] = rates_world[:, 1]
-        rolling[:, 1] = -rates_world[:, 0]
-        self.feet = self.feet + (dt * contact * self._radii)[:, None] * rolling
+        if self._rolls:  # omega x (radius z) = radius (omega_y, -omega_x, 0), world axes
+            rates_world = foot_rates @ R.T
+            step = dt * contact * self._radii
+            self.feet[:, 0] += step * rates_world[:, 1]
+            self.feet[:, 1] -= step * rates_world[:, 0]
         self.rotation = R @ pin.exp3(omega * dt)
         self._omega = omega
-        F = self._F
-        F[0:3, 3:6] = dt * np.eye(3)
-        F[3:6, 6:9] = -dt * _skew(force_world)
-        F[3:6, self._accel_bias] = -dt * R
-        F[6:9, self._gyro_bias] = -dt * R
-        Q = np.zeros(self.size)
-        Q[0:3] = (0.5 * dt * dt * noise.accel_noise) ** 2
-        Q[3:6] = (dt * noise.accel_noise) ** 2
-        Q[6:9] = (dt * noise.gyro_noise) ** 2
-        walk = np.where(contact, noise.stance_foot_walk, noise.swing_foot_walk)
-        Q[self._feet] = np.repeat(walk ** 2 * dt, 3)
-        Q[self._accel_bias] = noise.accel_bias_walk ** 2 * dt
-        Q[self._gyro_bias] = noise.gyro_bias_walk ** 2 * dt
-        P = F @ self.P @ F.T
-        P[np.diag_indices(self.size)] += Q
-        self.P = P
+        # F's entries that depend on the step: dt I, -dt [f]x, -dt R (twice), in one write
+        self._F9.reshape(-1)[self._transition_at] = -dt * np.concatenate(
+            (_MINUS_ONES3, _SKEW_SIGN * force_world[_SKEW_COMPONENT], R.reshape(-1),
+             R.reshape(-1)))
+        # F P F^T: F differs from the identity in its first nine rows only
+        P, F9 = self.P, self._F9
+        P[0:9] = F9 @ P
+        P[:, 0:9] = P @ F9.T
+        coefficients = self._noise_coefficients
+        coefficients[0:3] = dt ** 4, dt * dt, dt
+        np.multiply(~contact, dt, out=coefficients[3:])
+        P.reshape(-1)[::self.size + 1] += self._noise_basis @ coefficients
 
     def _correct(self, measured: np.ndarray) -> None:
         """Bloesch et al. 2013, eq. 12: the feet relative to the IMU, s_i = R^T (p_i - r)."""
-        R, H = self.rotation, self._H
+        R, G, P, size = self.rotation, self._G, self.P, self.size
         relative = self.feet - self.position
-        predicted = relative @ R
-        for i in range(self.n_feet):
-            rows = slice(3 * i, 3 * i + 3)
-            H[rows, 0:3] = -R.T
-            H[rows, 6:9] = R.T @ _skew(relative[i])
-            H[rows, 9 + 3 * i:12 + 3 * i] = R.T
-        innovation = (measured - predicted).ravel()
-        PHt = self.P @ H.T
-        S = H @ PHt + self._R_meas
-        blocks = np.array([S[3 * i:3 * i + 3, 3 * i:3 * i + 3] for i in range(self.n_feet)])
-        try:
-            K = np.linalg.solve(S, PHt.T).T
-            S_inv_blocks = np.linalg.inv(blocks)
-        except np.linalg.LinAlgError:
+        innovation = measured @ R.T - relative  # world axes
+        G.reshape(-1)[self._skew_at] = self._skew_sign * relative.reshape(-1)[self._skew_from]
+        right = self._right_sides
+        np.dot(P, G.T, out=right[:size])
+        right[size] = innovation.reshape(-1)
+        S = G @ right[:size]
+        S.reshape(-1)[::S.shape[0] + 1] += self._kinematics_variance
+        blocks = self._blocks
+        np.copyto(blocks, S, where=self._block_mask)
+        factor, info = lapack.dpotrf(S, lower=1)
+        if info == 0:
+            # L^-1 [P G^T | innovation] = [W^T | u], W = P G^T L^-T
+            solved, info = lapack.dtrtrs(factor, right.T, lower=1, overwrite_b=1)
+        if info == 0:
+            whitened, info = lapack.dposv(blocks, innovation.reshape(-1, 1), lower=1)[1:]
+        if info != 0:
             self._warn("kinematic update skipped: singular innovation covariance")
             return
-        dx = K @ innovation
+        W = solved.T[:size]
+        dx = W @ solved[:, size]
         self.position = self.position + dx[0:3]
         self.velocity = self.velocity + dx[3:6]
         self.rotation = pin.exp3(dx[6:9]) @ self.rotation
         self.feet = self.feet + dx[self._feet].reshape(-1, 3)
         self.accel_bias = self.accel_bias + dx[self._accel_bias]
         self.gyro_bias = self.gyro_bias + dx[self._gyro_bias]
-        IKH = self._identity - K @ H  # Joseph form: stays symmetric positive definite
-        P = IKH @ self.P @ IKH.T + self.noise.kinematics_noise ** 2 * (K @ K.T)
-        self.P = 0.5 * (P + P.T)
-        self._innovation = innovation.reshape(-1, 3)
-        self._foot_test = np.einsum("ni,nij,nj->n", self._innovation, S_inv_blocks,
-                                    self._innovation)
+        P -= W @ W.T  # = (I - KH) P (I - KH)^T + K R_meas K^T for K = P H^T S^-1
+        np.add(P, P.T, out=P)  # symmetric to the last bit (numpy buffers the overlap)
+        P *= 0.5
+        self._innovation = innovation @ R
+        self._foot_test = (innovation.reshape(-1) * whitened[:, 0]).reshape(-1, 3).sum(axis=1)
 
     def _correct_ground(self, contact: np.ndarray) -> None:
         """Each foot in contact on the known ground: its frame's height is the ground's under it
@@ -325,18 +383,12 @@ class KinematicInertialEKF:
     # ------------------------------------------------------------------ output
     def _output(self, reading: SensorReading) -> StateEstimate:
         """The IMU's state carried to the free-flyer (base joint) in Pinocchio's conventions."""
-        R_imu, R_i, t_i = self.rotation, self._imu_rotation, self._imu_translation
-        R_base = R_imu @ R_i.T
-        lever = R_base @ t_i
-        omega_world = R_imu @ self._omega
-        base_velocity_world = self.velocity - _cross(omega_world, lever)
-        q = np.empty(self.robot.nq)
-        q[0:3] = self.position - lever
-        q[3:7] = pin.Quaternion(R_base).normalized().coeffs()
-        q = self.robot.with_joint_angles(q, reading.joint_positions)
+        R_imu = self.rotation
+        q = self.kinematics.configuration.copy()  # the joints at this reading's angles
+        q[0:3] = self.position - R_imu @ self._lever_imu
+        q[3:7] = pin.Quaternion(R_imu @ self._imu_rotation.T).normalized().coeffs()
         v = np.empty(self.robot.nv)
-        v[0:3] = R_base.T @ base_velocity_world
-        v[3:6] = R_i @ self._omega
+        v[0:6] = self._twist_from_imu @ np.concatenate((self.velocity @ R_imu, self._omega))
         v[6:] = reading.joint_velocities
         return StateEstimate(t=self._t, q=q, v=v, covariance=self.P.copy(),
                              innovation=self._innovation.copy(), foot_test=self._foot_test.copy(),
