@@ -345,17 +345,22 @@ class KinematicInertialEKF:
             return
         W = solved.T[:size]
         dx = W @ solved[:, size]
+        self._inject(dx)
+        P -= W @ W.T  # = (I - KH) P (I - KH)^T + K R_meas K^T for K = P H^T S^-1
+        np.add(P, P.T, out=P)  # symmetric to the last bit (numpy buffers the overlap)
+        P *= 0.5
+        self._innovation = innovation @ R
+        self._foot_test = (innovation.reshape(-1) * whitened[:, 0]).reshape(-1, 3).sum(axis=1)
+
+    def _inject(self, dx: np.ndarray) -> None:
+        """The error state ``dx`` of a correction added to the nominal state (the orientation's
+        part as a rotation, Bloesch et al. 2013)."""
         self.position = self.position + dx[0:3]
         self.velocity = self.velocity + dx[3:6]
         self.rotation = pin.exp3(dx[6:9]) @ self.rotation
         self.feet = self.feet + dx[self._feet].reshape(-1, 3)
         self.accel_bias = self.accel_bias + dx[self._accel_bias]
         self.gyro_bias = self.gyro_bias + dx[self._gyro_bias]
-        P -= W @ W.T  # = (I - KH) P (I - KH)^T + K R_meas K^T for K = P H^T S^-1
-        np.add(P, P.T, out=P)  # symmetric to the last bit (numpy buffers the overlap)
-        P *= 0.5
-        self._innovation = innovation @ R
-        self._foot_test = (innovation.reshape(-1) * whitened[:, 0]).reshape(-1, 3).sum(axis=1)
 
     def _correct_ground(self, contact: np.ndarray) -> None:
         """Each foot in contact on the known ground: its frame's height is the ground's under it
@@ -371,12 +376,7 @@ class KinematicInertialEKF:
             column = self.P[:, j].copy()
             gain = column / (column[j] + sigma2)
             dx = gain * (height + self._radii[i] - z)
-            self.position = self.position + dx[0:3]
-            self.velocity = self.velocity + dx[3:6]
-            self.rotation = pin.exp3(dx[6:9]) @ self.rotation
-            self.feet = self.feet + dx[self._feet].reshape(-1, 3)
-            self.accel_bias = self.accel_bias + dx[self._accel_bias]
-            self.gyro_bias = self.gyro_bias + dx[self._gyro_bias]
+            self._inject(dx)
             P = self.P - np.outer(gain, column)
             self.P = 0.5 * (P + P.T)
 
