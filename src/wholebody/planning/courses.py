@@ -184,6 +184,13 @@ class Course:
                 out.append(a.x1)
         return out
 
+    def jumps_between(self, a, b) -> bool:
+        """Whether the surface jumps under the segment from (x, y) ``a`` to ``b``: a riser or
+        an end of rough ground (:attr:`edges`) between them, or rough ground under them."""
+        lo, hi = sorted((float(a[0]), float(b[0])))
+        return (any(lo <= e <= hi for e in self.edges)
+                or any(s.field is not None and s.x0 < hi and s.x1 > lo for s in self.strips))
+
     def safe_x(self, x: float, margin: float) -> float:
         """x moved to the nearest point at least ``margin`` from every gap and every
         :attr:`edges` (x itself if it is already safe)."""
@@ -422,8 +429,10 @@ class CoursePlanner(GaitPlanner):
     def swing_clearance(self, leg, p0, p1, swing, clearance: float | None = None) -> float:
         """The planner's clearance above the highest terrain under the path, capped by the leg's
         reach (:meth:`GaitPlanner.swing_clearance`); where the capped swing would meet an edge
-        (a riser crossed before mid-swing, the foot still low), raised in quarters of the foot
-        radius until its sphere passes over the course, the reach cap yielding to the terrain."""
+        (a riser crossed before mid-swing, the foot still low, :meth:`Course.jumps_between`),
+        raised in quarters of the foot radius until its sphere passes over the course, the reach
+        cap yielding to the terrain. Over a slope the cap stands: a leg of little reach (IIT
+        Centauro's) raised beyond it on a ramp drives its hip onto its limit."""
         course = getattr(self, "course", None)
         wanted = self.clearance if clearance is None else clearance
         if course is None:
@@ -432,6 +441,8 @@ class CoursePlanner(GaitPlanner):
         wanted += max(0.0, course.highest(p0[:2], p1[:2]) - ends)
         c = super().swing_clearance(leg, p0, p1, swing, wanted)
         radius = float(self._radius[self.schedule.index(leg)])
+        if not course.jumps_between(p0[:2], p1[:2]):
+            return c  # a slope or level ground: the reach cap stands (the swing may graze it)
         while c < wanted and not self._passes(p0, p1, swing, c, radius):
             c = min(wanted, c + 0.25 * max(radius, 1e-3))
         return c
