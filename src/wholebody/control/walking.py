@@ -697,17 +697,17 @@ class Walking:
         this the other sole would take that difference at once). Kept within the shares the
         commanded ZMP admits (both soles' CoPs inside them, along the line between their
         centres)."""
-        share = self._along(ph, self.zmp_command)
-        if self._start_share is not None:
-            carried, zmp_share = self._start_share
-            share += (carried - zmp_share) * max(0.0, 1.0 - (t - ph.start)
-                                                   / max(ph.end - ph.start, 1e-9))
         a = self.feet[ph.leaving][0]
         b = self.feet[self._other(ph.leaving)][0]
         dx, dy = float(a[0] - b[0]), float(a[1] - b[1])
         length = max(math.hypot(dx, dy), 1e-9)
         ux, uy = dx / length, dy / length
         x = float(self.zmp_command[0] - b[0]) * ux + float(self.zmp_command[1] - b[1]) * uy
+        share = x / length  # the ZMP's along the centres' line (:meth:`_along`)
+        if self._start_share is not None:
+            carried, zmp_share = self._start_share
+            share += (carried - zmp_share) * max(0.0, 1.0 - (t - ph.start)
+                                                   / max(ph.end - ph.start, 1e-9))
         reach_a = self._sole_reach(ph.leaving, ux, uy)
         reach_b = self._sole_reach(self._other(ph.leaving), ux, uy)
         low = max(0.0, (x - reach_b) / max(length + reach_a - reach_b, 1e-9))
