@@ -314,9 +314,9 @@ REALISM = Parameter("realism", "exact", "what the controller reads and drives: '
                     choices=LEVELS)
 #: with realism 'sensors' or 'robot': the estimator also measures each stance foot on the known
 #: ground (the twin's surfaces: the terrain map of the robot's planner)
-GROUND_MAP = Parameter("ground_map", False, "with realism sensors/robot: the state estimator "
-                                            "knows the ground under the feet (the terrain map) "
-                                            "and measures each stance foot's height on it")
+GROUND_MAP = Parameter("ground_map", True, "with realism sensors/robot: the state estimator "
+                                           "knows the ground under the feet (the terrain map) "
+                                           "and measures each stance foot's height on it")
 REAL_ROBOT_PARAMETERS = (REALISM, GROUND_MAP)
 
 
@@ -574,7 +574,8 @@ class Scenario:
             raise ValueError(f"--set duration: {duration:g} s is shorter than {MIN_DURATION:g} s "
                              f"(fewer than {MIN_DURATION / 1e-3:.0f} cycles of the 1 kHz twin "
                              f"measure nothing)")
-        if params.get("ground_map") and params.get("realism") == "exact":
+        if (overrides or {}).get("ground_map") is not None and params["ground_map"] \
+                and params.get("realism") == "exact":
             raise ValueError("--set ground_map: true needs --set realism=sensors or robot (the "
                              "exact state has no estimator to measure the ground)")
         if self.validate_function is not None:

@@ -49,7 +49,7 @@ class RobotConditions:
     as a single run would, none inheriting another's biases, filters or noise draws. The
     mismatch is the same robot for all of them."""
 
-    def __init__(self, robot, level: str, seed: int = 0, ground_map: bool = False):
+    def __init__(self, robot, level: str, seed: int = 0, ground_map: bool = True):
         if level not in LEVELS[1:]:
             raise ValueError(f"realism: expected one of {LEVELS[1:]}, got {level!r}")
         self.robot, self.level, self.seed = robot, level, seed
@@ -82,7 +82,7 @@ class RobotConditions:
 
 
 def conditions_for(robot, level: str, seed: int = 0,
-                   ground_map: bool = False) -> RobotConditions | None:
+                   ground_map: bool = True) -> RobotConditions | None:
     """The observer of ``level`` for ``robot`` (None for ``exact``: nothing between);
     ``ground_map``: its estimator measures the stance feet on the twin's ground."""
     return None if level == "exact" else RobotConditions(robot, level, seed, ground_map)
@@ -96,5 +96,5 @@ def job_observers(robot, params: dict, observers=None) -> tuple:
     if observers is not None:
         return tuple(observers)
     conditions = conditions_for(robot, params.get("realism", "exact"),
-                                ground_map=params.get("ground_map", False))
+                                ground_map=params.get("ground_map", True))
     return () if conditions is None else (conditions,)
