@@ -41,9 +41,16 @@ from ..scenarios.measures import Thresholds
 
 REPRODUCED, PARTLY, NOT_REPRODUCED, OURS, ERROR = (
     "reproduced", "partly", "not reproduced", "ours", "error")
-VERDICTS = (REPRODUCED, PARTLY, NOT_REPRODUCED, OURS, ERROR)
+#: verdicts of the library's own targets (the agility table): the target met or missed
+MET, MISSED = "met", "missed"
+VERDICTS = (REPRODUCED, PARTLY, NOT_REPRODUCED, OURS, ERROR, MET, MISSED)
 
-PAPERS = {"herzog2016": "Herzog et al. 2016", "fahmi2019": "Fahmi et al. 2019"}
+#: the tables ``wholebody report`` writes: one per paper (``--paper all``: both), and the
+#: library's own agility targets for quadrupeds (``--paper agility``: a table by robot)
+PAPERS = {"herzog2016": "Herzog et al. 2016", "fahmi2019": "Fahmi et al. 2019",
+          "agility": "Quadruped agility (the library's targets)"}
+#: the groups ``--paper all`` selects: the papers
+ALL_PAPERS = ("herzog2016", "fahmi2019")
 
 Summary = dict[str, Any]
 VerdictFunction = Callable[[Summary], tuple[str, str]]
@@ -104,6 +111,8 @@ class Claim:
     paper_value: str
     run: RunSpec
     judge: VerdictFunction = field(compare=False)
+    #: (row, column) of the claim in a table by robot (None: a row of its own)
+    cell: tuple[str, str] | None = None
 
     def evaluate(self, summary: Summary) -> tuple[str, str]:
         """(our value, verdict) from the run's summary."""
@@ -621,7 +630,100 @@ FAHMI = (
           run("passivity", gait="trot"), _passivity),
 )
 
-CLAIMS: tuple[Claim, ...] = HERZOG + FAHMI
+
+# ============================================================================ agility targets
+#: the quadruped presets of the agility table, its rows
+AGILITY_ROBOTS = ("hyq", "go1", "go2", "a1", "solo12", "anymal_c")
+
+
+def _agility_part(s: Summary, part: str) -> dict:
+    return s["metrics"]["parts"][part]
+
+
+def _unmet_outcome(m: dict) -> str | None:
+    """"fell at 36.8 s", "12 failed cycles" or None for a run that neither fell nor failed."""
+    if m.get("fell"):
+        return f"fell at {m.get('fell_at_s', float('nan')):.1f} s"
+    if m.get("failed_cycles"):
+        return f"{m['failed_cycles']} failed cycles"
+    return None
+
+
+def _agility(part: str, describe: Callable[[dict, Summary], str]) -> VerdictFunction:
+    """The verdict of agility part ``part``: met or missed as the ``agility`` scenario judged it,
+    the text from ``describe(the part's metrics, summary)``; a diverged simulation says so."""
+    def judge(s: Summary) -> tuple[str, str]:
+        p = _agility_part(s, part)
+        if "diverged" in p:
+            return f"the simulation diverged ({p['diverged']})", MISSED
+        return describe(p["metrics"], s), MET if p["met"] else MISSED
+    return judge
+
+
+def _top_speed(m: dict, s: Summary) -> str:
+    passive = m["passive"]
+    speed = s["metrics"]["top_speed_mps"]
+    unmet = _unmet_outcome(passive)
+    if unmet:
+        return f"{speed:.2f} m/s asked: {unmet}"
+    return (f"{speed:.2f} m/s reached, velocity error {100 * passive['hold_velocity_error_share']:.1f}"
+            f" % over the hold, slip {mm(passive['max_stance_slip_m'], 0)}")
+
+
+def _steer(m: dict, s: Summary) -> str:
+    parts = m["parts"]
+    shares = ", ".join(f"{name} {100 * parts[name]['velocity_error_share']:.0f} %"
+                       for name in ("forward", "turn", "side")
+                       if name in parts and parts[name].get("velocity_error_share") is not None)
+    unmet = _unmet_outcome(m)
+    text = (f"{unmet}; " if unmet else "") + f"velocity error {shares}"
+    if "heading_error_end_of_turn_deg" in m:
+        text += (f"; heading {m['heading_error_end_of_turn_deg']:+.1f}° after the turn, "
+                 f"{m['heading_error_final_deg']:+.1f}° at the end")
+    return text
+
+
+def _course(m: dict, s: Summary) -> str:
+    unmet = _unmet_outcome(m)
+    if unmet:
+        return unmet
+    return (f"{'crossed' if m['crossed'] else 'not across'}; roll / pitch ≤ "
+            f"{m['roll_error_max_rad']:.2f} / {m['pitch_error_max_rad']:.2f} rad, "
+            f"{mm(m['linear_rms_m'])} RMS")
+
+
+SIDES = {"90": "left", "270": "right"}
+
+
+def _push(m: dict, s: Summary) -> str:
+    angles = m["angles"]
+    dv = next(iter(angles.values()))["dv_mps"]
+    return f"Δv {dv:.2f} m/s: " + ", ".join(
+        f"{SIDES.get(a, a + '°')} {'trotted on' if r['survived'] else _unmet_outcome(r) or 'missed'}"
+        for a, r in angles.items())
+
+
+#: (part, column, claim, target, description) of the agility table
+AGILITY_PARTS = (
+    ("top-speed", "top speed (Froude 0.5)", "Trot ramped to Froude 0.5, held 1 s",
+     "no fall, 0 failed cycles, velocity error ≤ 10 %", _top_speed),
+    ("steer", "turn and side-step", "Forward, 90° turn, side-step, stop (trot)",
+     "no fall, 0 failed cycles, heading ≤ 5°, velocity errors ≤ 10 %", _steer),
+    ("stairs-crawl", "stairs, crawl", "5 steps up and down (15 cm × h / 0.6 m), crawl",
+     "no fall, every cycle solved, across", _course),
+    ("stairs-trot", "stairs, trot", "same, trot", "no fall, every cycle solved, across", _course),
+    ("rough", "rough ground, trot", "±5 cm × h / 0.6 m rough ground, trot",
+     "no fall, every cycle solved, across", _course),
+    ("push", "lateral push while trotting", "0.3 m/s × √(h / 0.6 m) pushes on either side",
+     "trots on after both", _push),
+)
+
+AGILITY = tuple(
+    Claim(f"{part}-{robot}", "agility", column, claim, target, run("agility", robot=robot),
+          _agility(part, describe), cell=(robot, column))
+    for robot in AGILITY_ROBOTS for part, column, claim, target, describe in AGILITY_PARTS)
+
+CLAIMS: tuple[Claim, ...] = HERZOG + FAHMI + AGILITY
 
 
 def under_conditions(claims, level: str) -> tuple[Claim, ...]:
@@ -644,9 +746,10 @@ def under_conditions(claims, level: str) -> tuple[Claim, ...]:
 
 
 def claims_for(paper: str) -> tuple[Claim, ...]:
-    """The claims of ``paper`` (a key of :data:`PAPERS`, or ``all``), in table order."""
+    """The claims of ``paper`` (a key of :data:`PAPERS`, or ``all``: :data:`ALL_PAPERS`), in
+    table order."""
     if paper == "all":
-        return CLAIMS
+        return tuple(c for c in CLAIMS if c.paper in ALL_PAPERS)
     if paper not in PAPERS:
         raise ValueError(f"--paper: unknown paper '{paper}'; papers: {', '.join(PAPERS)}, all")
     return tuple(c for c in CLAIMS if c.paper == paper)

@@ -23,7 +23,7 @@ from typing import Any, Callable
 from ..sweep.executors import Executor
 from ..sweep.grid import SweepRun
 from ..sweep.worker import run_one
-from .claims import ERROR, NOT_REPRODUCED, PAPERS, Claim, RunSpec
+from .claims import ERROR, MET, NOT_REPRODUCED, PAPERS, REPRODUCED, Claim, RunSpec, claims_for
 
 log = logging.getLogger(__name__)
 
@@ -142,13 +142,51 @@ def _cell(text: str) -> str:
 
 def table(rows: list[Row]) -> str:
     """The markdown table of ``rows``: claim (with its id and where in the paper) | paper | ours
-    | verdict | command."""
+    | verdict | command; claims placed in a table by robot (``Claim.cell``) as :func:`grid`."""
+    if rows and all(r.claim.cell is not None for r in rows):
+        return grid({r.claim.cell: grid_cell(r) for r in rows},
+                    {r.claim.cell[0]: r.claim.run.command() for r in rows})
     lines = [HEADER]
     for row in rows:
         c = row.claim
         lines.append(f"| `{c.id}` {_cell(c.claim)} ({_cell(c.where)}) | {_cell(c.paper_value)} | "
                      f"{_cell(row.ours)} | {row.verdict} | `{c.run.command()}` |\n")
     return "".join(lines)
+
+
+def grid_cell(row: Row) -> str:
+    """One cell of a table by robot: the verdict (a miss in bold) and our value."""
+    verdict = f"**{row.verdict}**" if row.verdict not in (REPRODUCED, MET) else row.verdict
+    return f"{verdict}: {_cell(row.ours)}"
+
+
+def grid(cells: dict[tuple[str, str], str], commands: dict[str, str]) -> str:
+    """A table by robot: one line per row label (the order of first appearance), one column per
+    column label, then the row's command; a missing cell is empty."""
+    rows = list(dict.fromkeys(r for r, _ in cells))
+    columns = list(dict.fromkeys(c for _, c in cells))
+    lines = ["| robot | " + " | ".join(columns) + " | command |\n",
+             "|---" * (len(columns) + 2) + "|\n"]
+    for r in rows:
+        lines.append(f"| {r} | " + " | ".join(cells.get((r, c), "") for c in columns)
+                     + f" | `{commands.get(r, '')}` |\n")
+    return "".join(lines)
+
+
+def _grid_cells(text: str) -> tuple[dict[tuple[str, str], str], dict[str, str]]:
+    """The cells and commands of a table written by :func:`grid` (nothing if ``text`` has none)."""
+    lines = [line for line in text.splitlines() if line.startswith("|")]
+    if len(lines) < 2 or not lines[0].startswith("| robot |"):
+        return {}, {}
+    columns = [c.strip() for c in lines[0].strip().strip("|").split(" | ")][1:-1]
+    cells, commands = {}, {}
+    for line in lines[2:]:
+        values = [c.strip() for c in line.strip()[1:-1].split(" | ")]
+        if len(values) != len(columns) + 2:
+            continue
+        commands[values[0]] = values[-1].strip("`")
+        cells.update({(values[0], c): v for c, v in zip(columns, values[1:-1]) if v})
+    return cells, commands
 
 
 def write_outputs(report: Report, out_dir: Path, realism: str = "exact") -> list[Path]:
@@ -202,6 +240,15 @@ def update_docs(path: Path, paper: str, rows: list[Row], order: list[str],
     begin, end = markers(table_key(paper, realism))
     head, rest = text.split(begin, 1)
     old, tail = rest.split(end, 1)
+    placed = [r for r in rows if r.claim.paper == paper and r.claim.cell is not None]
+    if placed:  # a table by robot: the new cells over the old ones
+        cells, commands = _grid_cells(old)
+        cells.update({r.claim.cell: grid_cell(r) for r in placed})
+        commands.update({r.claim.cell[0]: r.claim.run.command() for r in placed})
+        layout = [c.cell for c in claims_for(paper) if c.cell is not None]
+        ordered = {cell: cells[cell] for cell in layout if cell in cells}
+        path.write_text(f"{head}{begin}\n{grid(ordered, commands)}{end}{tail}", encoding="utf-8")
+        return
     kept = {}
     for line in old.splitlines(keepends=True):
         match = _ROW_ID.match(line)
