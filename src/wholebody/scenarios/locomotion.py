@@ -16,7 +16,7 @@ course (:func:`course_environment`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -84,8 +84,18 @@ POSTURE_REGULARIZER_GAINS = (
     Parameter("posture_damping_ratio", PassiveConfig.posture_damping, "posture regulariser: "
               "damping ratio", low=0.0, high=100.0),
 )
-#: every gain of the quadruped controllers a scenario takes (:func:`wbc_gains`)
+#: every gain of the quadruped controllers a scenario takes (:func:`wbc_gains`): the paper's
 WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS, *STANCE_GAINS, *POSTURE_REGULARIZER_GAINS)
+#: the CoM loop's damping ratio in the library's own locomotion scenarios (``steer``,
+#: ``trot-push``, ``agility``): critically damped. The paper's D_x gives 0.48 on HyQ, tuned for
+#: its 0.04-0.15 m/s crawl; every change of a velocity command then rings at the loop's 0.76 Hz
+#: (Froude-scaled on other robots; docs/results.md, "Steering")
+CRITICAL_DAMPING_RATIO = 1.0
+#: :data:`WBC_GAINS` with the CoM loop critically damped (:data:`CRITICAL_DAMPING_RATIO`)
+LOCOMOTION_WBC_GAINS = tuple(
+    replace(p, default=CRITICAL_DAMPING_RATIO, help="trunk impedance: damping ratio of the CoM "
+            f"loop (1: critically damped; the paper's D_x on HyQ: {DAMPING_RATIO_X:.3f})")
+    if p.name == "trunk_damping_ratio" else p for p in WBC_GAINS)
 #: the quasi-static baseline's Cartesian swing PD (force-level), for the scenarios that run it
 BASELINE_GAINS = (
     Parameter("baseline_swing_stiffness", 0.0, "quasi-static baseline: swing legs' Cartesian "
