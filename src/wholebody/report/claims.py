@@ -632,8 +632,12 @@ FAHMI = (
 
 
 # ============================================================================ agility targets
-#: the quadruped presets of the agility table, its rows
-AGILITY_ROBOTS = ("hyq", "go1", "go2", "a1", "solo12", "anymal_c")
+def quadruped_presets() -> tuple[str, ...]:
+    """The shipped presets with four feet, by name: the agility table's rows."""
+    from ..robots import preset_description, preset_names
+
+    return tuple(n for n in preset_names() if len(preset_description(n).contacts) == 4)
+
 
 
 def _agility_part(s: Summary, part: str) -> dict:
@@ -721,7 +725,7 @@ AGILITY_PARTS = (
 AGILITY = tuple(
     Claim(f"{part}-{robot}", "agility", column, claim, target, run("agility", robot=robot),
           _agility(part, describe), cell=(robot, column))
-    for robot in AGILITY_ROBOTS for part, column, claim, target, describe in AGILITY_PARTS)
+    for robot in quadruped_presets() for part, column, claim, target, describe in AGILITY_PARTS)
 
 CLAIMS: tuple[Claim, ...] = HERZOG + FAHMI + AGILITY
 
