@@ -322,14 +322,16 @@ def solve_levels(levels: list[Level], analytic_first_level: bool, settings: Solv
     fls = "analytic" if analytic_first_level and cascade else None
     backend, fallback = settings.backend, settings.fallback_backend
     result = bound.solve() if bound is not None else solve_hierarchy(
-        levels, settings if cascade else _without_fallback(settings), first_level_solution=fls)
+        levels, settings=settings if cascade else _without_fallback(settings),
+        first_level_solution=fls)
     status, outcome = result.status, Outcome.SOLVED if result.ok else Outcome.HELD
     retried = [w for w in result.warnings if w.endswith(f"solved with {fallback}")]
     if result.ok and retried:
         outcome = Outcome.FALLBACK
         status = f"optimal ({fallback} after {backend}: {'; '.join(retried)})"
     if not result.ok and fallback:
-        retry = solve_hierarchy(levels, _fallback_cascade(settings), first_level_solution=fls)
+        retry = solve_hierarchy(levels, settings=_fallback_cascade(settings),
+                                first_level_solution=fls)
         if retry.ok:
             log.debug("%s failed (%s); solved with %s", backend, result.status, fallback)
             status = f"optimal ({fallback} after {backend}: {result.status})"

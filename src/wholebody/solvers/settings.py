@@ -64,7 +64,10 @@ class SolverSettings:
 
 
 def _options(given) -> tuple:
-    """``backend_options`` (a mapping, or its (name, value) pairs) → sorted pairs."""
+    """``backend_options`` (a mapping, its (name, value) pairs, or None for none) → sorted
+    pairs."""
+    if given is None:
+        return ()
     try:
         pairs = dict(given.items() if isinstance(given, Mapping) else given)
     except (TypeError, ValueError):
