@@ -53,9 +53,12 @@ class SolverSettings:
             raise ValueError(f"regularization: expected a finite number > 0, got {eps!r}")
         object.__setattr__(self, "regularization", float(eps))
         object.__setattr__(self, "backend_options", _options(self.backend_options))
-        if self.analytic_first_level not in (None, True, False):
-            raise ValueError(f"analytic_first_level: expected None, True or False, got "
-                             f"{self.analytic_first_level!r}")
+        analytic = self.analytic_first_level
+        if analytic is not None:
+            if analytic not in (True, False):
+                raise ValueError(f"analytic_first_level: expected None, True or False, got "
+                                 f"{analytic!r}")
+            object.__setattr__(self, "analytic_first_level", bool(analytic))
 
     @property
     def options(self) -> dict:
