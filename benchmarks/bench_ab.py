@@ -48,8 +48,11 @@ for tag in ("wb_a", "wb_b"):
     robot = wb.load_robot("talos14" if args.case == "t2" else "talos")
     stack = (stacks.table2_stack(robot, full=not reduced) if args.case == "t2"
              else stacks.table1_stack(robot, robot.contact_names, full=not reduced))
+    solver = ({"settings": wb.SolverSettings(backend=args.backend, fallback_backend=fallback)}
+              if hasattr(wb, "SolverSettings") else  # a tree from before SolverSettings
+              {"backend": args.backend, "fallback_backend": fallback})
     versions[tag] = (robot, stack, formulation.Formulation(robot, reduced=reduced),
-                     variables.Variables(robot))
+                     variables.Variables(robot), solver)
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_wbc import moving_states  # noqa: E402
@@ -60,12 +63,11 @@ failures = {k: 0 for k in versions}
 order = list(versions)
 for i, (q, v) in enumerate(states):
     for tag in (order if i % 2 == 0 else order[::-1]):
-        robot, stack, form, var = versions[tag]
+        robot, stack, form, var, solver = versions[tag]
         t0 = time.perf_counter()
         robot.update(q, v)
         t1 = time.perf_counter()
-        sol = form.solve(stack, var, backend=args.backend, fallback_backend=fallback,
-                         diagnostics=False)
+        sol = form.solve(stack, var, diagnostics=False, **solver)
         t2 = time.perf_counter()
         times[tag][i] = (t1 - t0, sol.timings["rows"], sol.timings["solve"], t2 - t0)
         failures[tag] += not sol.ok

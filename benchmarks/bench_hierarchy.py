@@ -15,10 +15,12 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from wholebody.solvers import Level, solve_hierarchy  # noqa: E402
+from wholebody.solvers.settings import HIERARCHY_DEFAULT  # noqa: E402
 
 
 def realistic_problem(rng: np.random.Generator, n: int = 50) -> list:
@@ -63,10 +65,12 @@ def first_level(levels):
 
 
 def bench(problems, fls=None, **kw):
+    """Times of solve_hierarchy with SolverSettings(**kw) (its defaults otherwise)."""
+    settings = replace(HIERARCHY_DEFAULT, **kw)
     times, bad = [], 0
     for i, lv in enumerate(problems):
         t0 = time.perf_counter()
-        sol = solve_hierarchy(lv, first_level_solution=None if fls is None else fls[i], **kw)
+        sol = solve_hierarchy(lv, settings, first_level_solution=None if fls is None else fls[i])
         times.append(time.perf_counter() - t0)
         bad += not sol.ok
     t = np.array(times) * 1e6
@@ -98,14 +102,12 @@ def main() -> None:
         ("daqp hierarchical", {"method": "daqp"}, None),
     ]
     for name, kw, f in runs:
-        for i, lv in enumerate(problems[:20]):  # warm-up (imports, caches)
-            solve_hierarchy(lv, first_level_solution=None if f is None else f[i], **kw)
+        bench(problems[:20], f, **kw)  # warm-up (imports, caches)
         report(name, bench(problems, f, **kw))
     # the single weighted QP on the first two levels (hard level 1, objective = level 2)
     two = [[lv[0], lv[1]] for lv in problems]
     for backend in ("quadprog", "daqp"):
-        for lv in two[:20]:
-            solve_hierarchy(lv, method="weighted", backend=backend)
+        bench(two[:20], method="weighted", backend=backend)
         report(f"weighted/{backend} (2 levels)", bench(two, method="weighted", backend=backend))
         report(f"cascade/{backend} (same 2)", bench(two, method="cascade", backend=backend))
 

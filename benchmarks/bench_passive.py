@@ -29,6 +29,10 @@ from wholebody.control.passive import ENGINES, PassiveWBC  # noqa: E402
 from wholebody.formulation import Formulation  # noqa: E402
 from wholebody.planning.trunk import VelocityCommand  # noqa: E402
 from wholebody.scenarios.locomotion import run_gait  # noqa: E402
+from wholebody.solvers import SolverSettings  # noqa: E402
+
+#: the generic route's solver: the two levels in one weighted QP by DAQP (Fahmi et al. 2019, eq. 7)
+WEIGHTED = SolverSettings(method="weighted", backend="daqp")
 
 
 def record(robot, gait: str, cycles: int):
@@ -87,7 +91,7 @@ def time_stack(robot, states):
         stack, variables = wbc.as_stack(plan)
         t0 = time.perf_counter()
         robot.update(q, v)
-        formulation.solve(stack, variables, method="weighted", backend="daqp", diagnostics=False)
+        formulation.solve(stack, variables, WEIGHTED, diagnostics=False)
         full.append(time.perf_counter() - t0)
     return np.array(full) * 1e6
 

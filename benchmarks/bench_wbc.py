@@ -37,6 +37,7 @@ import numpy as np  # noqa: E402
 import wholebody as wb  # noqa: E402
 from wholebody.control.stacks import table1_stack, table2_stack  # noqa: E402
 from wholebody.cycle import HierarchyCycle  # noqa: E402
+from wholebody.solvers import SolverSettings  # noqa: E402
 from wholebody.variables import Variables  # noqa: E402
 
 
@@ -71,7 +72,8 @@ def run_case(robot, make_stack, contacts, reduced: bool, method: str, backend: s
     cycle and the reference workload's times (:func:`reference_workload`, one after each
     cycle), for one HierarchyCycle engine."""
     cycle = HierarchyCycle(robot, make_stack(full=not reduced), reduced=reduced, engine=engine,
-                           method=method, backend=backend, fallback_backend=fallback)
+                           settings=SolverSettings(method=method, backend=backend,
+                                                   fallback_backend=fallback))
     variables = Variables(robot, contacts)
     states = list(moving_states(robot, cycles))
     times = np.empty((passes, cycles, 5))

@@ -27,6 +27,7 @@ import wholebody as wb  # noqa: E402
 from wholebody.control.stacks import table1_stack, table2_stack  # noqa: E402
 from wholebody.cycle import HierarchyCycle  # noqa: E402
 from wholebody.formulation import Stack  # noqa: E402
+from wholebody.solvers import SolverSettings  # noqa: E402
 from wholebody.tasks import (CoMTask, ContactConstraint, ForceRegularizer, FrameTask,  # noqa: E402
                              FrictionCone, NewtonEuler, PostureTask, TorqueLimits)
 
@@ -85,7 +86,7 @@ def main():
     robot = wb.load_robot(cases.CASES[case_name]["preset"])
     assert list(robot.joint_names) == list(data["joint_names"])
     stack, method = build(case_name, variant, robot, data)
-    cycle = HierarchyCycle(robot, stack, engine="native", method=method)
+    cycle = HierarchyCycle(robot, stack, engine="native", settings=SolverSettings(method=method))
     Q, V = data["q"], data["v"]
     model, pdata = robot.model, robot.model.createData()
     solved = describe(stack, method)[0]

@@ -6,6 +6,8 @@ control (Fahmi et al. 2019), checked in closed loop in a MuJoCo twin of the Pino
 
 from .robot import Contact, Robot
 from .robots import RobotDescription, load_robot, preset_names
+from .solvers import SolverSettings
 
 __version__ = "0.1.0"
-__all__ = ["Contact", "Robot", "RobotDescription", "load_robot", "preset_names", "__version__"]
+__all__ = ["Contact", "Robot", "RobotDescription", "load_robot", "preset_names", "SolverSettings",
+           "__version__"]

@@ -31,8 +31,9 @@ import numpy as np
 from .formulation import (Formulation, Solution, Stack, eq14_blocks, make_solution,
                           overflow_status, place_rows, solve_levels, unsolved_solution)
 from .robot import Robot
-from .solvers import Level
+from .solvers import Level, SolverSettings
 from .solvers.compiled_cascade import BoundCascade
+from .solvers.settings import settings_or_default
 from .tasks import FullDynamics
 from .tasks.base import Task, contact_subset
 from .tasks.schema import LayoutContext, plain_scalar, scalars_writer
@@ -192,17 +193,15 @@ class _Program:
 
     def bound(self, cycle: "HierarchyCycle") -> BoundCascade | None:
         """The compiled cascade bound to these levels for the cycle's current solver settings
-        (rebuilt if they changed), None where it does not apply (another method, not built)."""
-        key = (cycle.method, cycle.backend, cycle.regularization, cycle.fallback_backend,
-               cycle.analytic, tuple(sorted(cycle.backend_options.items())))
+        (rebuilt if they changed: equal settings share it), None where it does not apply
+        (another method, not built)."""
+        key = cycle.settings  # (with the cycle's stack, it decides cycle.analytic too)
         if key != self._bound_key:
             self._bound_key, self._bound = key, None
-            if cycle.method == "cascade" and BoundCascade.available:
+            if key.method == "cascade" and BoundCascade.available:
                 self._bound = BoundCascade(
-                    self.levels, cycle.backend, cycle.regularization,
-                    first_level_solution="analytic" if cycle.analytic else None,
-                    fallback_backend=cycle.fallback_backend,
-                    backend_options=cycle.backend_options)
+                    self.levels, key,
+                    first_level_solution="analytic" if cycle.analytic else None)
         return self._bound
 
     def pack(self, cycle: "HierarchyCycle") -> None:
@@ -255,16 +254,13 @@ class HierarchyCycle:
         task without one writes its rows from Python into the same arrays), ``"python"``
         (``robot.update`` + :meth:`Formulation.solve`, the reference) or ``"auto"`` (native when
         built).
-    method, backend, fallback_backend, regularization, backend_options : as
-        :meth:`Formulation.solve` (``backend_options`` with scalar values, e.g. DAQP's
-        ``{"primal_tol": 1e-7}``); ``backend``, ``fallback_backend``, ``regularization`` and
-        ``backend_options`` may be changed between cycles.
+    settings : the :class:`~wholebody.solvers.SolverSettings` (None: ``SolverSettings()``), as
+        :meth:`Formulation.solve`; the attribute ``settings`` may be given new ones between
+        cycles.
     """
 
     def __init__(self, robot: Robot, stack: Stack, reduced: bool = True, engine: str = "auto",
-                 method: str = "cascade", backend: str = "daqp",
-                 fallback_backend: str | None = "quadprog", regularization: float = 1e-6,
-                 backend_options: dict | None = None):
+                 settings: SolverSettings | None = None):
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got '{engine}'")
         if engine == "native" and _hierarchy_cycle is None:
@@ -277,10 +273,7 @@ class HierarchyCycle:
                                      "wholebody._hierarchy_cycle is not built")
         self.robot, self.stack, self.engine_name = robot, stack, engine
         self.formulation = Formulation(robot, reduced=reduced)
-        self.method, self.backend = method, backend
-        self.fallback_backend, self.regularization = fallback_backend, regularization
-        self.backend_options = dict(backend_options or {})
-        self.analytic = Formulation.analytic_first_level(stack) and method == "cascade"
+        self.settings = settings
         for task in stack.tasks():
             if reduced and isinstance(task, FullDynamics):
                 raise ValueError("FullDynamics belongs to the full formulation; the reduced "
@@ -295,6 +288,18 @@ class HierarchyCycle:
             self.engine = _hierarchy_cycle.HierarchyCycle(self._spec())
             for task in stack.tasks():  # the frames known now (a task inserted later adds its own)
                 self.selection_of(task)
+
+    @property
+    def settings(self) -> SolverSettings:
+        """The solver settings of the next cycles (assign new ones between cycles)."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, settings: SolverSettings | None) -> None:
+        settings = settings_or_default(settings)
+        self.analytic = (Formulation.uses_analytic_first_level(self.stack, settings)
+                         and settings.method == "cascade")
+        self._settings = settings
 
     @property
     def native(self) -> bool:
@@ -384,11 +389,8 @@ class HierarchyCycle:
             t0 = time.perf_counter()
             robot.update(q, v)
             t1 = time.perf_counter()
-            sol = self.formulation.solve(self.stack, variables, method=self.method,
-                                         backend=self.backend, regularization=self.regularization,
-                                         fallback_backend=self.fallback_backend,
-                                         diagnostics=diagnostics,
-                                         backend_options=self.backend_options)
+            sol = self.formulation.solve(self.stack, variables, self.settings,
+                                         diagnostics=diagnostics)
             sol.timings["update"] = t1 - t0
             sol.timings["total"] = time.perf_counter() - t0
             return sol
@@ -413,10 +415,8 @@ class HierarchyCycle:
             program.raise_invalid()
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
         t_rows = time.perf_counter()
-        result, outcome, status = solve_levels(program.levels, self.analytic, self.method,
-                                               self.backend, self.regularization,
-                                               self.fallback_backend, program.bound(self),
-                                               self.backend_options)
+        result, outcome, status = solve_levels(program.levels, self.analytic, self.settings,
+                                               program.bound(self))
         t_solve = time.perf_counter()
         self.engine.recover(program.id, result.x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),

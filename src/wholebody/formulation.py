@@ -14,18 +14,20 @@ so the torque limits are then imposed with zero slack on every lower level.
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
 
 from .guard import Outcome, guard_torque
 from .robot import FREE_FLYER_NV, GRAVITY, Robot
-from .solvers import Level, solve_hierarchy
+from .solvers import Level, SolverSettings, solve_hierarchy
 from .solvers.compiled_cascade import BoundCascade
 from .solvers.hierarchy import analytic_first_level
+from .solvers.settings import settings_or_default
 from .tasks.base import Task, TaskRows
 from .tasks.dynamics import FullDynamics, NewtonEuler
 from .tasks.limits import TorqueLimits
@@ -218,26 +220,41 @@ class Formulation:
         :func:`wholebody.solvers.hierarchy.analytic_first_level`."""
         return analytic_first_level(level)
 
+    @staticmethod
+    def uses_analytic_first_level(stack: Stack, settings: SolverSettings) -> bool:
+        """Whether level 1 is solved in closed form (eq. 17) with ``settings``: as its
+        ``analytic_first_level`` says, None = when :meth:`analytic_first_level` allows it;
+        True where level 1 does not allow it is a ValueError."""
+        possible = Formulation.analytic_first_level(stack)
+        if settings.analytic_first_level is None:
+            return possible
+        if settings.analytic_first_level and not possible:
+            raise ValueError("analytic_first_level: True, but level 1 must hold only dynamics "
+                             "and torque limits")
+        return settings.analytic_first_level
+
     # ------------------------------------------------------------------ solve
-    def solve(self, stack: Stack, variables: Variables | None = None, method: str = "cascade",
-              backend: str = "daqp", regularization: float = 1e-6,
-              analytic_first_level: bool | None = None, fallback_backend: str | None = "quadprog",
-              diagnostics: bool = True, backend_options: dict | None = None) -> Solution:
+    def solve(self, stack: Stack, variables: Variables | None = None,
+              settings: SolverSettings | None = None, diagnostics: bool = True) -> Solution:
         """Solve the stack at the robot's cached state (call ``robot.update`` first).
 
-        ``backend`` solves the QPs (``backend_options``: its settings, e.g. DAQP's
-        ``primal_tol``; see :func:`~wholebody.solvers.hierarchy.solve_hierarchy`); if it fails,
-        the cycle is solved again with ``fallback_backend`` (each backend has rare failure modes
+        ``settings`` (None: ``SolverSettings()``): ``settings.backend`` solves the QPs
+        (``backend_options``: its settings, e.g. DAQP's ``primal_tol``; see
+        :func:`~wholebody.solvers.hierarchy.solve_hierarchy`); if it fails, the cycle is solved
+        again with ``settings.fallback_backend`` (each backend has rare failure modes
         of its own on these ill-conditioned cascades — measured in
         ``benchmarks/bench_wbc.py``). ``diagnostics`` computes the per-task report (extra
         work every cycle). Never raises for numerical reasons: a
         failed solve returns a :class:`Solution` with outcome ``HELD`` (``ok`` False), the reason,
         and a torque computed from the best available solution, clipped to the torque limits; a
         cached state whose rigid-body terms are not finite (products of a velocity ~1e155
-        overflow) returns ``HELD`` with zero torque and a reason naming ``v``. ``regularization`` is the eps of eq. 5
+        overflow) returns ``HELD`` with zero torque and a reason naming ``v``.
+        ``settings.regularization`` is the eps of eq. 5
         on the scaled variables; the paper's 1e-4 visibly trades tasks off (see the tests), 1e-6
-        does not, and much smaller values make quadprog cycle.
+        does not, and much smaller values make quadprog cycle. ``settings.analytic_first_level``:
+        see :meth:`uses_analytic_first_level`.
         """
+        settings = settings_or_default(settings)
         robot = self.robot
         variables = variables or Variables(robot)
         t0 = time.perf_counter()
@@ -249,16 +266,8 @@ class Formulation:
             return unsolved_solution(robot.nv, variables, robot.torque_bounds(),
                                      len(stack.levels), overflow_status(robot.v))
         t_rows = time.perf_counter()
-        if analytic_first_level is None:
-            use_analytic = self.analytic_first_level(stack)
-        else:
-            use_analytic = analytic_first_level
-            if use_analytic and not self.analytic_first_level(stack):
-                raise ValueError("analytic_first_level: level 1 must hold only dynamics and torque "
-                                 "limits")
-        result, outcome, status = solve_levels(levels, use_analytic, method, backend,
-                                               regularization, fallback_backend,
-                                               backend_options=backend_options)
+        result, outcome, status = solve_levels(
+            levels, self.uses_analytic_first_level(stack, settings), settings)
         t_solve = time.perf_counter()
         x = result.x * self.scales(variables)
         solution = self._recover(x, variables, outcome, status, result.costs)
@@ -300,34 +309,47 @@ class Formulation:
         return reports
 
 
-def solve_levels(levels: list[Level], analytic_first_level: bool, method: str, backend: str,
-                 regularization: float, fallback_backend: str | None,
-                 bound: BoundCascade | None = None, backend_options: dict | None = None):
-    """The levels solved as :meth:`Formulation.solve` does → (HierarchySolution, Outcome,
-    status): the analytic first level (eq. 17) when asked, a failed cascade level QP retried with
-    ``fallback_backend`` (one QP, not the whole cascade again; outcome FALLBACK), other methods
-    re-solved as a cascade with it. ``bound``: a :class:`BoundCascade` made with these same arguments on these
-    levels' arrays, used for the first attempt (a control loop's fast path).
-    ``backend_options`` are ``backend``'s (not passed to the fallback backend)."""
-    fls = "analytic" if analytic_first_level and method == "cascade" else None
+def solve_levels(levels: list[Level], analytic_first_level: bool, settings: SolverSettings,
+                 bound: BoundCascade | None = None):
+    """The levels solved as :meth:`Formulation.solve` does with ``settings`` → (HierarchySolution,
+    Outcome, status): the analytic first level (eq. 17) when ``analytic_first_level`` (resolved
+    by :meth:`Formulation.uses_analytic_first_level`), a failed cascade level QP retried with
+    ``settings.fallback_backend`` (one QP, not the whole cascade again; outcome FALLBACK), other
+    methods re-solved as a cascade with it. ``bound``: a :class:`BoundCascade` made with these
+    same settings on these levels' arrays, used for the first attempt (a control loop's fast
+    path). ``backend_options`` are ``backend``'s (not passed to the fallback backend)."""
+    cascade = settings.method == "cascade"
+    fls = "analytic" if analytic_first_level and cascade else None
+    backend, fallback = settings.backend, settings.fallback_backend
     result = bound.solve() if bound is not None else solve_hierarchy(
-        levels, method=method, backend=backend, regularization=regularization,
-        first_level_solution=fls,
-        fallback_backend=fallback_backend if method == "cascade" else None,
-        backend_options=backend_options)
+        levels, settings=settings if cascade else _without_fallback(settings),
+        first_level_solution=fls)
     status, outcome = result.status, Outcome.SOLVED if result.ok else Outcome.HELD
-    retried = [w for w in result.warnings if w.endswith(f"solved with {fallback_backend}")]
+    retried = [w for w in result.warnings if w.endswith(f"solved with {fallback}")]
     if result.ok and retried:
         outcome = Outcome.FALLBACK
-        status = f"optimal ({fallback_backend} after {backend}: {'; '.join(retried)})"
-    if not result.ok and fallback_backend and fallback_backend != backend:
-        retry = solve_hierarchy(levels, method="cascade", backend=fallback_backend,
-                                regularization=regularization, first_level_solution=fls)
+        status = f"optimal ({fallback} after {backend}: {'; '.join(retried)})"
+    if not result.ok and fallback:
+        retry = solve_hierarchy(levels, settings=_fallback_cascade(settings),
+                                first_level_solution=fls)
         if retry.ok:
-            log.debug("%s failed (%s); solved with %s", backend, result.status, fallback_backend)
-            status = f"optimal ({fallback_backend} after {backend}: {result.status})"
+            log.debug("%s failed (%s); solved with %s", backend, result.status, fallback)
+            status = f"optimal ({fallback} after {backend}: {result.status})"
             result, outcome = retry, Outcome.FALLBACK
     return result, outcome, status
+
+
+@functools.lru_cache(maxsize=64)
+def _without_fallback(settings: SolverSettings) -> SolverSettings:
+    """``settings`` for a first attempt that is not a cascade (its whole cascade is retried)."""
+    return replace(settings, fallback_backend=None)
+
+
+@functools.lru_cache(maxsize=64)
+def _fallback_cascade(settings: SolverSettings) -> SolverSettings:
+    """The cascade by ``settings.fallback_backend`` alone, with its own options, at the same ε."""
+    return SolverSettings(method="cascade", backend=settings.fallback_backend,
+                          fallback_backend=None, regularization=settings.regularization)
 
 
 def make_solution(qdd: np.ndarray, lam: np.ndarray, tau: np.ndarray,

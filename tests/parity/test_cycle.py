@@ -20,6 +20,7 @@ from conftest import torque_tolerance
 from wholebody.control.stacks import table1_stack, table2_stack, table4_stack
 from wholebody.cycle import HierarchyCycle, kernel_tasks, native_available, python_tasks
 from wholebody.formulation import Formulation, Stack
+from wholebody.solvers import SolverSettings
 from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer,
                              FrameTask, FrictionCone, FullDynamics, JointAccelerationLimits,
                              JointTrajectoryTask, MomentumForce, MomentumPD, NewtonEuler,
@@ -27,6 +28,9 @@ from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, Force
 from wholebody.tasks.regularization import (AccelerationRegularizer, AccelerationTarget,
                                              TangentialForceRegularizer)
 from wholebody.variables import Variables
+
+#: quadprog without a fallback: the settings the engines are compared with
+QUADPROG = SolverSettings(backend="quadprog", fallback_backend=None)
 
 native = pytest.mark.skipif(not native_available(),
                             reason="wholebody._hierarchy_cycle not built (no C++ compiler)")
@@ -517,7 +521,7 @@ def test_torques_equal_python_and_satisfy_dynamics(robots, case):
     variables = Variables(robot, contacts)
     # quadprog, no fallback: DAQP's tolerance-boundary acceptance could decide differently on the
     # bit-level-different inputs of the two engines (see the docstring)
-    kw = dict(reduced=reduced, backend="quadprog", fallback_backend=None)
+    kw = dict(reduced=reduced, settings=QUADPROG)
     c_native = HierarchyCycle(robot, build(robot), engine="native", **kw)
     c_python = HierarchyCycle(robot, build(robot), engine="python", **kw)
     assert c_native.native and not c_python.native
@@ -602,8 +606,7 @@ def test_bad_state_raises_naming_the_field(robots, engine):
     the field; the cycle still solves a good state afterwards, as before the errors. A quaternion
     within the accepted 1e-3 of unit norm is accepted and gives the reference's arrays."""
     robot = robots["talos14"]
-    cycle = HierarchyCycle(robot, table2_stack(robot), engine=engine, backend="quadprog",
-                           fallback_backend=None)
+    cycle = HierarchyCycle(robot, table2_stack(robot), engine=engine, settings=QUADPROG)
     q, v = moving_states(robot, 1)[0]
     before = cycle.solve(q, v)
     bad_q, bad_v = q.copy(), v.copy()
@@ -669,7 +672,7 @@ def test_python_task_in_a_native_stack(robots, extra):
     assert [t.name for t in python_tasks(stack)] == [odd]
     if not native_available():
         return
-    cycle = HierarchyCycle(robot, stack, engine="auto", backend="quadprog", fallback_backend=None)
+    cycle = HierarchyCycle(robot, stack, engine="auto", settings=QUADPROG)
     assert cycle.native
     reference = build()
     compare_on_states(robot, stack, reference, Variables(robot), moving_states(robot, 4),
@@ -677,8 +680,7 @@ def test_python_task_in_a_native_stack(robots, extra):
     q, v = moving_states(robot, 5)[-1]
     sol = cycle.solve(q, v)
     robot.update(q, v)
-    ref = Formulation(robot).solve(reference, Variables(robot), backend="quadprog",
-                                   fallback_backend=None)
+    ref = Formulation(robot).solve(reference, Variables(robot), settings=QUADPROG)
     assert sol.ok and ref.ok
     np.testing.assert_allclose(sol.tau, ref.tau, atol=1e-6, rtol=0)
 
@@ -768,8 +770,8 @@ def test_random_stacks_equal_python(robots, seed, method):
 
     variables = Variables(robot, contacts)
     stack, reference = build(seed), build(seed)
-    kwargs = dict(method=method, backend="daqp" if method == "daqp" else "quadprog",
-                  fallback_backend=None)
+    kwargs = dict(settings=SolverSettings(method=method, fallback_backend=None,
+                                          backend="daqp" if method == "daqp" else "quadprog"))
     cycle = HierarchyCycle(robot, stack, engine="native", **kwargs)
     python = HierarchyCycle(robot, reference, engine="python", **kwargs)
     for q, v in moving_states(robot, 3):
@@ -834,7 +836,7 @@ def test_tiny_torque_limits_return_a_value(robots, backend):
         stack.find("torque limits").scale = 1e-3
         return stack
 
-    kw = dict(backend=backend, fallback_backend=None)
+    kw = dict(settings=SolverSettings(backend=backend, fallback_backend=None))
     c_native = HierarchyCycle(robot, build(), engine="native", **kw)
     c_python = HierarchyCycle(robot, build(), engine="python", **kw)
     oks = []
@@ -871,7 +873,7 @@ def test_diagnostics_equal_python(robots, name):
     2) the lists are equal in order too (for the other order see the test below)."""
     robot = robots[name]
     build = table2_stack if name == "talos14" else hyq_stack
-    kw = dict(backend="quadprog", fallback_backend=None)
+    kw = dict(settings=QUADPROG)
     c_native = HierarchyCycle(robot, build(robot), engine="native", **kw)
     c_python = HierarchyCycle(robot, build(robot), engine="python", **kw)
     names = [t.name for t in c_native.stack.tasks()]
@@ -897,7 +899,7 @@ def test_diagnostics_in_declared_order(robots):
     inequality task is declared before an equality task."""
     robot = robots["hyq"]
     assert not eq_first(hyq_stack(robot))  # level 3: braking limits (ineq) before the CoM task
-    kw = dict(backend="quadprog", fallback_backend=None)
+    kw = dict(settings=QUADPROG)
     q, v = moving_states(robot, 1)[0]
     a = HierarchyCycle(robot, hyq_stack(robot), engine="native", **kw).solve(q, v, diagnostics=True)
     b = HierarchyCycle(robot, hyq_stack(robot), engine="python", **kw).solve(q, v, diagnostics=True)
@@ -915,7 +917,7 @@ def test_diagnostics_with_a_zero_row_task(robots):
                       [ContactConstraint(), CenterOfPressure(name="cop"), FrictionCone(0.7)],
                       [PostureTask(), ForceRegularizer(weight=1e-3)]])
 
-    kw = dict(backend="quadprog", fallback_backend=None)
+    kw = dict(settings=QUADPROG)
     q, v = moving_states(robot, 1)[0]
     a = HierarchyCycle(robot, build(), engine="native", **kw).solve(q, v, diagnostics=True)
     b = HierarchyCycle(robot, build(), engine="python", **kw).solve(q, v, diagnostics=True)
@@ -925,29 +927,29 @@ def test_diagnostics_with_a_zero_row_task(robots):
 @native
 def test_solver_settings_changed_after_the_first_cycle_take_effect(robots):
     """The native cycle keeps its compiled cascade bound to the program's level arrays; settings
-    changed on the cycle afterwards (regularization, backend, backend options) are used from the
+    given to the cycle afterwards (regularization, backend, backend options) are used from the
     next solve on — the same torques as a cycle built with them."""
     robot = robots["talos14"]
     variables = Variables(robot)
     q, v = next(iter(moving_states(robot, 3)))
     cycle = HierarchyCycle(robot, table2_stack(robot), engine="native")
     first = cycle.solve(q, v, variables)
-    cycle.regularization, cycle.backend, cycle.fallback_backend = 1e-3, "quadprog", None
+    cycle.settings = SolverSettings(regularization=1e-3, backend="quadprog", fallback_backend=None)
     changed = cycle.solve(q, v, variables)
-    fresh = HierarchyCycle(robot, table2_stack(robot), engine="native", regularization=1e-3,
-                           backend="quadprog", fallback_backend=None).solve(q, v, variables)
+    fresh = HierarchyCycle(robot, table2_stack(robot), engine="native",
+                           settings=cycle.settings).solve(q, v, variables)
     assert changed.ok and fresh.ok
     np.testing.assert_array_equal(changed.tau, fresh.tau)
     assert np.abs(changed.tau - first.tau).max() > 1e-3  # ε = 1e-3 trades the tasks off visibly
     # backend options too: an iteration limit of 1 makes DAQP fail, the fallback solves (on a
     # state whose cascade needs a level QP)
-    cycle.backend, cycle.fallback_backend, cycle.regularization = "daqp", "quadprog", 1e-6
+    cycle.settings = SolverSettings()
     q, v = next((q, v) for q, v in moving_states(robot, 400)
                 if cycle.solve(q, v, variables).timings["qps"])
-    cycle.backend_options = {"iter_limit": 1}
+    cycle.settings = SolverSettings(backend_options={"iter_limit": 1})
     limited = cycle.solve(q, v, variables)
     assert limited.ok and "iteration limit" in limited.status
-    cycle.backend_options = {}
+    cycle.settings = SolverSettings()
     assert "iteration limit" not in cycle.solve(q, v, variables).status
 
 

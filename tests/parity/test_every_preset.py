@@ -12,6 +12,7 @@ import wholebody as wb
 from wholebody.control.passive import PassiveWBC
 from wholebody.control.balance import MomentumBalance
 from wholebody.robots import preset_names
+from wholebody.solvers import SolverSettings
 
 from conftest import native_cycle_or_skip
 
@@ -66,8 +67,9 @@ def test_momentum_balance_engines_agree(presets, name, gains):
     engine's to 1e-6, satisfy the dynamics and stay within the torque limits. Quadprog on both (see
     test_cycle.test_torques_equal_python_and_satisfy_dynamics for why not DAQP)."""
     robot = presets[name]
-    native = MomentumBalance(robot, gains=gains, backend="quadprog", engine="native")
-    python = MomentumBalance(robot, gains=gains, backend="quadprog", engine="python")
+    settings = SolverSettings(backend="quadprog")
+    native = MomentumBalance(robot, gains=gains, settings=settings, engine="native")
+    python = MomentumBalance(robot, gains=gains, settings=settings, engine="python")
     for i, (q, v) in enumerate(robot.smooth_motion(8, 0.05)):
         a, b = native.compute(q, v, 0.0), python.compute(q, v, 0.0)
         where = f"{name} state {i}"

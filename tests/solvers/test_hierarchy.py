@@ -18,6 +18,8 @@ Every tolerance here was measured on 4 × 240 hierarchies (seeds 1000, 5000, 900
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import quadprog
@@ -25,10 +27,18 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import null_space, qr
 
-from wholebody.solvers import Level, evaluate_levels, row_normalised, solve_hierarchy, solve_qp
+from wholebody.solvers import (Level, SolverSettings, evaluate_levels, row_normalised, solve_hierarchy,
+                               solve_qp)
 from wholebody.solvers import backends as backends_mod
+from wholebody.solvers.settings import HIERARCHY_DEFAULT
 
 N_PROBLEMS = 240
+
+
+def cfg(**changes) -> SolverSettings:
+    """solve_hierarchy's default settings (quadprog, no fallback, ε = 1e-4) with ``changes``."""
+    return dataclasses.replace(HIERARCHY_DEFAULT, **changes)
+
 BACKENDS = ("quadprog", "daqp", "proxsuite")
 
 
@@ -209,7 +219,7 @@ def test_cascade_matches_oracle_same_eps(problems, oracle_same_eps, backend):
         if ref is None:
             skipped += 1
             continue
-        sol = solve_hierarchy(lv, backend=backend, regularization=1e-4, backend_options=opts)
+        sol = solve_hierarchy(lv, cfg(backend=backend, regularization=1e-4, backend_options=opts))
         assert np.all(np.isfinite(sol.x)) and np.all(np.isfinite(sol.costs))
         if not sol.ok and prox:
             failed += 1
@@ -243,7 +253,7 @@ def test_cascade_is_lexicographic_for_small_eps(problems):
         if np.linalg.norm(ref[1]) > 1e3:  # ε‖x‖² × multipliers no longer small
             ill_scaled += 1
             continue
-        sol = solve_hierarchy(lv, regularization=1e-10)
+        sol = solve_hierarchy(lv, settings=cfg(regularization=1e-10))
         assert sol.ok, f"problem {i}: {sol.status}"
         errs.append((rel_err(sol.costs, ref[0]).max(), i))
     assert ill_scaled + skipped <= 0.08 * len(problems), (ill_scaled, skipped)
@@ -263,7 +273,7 @@ def test_default_eps_is_close_to_lexicographic(problems, oracle_same_eps):
         exact = oracle_ladder(lv, 1e-11)
         if exact is None or np.linalg.norm(exact[1]) > 1e3:
             continue
-        sol = solve_hierarchy(lv, regularization=1e-4)
+        sol = solve_hierarchy(lv, settings=cfg(regularization=1e-4))
         gaps.append(rel_err(sol.costs, exact[0]).max())
     gaps = np.array(gaps)
     assert np.quantile(gaps, 0.95) < 1e-2
@@ -289,9 +299,9 @@ def test_daqp_native_mode_minimises_row_normalised_residuals():
     first break-point block, so without it these conflicting rows would make setup fail.)
     """
     L = Level(eq=(np.array([[1.0, 0.0], [2.0, 0.0]]), np.array([1.0, 0.0])))
-    native = solve_hierarchy([L], method="daqp", regularization=1e-8, daqp_native_weights=True)
-    fixed = solve_hierarchy([L], method="daqp", regularization=1e-8)
-    cascade = solve_hierarchy([L], regularization=1e-8)
+    native = solve_hierarchy([L], cfg(method="daqp", regularization=1e-8), daqp_native_weights=True)
+    fixed = solve_hierarchy([L], settings=cfg(method="daqp", regularization=1e-8))
+    cascade = solve_hierarchy([L], settings=cfg(regularization=1e-8))
     assert native.ok and fixed.ok
     assert native.x[0] == pytest.approx(0.5, abs=1e-6)  # min (x-1)² + x²      (normalised)
     assert cascade.x[0] == pytest.approx(0.2, abs=1e-6)  # min (x-1)² + (2x)²   (eq. 5)
@@ -304,11 +314,11 @@ def test_daqp_native_gap_is_the_normalisation():
     gap, match = [], []
     for _ in range(60):
         lv = _well_posed(rng)
-        native = solve_hierarchy(lv, method="daqp", regularization=1e-8, daqp_native_weights=True)
+        native = solve_hierarchy(lv, cfg(method="daqp", regularization=1e-8), daqp_native_weights=True)
         assert native.ok
-        cascade = solve_hierarchy(lv, regularization=1e-8)
+        cascade = solve_hierarchy(lv, settings=cfg(regularization=1e-8))
         normed = row_normalised(lv)
-        ref = solve_hierarchy(normed, regularization=1e-8)
+        ref = solve_hierarchy(normed, settings=cfg(regularization=1e-8))
         gap.append(rel_err(native.costs, cascade.costs).max())
         match.append(rel_err(evaluate_levels(normed, native.x)[0], ref.costs).max())
     gap, match = np.array(gap), np.array(match)
@@ -327,12 +337,12 @@ def test_daqp_method_matches_cascade():
     errs, failed = [], 0
     for _ in range(100):
         lv = _well_posed(rng)
-        sol = solve_hierarchy(lv, method="daqp", regularization=1e-8)
+        sol = solve_hierarchy(lv, settings=cfg(method="daqp", regularization=1e-8))
         if not sol.ok:  # DAQP exitflag 3: reported, x from an earlier level, finite
             failed += 1
             assert np.all(np.isfinite(sol.x)) and "exitflag" in sol.status
             continue
-        ref = solve_hierarchy(lv, regularization=1e-8)
+        ref = solve_hierarchy(lv, settings=cfg(regularization=1e-8))
         if np.linalg.norm(ref.x) > 1e3:
             continue
         errs.append(rel_err(sol.costs, ref.costs).max())
@@ -346,8 +356,8 @@ def test_daqp_method_handles_conflicting_dependent_equalities():
     B = np.array([[1.0, 0.0], [1.0, 0.0]])
     lv = [Level(eq=(B, np.array([1.0, 2.0])), name="conflict"),
           Level(eq=(np.array([[0.0, 1.0]]), np.array([5.0])), name="next")]
-    sol = solve_hierarchy(lv, method="daqp", regularization=1e-8)
-    ref = solve_hierarchy(lv, regularization=1e-8)
+    sol = solve_hierarchy(lv, settings=cfg(method="daqp", regularization=1e-8))
+    ref = solve_hierarchy(lv, settings=cfg(regularization=1e-8))
     assert sol.ok, sol.status
     np.testing.assert_allclose(sol.x, [1.5, 5.0], atol=1e-6)
     np.testing.assert_allclose(sol.costs, ref.costs, rtol=1e-6, atol=1e-6)
@@ -368,8 +378,8 @@ def test_adding_a_lower_level_never_changes_higher_costs(seed, extra_seed):
     lv = random_hierarchy(np.random.default_rng(seed), n_levels=n_levels)
     extra = random_hierarchy(np.random.default_rng(extra_seed), n=lv[0].n, n_levels=1)[0]
     for eps in (1e-10, 1e-4):
-        base = solve_hierarchy(lv, regularization=eps)
-        more = solve_hierarchy(lv + [extra], regularization=eps)
+        base = solve_hierarchy(lv, settings=cfg(regularization=eps))
+        more = solve_hierarchy(lv + [extra], settings=cfg(regularization=eps))
         assert base.ok and more.ok and len(more.costs) == len(lv) + 1
         change = (more.costs[:-1] - base.costs) / (1.0 + base.costs)
         assert change.max() <= 1e-6  # never worse
@@ -389,8 +399,8 @@ def test_weighted_equals_two_level_cascade():
                      name="hard")
         obj = random_hierarchy(rng, n=n, n_levels=1)[0]
         # ε small: the cascade's soft first level trades O(ε) violation for norm, the hard rows don't
-        w = solve_hierarchy([hard, obj], method="weighted", regularization=1e-10)
-        c = solve_hierarchy([hard, obj], method="cascade", regularization=1e-10)
+        w = solve_hierarchy([hard, obj], settings=cfg(method="weighted", regularization=1e-10))
+        c = solve_hierarchy([hard, obj], settings=cfg(method="cascade", regularization=1e-10))
         assert w.ok and c.ok and w.method == "weighted" and not w.warnings
         np.testing.assert_allclose(w.costs, c.costs, rtol=1e-6, atol=1e-6)
         # (x itself is only pinned by the tiny ε in directions neither level sees: not compared)
@@ -401,8 +411,8 @@ def test_weighted_falls_back_to_cascade_when_hard_level_is_infeasible():
     hard = Level(ineq=(np.array([[1.0, 0, 0, 0], [1.0, 0, 0, 0]]), np.array([1.0, -np.inf]), np.array([np.inf, 0.0])),
                  name="hard")  # x0 ≥ 1 and x0 ≤ 0
     obj = Level(eq=(np.eye(n), np.arange(n, dtype=float)), name="obj")
-    w = solve_hierarchy([hard, obj], method="weighted")
-    c = solve_hierarchy([hard, obj], method="cascade")
+    w = solve_hierarchy([hard, obj], settings=cfg(method="weighted"))
+    c = solve_hierarchy([hard, obj], settings=cfg(method="cascade"))
     assert w.ok and w.method == "cascade" and w.warnings
     np.testing.assert_allclose(w.x, c.x)
     assert w.costs[0] == pytest.approx(0.5, rel=1e-3)  # the hard level's best compromise x0 = 0.5
@@ -419,15 +429,15 @@ def test_first_level_solution_replaces_the_first_qp():
         lv += random_hierarchy(rng, n=n, n_levels=2)
         x1 = np.linalg.lstsq(B1, B1 @ x_feas, rcond=None)[0]  # −B₁⁺b₁ in the paper's sign convention
         Z1 = null_space(B1)
-        fast = solve_hierarchy(lv, first_level_solution=(x1, Z1), regularization=1e-10)
-        ref = solve_hierarchy(lv, regularization=1e-10)
+        fast = solve_hierarchy(lv, first_level_solution=(x1, Z1), settings=cfg(regularization=1e-10))
+        ref = solve_hierarchy(lv, settings=cfg(regularization=1e-10))
         assert fast.ok, fast.status
         # v*_1 = 0: the first level's inequalities hold exactly (x1 itself may violate them)
         assert fast.costs[0] <= 1e-12
         np.testing.assert_allclose(fast.costs, ref.costs, rtol=1e-6, atol=1e-6)
         # a non-orthonormal basis of the same space gives the same answer
         other = solve_hierarchy(lv, first_level_solution=(x1, Z1 @ rng.standard_normal((Z1.shape[1],) * 2)),
-                                regularization=1e-10)
+                                settings=cfg(regularization=1e-10))
         np.testing.assert_allclose(other.costs, fast.costs, rtol=1e-6, atol=1e-6)
 
 
@@ -437,7 +447,8 @@ def test_first_level_solution_flags_a_violated_frozen_row():
                ineq=(np.array([[1.0, 0, 0], [0, 1.0, 0]]), np.array([2.0, -1.0]), np.array([3.0, 1.0])), name="ne")
     L2 = Level(eq=(np.eye(3), np.full(3, 5.0)), name="task")
     Z1 = np.array([[0.0, 0], [1, 0], [0, 1]])
-    sol = solve_hierarchy([L1, L2], first_level_solution=(np.array([1.0, 0, 0]), Z1), regularization=1e-10)
+    sol = solve_hierarchy([L1, L2], first_level_solution=(np.array([1.0, 0, 0]), Z1),
+                          settings=cfg(regularization=1e-10))
     assert sol.ok and any("violate" in w for w in sol.warnings)
     np.testing.assert_allclose(sol.x, [1.0, 1.0, 5.0], atol=1e-6)  # row 2 held at its bound 1
 
@@ -472,14 +483,14 @@ def test_fallback_backend_solves_the_failed_level_qp(monkeypatch):
     """A level QP the backend fails on is solved by the fallback: same optimum, noted in warnings."""
     lv = random_hierarchy(np.random.default_rng(42), n=10, n_levels=3)
     lv = [Level(eq=(L.B, L.b), ineq=(np.eye(10), np.ones(10), 2.0 * np.ones(10)), name=L.name) for L in lv]
-    reference = solve_hierarchy(lv, backend="quadprog")
+    reference = solve_hierarchy(lv, settings=cfg(backend="quadprog"))
 
     def failing(*args, **kw):
         return None, "daqp: cycling (-2)", False
 
     monkeypatch.setitem(backends_mod.BACKENDS, "daqp", failing)
-    assert not solve_hierarchy(lv, backend="daqp").ok
-    sol = solve_hierarchy(lv, backend="daqp", fallback_backend="quadprog")
+    assert not solve_hierarchy(lv, settings=cfg(backend="daqp")).ok
+    sol = solve_hierarchy(lv, settings=cfg(backend="daqp", fallback_backend="quadprog"))
     assert sol.ok and any("solved with quadprog" in w for w in sol.warnings)
     np.testing.assert_allclose(sol.costs, reference.costs, rtol=1e-9, atol=1e-12)
 
@@ -490,7 +501,7 @@ def test_backend_that_raises_is_caught(monkeypatch):
 
     monkeypatch.setitem(backends_mod.BACKENDS, "daqp", boom)
     lv = [Level(ineq=(np.eye(3), -np.ones(3), np.ones(3)), eq=(np.ones((1, 3)), np.array([5.0])))]
-    sol = solve_hierarchy(lv, backend="daqp")
+    sol = solve_hierarchy(lv, settings=cfg(backend="daqp"))
     assert not sol.ok and "singular" in sol.status and np.all(np.isfinite(sol.x))
 
 
@@ -515,7 +526,7 @@ def test_levels_without_freedom_are_evaluated_only():
     n = 3
     lv = [Level(eq=(np.eye(n), np.ones(n)), name="all"),
           Level(eq=(np.ones((1, n)), np.array([0.0])), ineq=(np.eye(n), np.full(n, 2.0), None), name="late")]
-    sol = solve_hierarchy(lv, regularization=1e-10)
+    sol = solve_hierarchy(lv, settings=cfg(regularization=1e-10))
     assert sol.ok and list(sol.nullspace_dims) == [0, 0]
     assert sol.costs[1] == pytest.approx(9.0 + 3.0, rel=1e-6)  # (3-0)² + 3 · (2-1)²
     np.testing.assert_allclose(sol.ineq_violations[1], np.ones(n), atol=1e-6)
@@ -525,7 +536,7 @@ def test_unsatisfiable_equalities_still_lock_their_direction():
     # level 1 asks x0 = 1 and x0 = 3: compromise 2, and level 2 (x0 = 10) cannot move it
     lv = [Level(eq=(np.array([[1.0, 0.0], [1.0, 0.0]]), np.array([1.0, 3.0]))),
           Level(eq=(np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([10.0, 4.0])))]
-    sol = solve_hierarchy(lv, regularization=1e-10)
+    sol = solve_hierarchy(lv, settings=cfg(regularization=1e-10))
     np.testing.assert_allclose(sol.x, [2.0, 4.0], atol=1e-6)
     np.testing.assert_allclose(sol.costs, [2.0, 64.0], rtol=1e-6)
 
@@ -536,7 +547,7 @@ def test_violated_inequality_keeps_its_slack_for_lower_levels():
     lv = [Level(ineq=(np.array([[1.0, 0], [1.0, 0]]), np.array([2.0, -np.inf]), np.array([np.inf, 0.0])),
                 ineq_weights=V),
           Level(eq=(np.array([[1.0, 0.0]]), np.array([5.0])))]
-    sol = solve_hierarchy(lv, regularization=1e-10)
+    sol = solve_hierarchy(lv, settings=cfg(regularization=1e-10))
     # min (2 - x)² + (3x)²  →  x = 0.2
     assert sol.x[0] == pytest.approx(0.2, abs=1e-6)
     np.testing.assert_allclose(sol.ineq_violations[0], [1.8, 0.6], atol=1e-6)
@@ -544,7 +555,7 @@ def test_violated_inequality_keeps_its_slack_for_lower_levels():
 
 def test_one_level_and_empty_level():
     L = Level(eq=(np.array([[1.0, 1.0]]), np.array([2.0])))
-    sol = solve_hierarchy([Level(name="empty"), L, Level(name="empty2")], regularization=1e-10)
+    sol = solve_hierarchy([Level(name="empty"), L, Level(name="empty2")], cfg(regularization=1e-10))
     assert sol.ok and sol.costs[0] == 0.0 and sol.costs[2] == 0.0
     np.testing.assert_allclose(sol.x, [1.0, 1.0], atol=1e-6)  # minimum norm via ε
 
@@ -588,16 +599,12 @@ def test_mismatched_columns_across_levels_name_the_level():
 
 def test_bad_solver_arguments():
     L = Level(eq=(np.ones((1, 3)), np.zeros(1)))
-    with pytest.raises(ValueError, match="unknown method"):
-        solve_hierarchy([L], method="magic")
-    with pytest.raises(ValueError, match="unknown backend"):
-        solve_hierarchy([L], backend="cplex")
-    with pytest.raises(ValueError, match="regularization"):
-        solve_hierarchy([L], regularization=0.0)
+    with pytest.raises(ValueError, match="settings: expected a SolverSettings or None, got 'weighted'"):
+        solve_hierarchy([L], "weighted")
     with pytest.raises(ValueError, match="first_level_solution: x1 contains NaN"):
         solve_hierarchy([L], first_level_solution=(np.array([np.nan, 0, 0]), np.eye(3)))
     with pytest.raises(ValueError, match="'weighted' takes"):
-        solve_hierarchy([L, L, L], method="weighted")
+        solve_hierarchy([L, L, L], settings=cfg(method="weighted"))
 
 
 # ---------------------------------------------------------------------------- compiled cascade
@@ -673,7 +680,7 @@ def test_daqp_on_the_compiled_run_solves_its_qp_as_the_adapter(monkeypatch):
     monkeypatch.setattr(cc, "_daqp_on_run", compare)
     rng = np.random.default_rng(5)
     for _ in range(150):
-        solve_hierarchy(random_hierarchy(rng), backend="daqp")
+        solve_hierarchy(random_hierarchy(rng), settings=cfg(backend="daqp"))
     assert len(compared) > 150 and sum(compared) > 100
 
 
@@ -692,8 +699,8 @@ def test_daqp_in_the_run_gives_what_python_gives(monkeypatch, case):
                "tiny-eps": {"sing_tol": 3.7e-11, "primal_tol": 1e-7}}.get(case, {})
     rng = np.random.default_rng(8)
     problems = [random_hierarchy(rng) for _ in range(200)]
-    kwargs = dict(backend="daqp", fallback_backend="quadprog", backend_options=options,
-                  regularization=1e-10 if case == "tiny-eps" else 1e-4)
+    kwargs = dict(settings=cfg(backend="daqp", fallback_backend="quadprog", backend_options=options,
+                               regularization=1e-10 if case == "tiny-eps" else 1e-4))
     solvers, make_solver = [], cc._daqp_in_cascade
 
     def recording(backend, opts):
@@ -777,8 +784,8 @@ def test_compiled_cascade_matches_python_on_random_hierarchies(monkeypatch, back
     rng = np.random.default_rng(2024)
     for i in range(200):
         levels = random_hierarchy(rng)
-        compiled = solve_hierarchy(levels, backend=backend)
-        python = solve_hierarchy(levels, backend=backend, compiled=False)
+        compiled = solve_hierarchy(levels, settings=cfg(backend=backend))
+        python = solve_hierarchy(levels, settings=cfg(backend=backend), compiled=False)
         assert compiled.ok == python.ok, (i, compiled.status, python.status)
         assert compiled.status == python.status
         assert compiled.levels_solved == python.levels_solved
@@ -803,7 +810,7 @@ def test_daqp_c_interface_is_refused_for_another_version_or_layout(monkeypatch, 
     _daqp_in_run_or_skip()
     request.addfinalizer(cc._daqp_c_module.cache_clear)  # nothing stale left for other tests
     levels = random_hierarchy(np.random.default_rng(3))
-    reference = solve_hierarchy(levels, backend="daqp")
+    reference = solve_hierarchy(levels, settings=cfg(backend="daqp"))
     version = importlib.metadata.version
     monkeypatch.setattr(importlib.metadata, "version",
                         lambda name: "0.10.3" if name == "daqp" else version(name))
@@ -811,7 +818,7 @@ def test_daqp_c_interface_is_refused_for_another_version_or_layout(monkeypatch, 
     with caplog.at_level("INFO", logger=cc.log.name):
         assert cc._daqp_c_module() is None and cc._daqp_in_cascade("daqp", {}) is None
     assert "declared for 0.11.0" in caplog.text
-    np.testing.assert_array_equal(solve_hierarchy(levels, backend="daqp").x, reference.x)
+    np.testing.assert_array_equal(solve_hierarchy(levels, cfg(backend="daqp")).x, reference.x)
     monkeypatch.setattr(importlib.metadata, "version", version)
     solve = daqp.solve
 
@@ -853,9 +860,9 @@ def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots):
 
     def cycle(backend, engine="auto", **options):
         stack = table1_stack(robot, robot.contact_names, cop_margin=0.0)
-        return HierarchyCycle(robot, stack, backend=backend,
-                              fallback_backend="quadprog" if backend == "daqp" else None,
-                              engine=engine, backend_options=options)
+        return HierarchyCycle(robot, stack, engine=engine, settings=SolverSettings(
+            backend=backend, fallback_backend="quadprog" if backend == "daqp" else None,
+            backend_options=options))
 
     def fell_back(status):
         """A level QP solved with quadprog, or the whole cycle solved again by quadprog alone
@@ -956,8 +963,9 @@ def test_table1_level_qps_stay_feasible_after_tolerance_violations(robots, compi
         robot.update(q, v)
         levels, _ = formulation.levels(stack, variables)
         fls = formulation.first_level_solution(levels[0])
-        sol = solve_hierarchy(levels, backend="daqp", fallback_backend="quadprog",
-                              regularization=1e-6, first_level_solution=fls, compiled=compiled)
+        sol = solve_hierarchy(levels, settings=cfg(backend="daqp", fallback_backend="quadprog",
+                                                   regularization=1e-6),
+                              first_level_solution=fls, compiled=compiled)
         if not sol.ok:
             failed.append((k, sol.status))
     assert not failed
@@ -1025,9 +1033,10 @@ def test_daqp_alone_solves_most_table1_cycles_and_agrees_with_quadprog(robots):
             continue
         robot.update(q, v)
         levels, _ = formulation.levels(stack, variables)
-        kw = dict(regularization=1e-6, first_level_solution="analytic")
-        daqp_only = solve_hierarchy(levels, backend="daqp", **kw)
-        reference = solve_hierarchy(levels, backend="quadprog", **kw)
+        kw = dict(first_level_solution="analytic")
+        daqp_only = solve_hierarchy(levels, settings=cfg(backend="daqp", regularization=1e-6), **kw)
+        reference = solve_hierarchy(levels, settings=cfg(backend="quadprog", regularization=1e-6),
+                                    **kw)
         assert reference.ok
         if not daqp_only.ok:
             failed += 1
@@ -1087,7 +1096,7 @@ def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
         shape_seed = int(rng.integers(1 << 30))
         make = lambda seed: random_hierarchy(np.random.default_rng(seed))  # noqa: E731
         levels = make(shape_seed)
-        kw = dict(backend="daqp", regularization=1e-6, fallback_backend="quadprog")
+        kw = dict(settings=cfg(backend="daqp", regularization=1e-6, fallback_backend="quadprog"))
         bound = BoundCascade(levels, **kw)
         previous = None
         for _ in range(4):
@@ -1132,12 +1141,12 @@ def test_overflowing_entries_are_not_reported_solved(method):
     with np.errstate(over="ignore", invalid="ignore"):
         for compiled in (True, False):
             extra = {"compiled": compiled} if method == "cascade" else {}
-            sol = solve_hierarchy([big, rest], method=method, **extra)
+            sol = solve_hierarchy([big, rest], settings=cfg(method=method), **extra)
             assert not sol.ok and sol.status, (compiled, sol.status)
             assert np.all(np.isfinite(sol.x))
 
 
 @pytest.mark.parametrize("method", ["cascade", "daqp", "weighted"])
 def test_no_variables_is_an_empty_solution(method):
-    sol = solve_hierarchy([Level(eq=(np.zeros((1, 0)), np.zeros(1)), name="empty")], method=method)
+    sol = solve_hierarchy([Level(eq=(np.zeros((1, 0)), np.zeros(1)), name="empty")], cfg(method=method))
     assert sol.ok and sol.x.shape == (0,)

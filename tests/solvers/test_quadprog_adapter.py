@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wholebody.solvers import backends, common
+from wholebody.solvers import SolverSettings, backends, common
 
 DATA = Path(__file__).parent / "data" / "degenerate_apex_qp.npz"
 TIME_LIMIT = 20.0  # s; each batch below takes well under a second when quadprog returns
@@ -54,7 +54,8 @@ def _apex_as_fallback(queue) -> None:
     """The cascade's call of a level QP whose first backend failed (DAQP, failure forced)."""
     levels = [type("Level", (), {"name": "apex"})()]
     warns = []
-    y, ok, status = common._backend_solve(_apex_qp, "daqp", {}, "quadprog", 0, levels, warns,
+    settings = SolverSettings(backend="daqp", fallback_backend="quadprog")
+    y, ok, status = common._backend_solve(_apex_qp, settings, 0, levels, warns,
                                           first=(None, "daqp: forced failure", False))
     queue.put((y, status, ok))
 

@@ -2,11 +2,14 @@
 equations of motion (eq. 1), the contact constraint (eq. 2), Pinocchio's centroidal dynamics, and
 the full formulation as an independent route to the same answer."""
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from wholebody.formulation import Formulation, Solution, Stack
+from wholebody.solvers import SolverSettings
 from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer,
                              FrameTask, FrictionCone, FullDynamics, JointAccelerationLimits,
                              MomentumForce, MomentumPD, NewtonEuler, NormalForceBounds,
@@ -14,6 +17,9 @@ from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, Force
 from wholebody.variables import Variables
 
 PRESETS = ("talos14", "talos", "hyq")
+
+#: DAQP at a small ε (eq. 5), where the solution barely moves from the exact hierarchy
+DAQP_TIGHT = SolverSettings(regularization=1e-8, backend="daqp")
 
 
 def standard_stack(robot, full=False, pin_everything=False):
@@ -62,7 +68,7 @@ def test_solution_satisfies_dynamics_contacts_and_limits(robots, name, rng):
     for _ in range(3):
         robot.update(*nominal_state(robot, rng))
         variables = Variables(robot)
-        sol = Formulation(robot).solve(standard_stack(robot), variables, regularization=1e-8, backend="daqp")
+        sol = Formulation(robot).solve(standard_stack(robot), variables, settings=DAQP_TIGHT)
         assert sol.ok, sol.status
         assert check_physics(robot, sol, variables, contact_tol=1e-6) < 1e-8
         assert sol.timings["total"] > 0 and len(sol.tasks) == len(standard_stack(robot).tasks())
@@ -77,9 +83,9 @@ def test_reduced_equals_full(robots, name, rng):
     robot.update(*nominal_state(robot, rng))
     variables = Variables(robot)
     reduced = Formulation(robot, reduced=True).solve(
-        standard_stack(robot, pin_everything=True), variables, regularization=1e-8, backend="daqp")
+        standard_stack(robot, pin_everything=True), variables, settings=DAQP_TIGHT)
     full = Formulation(robot, reduced=False).solve(
-        standard_stack(robot, full=True, pin_everything=True), variables, regularization=1e-8, backend="daqp")
+        standard_stack(robot, full=True, pin_everything=True), variables, settings=DAQP_TIGHT)
     assert reduced.ok and full.ok
     for a, b in ((reduced.qdd, full.qdd), (reduced.lam, full.lam), (reduced.tau, full.tau)):
         np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5 * (1 + np.abs(b).max()))
@@ -94,8 +100,8 @@ def test_analytic_first_level_matches_qp(robots, name, rng):
     variables = Variables(robot)
     f = Formulation(robot)
     stack = standard_stack(robot, pin_everything=True)
-    analytic = f.solve(stack, variables, analytic_first_level=True, regularization=1e-8, backend="daqp")
-    qp = f.solve(stack, variables, analytic_first_level=False, regularization=1e-8, backend="daqp")
+    analytic = f.solve(stack, variables, settings=replace(DAQP_TIGHT, analytic_first_level=True))
+    qp = f.solve(stack, variables, settings=replace(DAQP_TIGHT, analytic_first_level=False))
     np.testing.assert_allclose(analytic.tau, qp.tau, rtol=1e-5, atol=1e-4)
     np.testing.assert_allclose(analytic.level_costs, qp.level_costs, rtol=1e-4, atol=1e-8)
     assert check_physics(robot, analytic, variables) < 1e-8
@@ -221,7 +227,8 @@ def test_com_task_tracks(robots):
                    [com], [PostureTask(weight=0.1), ForceRegularizer(weight=1e-4)]])
     errors = {}
     for eps in (1e-4, 1e-6, 1e-8):
-        sol = Formulation(robot).solve(stack, Variables(robot), regularization=eps)
+        sol = Formulation(robot).solve(stack, Variables(robot),
+                                       settings=SolverSettings(regularization=eps))
         acc = robot.J_com @ sol.qdd + robot.com_drift
         errors[eps] = np.abs(acc - [2.0, 0.0, -3.0]).max()
     # the eps ||x||^2 of eq. 5 trades the task off by O(eps): ~4 % at the paper's 1e-4
@@ -304,8 +311,8 @@ def test_backends_agree_on_robots(robots, name, rng):
     robot.update(*nominal_state(robot, rng))
     variables = Variables(robot)
     f = Formulation(robot)
-    a = f.solve(standard_stack(robot), variables, backend="quadprog")
-    b = f.solve(standard_stack(robot), variables, backend="daqp")
+    a = f.solve(standard_stack(robot), variables, settings=SolverSettings(backend="quadprog"))
+    b = f.solve(standard_stack(robot), variables, settings=SolverSettings(backend="daqp"))
     assert a.ok and b.ok
     np.testing.assert_allclose(a.level_costs, b.level_costs, rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(a.tau, b.tau, rtol=1e-4, atol=1e-3)

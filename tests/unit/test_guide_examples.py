@@ -65,6 +65,7 @@ def check_own_stack(ns: dict) -> None:
 def check_own_task(ns: dict) -> None:
     from wholebody.cycle import HierarchyCycle
     from wholebody.formulation import Formulation
+    from wholebody.solvers import SolverSettings
     from wholebody.tasks import Task
 
     robot, sol, squat = ns["robot"], ns["sol"], ns["squat"]
@@ -79,15 +80,15 @@ def check_own_task(ns: dict) -> None:
     # sensitivity (the squat and the saturated torques make this cascade ill-conditioned)
     from wholebody.cycle import native_available, python_tasks
     assert python_tasks(ns["stack"]) == [squat]
-    settings = dict(backend="quadprog", fallback_backend=None)
-    cycle = HierarchyCycle(robot, ns["stack"], engine="auto", **settings)
+    settings = SolverSettings(backend="quadprog", fallback_backend=None)
+    cycle = HierarchyCycle(robot, ns["stack"], engine="auto", settings=settings)
     assert cycle.engine_name == ("native" if native_available() else "python")
     q, v = robot.q_ref, np.zeros(robot.nv)
     native = cycle.solve(q, v)
 
     def reference(q, v):
         robot.update(q, v)
-        return Formulation(robot).solve(ns["stack"], **settings).tau
+        return Formulation(robot).solve(ns["stack"], settings=settings).tau
     from conftest import torque_tolerance
     np.testing.assert_allclose(native.tau, reference(q, v), rtol=0,
                                atol=torque_tolerance(reference, q, v, robot.nq))

@@ -13,6 +13,7 @@ import quadprog
 from wholebody.control.passive import STANCE_RANK_TOLERANCE, PassiveWBC, SwingGains
 from wholebody.formulation import Formulation
 from wholebody.guard import Outcome
+from wholebody.solvers import SolverSettings
 from wholebody.tasks.contact import friction_faces
 
 
@@ -76,8 +77,8 @@ def test_matches_two_level_stack(robots, rng, stance, options, plan_for):
                                        for n in robot.contact_names])
     sol = wbc.solve(plan)
     stack, variables = wbc.as_stack(plan)
-    ref = Formulation(robot).solve(stack, variables, method="weighted", backend="daqp",
-                                   regularization=1e-12, fallback_backend=None)
+    ref = Formulation(robot).solve(stack, variables, settings=SolverSettings(
+        method="weighted", backend="daqp", regularization=1e-12, fallback_backend=None))
     assert sol.ok and ref.ok, (sol.status, ref.status)
     scale = np.abs(sol.tau).max()
     np.testing.assert_allclose(sol.tau, ref.tau, atol=1e-6 * scale)

@@ -15,6 +15,7 @@ import wholebody as wb
 from wholebody.robots.description import DescriptionError
 from wholebody.robots.mjcf import build_model, load_mjcf
 from wholebody.sim import convert
+from wholebody.solvers import SolverSettings
 
 LEGS = {"lf": (0.25, 0.12), "rf": (0.25, -0.12), "lh": (-0.25, 0.12), "rh": (-0.25, -0.12)}
 
@@ -565,7 +566,8 @@ def test_continuous_joints_in_both_engines(tmp_path, rng, mode):
                       [JointTrajectoryTask([f"{next(iter(LEGS))}_kfe"], kp=80.0, kd=9.0, name="knee"),
                        PostureTask(kp=kp, kd=kd, base_kp=20.0, base_kd=5.0, name="posture")]])
 
-    engines = {e: HierarchyCycle(robot, stack(), engine=e, backend="quadprog", fallback_backend=None)
+    settings = SolverSettings(backend="quadprog", fallback_backend=None)
+    engines = {e: HierarchyCycle(robot, stack(), engine=e, settings=settings)
                for e in ("native", "python")}
     assert engines["native"].native
     angles = robot.joint_angles(robot.q_ref)

@@ -28,6 +28,8 @@ from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation, Solution
 from ..guard import Outcome
 from ..robot import Robot
+from ..solvers import SolverSettings
+from ..solvers.settings import settings_or_default
 from ..variables import Variables
 from ..planning.blend import quintic_blend
 from ..tasks.base import contact_list
@@ -185,7 +187,8 @@ class MomentumBalance:
     """Balance controller: ``compute(q, v, t) -> Solution`` (tau, contact forces, diagnostics).
 
     ``gains`` "lqr" (eq. 24, default) or "pd" (eq. 22 with diagonal ``P``/``D``). ``com_ref``
-    defaults to the CoM of the reference posture. ``backend`` picks the QP solver of the cascade.
+    defaults to the CoM of the reference posture. ``settings`` (a
+    :class:`~wholebody.solvers.SolverSettings`; None: its defaults) pick the cascade's QP solver.
     ``reference`` (optional) is called every cycle as ``reference(t, robot)`` after the robot
     update and returns a :class:`BalanceReference`; it sets ``com_ref``, ``h_ref``, ``hdot_ref`` and
     the posture task's base reference. ``cop_margin`` shrinks the admissible CoP region of every
@@ -222,13 +225,14 @@ class MomentumBalance:
     (PD only) 6x6 or their diagonals, finite with a positive semi-definite symmetric part;
     ``Q``/``R`` (LQR only, checked by :class:`~wholebody.control.lqr.MomentumLQR`); ``cop_margin``
     None or in [0, 1), not > 0 without a sole; ``angular_weight`` finite >= 0; ``integral_limit``
-    finite > 0; ``reference`` None or callable; ``engine`` one of
+    finite > 0; ``reference`` None or callable; ``settings`` None or a SolverSettings whose
+    ``analytic_first_level`` the stack allows; ``engine`` one of
     :data:`~wholebody.cycle.ENGINES`. Gains given for the other law (``P``/``D`` with "lqr",
     ``Q``/``R``/``q_integral`` with "pd") are errors, not ignored.
     """
 
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
-                 P=None, D=None, Q=None, R=None, backend: str = "daqp",
+                 P=None, D=None, Q=None, R=None, settings: SolverSettings | None = None,
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
                  cop_margin: float | None = None, angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                  q_integral=None, integral_limit: float = DEFAULT_INTEGRAL_LIMIT,
@@ -271,9 +275,10 @@ class MomentumBalance:
         if D is not None:
             self.momentum.D = D
         self.formulation = Formulation(robot)
-        self.backend = backend
+        self.settings = settings_or_default(settings)
+        Formulation.uses_analytic_first_level(self.stack, self.settings)  # (a ValueError now)
         self.cycle = (None if engine == "python" else
-                      HierarchyCycle(robot, self.stack, engine=engine, backend=backend))
+                      HierarchyCycle(robot, self.stack, engine=engine, settings=self.settings))
         if com_ref is None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             com_ref = robot.com.copy()
@@ -342,7 +347,7 @@ class MomentumBalance:
         if self.cycle is not None:
             sol = self.cycle.solve(q, v, self.variables)
         else:
-            sol = self.formulation.solve(self.stack, self.variables, backend=self.backend,
+            sol = self.formulation.solve(self.stack, self.variables, self.settings,
                                          diagnostics=False)
         if integral is not None and sol.outcome is not Outcome.HELD:
             self.cog_integral = integral  # a held cycle's error is not integrated (anti-windup)

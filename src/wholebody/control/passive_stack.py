@@ -1,7 +1,7 @@
 """PassiveWBC's QP (Fahmi et al. 2019, eq. 7) as a two-level stack of library tasks: hard
 constraints (eqs. 9-10/32, 13-18, hard swing rows of eq. 11), then the weighted objective (eqs.
-4/7a/8, the regulariser, swing tasks softened by eq. 33) — for
-``Formulation.solve(method="weighted")``, an independent assembly of the same problem."""
+4/7a/8, the regulariser, swing tasks softened by eq. 33) — for ``Formulation.solve`` with
+``SolverSettings(method="weighted")``, an independent assembly of the same problem."""
 
 from __future__ import annotations
 

@@ -83,8 +83,10 @@ def _sq_norms(A: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", A, A)
 
 
-def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
-    """The cascade (module docstring); the reference for its compiled mirror (compiled_cascade._solve_compiled)."""
+def _solve_cascade(levels, n, settings, fls, tols, t0):
+    """The cascade (module docstring) with ``settings`` (a :class:`.SolverSettings`); the reference
+    for its compiled mirror (compiled_cascade._solve_compiled)."""
+    eps = settings.regularization
     rank_tol, drop_tol, relax_tol, feas_tol = tols
     drop2 = drop_tol * drop_tol  # freedom tests on squared norms: ‖C_i Z‖² > drop_tol² ‖C_i‖²
     nl = len(levels)
@@ -161,7 +163,7 @@ def _solve_cascade(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
                 solved = ok and (rows is None or not _violated(rows, u))
         if not solved and rows is not None:
             u, ok, status = _level_qp(Rc, *rows, lambda *qp: _backend_solve(
-                lambda: qp, backend, opts, fallback, r, levels, warns))
+                lambda: qp, settings, r, levels, warns))
         if high is not None:  # the margins stay for the lower levels
             high = (high[0], hb[0], hb[1], high[3])
         if not ok:

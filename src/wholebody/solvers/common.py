@@ -15,14 +15,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .backends import BACKENDS, FALLBACK_OPTIONS, solve_qp
+from .backends import FALLBACK_OPTIONS, solve_qp
 from .level import Level
 
 # one logger for solve_hierarchy, whichever method's module writes to it
 log = logging.getLogger(f"{__package__}.hierarchy")
-
-_METHODS = ("cascade", "daqp", "weighted")
-
 
 @dataclass
 class HierarchySolution:
@@ -61,21 +58,11 @@ class FirstLevelSolution(NamedTuple):
 
 
 # ---------------------------------------------------------------------------- argument checks
-def _checked_arguments(levels, method, backend, regularization, first_level_solution,
-                       fallback_backend):
-    """solve_hierarchy's argument checks → (levels as a list, n, first_level_solution,
-    fallback_backend); ValueError naming what is wrong."""
+def _checked_arguments(levels, settings, first_level_solution):
+    """solve_hierarchy's argument checks (``settings`` checked themselves) → (levels as a list,
+    n, first_level_solution); ValueError naming what is wrong."""
     levels = [levels] if isinstance(levels, Level) else list(levels)
-    if method not in _METHODS:
-        raise ValueError(f"unknown method {method!r}; choose from {_METHODS}")
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; choose from {sorted(BACKENDS)}")
-    if fallback_backend is not None and fallback_backend not in BACKENDS:
-        raise ValueError(f"unknown fallback_backend {fallback_backend!r}; choose from {sorted(BACKENDS)}")
-    if fallback_backend == backend:
-        fallback_backend = None
-    if not (np.isfinite(regularization) and regularization > 0):
-        raise ValueError(f"regularization must be finite and > 0, got {regularization!r}")
+    method = settings.method
     n_hint = None
     analytic = isinstance(first_level_solution, str)
     if first_level_solution is not None:
@@ -91,7 +78,7 @@ def _checked_arguments(levels, method, backend, regularization, first_level_solu
             first_level_solution = _check_first_level(first_level_solution)
             n_hint = first_level_solution[0].shape[0]
     n = _check_levels(levels, n_hint)
-    return levels, n, first_level_solution, fallback_backend
+    return levels, n, first_level_solution
 
 
 def _check_levels(levels, n_hint=None) -> int:
@@ -176,11 +163,14 @@ def _finish(levels, x, status, ok, t_start, level_times, method, solved, zdims, 
     )
 
 
-def _backend_solve(qp, backend, opts, fallback, r, levels, warns, first=None):
-    """The level QP ``qp()`` → (H, g, A, lower, upper) with ``backend``, then ``fallback`` if it
-    fails → (y, ok, status); a fallback success is recorded in ``warns``. ``first``, if given, is
-    the backend's (y, status, ok) already computed (then ``qp`` is called only for the fallback)."""
-    y, status, ok = first if first is not None else solve_qp(*qp(), backend=backend, **opts)
+def _backend_solve(qp, settings, r, levels, warns, first=None):
+    """The level QP ``qp()`` → (H, g, A, lower, upper) with ``settings.backend``, then
+    ``settings.fallback_backend`` if it fails → (y, ok, status); a fallback success is recorded
+    in ``warns``. ``first``, if given, is the backend's (y, status, ok) already computed (then
+    ``qp`` is called only for the fallback)."""
+    fallback = settings.fallback_backend
+    y, status, ok = first if first is not None else solve_qp(*qp(), backend=settings.backend,
+                                                             **settings.options)
     if not ok and fallback is not None:
         y, status2, ok = solve_qp(*qp(), backend=fallback, **FALLBACK_OPTIONS.get(fallback, {}))
         if ok:

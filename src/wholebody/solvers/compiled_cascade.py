@@ -26,6 +26,7 @@ from . import cascade
 from .backends import (BACKENDS, DAQP_DEFAULTS, DAQP_EXIT, DAQP_RAW_TOL, QP_ERRORS,
                        daqp_verdict, solve_daqp, solve_daqp_unit_rows)
 from .common import HierarchySolution, _backend_solve, _checked_arguments, log
+from .settings import HIERARCHY_DEFAULT, SolverSettings, settings_or_default
 
 try:  # the cascade, compiled (src/wholebody/native/cascade.cpp); optional
     from .._cascade import CascadeRun as _CompiledCascade
@@ -37,15 +38,15 @@ except ImportError:  # not built (no C++ compiler at install): the Python cascad
 __all__ = ["BoundCascade"]
 
 
-def _solve_compiled(levels, n, backend, eps, fls, tols, opts, t0, fallback=None):
+def _solve_compiled(levels, n, settings, fls, tols, t0):
     """The cascade compiled (``wholebody._cascade.CascadeRun``, a line-for-line mirror of
     :func:`.cascade._solve_cascade`, including :func:`.cascade._implicit_equalities` with its
     NNLS, ``cascade.nnls``, passed in): it runs the levels and hands back each level QP, solved
-    here by ``backend``, then ``fallback``, exactly as the Python cascade does (DAQP's QPs are
-    solved in C++ when :func:`_daqp_in_cascade` allows it, with the same rows, settings and
-    verdict)."""
-    return _run_compiled(_new_run(levels, n, eps, fls, tols), levels, backend, opts, fallback, t0,
-                         _daqp_in_cascade(backend, opts))
+    here by ``settings.backend``, then its fallback, exactly as the Python cascade does (DAQP's
+    QPs are solved in C++ when :func:`_daqp_in_cascade` allows it, with the same rows, settings
+    and verdict)."""
+    return _run_compiled(_new_run(levels, n, settings.regularization, fls, tols), levels, settings,
+                         t0, _daqp_in_cascade(settings.backend, settings.options))
 
 
 def _new_run(levels, n, eps, fls, tols):
@@ -58,14 +59,15 @@ def _new_run(levels, n, eps, fls, tols):
                             [L.name for L in levels], n, eps, x1, Z1, analytic, *tols, cascade.nnls)
 
 
-def _run_compiled(run, levels, backend, opts, fallback, t0, daqp=None):
-    """Drives a compiled run from its first level: its level QPs solved by ``backend``, then
-    ``fallback`` → HierarchySolution. ``daqp`` (a :func:`_daqp_in_cascade` solver) lets the run
-    solve them with DAQP itself; the QPs it leaves (DAQP failed, or no rows) come back here."""
+def _run_compiled(run, levels, settings, t0, daqp=None):
+    """Drives a compiled run from its first level: its level QPs solved by ``settings.backend``,
+    then ``settings.fallback_backend`` → HierarchySolution. ``daqp`` (a :func:`_daqp_in_cascade`
+    solver) lets the run solve them with DAQP itself; the QPs it leaves (DAQP failed, or no rows)
+    come back here."""
     warns = []
     qp_times = None  # of the QPs solved here (not by the run), per level
     n_qps = 0
-    direct_daqp = BACKENDS.get(backend) is solve_daqp
+    direct_daqp = BACKENDS.get(settings.backend) is solve_daqp
     daqp = daqp if direct_daqp else None  # a test may have replaced the adapter since
     advance = run.advance if daqp is None else functools.partial(run.advance_daqp, daqp)
     while (kind := advance()) == "qp":
@@ -75,9 +77,8 @@ def _run_compiled(run, levels, backend, opts, fallback, t0, daqp=None):
             first = (None, run.daqp_status, False)
         else:
             n_qps += 1
-            first = _daqp_on_run(run, opts) if direct_daqp else None
-        y, ok, status = _backend_solve(_identity_qp(run), backend, opts, fallback, r, levels,
-                                       warns, first)
+            first = _daqp_on_run(run, settings.options) if direct_daqp else None
+        y, ok, status = _backend_solve(_identity_qp(run), settings, r, levels, warns, first)
         if qp_times is None:
             qp_times = np.zeros(len(levels))
         qp_times[r] += time.perf_counter() - tq  # (give_qp's end of the level is cascade work)
@@ -103,7 +104,7 @@ class BoundCascade:
     :class:`wholebody.cycle.HierarchyCycle`) — without :func:`solve_hierarchy`'s per-call
     argument checks and array hand-over.
 
-    Arguments as :func:`solve_hierarchy` with ``method="cascade"``; :meth:`solve` returns what
+    Arguments as :func:`solve_hierarchy` (``settings.method`` "cascade"); :meth:`solve` returns what
     ``solve_hierarchy(levels, ...)`` would for the arrays' current contents. The arrays must keep
     their shapes and stay finite (checked by the caller: nothing is copied or re-checked here).
     Needs the compiled cascade (:data:`available`).
@@ -111,33 +112,32 @@ class BoundCascade:
 
     available = _CompiledCascade is not None
 
-    def __init__(self, levels, backend: str = "quadprog", regularization: float = 1e-4, *,
-                 first_level_solution=None, fallback_backend: str | None = None,
-                 rank_tol: float = 1e-9, drop_tol: float = 1e-9, relax_tol: float = 1e-9,
-                 feas_tol: float = 1e-6, backend_options: dict | None = None):
+    def __init__(self, levels, settings: SolverSettings | None = None, *,
+                 first_level_solution=None, rank_tol: float = 1e-9, drop_tol: float = 1e-9,
+                 relax_tol: float = 1e-9, feas_tol: float = 1e-6):
         if _CompiledCascade is None:
             raise RuntimeError("BoundCascade needs the compiled cascade (wholebody._cascade), "
                                "which is not built")
-        levels, n, fls, fallback = _checked_arguments(
-            levels, "cascade", backend, regularization, first_level_solution, fallback_backend)
+        settings = settings_or_default(settings, HIERARCHY_DEFAULT)
+        if settings.method != "cascade":
+            raise ValueError(f"settings: BoundCascade runs method 'cascade', got {settings.method!r}")
+        levels, n, fls = _checked_arguments(levels, settings, first_level_solution)
         for L in levels:  # held, not copied: a converted copy would never see the new contents
             for field_name in ("B", "b", "w", "C", "lower", "upper", "v"):
                 a = getattr(L, field_name)
                 if a.dtype != np.float64 or not a.flags.c_contiguous:
                     raise ValueError(f"BoundCascade: level {L.name!r} {field_name}: needs a "
                                      f"C-contiguous float64 array (it is held, not copied)")
-        self.levels, self.backend, self.fallback_backend = levels, backend, fallback
-        self._opts = dict(backend_options or {})
-        self._run = _new_run(levels, n, regularization, fls,
+        self.levels, self.settings = levels, settings
+        self._run = _new_run(levels, n, settings.regularization, fls,
                              (rank_tol, drop_tol, relax_tol, feas_tol))
-        self._daqp = _daqp_in_cascade(backend, self._opts)
+        self._daqp = _daqp_in_cascade(settings.backend, settings.options)
 
     def solve(self) -> HierarchySolution:
         """The cascade on the arrays' current contents."""
         t0 = time.perf_counter()
         self._run.reset()
-        return _run_compiled(self._run, self.levels, self.backend, self._opts,
-                             self.fallback_backend, t0, self._daqp)
+        return _run_compiled(self._run, self.levels, self.settings, t0, self._daqp)
 
 
 def _daqp_on_run(run, opts):

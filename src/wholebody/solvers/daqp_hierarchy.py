@@ -125,7 +125,7 @@ def _solve_daqp(levels, n, opts, t0, uniform_soft_weights=True, split_equalities
 def row_normalised(levels):
     """The levels with every weighted row scaled to unit norm — what DAQP's native soft penalty sees.
 
-    Running the cascade on these reproduces ``method="daqp", daqp_native_weights=True``.
+    Running the cascade on these reproduces the daqp method with ``daqp_native_weights=True``.
     """
     out = []
     for L in levels:

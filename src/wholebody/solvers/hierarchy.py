@@ -51,6 +51,7 @@ from .common import FirstLevelSolution, HierarchySolution, _checked_arguments, e
 from .compiled_cascade import BoundCascade, _solve_compiled
 from .daqp_hierarchy import _solve_daqp, row_normalised
 from .level import Level
+from .settings import HIERARCHY_DEFAULT, SolverSettings, settings_or_default
 from .weighted import _solve_weighted
 
 __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
@@ -59,18 +60,14 @@ __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evalua
 
 def solve_hierarchy(
     levels,
-    method: str = "cascade",
-    backend: str = "quadprog",
-    regularization: float = 1e-4,
+    settings: SolverSettings | None = None,
     *,
     first_level_solution=None,
     rank_tol: float = 1e-9,
     drop_tol: float = 1e-9,
     relax_tol: float = 1e-9,
     feas_tol: float = 1e-6,
-    backend_options: dict | None = None,
     daqp_native_weights: bool = False,
-    fallback_backend: str | None = None,
     compiled: bool = True,
 ) -> HierarchySolution:
     """Lexicographic optimum of a list of :class:`Level` (Herzog et al. 2016, eqs. 5-11).
@@ -78,12 +75,20 @@ def solve_hierarchy(
     Parameters
     ----------
     levels : highest priority first.
-    method : ``"cascade"`` (reference, eqs. 8-11), ``"daqp"`` (DAQP's hierarchical mode) or
-        ``"weighted"`` (one QP over ``levels = [hard, objective]``); see the module docstring.
-    backend : QP backend of the cascade / weighted QPs: ``quadprog``, ``daqp`` or ``proxsuite``.
-    regularization : ε of eq. 5 (> 0) for the cascade and weighted QPs (not used by ``daqp``).
-        Costs are reported without it; :mod:`.cascade`'s docstring says how far it moves them
-        from the exact lexicographic optimum.
+    settings : a :class:`~wholebody.solvers.SolverSettings` (None:
+        :data:`~wholebody.solvers.settings.HIERARCHY_DEFAULT`, quadprog without a fallback and
+        ε = 1e-4). Its ``method``: ``"cascade"`` (reference, eqs. 8-11), ``"daqp"`` (DAQP's
+        hierarchical mode) or ``"weighted"`` (one QP over ``levels = [hard, objective]``); see
+        the module docstring. ``backend``: QP backend of the cascade / weighted QPs, with its
+        ``backend_options`` (``eps_abs`` for proxsuite, DAQP settings for ``daqp`` and the daqp
+        method). ``regularization``: ε of eq. 5 for the cascade and weighted QPs (not used by
+        ``daqp``); costs are reported without it, :mod:`.cascade`'s docstring says how far it
+        moves them from the exact lexicographic optimum. ``fallback_backend``: cascade only — a
+        level QP that ``backend`` fails on is solved again with it (same QP, so the same
+        optimum), recorded in ``warnings``; cheaper than re-solving the whole cascade, each
+        backend having rare failures of its own on these ill-conditioned QPs.
+        ``analytic_first_level`` is read by the whole-body callers, which know what level 1
+        holds; here ``first_level_solution`` says it.
     first_level_solution : optional ``(x1, Z1)`` replacing the first level's QP (the analytic
         first priority of §2.4, eq. 17): ``x1`` one solution of level 1 and ``Z1`` a basis of the
         directions it leaves free (orthonormalised here if it is not). Level 1's inequalities
@@ -95,17 +100,11 @@ def solve_hierarchy(
     drop_tol : an inequality row has no freedom left when ``‖C_i Z‖ ≤ drop_tol ‖C_i‖``.
     relax_tol : margin by which rows tight at x* are loosened for the next level.
     feas_tol : tolerance for checking dropped rows and the weighted method's hard level.
-    backend_options : extra keyword arguments for the backend (``eps_abs`` for proxsuite,
-        DAQP settings for ``daqp`` and the daqp method).
     daqp_native_weights : method ``daqp`` only — use DAQP's native (row-normalised) soft
         penalty instead of uniform per-row weights (which give eq. 5's Σ s² trade-off).
-    fallback_backend : cascade only — a level QP that ``backend`` fails on is solved again with
-        this backend (same QP, so the same optimum), recorded in ``warnings``. Cheaper than
-        re-solving the whole cascade: each backend has rare failures of its own on these
-        ill-conditioned QPs.
     compiled : cascade only — run the compiled cascade (``wholebody._cascade``, when built): the
-        same algorithm line for line, with the level QPs still solved by ``backend`` (and
-        ``fallback_backend``) from Python. ``False`` runs the Python cascade (the reference).
+        same algorithm line for line, with the level QPs still solved by the backend (and the
+        fallback) from Python. ``False`` runs the Python cascade (the reference).
         Warnings from the compiled cascade list its own (frozen rows) before the fallback notes.
 
     Bad input (NaN/inf in data, inconsistent column counts, unknown names) raises ValueError
@@ -113,34 +112,33 @@ def solve_hierarchy(
     (``ok=False``, ``status`` says why) and ``x`` is the last successful level's (finite) x.
     """
     t0 = time.perf_counter()
-    levels, n, first_level_solution, fallback_backend = _checked_arguments(
-        levels, method, backend, regularization, first_level_solution, fallback_backend)
+    settings = settings_or_default(settings, HIERARCHY_DEFAULT)
+    levels, n, first_level_solution = _checked_arguments(levels, settings, first_level_solution)
     analytic = isinstance(first_level_solution, str)
-    opts = dict(backend_options or {})
+    method = settings.method
     tols = (rank_tol, drop_tol, relax_tol, feas_tol)
 
     if n == 0 and method != "cascade":  # no variable: nothing to optimise, the cascade evaluates
         method = "cascade"
     if method == "daqp":
-        return _solve_daqp(levels, n, opts, t0, uniform_soft_weights=not daqp_native_weights)
+        return _solve_daqp(levels, n, settings.options, t0,
+                           uniform_soft_weights=not daqp_native_weights)
     if method == "weighted":
         if len(levels) > 2:
             raise ValueError(f"method 'weighted' takes [hard, objective] levels, got {len(levels)} levels")
-        sol = _solve_weighted(levels, n, backend, regularization, feas_tol, opts, t0)
+        sol = _solve_weighted(levels, n, settings, feas_tol, t0)
         if sol is not None:
             return sol
         warn = "weighted: hard level infeasible or the single QP failed; result of the cascade"
         log.debug(warn)
-        sol = _solve_cascade(levels, n, backend, regularization, None, tols, opts, t0, fallback_backend)
+        sol = _solve_cascade(levels, n, settings, None, tols, t0)
         sol.warnings = (warn,) + sol.warnings
         return sol
     if compiled and compiled_cascade._CompiledCascade is not None:
-        return _solve_compiled(levels, n, backend, regularization, first_level_solution, tols, opts,
-                               t0, fallback_backend)
+        return _solve_compiled(levels, n, settings, first_level_solution, tols, t0)
     if analytic:
         first_level_solution = analytic_first_level(levels[0])
-    return _solve_cascade(levels, n, backend, regularization, first_level_solution, tols, opts, t0,
-                          fallback_backend)
+    return _solve_cascade(levels, n, settings, first_level_solution, tols, t0)
 
 
 def analytic_first_level(level: Level) -> "FirstLevelSolution":

@@ -16,8 +16,10 @@ import numpy as np
 from .backends import solve_qp
 from .common import _finish, _rows, log
 
-def _solve_weighted(levels, n, backend, eps, feas_tol, opts, t0):
-    """One QP: rows of levels[0] as hard constraints, levels[-1] as weighted objective (Fahmi et al. 2019, eq. 7)."""
+def _solve_weighted(levels, n, settings, feas_tol, t0):
+    """One QP: rows of levels[0] as hard constraints, levels[-1] as weighted objective (Fahmi et al. 2019, eq. 7),
+    solved by ``settings.backend`` with ε = ``settings.regularization``."""
+    eps = settings.regularization
     obj = levels[-1]
     hard = levels[0] if len(levels) == 2 else None
     Bo, Co = _rows(obj, n)
@@ -54,7 +56,7 @@ def _solve_weighted(levels, n, backend, eps, feas_tol, opts, t0):
         A = np.concatenate((A, S))
         lower = np.concatenate((lower, obj.v[il] * obj.lower[il], np.full(iu.size, -np.inf)))
         upper = np.concatenate((upper, np.full(il.size, np.inf), obj.v[iu] * obj.upper[iu]))
-    y, status, ok = solve_qp(H, g, A, lower, upper, backend=backend, **opts)
+    y, status, ok = solve_qp(H, g, A, lower, upper, backend=settings.backend, **settings.options)
     if not ok:
         log.debug("weighted QP failed: %s", status)
         return None
