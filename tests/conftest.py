@@ -51,6 +51,17 @@ def g1_description(armature: float = 0.0, lock_arms: bool = True) -> dict:
                           "offset": [0.035, 0.0, -0.035]} for side in ("left", "right")]}
 
 
+def talos14_five_joint_toml(sole_half_width: float | None = None) -> str:
+    """talos14's description with its ankle rolls locked (five-joint legs, as Unitree H1's), and
+    with soles ``sole_half_width`` m wide on each side of their x axis if given (H1's: 0.015)."""
+    text = (Path(wb.__file__).parent / "robots/presets/talos14.toml").read_text().replace(
+        '"head_1_joint", "head_2_joint",',
+        '"head_1_joint", "head_2_joint", "leg_left_6_joint", "leg_right_6_joint",')
+    if sole_half_width is not None:
+        text = text.replace("half_size = [0.105, 0.065]", f"half_size = [0.105, {sole_half_width}]")
+    return text
+
+
 #: iCub's right leg has masses but zero inertias in example-robot-data: the left leg's moments
 ICUB_RIGHT_LEG_INERTIAS = {
     "r_hip_1": [0.000471, 0.000346, 0.00051], "r_hip_2": [0.000562, 0.000738, 0.000294],

@@ -407,10 +407,9 @@ def test_five_joint_legs_are_named_with_what_they_cannot_do(tmp_path, capsys):
     """talos14 with its ankle rolls locked has five-joint legs: check-robot says each sole cannot
     roll relative to the trunk and what that means; talos14 itself (six joints) gets no such
     warning. Independent evidence: the rank of the locked leg's Jacobian is 5 (Pinocchio)."""
-    text = (Path(wb.__file__).parent / "robots/presets/talos14.toml").read_text().replace(
-        '"head_1_joint", "head_2_joint",',
-        '"head_1_joint", "head_2_joint", "leg_left_6_joint", "leg_right_6_joint",')
-    path = write(tmp_path, text)
+    from conftest import talos14_five_joint_toml
+
+    path = write(tmp_path, talos14_five_joint_toml())
     code, out = check(capsys, path, "--json")
     legs = [f for f in json.loads(out)["findings"] if f["topic"] == "legs"]
     assert code == 0 and len(legs) == 2

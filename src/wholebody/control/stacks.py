@@ -13,6 +13,7 @@ import numpy as np
 
 from ..formulation import Stack
 from ..robot import Robot
+from ..robots.roles import leg_missing_directions
 from ..tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer, FrameTask,
                      FrictionCone, FullDynamics, JointAccelerationLimits, MomentumForce, MomentumPD,
                      NewtonEuler, PostureTask, TorqueLimits)
@@ -143,6 +144,23 @@ def posture_weight(robot: Robot, base_orientation_weight: float | None):
     return w
 
 
+def contact_constraint(robot: Robot, contacts: Sequence[str], posture_gains=POSTURE_PD,
+                       weight: float = 1.0) -> ContactConstraint:
+    """Eq. 2's contact constraint, J_c qdd + Jdot_c v = 0 on ``contacts``; when a leg cannot move
+    its contact every way the contact constrains (a five-joint leg under a sole:
+    :func:`~wholebody.robots.roles.leg_missing_directions`), with the contacts' velocity damped
+    at the posture's rate (``posture_gains``' kd), J_c qdd + Jdot_c v = -kd J_c v (Fahmi et al.
+    2019 eq. 32 without its anchor). Along the missing direction (no ankle roll: the sole's roll)
+    the sole moves with the whole robot, held by nothing but the contact's compliance, and eq. 2
+    keeps whatever velocity it has: on narrow soles (Unitree H1's 3 cm) the robot rocks on them,
+    a 1 Hz oscillation that grows until it falls, at rest, under either momentum law
+    (docs/results.md). On six-joint legs the constraint is the paper's (kd = 0)."""
+    _, kd = pd_gains(posture_gains, "posture_gains")
+    short = any(len(leg_missing_directions(robot, c)) for c in contacts)
+    return ContactConstraint(name="contacts", contacts=contacts, weight=weight,
+                             kd=kd if short else 0.0)
+
+
 def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool = False,
                  full: bool = False, mu: float | None = None,
                  angular_weight: float = ANGULAR_MOMENTUM_WEIGHT,
@@ -181,7 +199,7 @@ def table2_stack(robot: Robot, contacts: Sequence[str] | None = None, lqr: bool 
     contacts = _contacts(robot, contacts, "contacts", default_all=True)
     return Stack([
         _dynamics(full),
-        [ContactConstraint(name="contacts", contacts=contacts)]
+        [contact_constraint(robot, contacts, posture_gains)]
         + _contact_conditions(robot, contacts, mu, torsion, cop_margin),
         [momentum_task(lqr, angular_weight),
          posture_task(robot, base_orientation_weight, posture_gains),
@@ -210,7 +228,7 @@ def table4_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
         _dynamics(full),
         _contact_conditions(robot, stance, mu, torsion, cop_margin),
         [momentum_task(lqr, angular_weight),
-         ContactConstraint(name="contacts", contacts=stance, weight=1e4)]
+         contact_constraint(robot, stance, posture_gains, weight=1e4)]
         + swing_tasks(swing_frames, swing_gains)
         + [posture_task(robot, base_orientation_weight, posture_gains)],
         [ForceRegularizer(name="force regularizer", weight=1e-4, contacts=stance)],
@@ -231,7 +249,7 @@ def table1_stack(robot: Robot, stance: Sequence[str], swing_frames: Sequence[str
     com_kp, com_kd = pd_gains(com_gains, "com_gains")
     return Stack([
         _dynamics(full),
-        [ContactConstraint(name="contacts", contacts=stance)]
+        [contact_constraint(robot, stance, posture_gains)]
         + _contact_conditions(robot, stance, mu, torsion, cop_margin),
         [CoMTask(name="com", kp=com_kp, kd=com_kd)] + swing_tasks(swing_frames, swing_gains),
         [posture_task(robot, gains=posture_gains, weight=1.0)],  # alone on its level

@@ -19,7 +19,8 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull, QhullError
 
 from .description import DescriptionError
-from .roles import GAIT_LEG_JOINTS, contact_roles, leg_joints, moving_leg_joints, role_in_name
+from .roles import (GAIT_LEG_JOINTS, contact_roles, leg_joints, leg_missing_directions,
+                    moving_leg_joints, role_in_name)
 
 log = logging.getLogger(__name__)
 
@@ -153,7 +154,7 @@ def inspect_robot(robot, report: RobotCheck | None = None) -> RobotCheck:
     pin.framesForwardKinematics(robot.model, data, robot.q_ref)
     _contacts_on_the_floor(robot, data, report)
     _joints_that_leave_the_feet(robot, data, report)
-    _soles_the_legs_cannot_turn(robot, data, report)
+    _soles_the_legs_cannot_turn(robot, report)
     _support(robot, data, report)
     _gravity_torques(robot, report)
     return report
@@ -379,30 +380,25 @@ _SOLE_MOTIONS = ("slide it along its x axis", "slide it along its y axis", "lift
                  "yaw it (about its normal)")
 
 
-def _soles_the_legs_cannot_turn(robot, data, report: RobotCheck) -> None:
+def _soles_the_legs_cannot_turn(robot, report: RobotCheck) -> None:
     """A sole whose leg moves it in fewer than 6 directions (a five-joint leg: no ankle roll).
-    Along the missing direction u (the left null space of the leg's Jacobian in the sole frame) a
-    contact wrench costs no joint torque: the leg cannot set that part of the sole's wrench (with
-    no ankle roll, the sole's moment about its x axis, i.e. its lateral CoP), which then follows
-    from the trunk's motion; the sole cannot stay flat while the trunk moves along u relative to
-    it, so single support over it cannot hold the trunk's pose."""
-    pin.computeJointJacobians(robot.model, data, robot.q_ref)
-    height = float(robot.q_ref[2])
+    Along the missing direction u (:func:`~wholebody.robots.roles.leg_missing_directions`: the
+    left null space of the leg's Jacobian in the sole frame) a contact wrench costs no joint
+    torque: the leg cannot set that part of the sole's wrench (with no ankle roll, the sole's
+    moment about its x axis, i.e. its lateral CoP), which then follows from the trunk's motion;
+    the sole cannot stay flat while the trunk moves along u relative to it, so single support
+    over it cannot hold the trunk's pose."""
     for c in robot.contacts:
         if c.spec.type != "rectangle":
             continue
         joints = leg_joints(robot, c.name)
         if not joints:
             continue
-        J = pin.getFrameJacobian(robot.model, data, c.frame_id, pin.LOCAL)
-        columns = [6 + robot.joint_names.index(j) for j in joints]
-        leg = J[:, columns].copy()
-        leg[:3] /= height  # lengths in base heights: translations and rotations comparable
-        u, sv, _ = np.linalg.svd(leg)
-        rank = int(np.sum(sv > 1e-6 * sv[0])) if len(sv) else 0
-        if rank >= 6:
+        directions = leg_missing_directions(robot, c.name)
+        if not len(directions):
             continue
-        missing = u[:, rank]
+        rank = 6 - len(directions)
+        missing = directions[0]
         roll = abs(missing[3]) > 0.3  # a roll, possibly with a sideways slide
         what = (_SOLE_MOTIONS[3] + (" with a sideways slide" if abs(missing[1]) > 0.3 else "")
                 if roll else _SOLE_MOTIONS[int(np.argmax(np.abs(missing)))])

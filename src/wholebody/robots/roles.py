@@ -114,6 +114,29 @@ def leg_joints(robot, contact: str) -> tuple[str, ...]:
     return tuple(reversed(chain))
 
 
+def leg_missing_directions(robot, contact: str) -> np.ndarray:
+    """The directions in which ``contact``'s leg cannot move the contact frame relative to the
+    trunk, in the reference posture: the left null space of the leg's Jacobian (its joints'
+    columns, :func:`leg_joints`; the rows the contact constrains, [linear; angular] in the
+    contact frame, linear rows in standing base heights so that translations and rotations
+    compare). One unit row per direction: none (shape (0, dim)) when the leg moves its contact
+    every way the contact constrains (a sole on a six-joint leg, a point foot on a three-joint
+    leg), all of them for a contact on the base. A five-joint leg (no ankle roll) leaves its
+    sole one, a roll about the sole's x axis with a sideways slide: as a wrench, a sideways force
+    through the hip-roll axis."""
+    c = robot.contact(contact)
+    columns = [6 + robot.joint_names.index(j) for j in leg_joints(robot, contact)]
+    if not columns:
+        return np.eye(c.dim)
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, robot.q_ref)
+    leg = pin.getFrameJacobian(robot.model, data, c.frame_id, pin.LOCAL)[:c.dim][:, columns]
+    leg[:3] /= float(robot.q_ref[2])
+    u, sv, _ = np.linalg.svd(leg)
+    rank = int(np.sum(sv > 1e-6 * sv[0]))
+    return u[:, rank:].T.copy()
+
+
 def moving_leg_joints(robot, contact: str) -> tuple[str, ...]:
     """:func:`leg_joints` of ``contact`` that can move: a range wider than 1e-6 rad (a joint
     whose limits are equal is a fixed joint in disguise)."""
