@@ -113,13 +113,3 @@ def test_the_table_by_robot_keeps_the_cells_it_did_not_run(tmp_path):
     assert hyq.endswith("| `wholebody run agility --robot hyq` |")
     assert lines.index(go2) < lines.index(hyq)  # the claims' order: the presets by name
 
-
-def test_every_part_runs_the_same_com_damping(robots):
-    """The course's ``trunk_damping_ratio`` (critically damped by default) reaches every part,
-    the paper-default scenarios (crawl, ramp) included."""
-    for value, params in ((1.0, AGILITY.validate(robots["hyq"], {})),
-                          (0.48, AGILITY.validate(robots["hyq"], {"trunk_damping_ratio": "0.48"}))):
-        for name in PARTS:
-            overrides = part_overrides(name, robots["hyq"], params)
-            resolved = get_scenario(PARTS[name][0]).validate(robots["hyq"], overrides)
-            assert resolved["trunk_damping_ratio"] == value

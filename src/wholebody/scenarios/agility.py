@@ -17,9 +17,8 @@ proportion to the robot's standing base height h (HyQ's 0.599 m the reference):
 - ``push``: ``trot-push --set angles=90,270``: a 0.3 m/s lateral push from each side while
   trotting; met: trotted on after both.
 
-Every part runs with the CoM loop of the library's locomotion scenarios, critically damped
-(``--set trunk_damping_ratio``; the paper's gains give 0.48 on HyQ). A part whose simulation
-diverged counts as missed (``diverged`` in its metrics). Each part writes its own
+Every part runs on its scenario's defaults (``steer``'s CoM loop critically damped, the others'
+the paper's gains). A part whose simulation diverged counts as missed (``diverged`` in its metrics). Each part writes its own
 ``summary.json`` and figures under ``OUT/<part>/``.
 """
 
@@ -33,7 +32,6 @@ from ..sim.incidents import IncidentLog
 from ..sim.simulator import SimulationDiverged
 from .base import Parameter, Scenario, ScenarioResult
 from .conditions import RobotConditions
-from .locomotion import LOCOMOTION_WBC_GAINS
 
 log = logging.getLogger(__name__)
 
@@ -55,15 +53,11 @@ PARTS = {
     "push": ("trot-push", "passive", {"angles": "90,270"}),
 }
 
-#: the CoM loop's damping ratio, the same in every part: the library's locomotion default
-TRUNK_DAMPING = next(p for p in LOCOMOTION_WBC_GAINS if p.name == "trunk_damping_ratio")
-
 PARAMETERS = (
     Parameter("parts", ",".join(PARTS), "the parts to run, comma-separated",
               choices=tuple(PARTS), items=str),
     Parameter("froude", 0.5, "top-speed: the Froude number v^2 / (g h) of the speed reached",
               low=0.0, high=2.0, low_open=True),
-    TRUNK_DAMPING,
 )
 
 
@@ -75,8 +69,8 @@ def froude_speed(robot, froude: float) -> float:
 
 def part_overrides(name: str, robot, params: dict) -> dict[str, str]:
     """The ``--set`` pairs of part ``name`` on ``robot``: its own, the top speed from ``froude``,
-    the CoM loop's damping ratio and the realism level passed down."""
-    overrides = {**PARTS[name][2], TRUNK_DAMPING.name: f"{params[TRUNK_DAMPING.name]:g}"}
+    and the realism level passed down."""
+    overrides = dict(PARTS[name][2])
     if name == "top-speed":
         overrides["speed_end"] = f"{froude_speed(robot, params['froude']):.4g}"
     if params["realism"] != "exact":

@@ -86,13 +86,14 @@ POSTURE_REGULARIZER_GAINS = (
 )
 #: every gain of the quadruped controllers a scenario takes (:func:`wbc_gains`): the paper's
 WBC_GAINS = (*TRUNK_GAINS, *SWING_GAINS, *STANCE_GAINS, *POSTURE_REGULARIZER_GAINS)
-#: the CoM loop's damping ratio in the library's own locomotion scenarios (``steer``,
-#: ``trot-push``, ``agility``): critically damped. The paper's D_x gives 0.48 on HyQ, tuned for
-#: its 0.04-0.15 m/s crawl; every change of a velocity command then rings at the loop's 0.76 Hz
-#: (Froude-scaled on other robots; docs/results.md, "Steering")
+#: the CoM loop's damping ratio of ``steer``, the velocity-command schedule: critically damped.
+#: The paper's D_x gives 0.48 on HyQ, tuned for its 0.04-0.15 m/s crawl; every change of a
+#: velocity command then rings at the loop's 0.76 Hz (Froude-scaled on other robots). Not a
+#: default elsewhere: at Froude 0.5 and under pushes while trotting it lost ANYmal C
+#: (docs/results.md, "Steering")
 CRITICAL_DAMPING_RATIO = 1.0
 #: :data:`WBC_GAINS` with the CoM loop critically damped (:data:`CRITICAL_DAMPING_RATIO`)
-LOCOMOTION_WBC_GAINS = tuple(
+CRITICALLY_DAMPED_WBC_GAINS = tuple(
     replace(p, default=CRITICAL_DAMPING_RATIO, help="trunk impedance: damping ratio of the CoM "
             f"loop (1: critically damped; the paper's D_x on HyQ: {DAMPING_RATIO_X:.3f})")
     if p.name == "trunk_damping_ratio" else p for p in WBC_GAINS)

@@ -49,8 +49,9 @@ from ..report.locomotion_figures import steer_figure
 from ..robots.reference import froude_ratio
 from .base import Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (GAIT_SHAPE, LOCOMOTION_WBC_GAINS, PAPER_BASE_HEIGHT, REGULARIZATION,
-                         TROT_SPEED, check_gait, check_quadruped, make_schedule, run_gait, wbc_gains)
+from .locomotion import (CRITICALLY_DAMPED_WBC_GAINS, GAIT_SHAPE, PAPER_BASE_HEIGHT,
+                         REGULARIZATION, TROT_SPEED, check_gait, check_quadruped, make_schedule,
+                         run_gait, wbc_gains)
 
 #: the robot stands this long before its gait starts (s)
 GAIT_START = 1.0
@@ -89,7 +90,7 @@ PARAMETERS = (
               high=10.0),
     Parameter("engine", "auto", "passive WBC engine: native, python or auto", choices=ENGINES),
     REGULARIZATION,
-    *LOCOMOTION_WBC_GAINS,
+    *CRITICALLY_DAMPED_WBC_GAINS,
     *GAIT_SHAPE,
 )
 

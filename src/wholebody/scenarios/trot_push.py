@@ -43,8 +43,8 @@ from ..sim.simulator import SimulationDiverged
 from ..tasks.contact import friction_faces
 from .base import TIME_SPAN, Parameter, Scenario, ScenarioResult
 from .gait_measures import outcome
-from .locomotion import (GAIT_SHAPE, LOCOMOTION_WBC_GAINS, REGULARIZATION, TROT_SPEED,
-                         PaperSpeed, check_gait, check_quadruped, make_schedule, run_gait, wbc_gains)
+from .locomotion import (GAIT_SHAPE, REGULARIZATION, TROT_SPEED, WBC_GAINS, PaperSpeed,
+                         check_gait, check_quadruped, make_schedule, run_gait, wbc_gains)
 from .pushes import (bisect_dv, check_bisection, peak_force_for, push_angles, push_direction,
                      push_series, series_parameters, series_simulations)
 
@@ -83,7 +83,7 @@ PARAMETERS = (
               high=10.0),
     Parameter("engine", "auto", "passive WBC engine: native, python or auto", choices=ENGINES),
     REGULARIZATION,
-    *LOCOMOTION_WBC_GAINS,
+    *WBC_GAINS,
     *GAIT_SHAPE,
 )
 
