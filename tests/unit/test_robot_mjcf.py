@@ -632,3 +632,62 @@ def test_a_continuous_thigh_lifts_its_foot_as_the_same_revolute_thigh(tmp_path):
     changes = [slope_stance_change(r, np.radians(10.0)) for r in robots]
     assert np.isfinite(changes[1])
     assert changes[0] == pytest.approx(changes[1], abs=1e-6)
+
+
+def _box_stl(path, centre, half, unit: float = 1.0) -> None:
+    """A binary STL (as vendors ship them) of the box ``centre`` ± ``half`` (m), written in
+    ``unit``s (1e-3: mm)."""
+    import struct
+
+    corners = [np.asarray(centre) + np.asarray(half) * np.array(s)
+               for s in ((-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1),
+                         (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1))]
+    faces = [(0, 2, 1), (0, 3, 2), (4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4),
+             (1, 2, 6), (1, 6, 5), (2, 3, 7), (2, 7, 6), (3, 0, 4), (3, 4, 7)]
+    out = bytearray(b"box".ljust(80, b" ")) + struct.pack("<I", len(faces))
+    for face in faces:
+        a, b, c = (corners[i] / unit for i in face)
+        out += struct.pack("<12fH", *np.cross(b - a, c - a), *a, *b, *c, 0)
+    path.write_bytes(bytes(out))
+
+
+def test_init_robot_reads_a_urdf_foot_mesh_as_the_same_box(tmp_path):
+    """A foot whose collision is an STL mesh (in mm, ``scale`` 0.001, a path relative to the
+    URDF) drafts the same contacts as the same box written as a URDF ``<box>``; a mesh that
+    cannot be read is a point at the foot's frame, flagged."""
+    from wholebody.robots.draft import draft_description
+
+    centre, half = np.array([0.015, -0.004, -0.012]), np.array([0.03, 0.02, 0.008])
+    sphere = '<collision><geometry><sphere radius="0.02"/></geometry></collision>'
+    box = (f'<collision><origin xyz="{centre[0]} {centre[1]} {centre[2]}"/><geometry>'
+           f'<box size="{2 * half[0]} {2 * half[1]} {2 * half[2]}"/></geometry></collision>')
+    (tmp_path / "meshes").mkdir()
+    _box_stl(tmp_path / "meshes" / "foot.stl", centre, half, unit=1e-3)
+    mesh = ('<collision><geometry><mesh filename="meshes/foot.stl" scale="0.001 0.001 0.001"/>'
+            '</geometry></collision>')
+    drafts = {}
+    for name, collision in (("box", box), ("mesh", mesh),
+                            ("dae", mesh.replace("foot.stl", "foot.dae"))):
+        path = tmp_path / f"{name}.urdf"
+        path.write_text(quadruped_urdf().replace(sphere, collision))
+        drafts[name] = draft_description(path)
+    by_frame = {k: {c["frame"]: c for c in d.data["contacts"]} for k, d in drafts.items()}
+    assert set(by_frame["mesh"]) == {f"{leg}_foot" for leg in LEGS}
+    for frame, contact in by_frame["box"].items():
+        mesh_contact = by_frame["mesh"][frame]
+        assert mesh_contact["type"] == contact["type"]
+        for key in ("radius", "half_size", "offset"):
+            assert np.allclose(mesh_contact.get(key, 0.0), contact.get(key, 0.0), atol=1e-4), key
+        assert np.linalg.norm(contact.get("offset", [0, 0, 0])) > 0.01  # the box's, not 0
+    unread = by_frame["dae"]["lf_foot"]
+    assert unread["type"] == "point" and unread["radius"] == 0 and "offset" not in unread
+    assert any("could not be read" in n for n in drafts["dae"].notes)
+    assert not any("could not be read" in n for n in drafts["mesh"].notes)
+    # the same box tilted 0.4 rad about y with the joints at zero: its lowest points are an
+    # edge, not a sole; drafted as a point at that edge, flagged
+    tilted = tmp_path / "tilted.urdf"
+    tilted.write_text(quadruped_urdf().replace(sphere, box.replace('"/><geometry>',
+                                                                   '" rpy="0 0.4 0"/><geometry>')))
+    draft = draft_description(tilted)
+    assert any("form an edge" in n for n in draft.notes)
+    assert all(c["type"] == "point" and c["radius"] == 0 for c in draft.data["contacts"])

@@ -11,8 +11,10 @@ what it guessed:
 * **contact type and geometry**: four or more legs: point feet, the sphere's radius and centre
   (``offset`` in the foot's frame); two legs: soles, the rectangle spanned by the foot's lowest
   collision geometry (a box's bottom face, the footprint of spheres at the sole's corners, a mesh's
-  bounding box: MJCF only) in the frame of the body carrying it, ``offset`` at its centre;
-  a URDF foot whose collision is a mesh is taken as a point at its frame with radius 0 (flagged);
+  bounding box in the frame of the body carrying it: an MJCF's meshes as MuJoCo compiled them, a
+  URDF's STL or OBJ files read by MuJoCo's mesh loader), ``offset`` at its centre; a URDF foot
+  whose mesh cannot be read (not found, another format) is taken as a point at its frame with
+  radius 0 (flagged);
 * **posture**: an MJCF keyframe inside the joint limits (one named like "home"/"stand", else the
   first), or an SRDF group state of an ``.srdf`` beside the URDF or in a sibling ``srdf`` folder,
   else a computed one: each foot where it is with the joints at 0 (clipped into their limits) in
@@ -36,7 +38,8 @@ import numpy as np
 import pinocchio as pin
 
 from .description import NAME_PATTERN, RobotDescription
-from .model_file import ModelSource, load_model_file
+from .locate import example_robot_data_dir
+from .model_file import ModelSource, captured_stderr, load_model_file
 from .mjcf import KEYFRAME_PREFIX
 
 
@@ -48,6 +51,8 @@ LEG_HEIGHT_FRACTION = {"point": 0.75, "rectangle": 0.9}
 SOLE_BAND = 0.03
 #: a foot whose sole spans less than this (m) in both directions is a point
 POINT_SPAN = 0.03
+#: lowest collision points whose extent along one axis is below this (m) are an edge, not a sole
+EDGE_SPAN = 1e-3
 #: keyframe / group-state names preferred as the standing posture, in this order
 POSTURE_NAMES = ("stand", "standing", "home", "half_sitting", "default", "init")
 
@@ -154,11 +159,62 @@ def _urdf_geometries(source: ModelSource) -> list[Geometry]:
                 ring = np.c_[r * np.cos(angles), r * np.sin(angles)]
                 local = np.vstack([np.c_[ring, np.full(12, z)] for z in (-length / 2, length / 2)])
                 radius = 0.0
-            else:  # a mesh: its frame's origin only (meshes are not read)
-                local, radius = np.zeros((1, 3)), 0.0
+            elif shape.tag == "mesh":
+                corners = _mesh_box(shape, source.path)
+                kind = "mesh" if corners is not None else "unread mesh"
+                local = corners if corners is not None else np.zeros((1, 3))  # its frame's origin
+                out.append(Geometry(joint, name, np.array([pose.act(p) for p in local]), 0.0,
+                                    kind))
+                continue
+            else:
+                continue
             out.append(Geometry(joint, name, np.array([pose.act(p) for p in local]), radius,
                                 shape.tag))
     return out
+
+
+def _mesh_file(filename: str, urdf: Path) -> Path | None:
+    """A URDF mesh reference as a file: ``package://PKG/REST`` in a folder PKG above the URDF (a
+    vendor's repository) or in example-robot-data, ``file://`` or a path relative to the URDF's
+    folder; None if not found."""
+    if filename.startswith("package://"):
+        package, _, rest = filename[len("package://"):].partition("/")
+        roots = [parent / package for parent in urdf.resolve().parents if parent.name == package]
+        roots += [parent.parent / package for parent in urdf.resolve().parents]
+        try:
+            roots.append(example_robot_data_dir() / package)
+        except FileNotFoundError:
+            pass
+        candidates = [root / rest for root in roots]
+    else:
+        path = Path(filename[len("file://"):] if filename.startswith("file://") else filename)
+        candidates = [path if path.is_absolute() else urdf.parent / path]
+    return next((c for c in candidates if c.is_file()), None)
+
+
+def _mesh_box(shape, urdf: Path) -> np.ndarray | None:
+    """The corners of the axis-aligned bounding box of a URDF ``<mesh>`` in its own frame, scaled
+    (``scale``); the file read by MuJoCo's mesh loader (STL, OBJ), which re-centres a mesh on its
+    inertia and places the geom back where the file has it. None if the file is not found or
+    MuJoCo cannot read it (e.g. COLLADA)."""
+    import mujoco
+
+    path = _mesh_file(shape.get("filename", ""), urdf)
+    if path is None:
+        return None
+    scale = shape.get("scale", "1 1 1")
+    xml = (f'<mujoco><asset><mesh name="m" file="{path}" scale="{scale}"/></asset>'
+           f'<worldbody><geom type="mesh" mesh="m"/></worldbody></mujoco>')
+    try:
+        with captured_stderr(f"mesh {path.name}"):
+            m = mujoco.MjModel.from_xml_string(xml)
+    except ValueError:
+        return None
+    start, count = int(m.mesh_vertadr[0]), int(m.mesh_vertnum[0])
+    rotation = pin.Quaternion(*m.geom_quat[0]).normalized().matrix()
+    vertices = m.mesh_vert[start:start + count] @ rotation.T + m.geom_pos[0]
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    return 0.5 * (low + high) + _box_corners(0.5 * (high - low))
 
 
 def _neutral(model: pin.Model) -> np.ndarray:
@@ -208,6 +264,7 @@ class Foot:
     geometry: str = ""
     length: float = 0.0
     label: str = ""  # the foot geometry's own name, if it has one
+    edge: bool = False  # its lowest collision points form an edge (a sole tilted in the posture)
 
 
 def _find_feet(model: pin.Model, geometries: list[Geometry], notes: list[str]) -> list[Foot]:
@@ -270,7 +327,9 @@ def _shape_foot(model, data, foot: Foot, geometry: list[Geometry], low: float,
     pts, radii = np.array(pts), np.array(radii)
     span = pts[:, :2].max(axis=0) - pts[:, :2].min(axis=0)
     foot.span = span
-    if len(pts) == 1 or np.all(span < POINT_SPAN):
+    # a sole tilted onto an edge: its lowest points on a line (narrow soles are wider than this)
+    foot.edge = bool(len(pts) > 1 and np.sum(span < EDGE_SPAN) == 1)
+    if len(pts) == 1 or np.all(span < POINT_SPAN) or foot.edge:
         k = int(np.argmin(pts[:, 2] - radii))
         foot.type, foot.radius = "point", float(radii[k])
         foot.offset = tuple(float(x) for x in pts[k])
@@ -454,10 +513,17 @@ def draft_description(path: str | Path, name: str | None = None) -> Draft:
         if any(abs(x) > 1e-6 for x in foot.offset):
             entry["offset"] = [round(x, 4) for x in foot.offset]
         contacts.append(entry)
-        if foot.geometry in ("mesh", "none") and source.format == "urdf":
+        if foot.geometry in ("unread mesh", "none"):
             notes.append(f"contacts: '{cname}': the foot's collision is "
-                         f"{'a mesh' if foot.geometry == 'mesh' else 'missing'}: a point with "
-                         f"radius 0 at frame '{foot.frame}'; give the foot's radius and offset")
+                         f"{'a mesh that could not be read' if foot.geometry != 'none' else 'missing'}"
+                         f": a point with radius 0 at frame '{foot.frame}'; give the foot's radius "
+                         f"and offset")
+        elif foot.edge:
+            notes.append(f"contacts: '{cname}': the lowest points of the foot's collision "
+                         f"({foot.geometry}) form an edge, not a face, with the joints at zero (a "
+                         f"sole tilted, or a frame whose z is not the sole's normal): a point with "
+                         f"radius 0 at its lowest point; give the sole (a frame normal to it, "
+                         f"half_size, offset) and a posture with the soles flat")
         elif foot.geometry == "mesh":
             notes.append(f"contacts: '{cname}': taken from the bounding box of a mesh; check the "
                          f"size and offset")
