@@ -66,6 +66,21 @@ def test_ground_map_needs_an_estimator(capsys):
     assert "ground_map" in capsys.readouterr().err
 
 
+def test_the_ground_map_is_on_by_default_under_real_conditions(hyq):
+    """On defaults a scenario's estimator knows the ground under ``sensors`` and ``robot`` (and
+    the exact state takes the default without complaint); ``ground_map=false`` turns it off."""
+    from wholebody.scenarios import get_scenario
+    from wholebody.scenarios.conditions import conditions_for
+
+    crawl = get_scenario("crawl")
+    assert crawl.validate(hyq, {})["ground_map"] is True  # exact: accepted, nothing to measure
+    for level in ("sensors", "robot"):
+        params = crawl.validate(hyq, {"realism": level})
+        assert conditions_for(hyq, level, ground_map=params["ground_map"]).ground_map
+    params = crawl.validate(hyq, {"realism": "sensors", "ground_map": "false"})
+    assert not conditions_for(hyq, "sensors", ground_map=params["ground_map"]).ground_map
+
+
 @pytest.mark.slow
 def test_hyq_trots_on_the_estimate_with_the_ground_map():
     """The passive WBC trotting on the estimate of the twin's sensors (``realism=sensors``) with
