@@ -87,6 +87,10 @@ class SimObserver(Protocol):
     def controller_result(self, sim: "Simulator", result) -> None: ...
 
 
+#: how many robot surfaces a ground ray may pass before it gives up (ground_height)
+_RAY_PASSES = 64
+
+
 class Simulator:
     """A MuJoCo twin of ``robot`` with an environment, optional model mismatch and pushes.
 
@@ -137,7 +141,7 @@ class Simulator:
                             else twin.actuator_scale)
         self._held = twin.held_qpos
         self.model = self.twin.model
-        self._ground_geoms: list[int] | None = None  # the environment's geoms (ground_height)
+        self._robot_bodies: frozenset[int] | None = None  # the twin's (ground_height)
         self.data = mujoco.MjData(self.model)
         self.dt = self.model.opt.timestep
         self.record = record
@@ -211,30 +215,26 @@ class Simulator:
         return self._state[0].copy(), self._state[1].copy()
 
     def ground_height(self, x: float, y: float) -> float:
-        """Height of the environment's surface under (x, y): the nearest of its geoms (every geom
-        not on the robot) along a ray cast straight down from above the scene (MuJoCo's ray
-        functions); -inf where nothing is under (a gap). The terrain map a real robot's planner
-        has."""
+        """Height of the environment's surface under (x, y): the first geom not on the robot
+        along a ray cast straight down from above the scene (MuJoCo's ``mj_ray``; a robot geom in
+        the way is passed by casting again from where the ray met it, its body excluded); -inf
+        where nothing is under (a gap). The terrain map a real robot's planner has."""
         m, d = self.model, self.data
-        if self._ground_geoms is None:
-            robot_bodies = self.twin.bodies()
-            self._ground_geoms = [g for g in range(m.ngeom)
-                                  if int(m.geom_bodyid[g]) not in robot_bodies]
+        if self._robot_bodies is None:
+            self._robot_bodies = frozenset(self.twin.bodies())
         top = float(m.stat.extent) + float(d.qpos[2]) + abs(float(m.stat.center[2]))
-        point, down = np.array([x, y, top]), np.array([0.0, 0.0, -1.0])
-        nearest = np.inf
-        for g in self._ground_geoms:
-            kind = int(m.geom_type[g])
-            if kind == mujoco.mjtGeom.mjGEOM_MESH:
-                distance = mujoco.mj_rayMesh(m, d, g, point, down)
-            elif kind == mujoco.mjtGeom.mjGEOM_HFIELD:
-                distance = mujoco.mj_rayHfield(m, d, g, point, down)
-            else:
-                distance = mujoco.mju_rayGeom(d.geom_xpos[g], d.geom_xmat[g], m.geom_size[g],
-                                              point, down, kind)
-            if 0.0 <= distance < nearest:
-                nearest = distance
-        return top - nearest if np.isfinite(nearest) else -np.inf
+        point, down, hit = np.array([x, y, top]), np.array([0.0, 0.0, -1.0]), np.array([-1],
+                                                                                      np.int32)
+        exclude = -1
+        for _ in range(_RAY_PASSES):
+            distance = mujoco.mj_ray(m, d, point, down, None, 1, exclude, hit)
+            if hit[0] < 0:
+                return -np.inf
+            exclude = int(m.geom_bodyid[hit[0]])
+            if exclude not in self._robot_bodies:
+                return float(point[2] - distance)
+            point[2] -= distance  # on the robot's surface, its body excluded from the next cast
+        return -np.inf
 
     def _to_mujoco(self, q, v) -> tuple[np.ndarray, np.ndarray]:
         """(qpos, qvel) of the robot's MuJoCo joints from Pinocchio's (q, v)."""
