@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
+from xml.sax.saxutils import quoteattr
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -202,8 +203,8 @@ def _mesh_box(shape, urdf: Path) -> np.ndarray | None:
     path = _mesh_file(shape.get("filename", ""), urdf)
     if path is None:
         return None
-    scale = shape.get("scale", "1 1 1")
-    xml = (f'<mujoco><asset><mesh name="m" file="{path}" scale="{scale}"/></asset>'
+    scale = quoteattr(shape.get("scale", "1 1 1"))
+    xml = (f'<mujoco><asset><mesh name="m" file={quoteattr(str(path))} scale={scale}/></asset>'
            f'<worldbody><geom type="mesh" mesh="m"/></worldbody></mujoco>')
     try:
         with captured_stderr(f"mesh {path.name}"):
