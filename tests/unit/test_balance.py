@@ -74,17 +74,20 @@ def test_push_series_table_and_claim(robots, tmp_path):
 
 
 
-def test_integral_action_is_accumulated_clamped_and_off_by_default(robots):
+def test_integral_action_is_accumulated_clamped_on_by_default_and_off_at_zero(robots):
     """MomentumBalance(q_integral=...) (LQI, our extension; LQR only): the CoG-error integral grows
     by dt (com - com_ref) per compute() call, enters the force law as -K_integral z, and is clamped
-    to +-integral_limit; without q_integral nothing is integrated (the paper's law)."""
+    to +-integral_limit; the LQR integrates by default, and with q_integral=0 nothing is
+    integrated (the paper's law)."""
     robot = robots["talos14"]
     with pytest.raises(ValueError, match="^q_integral"):
         MomentumBalance(robot, gains="pd", q_integral=1e6)
     q = robot.q_ref.copy()
     q[2] += 0.004  # base (and CoM) 4 mm above the reference
     v = np.zeros(robot.nv)
-    plain = MomentumBalance(robot, gains="lqr")
+    assert MomentumBalance(robot, gains="lqr").lqr.integral
+    assert not MomentumBalance(robot, gains="pd").lqr
+    plain = MomentumBalance(robot, gains="lqr", q_integral=0)
     plain.compute(q, v, 0.0)
     plain.compute(q, v, 0.5)
     assert not plain.lqr.integral and np.all(plain.cog_integral == 0.0)

@@ -36,7 +36,7 @@ from ..tasks.base import contact_list
 from ..tasks.momentum import momentum_gain
 from ..validation import finite_array, nonnegative, number, positive
 from .base import FailureStreak
-from .lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_DIAG, MomentumLQR
+from .lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_DIAG, DEFAULT_Q_INTEGRAL, MomentumLQR
 from .stacks import ANGULAR_MOMENTUM_WEIGHT, COP_MARGIN, POSTURE_PD, TORSION, table2_stack
 
 GAINS = ("lqr", "pd")
@@ -199,9 +199,10 @@ class MomentumBalance:
     ``torsion`` (default True): the soles' yaw-moment rows in the friction task (False: the
     paper's pyramid only; :data:`~wholebody.control.stacks.TORSION`). ``posture_gains``: the
     posture task's (kp, kd) (:data:`~wholebody.control.stacks.POSTURE_PD`).
-    ``q_integral`` (LQR only; None/0 = off, the default and the paper's controller): weight of the
-    integral of the CoG error ``robot.com - com_ref`` in the augmented LQR cost — integral action,
-    our extension, not Herzog et al. 2016 (see :mod:`wholebody.control.lqr`). The integral is
+    ``q_integral`` (LQR only): weight of the integral of the CoG error ``robot.com - com_ref`` in
+    the augmented LQR cost — integral action, our extension, not Herzog et al. 2016 (see
+    :mod:`wholebody.control.lqr`); None (default) = :data:`~wholebody.control.lqr.DEFAULT_Q_INTEGRAL`
+    with ``gains="lqr"``, 0 = off, the paper's controller. The integral is
     accumulated here, one step per :meth:`compute` call with ``dt`` the time since the previous
     call, clamped to ``+-integral_limit`` (m s, anti-windup), not on a cycle that is ``HELD``;
     :meth:`reset_integral` zeroes it. A ``HELD`` cycle's status ends with "(N failed cycle(s) in
@@ -287,6 +288,8 @@ class MomentumBalance:
         self.hdot_ref = np.zeros(6)
         self.reference = reference
         self.posture = self.stack.find("posture")
+        if gains == "lqr" and q_integral is None:
+            q_integral = DEFAULT_Q_INTEGRAL
         self.lqr = (MomentumLQR(robot, self.contacts, Q=Q, R=R, q_integral=q_integral,
                                 integral_limit=integral_limit, q_orientation=q_orientation)
                     if gains == "lqr" else None)

@@ -13,7 +13,8 @@ cost of eq. 26 is solved, and the result is the force law of eq. 23,
 task projects into momentum space (eq. 24). Gains are computed once per contact configuration and
 interpolated during contact transitions (Remark at the end of Sect. 3.2).
 
-Integral action (OUR EXTENSION, not in the paper; off by default). The LQR of Herzog et al. 2016,
+Integral action (OUR EXTENSION, not in the paper; off in this class by default, on by default in
+:class:`~wholebody.control.balance.MomentumBalance` with :data:`DEFAULT_Q_INTEGRAL`). The LQR of Herzog et al. 2016,
 eq. 21-26, has no integral term; everything about ``q_integral`` is ours. With ``q_integral`` the
 state of eq. 21 is augmented with the integral of the CoG error, ``z' = x_cog - x_ref`` (3), the
 same infinite-horizon Riccati equation is solved for the augmented system (LQI) with
@@ -58,10 +59,18 @@ DEFAULT_Q_DIAG = np.array([30.0, 30.0, 50.0, 0.5, 0.5, 0.5, 0.1, 0.1, 0.1])
 #: Herzog et al. 2016, Sect. 5.2.2 (eq. 26): input cost of one contact wrench [f; tau]; a point
 #: contact (3D force) uses the first three entries.
 DEFAULT_R_DIAG = np.array([0.1, 0.1, 0.01, 2.0, 2.0, 2.0])
+#: Weight of the CoG-error integral that :class:`~wholebody.control.balance.MomentumBalance`'s LQR
+#: uses unless told otherwise (``q_integral=0``: the paper's LQR). With eq. 26's Q/R the vertical
+#: CoG pole is 0.11 rad/s on talos14: a robot whose mass or CoG differ from its model settles
+#: centimetres off its reference, and the integral removes that offset. docs/results.md measures
+#: what it gains under model errors and what it costs in the strongest pushes survived: on talos14
+#: under model errors 3e5 and 1e6 each keep 19 of 20 ``robust-push`` draws, 1e5 16 (too slow for
+#: the lightest draw); 1e6 makes a five-joint leg on 3 cm soles rock after a push.
+DEFAULT_Q_INTEGRAL = 3e5
 #: Anti-windup bound (m s) of each component of the CoG-error integral (our extension, see the
-#: module docstring); only used when integral action is on. On talos14 with ``q_integral=1e6``
-#: (integral gain ~1.4e4 N per m s on the total vertical force) 0.01 m s caps the integral's force
-#: at ~140 N (~16 % of m g), six times the bias of a 2.3 kg mass error; a 3 cm CoG error during a
+#: module docstring); only used when integral action is on. On talos14 with ``q_integral=3e5``
+#: (integral gain ~7.7e3 N per m s on the total vertical force) 0.01 m s caps the integral's force
+#: at ~77 N (~9 % of m g), 3.4 times the bias of a 2.3 kg mass error; a 3 cm CoG error during a
 #: push reaches the cap in 0.3 s.
 DEFAULT_INTEGRAL_LIMIT = 0.01
 

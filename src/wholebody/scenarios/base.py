@@ -15,6 +15,7 @@ from typing import Any, Callable, ClassVar, Sequence
 
 import numpy as np
 
+from ..control.lqr import DEFAULT_INTEGRAL_LIMIT, DEFAULT_Q_INTEGRAL
 from ..control.stacks import COM_PD, COP_MARGIN as COP_MARGIN_DEFAULT, POSTURE_PD, SWING_FOOT_PD
 from ..cycle import ENGINES
 from .conditions import LEVELS, conditions_for
@@ -330,6 +331,16 @@ def check_engine(params: dict) -> None:
 #: eq. 26's angular-momentum weight of the LQR cost, for the momentum-balance scenarios
 Q_ANGULAR = Parameter("q_angular", 0.1, "LQR weight on angular momentum (eq. 26 uses 0.1)",
                       low=0.0, low_open=True)
+#: the LQR's integral action on the CoG error (ours, not the paper's; on by default, 0 = the paper's
+#: LQR), for the momentum-balance scenarios
+Q_INTEGRAL = Parameter("q_integral", DEFAULT_Q_INTEGRAL,
+                       "LQR only: weight of the CoG-error integral (integral action, LQI; ours, not "
+                       "the paper's); 0 = off, the paper's LQR", low=0.0)
+INTEGRAL_LIMIT = Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
+                           "LQR integral action: anti-windup clamp of each integral component "
+                           "(m s)", low=0.0, low_open=True)
+#: the LQR's parameters of the momentum-balance scenarios
+LQR_PARAMETERS = (Q_ANGULAR, Q_INTEGRAL, INTEGRAL_LIMIT)
 
 
 #: eq. 22's momentum PD gains (Table 2's defaults: P = 50, D = 15 on the linear rows, 5 on the
@@ -378,13 +389,14 @@ def task_gains(params: dict) -> dict:
 
 def momentum_gains(controller: str, params: dict) -> dict:
     """:class:`~wholebody.control.balance.MomentumBalance`'s gains from the parameters (missing
-    ones at their defaults): eq. 26's Q with ``q_angular`` for LQR, eq. 22's P and D from
-    :data:`PD_PARAMETERS` for PD."""
+    ones at their defaults): for LQR eq. 26's Q with ``q_angular`` and the integral action
+    (:data:`LQR_PARAMETERS`), for PD eq. 22's P and D from :data:`PD_PARAMETERS`."""
     from ..control.balance import lqr_q
 
-    get = {p.name: params.get(p.name, p.default) for p in (Q_ANGULAR, *PD_PARAMETERS)}
+    get = {p.name: params.get(p.name, p.default) for p in (*LQR_PARAMETERS, *PD_PARAMETERS)}
     if controller == "lqr":
-        return {"Q": lqr_q(get["q_angular"])}
+        return {"Q": lqr_q(get["q_angular"]), "q_integral": get["q_integral"],
+                "integral_limit": get["integral_limit"]}
     return {"P": np.r_[np.full(3, get["pd_stiffness"]), np.zeros(3)],
             "D": np.r_[np.full(3, get["pd_damping"]), np.full(3, get["pd_angular_damping"])]}
 

@@ -60,7 +60,8 @@ from ..planning.blend import WaypointMotion
 from ..report.balance_figures import balance_figure
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
+from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PARAMETERS,
+                   Q_ANGULAR, Q_INTEGRAL, TIME_SPAN,
                    Parameter, Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
                    paper_q_notes, task_gains)
 from .loop import run_closed_loop
@@ -84,6 +85,8 @@ PARAMETERS = (
     Parameter("feedforward", False, "feed the board's acceleration (an IMU on it) forward as "
                                     "hdot_ref = m a (not in the paper)"),
     Q_ANGULAR,
+    Q_INTEGRAL,
+    INTEGRAL_LIMIT,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
     COP_MARGIN,

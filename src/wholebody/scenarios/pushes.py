@@ -15,13 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..control.balance import MomentumBalance
-from ..control.lqr import DEFAULT_INTEGRAL_LIMIT
 from ..control.stacks import ANGULAR_MOMENTUM_WEIGHT
 from ..robots import reference
 from ..robots.roles import biped_soles
 from ..sim.disturbance import Push
 from ..sim.simulator import Simulator
-from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter,
+from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR,
+                   Q_INTEGRAL, Parameter,
                    RobotRelative, check_engine, momentum_gains, parse_list, task_gains)
 from .loop import run_closed_loop
 from .measures import Thresholds, rotation_angle_deg, sole_slip, tilt_deg
@@ -109,12 +109,6 @@ ANGULAR_WEIGHT = Parameter(
     "angular_weight", ANGULAR_MOMENTUM_WEIGHT,
     "weight of the momentum task's angular rows in Table 2 (1e4: the paper's single momentum "
     "weight, which lets the pelvis drift under model errors)", low=0.0)
-Q_INTEGRAL = Parameter("q_integral", 0.0, "LQR only: weight of the CoG-error integral (LQI; our "
-                                          "extension, not the paper's); 0 = off, the paper's "
-                                          "controller", low=0.0)
-INTEGRAL_LIMIT = Parameter("integral_limit", DEFAULT_INTEGRAL_LIMIT,
-                           "LQR integral action: anti-windup clamp of each integral component "
-                           "(m s)", low=0.0, low_open=True)
 Q_ORIENTATION = Parameter("q_orientation", 0.0, "LQR only: weight of the base orientation error "
                                                 "in the LQR state (ours, not the paper's; 0 = "
                                                 "off, the paper's controller)", low=0.0)
@@ -138,9 +132,6 @@ def controller_options(controller: str, params: dict) -> dict:
             "cop_margin": get("cop_margin"),
             **momentum_gains(controller, params),
             **task_gains({p.name: get(p.name) for p in POSTURE_PARAMETERS})}
-    if controller == "lqr" and get("q_integral") > 0:
-        opts["q_integral"] = get("q_integral")
-        opts["integral_limit"] = get("integral_limit")
     if controller == "lqr" and get("q_orientation") > 0:
         opts["q_orientation"] = get("q_orientation")
     return opts

@@ -52,7 +52,8 @@ from ..control.balance import CoMSineReference, MomentumBalance
 from ..report.balance_figures import squat_figure
 from ..robots.reference import humanoid_length_ratio
 from ..sim.simulator import Simulator
-from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, Parameter,
+from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PARAMETERS,
+                   Q_ANGULAR, Q_INTEGRAL, Parameter,
                    Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
                    paper_q_notes, task_gains)
 from .loop import run_closed_loop
@@ -82,6 +83,8 @@ PARAMETERS = (
     Parameter("torsion", True, "the soles' yaw moments bounded (FrictionCone torsion rows, the "
                                "stacks' default); false: the paper's friction pyramid only"),
     Q_ANGULAR,
+    Q_INTEGRAL,
+    INTEGRAL_LIMIT,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
     COP_MARGIN,

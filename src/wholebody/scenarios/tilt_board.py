@@ -42,7 +42,8 @@ from ..report.balance_figures import balance_figure
 from ..robot import GRAVITY
 from ..sim.environment import Environment, Platform
 from ..sim.simulator import Simulator
-from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
+from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PARAMETERS,
+                   Q_ANGULAR, Q_INTEGRAL, TIME_SPAN,
                    Parameter, Scenario, ScenarioResult, check_biped, format_mm, momentum_gains,
                    paper_q_notes, task_gains)
 from .loop import run_closed_loop
@@ -75,6 +76,8 @@ PARAMETERS = (
     Parameter("settle", 2.0, "simulated time after the last move or the impact (s)",
               low=0.0, high=Parameter.MAX_TIME),
     Q_ANGULAR,
+    Q_INTEGRAL,
+    INTEGRAL_LIMIT,
     *PD_PARAMETERS,
     *POSTURE_PARAMETERS,
     COP_MARGIN,
