@@ -81,6 +81,8 @@ class GaitSchedule:
     # (t_j, c_j, T_j): from time t_j (cycle c_j, an integer) on, the period is T_j; grown lazily
     _segments: list = field(init=False, repr=False, compare=False, default=None)
     _horizon: list = field(init=False, repr=False, compare=False, default=None)
+    # [t, cycles(t)] of the last call: a planner's cycle asks for the same t once per question
+    _last_cycles: list = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self):
         n = len(self.legs)
@@ -106,6 +108,7 @@ class GaitSchedule:
                              f"got {self.period_at!r}")
         object.__setattr__(self, "_segments", [(self.start, 0, self.period)])
         object.__setattr__(self, "_horizon", [self.start, 0])  # the next boundary to decide
+        object.__setattr__(self, "_last_cycles", [math.nan, math.nan])
 
     # ------------------------------------------------------------------ the cycle clock
     def _grow(self, t: float = -math.inf, c: float = -math.inf) -> None:
@@ -129,9 +132,14 @@ class GaitSchedule:
         return seg[max(0, bisect.bisect_right(seg, (t, math.inf, math.inf)) - 1)]
 
     def cycles(self, t: float) -> float:
-        """Gait cycles elapsed since ``start`` at time ``t`` (negative before it)."""
+        """Gait cycles elapsed since ``start`` at time ``t`` (negative before it). The last
+        answer is kept: the segment holding a time, once decided, never changes."""
+        last = self._last_cycles
+        if t == last[0]:
+            return last[1]
         t_j, c_j, T_j = self._segment_at_time(t)
-        return c_j + (t - t_j) / T_j
+        last[0], last[1] = t, c_j + (t - t_j) / T_j
+        return last[1]
 
     def cycle_time(self, c: float) -> float:
         """The time at which ``c`` cycles have elapsed since ``start`` (the inverse of
