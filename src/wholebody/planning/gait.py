@@ -162,9 +162,10 @@ class GaitSchedule:
     def index(self, leg: str | int) -> int:
         """Index of ``leg`` (a name in ``legs`` or an integer index)."""
         if isinstance(leg, (int, np.integer)):
-            if not 0 <= int(leg) < self.n_legs:
+            i = int(leg)
+            if not 0 <= i < len(self.legs):
                 raise ValueError(f"leg: index {leg} out of range for {self.n_legs} legs")
-            return int(leg)
+            return i
         try:
             return self.legs.index(leg)
         except ValueError:
