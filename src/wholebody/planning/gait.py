@@ -238,14 +238,18 @@ class GaitSchedule:
     # ------------------------------------------------------------------ events
     def liftoff_time(self, leg: str | int, k: int) -> float:
         """Lift-off time of swing number ``k`` (k = 0 is the first swing after ``start``)."""
-        i = self.index(leg)
+        return self._liftoff(self.index(leg), k)
+
+    def _liftoff(self, i: int, k: int) -> float:
         if self.period_at is None:
             return self.start + (k + self.offsets[i]) * self.period
         return self.cycle_time(k + self.offsets[i])
 
     def touchdown_time(self, leg: str | int, k: int) -> float:
         """Touchdown time ending swing number ``k``."""
-        i = self.index(leg)
+        return self._touchdown(self.index(leg), k)
+
+    def _touchdown(self, i: int, k: int) -> float:
         if self.period_at is None:
             return self.start + (k + self.offsets[i] + 1.0 - self.duty[i]) * self.period
         return self.cycle_time(k + self.offsets[i] + 1.0 - self.duty[i])
@@ -296,23 +300,22 @@ class GaitSchedule:
     def swings(self, t0: float, t1: float, legs: Sequence[str | int] | None = None) -> list[Swing]:
         """Every swing interval overlapping [t0, t1), sorted by lift-off time then leg order."""
         idx = range(self.n_legs) if legs is None else [self.index(leg) for leg in legs]
-        out: list[Swing] = []
+        found: list[tuple[float, int, Swing]] = []  # (lift-off, leg index, swing): the sort key
         for i in idx:
             if self.duty[i] >= 1.0:
                 continue
             sw = 1.0 - self.duty[i]
             k = max(0, math.floor(self.cycles(t0) - self.offsets[i] - sw))
             while True:
-                lo = self.liftoff_time(i, k)
+                lo = self._liftoff(i, k)
                 if lo >= t1:
                     break
-                td = (lo + sw * self.period if self.period_at is None
-                      else self.touchdown_time(i, k))
+                td = lo + sw * self.period if self.period_at is None else self._touchdown(i, k)
                 if td > t0:
-                    out.append(Swing(lo, td, self.legs[i], k))
+                    found.append((lo, i, Swing(lo, td, self.legs[i], k)))
                 k += 1
-        out.sort(key=lambda s: (s.liftoff, self.legs.index(s.leg)))
-        return out
+        found.sort(key=lambda entry: entry[:2])
+        return [swing for _, _, swing in found]
 
     def events(self, t0: float, t1: float) -> list[GaitEvent]:
         """Lift-offs and touchdowns with time in [t0, t1), sorted by time (touchdowns first at equal
