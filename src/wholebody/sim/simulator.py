@@ -159,8 +159,7 @@ class Simulator:
         self._contact_site = np.array([self.twin.contact_sites[n] for n in robot.contact_names],
                                       dtype=np.intp).reshape(-1)
         self._contact_site_ids = self._contact_site.tolist()
-        # the pyramid's forces need MuJoCo's decoding (the cone is fixed when the twin is built)
-        self._pyramidal = self.model.opt.cone == _PYRAMIDAL
+        self._options = self.model.opt  # MuJoCo's options, read in place (the cone per step)
         # MuJoCo's data is computed anew by each reset and step: ``_generation`` counts them, and
         # the contact wrenches are kept for the generation they were computed in
         self._generation = 0
@@ -383,7 +382,7 @@ class Simulator:
         n = d.ncon
         if n == 0:
             return np.array(out).reshape(-1, 6)
-        if self._pyramidal:
+        if self._options.cone == _PYRAMIDAL:  # the pyramid's forces need MuJoCo's decoding
             return self._contact_wrenches_pyramidal()
         con = d.contact
         owners = self._geom_owner
