@@ -124,17 +124,18 @@ def balancing_forces_factored(X: np.ndarray, com: np.ndarray, mass: float, dims:
     G = _momentum_map(X, com, dims)
     w = hdot - _gravity_wrench(mass, gravity)
     lam = _weighted_least_norm(G, w, factor)
-    residual = float(np.linalg.norm(G @ lam - w))
-    if residual > 1e-6 * max(1.0, float(np.linalg.norm(w))):
-        log.debug("balancing_forces: the contacts cannot balance the wrench %s exactly "
-                  "(residual %.3g)", np.round(w, 3), residual)
-    start, fz = 0, []
-    for d in dims:
-        fz.append(float(lam[start + 2]))
-        start += d
-    if min(fz) < 0.0:
-        log.debug("balancing_forces: negative normal force %s (CoM outside the support?)",
-                  np.round(fz, 3))
+    if log.isEnabledFor(logging.DEBUG):  # what the checks find is only logged
+        residual = float(np.linalg.norm(G @ lam - w))
+        if residual > 1e-6 * max(1.0, float(np.linalg.norm(w))):
+            log.debug("balancing_forces: the contacts cannot balance the wrench %s exactly "
+                      "(residual %.3g)", np.round(w, 3), residual)
+        start, fz = 0, []
+        for d in dims:
+            fz.append(float(lam[start + 2]))
+            start += d
+        if min(fz) < 0.0:
+            log.debug("balancing_forces: negative normal force %s (CoM outside the support?)",
+                      np.round(fz, 3))
     return lam
 
 

@@ -81,6 +81,8 @@ class GaitSchedule:
     # (t_j, c_j, T_j): from time t_j (cycle c_j, an integer) on, the period is T_j; grown lazily
     _segments: list = field(init=False, repr=False, compare=False, default=None)
     _horizon: list = field(init=False, repr=False, compare=False, default=None)
+    # [t, cycles(t)] of the last call: a planner's cycle asks for the same t once per question
+    _last_cycles: list = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self):
         n = len(self.legs)
@@ -106,6 +108,7 @@ class GaitSchedule:
                              f"got {self.period_at!r}")
         object.__setattr__(self, "_segments", [(self.start, 0, self.period)])
         object.__setattr__(self, "_horizon", [self.start, 0])  # the next boundary to decide
+        object.__setattr__(self, "_last_cycles", [math.nan, math.nan])
 
     # ------------------------------------------------------------------ the cycle clock
     def _grow(self, t: float = -math.inf, c: float = -math.inf) -> None:
@@ -129,9 +132,14 @@ class GaitSchedule:
         return seg[max(0, bisect.bisect_right(seg, (t, math.inf, math.inf)) - 1)]
 
     def cycles(self, t: float) -> float:
-        """Gait cycles elapsed since ``start`` at time ``t`` (negative before it)."""
+        """Gait cycles elapsed since ``start`` at time ``t`` (negative before it). The last
+        answer is kept: the segment holding a time, once decided, never changes."""
+        last = self._last_cycles
+        if t == last[0]:
+            return last[1]
         t_j, c_j, T_j = self._segment_at_time(t)
-        return c_j + (t - t_j) / T_j
+        last[0], last[1] = t, c_j + (t - t_j) / T_j
+        return last[1]
 
     def cycle_time(self, c: float) -> float:
         """The time at which ``c`` cycles have elapsed since ``start`` (the inverse of
@@ -154,9 +162,10 @@ class GaitSchedule:
     def index(self, leg: str | int) -> int:
         """Index of ``leg`` (a name in ``legs`` or an integer index)."""
         if isinstance(leg, (int, np.integer)):
-            if not 0 <= int(leg) < self.n_legs:
+            i = int(leg)
+            if not 0 <= i < len(self.legs):
                 raise ValueError(f"leg: index {leg} out of range for {self.n_legs} legs")
-            return int(leg)
+            return i
         try:
             return self.legs.index(leg)
         except ValueError:
@@ -229,14 +238,18 @@ class GaitSchedule:
     # ------------------------------------------------------------------ events
     def liftoff_time(self, leg: str | int, k: int) -> float:
         """Lift-off time of swing number ``k`` (k = 0 is the first swing after ``start``)."""
-        i = self.index(leg)
+        return self._liftoff(self.index(leg), k)
+
+    def _liftoff(self, i: int, k: int) -> float:
         if self.period_at is None:
             return self.start + (k + self.offsets[i]) * self.period
         return self.cycle_time(k + self.offsets[i])
 
     def touchdown_time(self, leg: str | int, k: int) -> float:
         """Touchdown time ending swing number ``k``."""
-        i = self.index(leg)
+        return self._touchdown(self.index(leg), k)
+
+    def _touchdown(self, i: int, k: int) -> float:
         if self.period_at is None:
             return self.start + (k + self.offsets[i] + 1.0 - self.duty[i]) * self.period
         return self.cycle_time(k + self.offsets[i] + 1.0 - self.duty[i])
@@ -287,23 +300,22 @@ class GaitSchedule:
     def swings(self, t0: float, t1: float, legs: Sequence[str | int] | None = None) -> list[Swing]:
         """Every swing interval overlapping [t0, t1), sorted by lift-off time then leg order."""
         idx = range(self.n_legs) if legs is None else [self.index(leg) for leg in legs]
-        out: list[Swing] = []
+        found: list[tuple[float, int, Swing]] = []  # (lift-off, leg index, swing): the sort key
         for i in idx:
             if self.duty[i] >= 1.0:
                 continue
             sw = 1.0 - self.duty[i]
             k = max(0, math.floor(self.cycles(t0) - self.offsets[i] - sw))
             while True:
-                lo = self.liftoff_time(i, k)
+                lo = self._liftoff(i, k)
                 if lo >= t1:
                     break
-                td = (lo + sw * self.period if self.period_at is None
-                      else self.touchdown_time(i, k))
+                td = lo + sw * self.period if self.period_at is None else self._touchdown(i, k)
                 if td > t0:
-                    out.append(Swing(lo, td, self.legs[i], k))
+                    found.append((lo, i, Swing(lo, td, self.legs[i], k)))
                 k += 1
-        out.sort(key=lambda s: (s.liftoff, self.legs.index(s.leg)))
-        return out
+        found.sort(key=lambda entry: entry[:2])
+        return [swing for _, _, swing in found]
 
     def events(self, t0: float, t1: float) -> list[GaitEvent]:
         """Lift-offs and touchdowns with time in [t0, t1), sorted by time (touchdowns first at equal

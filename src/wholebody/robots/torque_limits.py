@@ -70,6 +70,7 @@ class TorqueProfile:
         with np.errstate(all="ignore"):
             self._ab, self._a2b2, self._force_ab = a * b, a * a + b * b, force * a * b
         self._angle_offset = np.pi / 2 - q_peak
+        self._last_upper: tuple[bytes, np.ndarray] | None = None  # see upper()
         self._check_derived(where)
 
     def _check_derived(self, where: str) -> None:
@@ -98,13 +99,21 @@ class TorqueProfile:
         return self._linkage_rows.size > 0
 
     def upper(self, q_joints: np.ndarray) -> np.ndarray:
-        """tau_max(q) for the actuated joint positions ``q_joints``."""
-        hi = self.constant.copy()
-        if self.has_profile:
-            t = np.asarray(q_joints)[self._linkage_rows] + self._angle_offset
+        """tau_max(q) for the actuated joint positions ``q_joints`` (a new array). With a
+        linkage profile the last answer is kept with the profiled joints' angles it came from:
+        a control cycle and the simulator's step ask for the same state several times."""
+        if not self.has_profile:
+            hi = self.constant.copy()
+            return self.scale * hi if self.scale != 1.0 else hi
+        angles = np.asarray(q_joints)[self._linkage_rows]
+        key = angles.dtype.str.encode() + angles.tobytes()
+        if self._last_upper is None or self._last_upper[0] != key:
+            hi = self.constant.copy()
+            t = angles + self._angle_offset
             hi[self._linkage_rows] = (self._force_ab * np.abs(np.sin(t))
                                       / np.sqrt(self._a2b2 - 2.0 * self._ab * np.cos(t)))
-        return self.scale * hi if self.scale != 1.0 else hi
+            self._last_upper = (key, self.scale * hi if self.scale != 1.0 else hi)
+        return self._last_upper[1].copy()
 
     def bounds(self, q_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(tau_min(q), tau_max(q))."""

@@ -8,6 +8,7 @@ controller's model.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -91,20 +92,27 @@ class Thresholds:
 
 def tilt_deg(rotation: np.ndarray) -> float:
     """Angle (deg) between the z axis of ``rotation`` and the world's (or the support's, for a
-    rotation relative to it)."""
-    return np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0)))
+    rotation relative to it). Measured every cycle: Python's min/max clip one number (np.clip's
+    own cost is many times the arithmetic's), the same value."""
+    return np.degrees(np.arccos(min(max(rotation[2, 2], -1.0), 1.0)))
+
+
+def _norm(x: np.ndarray) -> float:
+    """np.linalg.norm of a float vector, as it computes it (sqrt(x . x)), without its dispatch."""
+    return math.sqrt(x.dot(x))
 
 
 def rotation_angle_deg(quat: np.ndarray, quat_ref: np.ndarray) -> float:
     """Angle (deg) of the rotation between two unit quaternions (any component order, the same for
     both): 2 arccos |<q, q_ref>|."""
-    dot = abs(float(np.dot(quat, quat_ref))) / (np.linalg.norm(quat) * np.linalg.norm(quat_ref))
+    quat, quat_ref = np.asarray(quat, dtype=float), np.asarray(quat_ref, dtype=float)
+    dot = abs(float(quat.dot(quat_ref))) / (_norm(quat) * _norm(quat_ref))
     return float(np.degrees(2.0 * np.arccos(min(dot, 1.0))))
 
 
 def sole_slip(position: np.ndarray, start: np.ndarray) -> float:
     """Horizontal displacement of a sole frame origin from its start (m)."""
-    return np.linalg.norm((position - start)[:2])
+    return _norm(np.asarray(position - start, dtype=float)[:2])
 
 
 def cog_recovery(t: np.ndarray, err: np.ndarray, end: float, window: np.ndarray | None,

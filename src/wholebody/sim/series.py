@@ -27,6 +27,8 @@ class Series:
     def __init__(self, dtype=None):
         self._fixed_dtype = None if dtype is None else np.dtype(dtype)
         self._chunks: list[np.ndarray] = []
+        self._last: np.ndarray | None = None  # the last chunk, the one being filled
+        self._shape: tuple = ()  # the rows' shape (the first row's)
         self._filled = 0  # rows used in the last chunk
         self._rows = 0
 
@@ -42,23 +44,30 @@ class Series:
         """Copy ``row`` (an array, a sequence of numbers or a number) in as the next row.
         ValueError if its shape differs from the first row's."""
         row = np.asarray(row, dtype=self._fixed_dtype)
-        if not self._chunks:
-            self._chunks.append(np.empty((FIRST_CHUNK, *row.shape), dtype=row.dtype))
-        last = self._chunks[-1]
-        if row.shape != last.shape[1:]:
+        last = self._last
+        if last is None:
+            self._shape = row.shape
+            last = self._add_chunk(FIRST_CHUNK, row.dtype)
+        elif row.shape != self._shape:
             raise ValueError(f"series: a row of shape {row.shape} after rows of shape "
-                             f"{last.shape[1:]}")
+                             f"{self._shape}")
         if row.dtype != last.dtype and not np.can_cast(row.dtype, last.dtype, "safe"):
             self._widen(np.result_type(last.dtype, row.dtype))
-            last = self._chunks[-1]
-        if self._filled == len(last):
-            size = min(max(2 * len(last), FIRST_CHUNK), MAX_CHUNK)
-            last = np.empty((size, *row.shape), dtype=last.dtype)
-            self._chunks.append(last)
-            self._filled = 0
-        last[self._filled] = row
-        self._filled += 1
+            last = self._last
+        filled = self._filled
+        if filled == len(last):
+            last = self._add_chunk(min(max(2 * len(last), FIRST_CHUNK), MAX_CHUNK), last.dtype)
+            filled = 0
+        last[filled] = row
+        self._filled = filled + 1
         self._rows += 1
+
+    def _add_chunk(self, size: int, dtype) -> np.ndarray:
+        """A new empty chunk of ``size`` rows, now the one being filled."""
+        self._last = np.empty((size, *self._shape), dtype=dtype)
+        self._chunks.append(self._last)
+        self._filled = 0
+        return self._last
 
     def array(self) -> np.ndarray:
         """All rows, (rows, *row shape), read-only (a view of the series' storage: copy it to
@@ -67,13 +76,14 @@ class Series:
             return np.asarray([], dtype=self._fixed_dtype)
         if len(self._chunks) > 1 or self._filled < len(self._chunks[0]):
             joined = np.concatenate([*self._chunks[:-1], self._chunks[-1][:self._filled]])
-            self._chunks, self._filled = [joined], len(joined)
+            self._chunks, self._filled, self._last = [joined], len(joined), joined
         view = self._chunks[0].view()
         view.flags.writeable = False
         return view
 
     def _widen(self, dtype: np.dtype) -> None:
         self._chunks = [c.astype(dtype) for c in self._chunks]
+        self._last = self._chunks[-1]
 
 
 class SeriesLog:
@@ -93,8 +103,9 @@ class SeriesLog:
             missing, unknown = self._series.keys() - row.keys(), row.keys() - self._series.keys()
             raise ValueError(f"{type(self).__name__}.append: missing {sorted(missing)}, unknown "
                              f"{sorted(unknown)}")
+        series = self._series
         for name, value in row.items():
-            self._series[name].append(value)
+            series[name].append(value)
 
     def __len__(self) -> int:
         return len(self._series[self.FIELDS[0]]) if self.FIELDS else 0

@@ -158,6 +158,8 @@ class Simulator:
         self._geom_owner = self._geom_contact.tolist()
         self._contact_site = np.array([self.twin.contact_sites[n] for n in robot.contact_names],
                                       dtype=np.intp).reshape(-1)
+        self._contact_site_ids = self._contact_site.tolist()
+        self._options = self.model.opt  # MuJoCo's options, read in place (the cone per step)
         # MuJoCo's data is computed anew by each reset and step: ``_generation`` counts them, and
         # the contact wrenches are kept for the generation they were computed in
         self._generation = 0
@@ -207,12 +209,17 @@ class Simulator:
         kept with the bytes of MuJoCo's qpos and qvel it came from: asked again for the same
         numbers (the controller, the simulator's log and a scenario's measures all read the
         state of one step), it is not redone."""
+        q, v = self._current_state()
+        return q.copy(), v.copy()
+
+    def _current_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The kept (q, v) of :meth:`state`, not copied: read it, do not write to it."""
         qpos, qvel = self.data.qpos[self._qpos], self.data.qvel[self._qvel]
         key = (qpos.tobytes(), qvel.tobytes())
         if key != self._state_key:
             self._state = self._to_pinocchio(qpos, qvel)
             self._state_key = key
-        return self._state[0].copy(), self._state[1].copy()
+        return self._state
 
     def ground_height(self, x: float, y: float) -> float:
         """Height of the environment's surface under (x, y): the first geom not on the robot
@@ -307,39 +314,38 @@ class Simulator:
     def step(self, tau) -> None:
         """Advance one time step with the commanded actuated-joint torques ``tau``.
         :class:`SimulationDiverged` (with the time) if MuJoCo cannot integrate the state."""
-        robot = self.robot
+        robot, mismatch, data = self.robot, self.mismatch, self.data
         tau = check_vector(tau, robot.na, "tau")
-        q, v = self.state()
-        if self.mismatch.torque_delay:
+        q, v = self._current_state()  # read here; the log copies them
+        if mismatch.torque_delay:
             self._delay.append(tau)
             applied = self._delay.popleft()
         else:
             applied = tau
-        if self.mismatch.torque_bandwidth:
+        if mismatch.torque_bandwidth:
             if self._lagged is None:
                 self._lagged = np.array(applied, dtype=float)
-            self._lagged += self.mismatch.lag_gain(self.dt) * (applied - self._lagged)
+            self._lagged += mismatch.lag_gain(self.dt) * (applied - self._lagged)
             applied = self._lagged.copy()
-        if self.mismatch.torque_noise:
-            applied = applied + self._rng.normal(scale=self.mismatch.torque_noise, size=robot.na)
+        if mismatch.torque_noise:
+            applied = applied + self._rng.normal(scale=mismatch.torque_noise, size=robot.na)
         lo, hi = robot.torque_bounds(q)
         if self.twin.torque_lower is not None:  # a plant's own actuator limits
             lo, hi = np.maximum(lo, self.twin.torque_lower), np.minimum(hi, self.twin.torque_upper)
-        clipped = np.clip(applied, lo, hi)
+        clipped = applied.clip(lo, hi)
         self.last_clipped = applied - clipped
-        self.data.ctrl[self._ctrl] = clipped * self._ctrl_scale
-        push_force = self._apply_pushes(self.t)
-        self._set_platform(self.t)
+        data.ctrl[self._ctrl] = clipped * self._ctrl_scale
+        t_start = data.time
+        push_force = self._apply_pushes(t_start)
+        self._set_platform(t_start)
         if self.record:
-            self.log.append(t=self.t, q=q, v=v, tau_command=tau, tau_applied=clipped,
-                            contact_wrenches=self.contact_wrenches_array(),
-                            push_force=push_force)
+            self.log.append(t=t_start, q=q, v=v, tau_command=tau, tau_applied=clipped,
+                            contact_wrenches=self._current_wrenches(), push_force=push_force)
         for observer in self.observers:
             observer.step(self)
-        t_start = self.data.time
         self._generation += 1
-        mujoco.mj_step(self.model, self.data)
-        if self.data.time < t_start + 0.5 * self.dt:  # MuJoCo reset its data: it diverged
+        mujoco.mj_step(self.model, data)
+        if data.time < t_start + 0.5 * self.dt:  # MuJoCo reset its data: it diverged
             raise SimulationDiverged(t_start, self._divergence_reason())
 
     def _divergence_reason(self) -> str:
@@ -357,10 +363,15 @@ class Simulator:
         the sign of the force on the robot's geom) and that force's moment about the contact
         frame's origin. Computed once per step (MuJoCo's data changes only when it steps or
         resets) and returned as a copy."""
+        return self._current_wrenches().copy()
+
+    def _current_wrenches(self) -> np.ndarray:
+        """The kept array of :meth:`contact_wrenches_array`, not copied: read it, do not write
+        to it."""
         if self._wrenches_generation != self._generation:
             self._wrenches = self._contact_wrenches()
             self._wrenches_generation = self._generation
-        return self._wrenches.copy()
+        return self._wrenches
 
     def _contact_wrenches(self) -> np.ndarray:
         """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts, in plain floats: with
@@ -371,14 +382,15 @@ class Simulator:
         n = d.ncon
         if n == 0:
             return np.array(out).reshape(-1, 6)
-        con = d.contact
-        if self.model.opt.cone == _PYRAMIDAL:  # the pyramid's forces need MuJoCo's decoding
+        if self._options.cone == _PYRAMIDAL:  # the pyramid's forces need MuJoCo's decoding
             return self._contact_wrenches_pyramidal()
+        con = d.contact
         owners = self._geom_owner
         geoms, address, dim = con.geom.tolist(), con.efc_address.tolist(), con.dim.tolist()
         frames, points = con.frame.tolist(), con.pos.tolist()
         efc = d.efc_force.tolist()
-        sites = d.site_xpos[self._contact_site].tolist()
+        site_xpos = d.site_xpos.tolist()
+        sites = [site_xpos[s] for s in self._contact_site_ids]
         for k in range(n):
             g1, g2 = geoms[k]
             j, sign = owners[g1], -1.0  # geom1 is the robot's: the force on it is minus MuJoCo's

@@ -20,8 +20,20 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unit normal and two unit tangents (t1, t2, n right-handed) for a surface normal."""
+    """Unit normal and two unit tangents (t1, t2, n right-handed) for a surface normal (new
+    arrays; the bases of the last normals met are kept, a control loop meets the same few)."""
+    return tuple(a.copy() for a in _tangent_basis(*_key(normal)))
+
+
+def _key(normal) -> tuple[bytes, tuple]:
+    """A normal as a cache key: its float64 bytes (exact, -0.0 apart from 0.0) and shape."""
     n = np.asarray(normal, dtype=float)
+    return n.tobytes(), n.shape
+
+
+@functools.lru_cache(maxsize=256)
+def _tangent_basis(data: bytes, shape: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n = np.frombuffer(data).reshape(shape)
     n = n / np.linalg.norm(n)
     helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     t1 = cross3(helper, n)
@@ -62,8 +74,15 @@ def _rotation_map(block_of) -> np.ndarray:
 
 
 def friction_faces(normal: np.ndarray, mu: float) -> np.ndarray:
-    """The 4 x 3 rows F with F f <= 0 <=> f in the friction pyramid about ``normal``."""
-    t1, t2, n = tangent_basis(normal)
+    """The 4 x 3 rows F with F f <= 0 <=> f in the friction pyramid about ``normal`` (a new
+    array; kept for the last normals and mu met, as :func:`tangent_basis`)."""
+    return _friction_faces(*_key(normal), np.float64(mu).tobytes()).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _friction_faces(data: bytes, shape: tuple, mu: bytes) -> np.ndarray:
+    t1, t2, n = _tangent_basis(data, shape)
+    mu = np.frombuffer(mu)[0]
     return np.array([t1 - mu * n, -t1 - mu * n, t2 - mu * n, -t2 - mu * n])
 
 

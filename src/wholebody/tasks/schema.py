@@ -55,12 +55,17 @@ class LayoutContext:
 
     def __init__(self, robot, contacts: Sequence[str] = (), rows: Sequence[int] = ()):
         self.robot, self.contacts, self.rows = robot, tuple(contacts), tuple(rows)
+        self._counts: dict[str, int] | None = None
 
     def count(self, unit: str) -> int:
-        robot = self.robot
-        return {"": 1, "nq": robot.nq, "na": robot.na, "nv": robot.nv,
-                "contact": len(self.contacts), "rows": len(self.rows),
-                "contact_dim": sum(robot.contact(n).dim for n in self.contacts)}[unit]
+        """How many of ``unit`` (:data:`UNITS`) the layout has (counted on first use: a task's
+        checks ask every cycle)."""
+        if self._counts is None:
+            robot = self.robot
+            self._counts = {"": 1, "nq": robot.nq, "na": robot.na, "nv": robot.nv,
+                            "contact": len(self.contacts), "rows": len(self.rows),
+                            "contact_dim": sum(robot.contact(n).dim for n in self.contacts)}
+        return self._counts[unit]
 
 
 class CycleState(Protocol):
