@@ -10,6 +10,11 @@ gets a large one, so it follows its measurement and is anchored again where it l
 A ball foot in contact rolls: its centre (the contact frame) moves by omega_foot x (radius z) on
 flat ground, which the prediction adds (without it, HyQ's feet rolling forward in stance make the
 estimate lag 2-3 % of the distance trotted).
+While the readings show the robot at rest (every contact closed, the joints and the
+bias-corrected gyro still within their noise over a short window) the gyro reads its bias: a
+zero angular-rate update, the standard one of inertial navigation, observes the gyro bias about
+the vertical, which the legs' kinematics leave unobserved (Bloesch et al. 2013, observability
+analysis) and which otherwise integrates into the heading.
 
 The filter works on the error state [dr, dv, dphi, dp_1 .. dp_n, db_f, db_w] with the orientation
 error about the world axes (R = exp(dphi) R_hat), which gives the linearisations below in the
@@ -77,6 +82,25 @@ class EstimatorNoise:
     initial_gyro_bias, initial_accel_bias  std of the initial biases (rad/s, m/s^2)
     ground_noise                     std of a stance foot's height above the known ground (m):
                                      the contact's give, the ground map (with ``ground`` only)
+    encoder_noise                    std of a joint position reading (rad): its quantisation
+                                     (step / sqrt(12)) and noise; a joint velocity reading at rest
+                                     (differenced over dt) then has std sqrt(2) encoder_noise / dt
+    rest_update                      the zero angular-rate update: while the robot is at rest the
+                                     gyro reads its bias (gyro - b_w = 0 + noise)
+    rest_window                      time constant (s) of the averages that detect rest, and how
+                                     long every contact must have been closed first
+    rest_gate                        at rest when the averages of the bias-corrected gyro and of
+                                     the joint velocities are within rest_gate standard
+                                     deviations of zero (their spread at rest from gyro_noise and
+                                     b_w's variance, from encoder_noise): each a chi-square with
+                                     as many degrees of freedom as axes, below that number times
+                                     rest_gate^2
+    rest_rate_noise                  std of the angular rate a robot detected at rest may still
+                                     have (rad/s), in the rest update, correlated over
+                                     rest_window: what the rest test lets pass, rest_gate times
+                                     the spread of the joint velocities' average at 1 kHz (the
+                                     base turns as fast as the joints that hold it;
+                                     :meth:`for_sensors`)
     """
 
     gyro_noise: float = 3e-3
@@ -92,18 +116,30 @@ class EstimatorNoise:
     initial_gyro_bias: float = 2e-3
     initial_accel_bias: float = 2e-2
     ground_noise: float = 2e-3
+    encoder_noise: float = 3.4e-5
+    rest_update: bool = True
+    rest_window: float = 0.05
+    rest_gate: float = 2.0
+    rest_rate_noise: float = 1.4e-3
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if f.type in (bool, "bool"):
+                if not isinstance(value, (bool, np.bool_)):
+                    raise ValueError(f"EstimatorNoise.{f.name} must be True or False, got "
+                                     f"{value!r}")
+                continue
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and math.isfinite(value) and value > 0):
                 raise ValueError(f"EstimatorNoise.{f.name} must be a finite number > 0, got "
                                  f"{value!r}")
 
     @classmethod
     def for_sensors(cls, spec: SensorSpec, **overrides) -> "EstimatorNoise":
-        """The IMU terms and initial biases from a sensor spec (each at least a small floor so
-        that the filter stays well posed for exact sensors), the rest from the defaults."""
+        """The IMU terms, initial biases and the encoders' noise from a sensor spec (each at
+        least a small floor so that the filter stays well posed for exact sensors), the rate
+        left at rest from the encoders' (``rest_rate_noise``), the rest from the defaults."""
         floor = 1e-6
         values = dict(gyro_noise=max(spec.gyro_noise, floor),
                       accel_noise=max(spec.accel_noise, floor),
@@ -111,8 +147,17 @@ class EstimatorNoise:
                       accel_bias_walk=max(spec.accel_bias_walk, floor),
                       initial_gyro_bias=max(spec.gyro_bias, floor),
                       initial_accel_bias=max(spec.accel_bias, floor),
-                      initial_orientation=max(spec.attitude_noise, floor) + 1e-3)
+                      initial_orientation=max(spec.attitude_noise, floor) + 1e-3,
+                      encoder_noise=max(math.hypot(spec.encoder_resolution / math.sqrt(12.0),
+                                                   spec.encoder_noise), floor))
         values.update(overrides)
+        defaults = cls()
+        window = values.get("rest_window", defaults.rest_window)
+        alpha = (1.0 - math.exp(-1e-3 / window)
+                 if isinstance(window, (int, float)) and window > 0 else 1.0)
+        values.setdefault("rest_rate_noise", values.get("rest_gate", defaults.rest_gate)
+                          * values["encoder_noise"] * alpha / 1e-3
+                          * math.sqrt(2.0 / (2.0 - alpha)))
         return cls(**values)
 
 
@@ -127,6 +172,7 @@ class StateEstimate:
     foot_test    (ncontact,): each foot's squared innovation normalised by its covariance (a
                  chi-square with 3 degrees of freedom when the foot behaves as modelled)
     feet         (ncontact, 3): the estimated contact positions in the world
+    at_rest      the readings showed the robot at rest (the zero angular-rate update ran)
     """
 
     t: float
@@ -136,6 +182,7 @@ class StateEstimate:
     innovation: np.ndarray
     foot_test: np.ndarray
     feet: np.ndarray
+    at_rest: bool = False
 
 
 class KinematicInertialEKF:
@@ -257,6 +304,10 @@ class KinematicInertialEKF:
         self._omega = np.asarray(reading.gyro, dtype=float).copy()
         self._innovation = np.zeros((self.n_feet, 3))
         self._foot_test = np.zeros(self.n_feet)
+        # the rest test's averages start at this reading at rest, the contacts' closed time at 0
+        self._rest_gyro, self._rest_joints = self._omega.copy(), np.zeros(self.robot.na)
+        self._closed_for = 0.0
+        self._at_rest = False
         self.estimate = self._output(reading)
         return self.estimate
 
@@ -281,12 +332,16 @@ class KinematicInertialEKF:
         if contact.shape != (self.n_feet,):
             contact = np.zeros(self.n_feet, bool)
         omega = gyro - self.gyro_bias
-        measured, foot_rates = self.kinematics.feet_in_imu(joints, omega,
-                                                           reading.joint_velocities)
+        joint_velocities = np.asarray(reading.joint_velocities, dtype=float)
+        measured, foot_rates = self.kinematics.feet_in_imu(joints, omega, joint_velocities)
+        self._at_rest = self.noise.rest_update and self._detect_rest(gyro, joint_velocities,
+                                                                     contact, dt)
         self._predict(omega, accel, contact, foot_rates, dt)
         self._correct(measured)
         if self.ground is not None:
-            self._correct_ground(contact)
+            self._correct_ground(self._ground_heights(contact))
+        if self._at_rest:
+            self._correct_rest(gyro, dt)
         self._t = float(reading.t)
         self.estimate = self._output(reading)
         return self.estimate
@@ -362,23 +417,75 @@ class KinematicInertialEKF:
         self.accel_bias = self.accel_bias + dx[self._accel_bias]
         self.gyro_bias = self.gyro_bias + dx[self._gyro_bias]
 
-    def _correct_ground(self, contact: np.ndarray) -> None:
-        """Each foot in contact on the known ground: its frame's height is the ground's under it
-        plus its radius (a sole's: the ground's), one scalar update per foot (noise
-        ``ground_noise``); a foot over no ground (a gap) is not measured."""
-        sigma2 = self.noise.ground_noise ** 2
+    def _ground_heights(self, contact: np.ndarray) -> np.ndarray:
+        """The ground's height under each foot in contact, where the kinematic update put it;
+        NaN for the others and over no ground (a gap)."""
+        heights = np.full(self.n_feet, np.nan)
         for i in np.flatnonzero(contact):
-            x, y, z = self.feet[i]
-            height = float(self.ground(float(x), float(y)))
-            if not np.isfinite(height):
-                continue
+            heights[i] = float(self.ground(float(self.feet[i, 0]), float(self.feet[i, 1])))
+        return heights
+
+    def _correct_ground(self, heights: np.ndarray) -> None:
+        """Each foot in contact on the known ground: its frame's height is the ground's under it
+        (``heights``, NaN: not measured) plus its radius (a sole's: the ground's), one scalar
+        update per foot (noise ``ground_noise``)."""
+        sigma2 = self.noise.ground_noise ** 2
+        for i in np.flatnonzero(np.isfinite(heights)):
             j = 9 + 3 * i + 2  # the foot's z in the error state
             column = self.P[:, j].copy()
             gain = column / (column[j] + sigma2)
-            dx = gain * (height + self._radii[i] - z)
+            dx = gain * (heights[i] + self._radii[i] - self.feet[i, 2])
             self._inject(dx)
             P = self.P - np.outer(gain, column)
             self.P = 0.5 * (P + P.T)
+
+    def _detect_rest(self, gyro: np.ndarray, joint_velocities: np.ndarray,
+                     contact: np.ndarray, dt: float) -> bool:
+        """At rest from the readings alone: every contact closed for ``rest_window``, and the
+        averages (first order, time constant ``rest_window``) of the gyro less the present bias
+        estimate and of the joint velocities within ``rest_gate`` standard deviations of zero
+        (their spread at rest: the gyro's white noise averaged plus b_w's variance; the encoders'
+        noise differenced and averaged). Joints still with every foot down hold the base still:
+        the evidence that the gyro then reads its bias. The raw gyro is averaged, so that the
+        test does not lag the bias's estimate. A push or a step moves the averages past the gate
+        within a cycle or two; a joint velocity that is not finite restarts the test."""
+        noise = self.noise
+        if not math.isfinite(joint_velocities.sum()) or joint_velocities.shape != (
+                self._rest_joints.size,):
+            self._closed_for = 0.0
+            return False
+        alpha = 1.0 - math.exp(-dt / noise.rest_window)
+        self._rest_gyro += alpha * (gyro - self._rest_gyro)
+        self._rest_joints += alpha * (joint_velocities - self._rest_joints)
+        # a first-order average of white noise of variance s^2: s^2 alpha / (2 - alpha); of
+        # encoder noise e differenced, (e_k - e_k-1) / dt, which telescopes:
+        # 2 (e alpha / dt)^2 / (2 - alpha)
+        gyro_variance = (noise.gyro_noise ** 2 * alpha / (2.0 - alpha)
+                         + self.P.diagonal()[self._gyro_bias])
+        joint_variance = 2.0 * (noise.encoder_noise * alpha / dt) ** 2 / (2.0 - alpha)
+        self._closed_for = self._closed_for + dt if contact.all() else 0.0
+        gate = noise.rest_gate ** 2
+        return (self._closed_for >= noise.rest_window
+                and float(np.sum((self._rest_gyro - self.gyro_bias) ** 2 / gyro_variance))
+                < 3.0 * gate
+                and float(self._rest_joints @ self._rest_joints) / joint_variance
+                < self._rest_joints.size * gate)
+
+    def _correct_rest(self, gyro: np.ndarray, dt: float) -> None:
+        """The zero angular-rate update of inertial navigation: at rest the gyro reads its bias,
+        gyro = b_w + noise, three rows on b_w; it makes the bias about the vertical observable,
+        which the legs' kinematics do not (Bloesch et al. 2013, observability analysis). The
+        noise: the gyro's white noise and the rate left at rest (``rest_rate_noise``), which is
+        correlated over the rest window: counted once per window (its variance times
+        rest_window / dt per sample)."""
+        noise, b = self.noise, self._gyro_bias
+        columns = self.P[:, b].copy()  # P H^T
+        variance = noise.gyro_noise ** 2 + noise.rest_rate_noise ** 2 * noise.rest_window / dt
+        S = columns[b] + variance * np.eye(3)
+        gain = np.linalg.solve(S, columns.T).T
+        self._inject(gain @ (gyro - self.gyro_bias))
+        P = self.P - gain @ columns.T
+        self.P = 0.5 * (P + P.T)
 
     # ------------------------------------------------------------------ output
     def _output(self, reading: SensorReading) -> StateEstimate:
@@ -392,7 +499,7 @@ class KinematicInertialEKF:
         v[6:] = reading.joint_velocities
         return StateEstimate(t=self._t, q=q, v=v, covariance=self.P.copy(),
                              innovation=self._innovation.copy(), foot_test=self._foot_test.copy(),
-                             feet=self.feet.copy())
+                             feet=self.feet.copy(), at_rest=bool(self._at_rest))
 
     def _warn(self, message: str) -> None:
         if not self._warned:
