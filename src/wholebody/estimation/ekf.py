@@ -36,6 +36,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg import lapack
 
+from ..cycle import ENGINES, warn_python_fallback
 from ..robot import GRAVITY, Robot
 from ..sim.sensors import SensorReading, SensorSpec
 from .kinematics import LegKinematics
@@ -44,6 +45,7 @@ log = logging.getLogger(__name__)
 
 _GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY])
 _MINUS_ONES3 = -np.ones(3)
+_NO_HEIGHTS = np.zeros(0)  # the compiled cycle's ground heights without a ground map
 # [x]x's off-diagonal entries (0,1) (0,2) (1,0) (1,2) (2,0) (2,1): sign * x[component]
 _SKEW_ROWS, _SKEW_COLUMNS = np.array([0, 0, 1, 1, 2, 2]), np.array([1, 2, 0, 2, 0, 1])
 _SKEW_COMPONENT = np.array([2, 1, 2, 0, 1, 0])
@@ -199,15 +201,21 @@ class KinematicInertialEKF:
     base height is observed only through the feet's anchors, which each touchdown re-sets where
     the kinematics put them: the height drifts, and a controller that places its swings on the
     ground by the estimate lands them short or deep, which the next anchors take as base motion
-    (a trot on the estimate sank 11 cm in 6 s)."""
+    (a trot on the estimate sank 11 cm in 6 s).
+
+    ``engine``: "python" runs the cycle's numerics here (the reference), "native" in the compiled
+    ``wholebody._estimator`` (the same numbers, faster; the forward kinematics and the ground
+    map's queries stay in Python), "auto" (default) the compiled one where it is built."""
 
     def __init__(self, robot: Robot, noise: EstimatorNoise | None = None,
-                 imu_frame: str | None = None, ground=None):
+                 imu_frame: str | None = None, ground=None, engine: str = "auto"):
         self.robot = robot
         self.ground = ground
         self.noise = noise or EstimatorNoise()
         if not isinstance(self.noise, EstimatorNoise):
             raise ValueError(f"noise: expected an EstimatorNoise, got {type(self.noise).__name__}")
+        if engine not in ENGINES:
+            raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
         self.kinematics = LegKinematics(robot, imu_frame)
         n_feet = self.kinematics.count
         if n_feet == 0:
@@ -269,6 +277,9 @@ class KinematicInertialEKF:
         self.estimate: StateEstimate | None = None
         self._t = 0.0
         self._warned = False
+        self.engine = self._resolve_engine(engine)
+        self._native = self._build_native() if self.engine == "native" else None
+        self._nb: dict[str, np.ndarray] = {}
 
     # ------------------------------------------------------------------ start
     def reset(self, reading: SensorReading, base_position=(0.0, 0.0, 0.0),
@@ -308,6 +319,8 @@ class KinematicInertialEKF:
         self._rest_gyro, self._rest_joints = self._omega.copy(), np.zeros(self.robot.na)
         self._closed_for = 0.0
         self._at_rest = False
+        if self._native is not None:
+            self._bind_native()
         self.estimate = self._output(reading)
         return self.estimate
 
@@ -334,16 +347,19 @@ class KinematicInertialEKF:
         omega = gyro - self.gyro_bias
         joint_velocities = np.asarray(reading.joint_velocities, dtype=float)
         measured, foot_rates = self.kinematics.feet_in_imu(joints, omega, joint_velocities)
-        self._at_rest = self.noise.rest_update and self._detect_rest(gyro, joint_velocities,
-                                                                     contact, dt)
-        self._predict(omega, accel, contact, foot_rates, dt)
-        self._correct(measured)
-        if self.ground is not None:
-            self._correct_ground(self._ground_heights(contact))
-        if self._at_rest:
-            self._correct_rest(gyro, dt)
+        if self._native is not None:
+            self._native_cycle(dt, gyro, accel, contact, joint_velocities, measured, foot_rates)
+        else:
+            self._at_rest = self.noise.rest_update and self._detect_rest(
+                gyro, joint_velocities, contact, dt)
+            self._predict(omega, accel, contact, foot_rates, dt)
+            self._correct(measured)
+            if self.ground is not None:
+                self._correct_ground(self._ground_heights(contact))
+            if self._at_rest:
+                self._correct_rest(gyro, dt)
         self._t = float(reading.t)
-        self.estimate = self._output(reading)
+        self.estimate = self._output(reading, native=self._native is not None)
         return self.estimate
 
     def _predict(self, omega: np.ndarray, accel: np.ndarray, contact: np.ndarray,
@@ -487,15 +503,88 @@ class KinematicInertialEKF:
         P = self.P - gain @ columns.T
         self.P = 0.5 * (P + P.T)
 
+    # ------------------------------------------------------------------ native engine
+    def _resolve_engine(self, engine: str) -> str:
+        """``engine``, with "auto" resolved: native when the compiled estimator is built."""
+        if engine != "auto":
+            return engine
+        try:
+            from .. import _estimator  # noqa: F401
+        except ImportError:
+            warn_python_fallback("KinematicInertialEKF", "the compiled estimator "
+                                                         "wholebody._estimator is not built")
+            return "python"
+        return "native"
+
+    def _build_native(self):
+        try:
+            from .. import _estimator
+        except ImportError as exc:
+            raise ValueError(
+                "engine: 'native' needs the compiled estimator wholebody._estimator, which was "
+                "not built with this install (it needs a C++17 compiler at 'pip install' time; "
+                "WHOLEBODY_NO_NATIVE=1 skips it); use engine='python'") from exc
+        noise = {f.name: float(getattr(self.noise, f.name)) for f in fields(self.noise)
+                 if f.name != "rest_update"}
+        return _estimator.Estimator(noise | {
+            "n_feet": self.n_feet, "n_joints": self.robot.na, "radii": self._radii,
+            "imu_rotation": self._imu_rotation, "lever_imu": self._lever_imu})
+
+    # the state the compiled cycle updates in place: attribute -> buffer name
+    _NATIVE_STATE = {"position": "position", "velocity": "velocity", "rotation": "rotation",
+                     "feet": "feet", "accel_bias": "accel_bias", "gyro_bias": "gyro_bias",
+                     "P": "P", "_innovation": "innovation", "_foot_test": "foot_test",
+                     "_omega": "omega", "_rest_gyro": "rest_gyro", "_rest_joints": "rest_joints"}
+
+    def _bind_native(self) -> None:
+        """The state's arrays (copied, C-ordered) handed to the compiled cycle by name."""
+        nb = {name: np.array(getattr(self, attribute), dtype=float, order="C")
+              for attribute, name in self._NATIVE_STATE.items()}
+        nb |= {"closed_for": np.array([self._closed_for]), "base": np.zeros(7),
+               "twist": np.zeros(6)}
+        for attribute, name in self._NATIVE_STATE.items():
+            setattr(self, attribute, nb[name])
+        self._nb = nb
+        self._native.bind(nb)
+
+    def _native_cycle(self, dt, gyro, accel, contact, joint_velocities, measured,
+                      foot_rates) -> None:
+        """The cycle in the compiled estimator; state set from outside since (an attribute
+        assigned a new array) is copied into its buffer first."""
+        nb = self._nb
+        for attribute, name in self._NATIVE_STATE.items():
+            value = getattr(self, attribute)
+            if value is not nb[name]:
+                np.copyto(nb[name], value)
+                setattr(self, attribute, nb[name])
+        native = self._native
+        self._at_rest = native.predict_correct(
+            dt=dt, gyro=gyro, accel=accel, contact=contact, joint_velocities=joint_velocities,
+            measured=measured, foot_rates=foot_rates, rest_update=self.noise.rest_update)
+        if native.skipped:
+            self._warn("kinematic update skipped: singular innovation covariance")
+        heights = self._ground_heights(contact) if self.ground is not None else _NO_HEIGHTS
+        native.finish(heights=heights, at_rest=self._at_rest, gyro=gyro, dt=dt)
+
+    @property
+    def closed_for(self) -> float:
+        """How long every contact has been closed (s), as the rest test counts it."""
+        return float(self._nb["closed_for"][0]) if self._native is not None else self._closed_for
+
     # ------------------------------------------------------------------ output
-    def _output(self, reading: SensorReading) -> StateEstimate:
-        """The IMU's state carried to the free-flyer (base joint) in Pinocchio's conventions."""
-        R_imu = self.rotation
+    def _output(self, reading: SensorReading, native: bool = False) -> StateEstimate:
+        """The IMU's state carried to the free-flyer (base joint) in Pinocchio's conventions
+        (``native``: as the compiled cycle wrote it)."""
         q = self.kinematics.configuration.copy()  # the joints at this reading's angles
-        q[0:3] = self.position - R_imu @ self._lever_imu
-        q[3:7] = pin.Quaternion(R_imu @ self._imu_rotation.T).normalized().coeffs()
         v = np.empty(self.robot.nv)
-        v[0:6] = self._twist_from_imu @ np.concatenate((self.velocity @ R_imu, self._omega))
+        if native:
+            q[0:7] = self._nb["base"]
+            v[0:6] = self._nb["twist"]
+        else:
+            R_imu = self.rotation
+            q[0:3] = self.position - R_imu @ self._lever_imu
+            q[3:7] = pin.Quaternion(R_imu @ self._imu_rotation.T).normalized().coeffs()
+            v[0:6] = self._twist_from_imu @ np.concatenate((self.velocity @ R_imu, self._omega))
         v[6:] = reading.joint_velocities
         return StateEstimate(t=self._t, q=q, v=v, covariance=self.P.copy(),
                              innovation=self._innovation.copy(), foot_test=self._foot_test.copy(),
