@@ -7,10 +7,13 @@ Default: talos14 standing (standing controller) and hyq trotting at 0.3 m/s afte
 others), HyQ crawling D m (the crawl's default speed), talos14 standing D s and walking D m
 (``control.Walking`` at 0.4 m/s, ramped in over 1 s); default sensors (``--exact`` adds exact
 ones). The orientation error is split into tilt (roll and pitch, which
-gravity observes) and heading (yaw, which nothing in this filter observes).
+gravity observes) and heading (yaw, which nothing in this filter observes). ``--no-rest-update``:
+the filter without its zero angular-rate update; ``--gyro-bias-walk``: the default sensors with
+that gyro bias random walk (rad/s per sqrt(s)).
 
     python benchmarks/estimator_accuracy.py [--seconds 5] [--seed 1]
     python benchmarks/estimator_accuracy.py --distance 10 [--robots hyq go1 ...] [--exact]
+        [--no-rest-update] [--gyro-bias-walk W]
 """
 
 from __future__ import annotations
@@ -64,12 +67,12 @@ def errors(log: dict) -> dict:
 
 
 def run(name: str, spec: SensorSpec, seconds: float, seed: int, gait: str | None = "trot",
-        speed: float = TROT_SPEED_ON_HYQ) -> dict:
+        speed: float = TROT_SPEED_ON_HYQ, rest_update: bool = True) -> dict:
     """The filter beside ``name`` walking ``gait`` at ``speed`` (m/s, from GAIT_START on) under
     the passive WBC (a quadruped) or ``control.Walking`` (``gait`` "walk"), or standing (``gait``
     None) under the standing controller, ``seconds``."""
     robot = wb.load_robot(name)
-    estimation = TwinEstimation.for_robot(robot, spec, seed=seed)
+    estimation = TwinEstimation.for_robot(robot, spec, seed=seed, rest_update=rest_update)
     fell = False
     if gait == "walk":
         def command(t):
@@ -112,17 +115,29 @@ def main() -> None:
                         help="with --distance: these presets only (default: hyq crawl, every "
                              "quadruped's trot, talos14 standing)")
     parser.add_argument("--exact", action="store_true", help="with --distance: exact sensors too")
+    parser.add_argument("--no-rest-update", action="store_true",
+                        help="the filter without its zero angular-rate update at rest")
+    parser.add_argument("--gyro-bias-walk", type=float, default=None, metavar="W",
+                        help="the default sensors' gyro bias random walk (rad/s per sqrt(s))")
     args = parser.parse_args()
+    rest = not args.no_rest_update
+    default = SensorSpec()
+    if args.gyro_bias_walk is not None:
+        if not (math.isfinite(args.gyro_bias_walk) and args.gyro_bias_walk >= 0):
+            parser.error(f"--gyro-bias-walk must be a finite number >= 0, got "
+                         f"{args.gyro_bias_walk}")
+        default = SensorSpec(gyro_bias_walk=args.gyro_bias_walk)
     if args.distance is None:
         for name in ("talos14", "hyq"):
-            for label, spec in (("default sensors", SensorSpec()),
+            for label, spec in (("default sensors", default),
                                 ("exact sensors", SensorSpec.exact())):
-                e = run(name, spec, args.seconds, args.seed, None if name == "talos14" else "trot")
+                e = run(name, spec, args.seconds, args.seed, None if name == "talos14" else "trot",
+                        rest_update=rest)
                 print(line(f"{name:8s} {label:16s}", e), flush=True)
         return
     if not (math.isfinite(args.distance) and args.distance > 0):
         parser.error(f"--distance must be a finite number > 0, got {args.distance}")
-    specs = [("default sensors", SensorSpec())]
+    specs = [("default sensors", default)]
     if args.exact:
         specs.append(("exact sensors", SensorSpec.exact()))
     runs = [("hyq", "crawl", CRAWL_SPEED.default.value(wb.load_robot("hyq")))]
@@ -138,7 +153,7 @@ def main() -> None:
             seconds += 0.5  # the ramp
         for label, spec in specs:
             start = time.perf_counter()
-            e = run(name, spec, seconds, args.seed, gait, speed)
+            e = run(name, spec, seconds, args.seed, gait, speed, rest)
             what = "standing" if gait is None else f"{gait} {speed:.3f} m/s"
             print(line(f"{name:8s} {what:16s} {label:16s}", e)
                   + f" [{time.perf_counter() - start:.0f} s wall]", flush=True)
