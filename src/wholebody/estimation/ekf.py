@@ -336,8 +336,10 @@ class KinematicInertialEKF:
         gyro = np.asarray(reading.gyro, dtype=float)
         accel = np.asarray(reading.accel, dtype=float)
         joints = np.asarray(reading.joint_positions, dtype=float)
+        joint_velocities = np.asarray(reading.joint_velocities, dtype=float)
         # a sum is finite when every term is (short of overflowing past 1e308)
-        if not (dt > 0.0 and math.isfinite(gyro.sum() + accel.sum() + joints.sum())):
+        if not (dt > 0.0 and math.isfinite(gyro.sum() + accel.sum() + joints.sum()
+                                           + joint_velocities.sum())):
             self._warn(f"reading at t = {reading.t!r} skipped (not finite or not after "
                        f"t = {self._t:.6f})")
             return self.estimate
@@ -345,7 +347,6 @@ class KinematicInertialEKF:
         if contact.shape != (self.n_feet,):
             contact = np.zeros(self.n_feet, bool)
         omega = gyro - self.gyro_bias
-        joint_velocities = np.asarray(reading.joint_velocities, dtype=float)
         measured, foot_rates = self.kinematics.feet_in_imu(joints, omega, joint_velocities)
         if self._native is not None:
             self._native_cycle(dt, gyro, accel, contact, joint_velocities, measured, foot_rates)
@@ -464,12 +465,8 @@ class KinematicInertialEKF:
         noise differenced and averaged). Joints still with every foot down hold the base still:
         the evidence that the gyro then reads its bias. The raw gyro is averaged, so that the
         test does not lag the bias's estimate. A push or a step moves the averages past the gate
-        within a cycle or two; a joint velocity that is not finite restarts the test."""
+        within a cycle or two."""
         noise = self.noise
-        if not math.isfinite(joint_velocities.sum()) or joint_velocities.shape != (
-                self._rest_joints.size,):
-            self._closed_for = 0.0
-            return False
         alpha = 1.0 - math.exp(-dt / noise.rest_window)
         self._rest_gyro += alpha * (gyro - self._rest_gyro)
         self._rest_joints += alpha * (joint_velocities - self._rest_joints)

@@ -210,11 +210,6 @@ private:
   bool detect_rest(const Vector3d & gyro, const Eigen::Map<const VectorXd> & qd, const bool * c,
                    double dt)
   {
-    if (!std::isfinite(qd.sum()))
-    {
-      closed_for_[0] = 0.0;
-      return false;
-    }
     const double window = noise_.rest_window;
     const double alpha = 1.0 - std::exp(-dt / window);
     Eigen::Map<Vector3d> mean_gyro(rest_gyro_);
