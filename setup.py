@@ -4,11 +4,13 @@ metadata is in pyproject.toml):
 - ``wholebody._passive_cycle``: the passive WBC's whole cycle (``PassiveWBC(engine="native")``);
 - ``wholebody._hierarchy_cycle``: the rigid-body terms and task rows of ``HierarchyCycle``;
 - ``wholebody._cascade``: the cascade of QPs, which solves DAQP's level QPs itself and hands the
-  other backends' level QPs to Python.
+  other backends' level QPs to Python;
+- ``wholebody._estimator``: the state estimator's per-cycle numerics
+  (``KinematicInertialEKF(engine="native")``).
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
-and ``cmeel-eigen``; the cascade needs Eigen only), so the extensions link no Pinocchio library and
-need no run-time path. ``BuildExt`` adds ``-mavx2 -mfma`` when the building machine has AVX2 and
+and ``cmeel-eigen``; the cascade and the estimator need Eigen only), so the extensions link no
+Pinocchio library and need no run-time path. ``BuildExt`` adds ``-mavx2 -mfma`` when the building machine has AVX2 and
 FMA (``WHOLEBODY_PORTABLE=1`` builds for any x86-64 CPU). The extensions are optional: without a
 C++ compiler, without the headers or pybind11, or with ``WHOLEBODY_NO_NATIVE=1``, the package
 installs without them; ``engine="native"`` then raises a clear error and everything else runs in
@@ -68,6 +70,11 @@ def extensions() -> list[Extension]:
         Extension(  # the cascade: Eigen only
             "wholebody._cascade",
             sources=["src/wholebody/native/cascade.cpp"],
+            include_dirs=eigen, define_macros=[("NDEBUG", None)],
+            extra_compile_args=flags, language="c++", optional=True),
+        Extension(  # the estimator: Eigen only
+            "wholebody._estimator",
+            sources=["src/wholebody/native/estimator.cpp"],
             include_dirs=eigen, define_macros=[("NDEBUG", None)],
             extra_compile_args=flags, language="c++", optional=True),
     ]

@@ -2,14 +2,19 @@
 
 Sensor readings are recorded at 1 kHz from closed-loop runs in the twin (hyq trotting under the
 passive WBC, talos14 standing under the standing controller), then replayed through a fresh filter:
-one cycle = forward kinematics of the measured joints + IMU prediction + kinematic update + the
-estimate in Pinocchio's conventions. A benchmark, not a test.
+one cycle = forward kinematics of the measured joints + the rest test + IMU prediction + kinematic
+update (+ the rest update) + the estimate in Pinocchio's conventions, with the filter's default
+engine (the compiled ``wholebody._estimator`` where it is built). A benchmark, not a test.
+
+``--python``: the Python engine (the reference) too, on the same readings, cycle by cycle
+alternating with the default one.
 
 ``--against REV``: the estimator as it was at git revision REV (``estimation/ekf.py`` and
 ``kinematics.py`` read with ``git show``) timed on the same readings, cycle by cycle alternating
 with the current one, so that both see the same load on a shared machine.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/estimator.py [--seconds 2] [--repeat 3] [--against REV]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/estimator.py [--seconds 2] [--repeat 3] [--python]
+        [--against REV]
 """
 
 from __future__ import annotations
@@ -85,9 +90,9 @@ def estimator_at(revision: str, folder: Path):
 
 
 def time_cycles(robot, readings, filters) -> list[np.ndarray]:
-    """Per-cycle times of each of ``filters`` ((class, noise class) pairs) on ``readings``, the
-    filters taking turns at every reading."""
-    ekfs = [cls(robot, noise.for_sensors(SensorSpec())) for cls, noise in filters]
+    """Per-cycle times of each of ``filters`` (functions of the robot making a filter) on
+    ``readings``, the filters taking turns at every reading."""
+    ekfs = [make(robot) for make in filters]
     for ekf in ekfs:
         ekf.reset(readings[0], np.zeros(3))
     times = np.empty((len(ekfs), len(readings) - 1))
@@ -104,13 +109,25 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=2.0, help="simulated seconds recorded")
     parser.add_argument("--repeat", type=int, default=3,
                         help="replays; the median of their medians is reported")
+    parser.add_argument("--python", action="store_true",
+                        help="also time the Python engine, interleaved")
     parser.add_argument("--against", default=None, metavar="REV",
                         help="also time the estimator of git revision REV, interleaved")
     args = parser.parse_args()
-    filters = [("current", (KinematicInertialEKF, EstimatorNoise))]
+
+    def current(**options):
+        return lambda robot: KinematicInertialEKF(
+            robot, EstimatorNoise.for_sensors(SensorSpec()), **options)
+
+    default_engine = KinematicInertialEKF(wb.load_robot("hyq")).engine
+    filters = [(default_engine, current())]
+    if args.python:
+        filters.append(("python", current(engine="python")))
     with tempfile.TemporaryDirectory() as folder:
         if args.against:
-            filters.append((args.against, estimator_at(args.against, Path(folder))))
+            cls, noise = estimator_at(args.against, Path(folder))
+            filters.append((args.against,
+                            lambda robot: cls(robot, noise.for_sensors(SensorSpec()))))
         for name in ("hyq", "talos14"):
             robot, readings = record(name, args.seconds)
             runs = [time_cycles(robot, readings, [f for _, f in filters])

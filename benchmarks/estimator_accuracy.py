@@ -7,10 +7,14 @@ Default: talos14 standing (standing controller) and hyq trotting at 0.3 m/s afte
 others), HyQ crawling D m (the crawl's default speed), talos14 standing D s and walking D m
 (``control.Walking`` at 0.4 m/s, ramped in over 1 s); default sensors (``--exact`` adds exact
 ones). The orientation error is split into tilt (roll and pitch, which
-gravity observes) and heading (yaw, which nothing in this filter observes).
+gravity observes) and heading (yaw, which nothing in this filter observes). ``--rest-update``:
+the filter with its zero angular-rate update (off by default); ``--gyro-bias-walk``: the default sensors with
+that gyro bias random walk (rad/s per sqrt(s)); ``--noise NAME=VALUE``: a term of the filter's
+``EstimatorNoise`` (repeatable).
 
     python benchmarks/estimator_accuracy.py [--seconds 5] [--seed 1]
     python benchmarks/estimator_accuracy.py --distance 10 [--robots hyq go1 ...] [--exact]
+        [--rest-update] [--gyro-bias-walk W] [--noise kinematics_noise=0.001 ...]
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from dataclasses import fields
 
 import numpy as np
 import pinocchio as pin
@@ -25,7 +30,7 @@ import pinocchio as pin
 import wholebody as wb
 from wholebody.control import Walking
 from wholebody.control.standing import StandingController
-from wholebody.estimation import TwinEstimation
+from wholebody.estimation import EstimatorNoise, TwinEstimation
 from wholebody.planning.trunk import VelocityCommand
 from wholebody.robots.reference import froude_ratio
 from wholebody.scenarios.locomotion import CRAWL_SPEED, run_gait
@@ -64,12 +69,13 @@ def errors(log: dict) -> dict:
 
 
 def run(name: str, spec: SensorSpec, seconds: float, seed: int, gait: str | None = "trot",
-        speed: float = TROT_SPEED_ON_HYQ) -> dict:
+        speed: float = TROT_SPEED_ON_HYQ, rest_update: bool = False, noise=None) -> dict:
     """The filter beside ``name`` walking ``gait`` at ``speed`` (m/s, from GAIT_START on) under
     the passive WBC (a quadruped) or ``control.Walking`` (``gait`` "walk"), or standing (``gait``
     None) under the standing controller, ``seconds``."""
     robot = wb.load_robot(name)
-    estimation = TwinEstimation.for_robot(robot, spec, seed=seed)
+    estimation = TwinEstimation.for_robot(robot, spec, seed=seed, rest_update=rest_update,
+                                          **(noise or {}))
     fell = False
     if gait == "walk":
         def command(t):
@@ -112,17 +118,45 @@ def main() -> None:
                         help="with --distance: these presets only (default: hyq crawl, every "
                              "quadruped's trot, talos14 standing)")
     parser.add_argument("--exact", action="store_true", help="with --distance: exact sensors too")
+    parser.add_argument("--rest-update", action="store_true",
+                        help="the filter with its zero angular-rate update at rest")
+    parser.add_argument("--gyro-bias-walk", type=float, default=None, metavar="W",
+                        help="the default sensors' gyro bias random walk (rad/s per sqrt(s))")
+    parser.add_argument("--noise", action="append", default=[], metavar="NAME=VALUE",
+                        help="a term of the filter's EstimatorNoise (repeatable)")
     args = parser.parse_args()
+    rest = args.rest_update
+    noise = {}
+    terms = {f.name for f in fields(EstimatorNoise)} - {"rest_update"}
+    for item in args.noise:
+        name, _, value = item.partition("=")
+        try:
+            noise[name] = float(value)
+        except ValueError:
+            parser.error(f"--noise {item!r}: expected NAME=NUMBER")
+        if name not in terms:
+            parser.error(f"--noise {item!r}: NAME is one of {', '.join(sorted(terms))}")
+    try:
+        EstimatorNoise(**noise)
+    except ValueError as exc:
+        parser.error(f"--noise: {exc}")
+    default = SensorSpec()
+    if args.gyro_bias_walk is not None:
+        if not (math.isfinite(args.gyro_bias_walk) and args.gyro_bias_walk >= 0):
+            parser.error(f"--gyro-bias-walk must be a finite number >= 0, got "
+                         f"{args.gyro_bias_walk}")
+        default = SensorSpec(gyro_bias_walk=args.gyro_bias_walk)
     if args.distance is None:
         for name in ("talos14", "hyq"):
-            for label, spec in (("default sensors", SensorSpec()),
+            for label, spec in (("default sensors", default),
                                 ("exact sensors", SensorSpec.exact())):
-                e = run(name, spec, args.seconds, args.seed, None if name == "talos14" else "trot")
+                e = run(name, spec, args.seconds, args.seed, None if name == "talos14" else "trot",
+                        rest_update=rest, noise=noise)
                 print(line(f"{name:8s} {label:16s}", e), flush=True)
         return
     if not (math.isfinite(args.distance) and args.distance > 0):
         parser.error(f"--distance must be a finite number > 0, got {args.distance}")
-    specs = [("default sensors", SensorSpec())]
+    specs = [("default sensors", default)]
     if args.exact:
         specs.append(("exact sensors", SensorSpec.exact()))
     runs = [("hyq", "crawl", CRAWL_SPEED.default.value(wb.load_robot("hyq")))]
@@ -138,7 +172,7 @@ def main() -> None:
             seconds += 0.5  # the ramp
         for label, spec in specs:
             start = time.perf_counter()
-            e = run(name, spec, seconds, args.seed, gait, speed)
+            e = run(name, spec, seconds, args.seed, gait, speed, rest, noise)
             what = "standing" if gait is None else f"{gait} {speed:.3f} m/s"
             print(line(f"{name:8s} {what:16s} {label:16s}", e)
                   + f" [{time.perf_counter() - start:.0f} s wall]", flush=True)

@@ -4,15 +4,19 @@ supports the configuration, else the Python reference with one logged warning. T
 reference's."""
 
 import logging
+import sys
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+import wholebody
+
 from conftest import native_cycle_or_skip
 from wholebody.control.balance import MomentumBalance
 from wholebody.control.passive import PassiveWBC
 from wholebody.cycle import warn_python_fallback
+from wholebody.estimation import KinematicInertialEKF
 
 
 def planner(robot):
@@ -56,3 +60,24 @@ def test_momentum_balance_defaults_to_the_compiled_cycle(robots):
     native_cycle_or_skip("_hierarchy_cycle")
     ctrl = MomentumBalance(robots["talos14"], gains="pd")
     assert ctrl.cycle is not None and ctrl.cycle.engine_name == "native"
+
+
+def test_estimator_defaults_to_the_compiled_cycle(robots):
+    module = native_cycle_or_skip("_estimator")
+    ekf = KinematicInertialEKF(robots["hyq"])
+    assert ekf.engine == "native" and isinstance(ekf._native, module.Estimator)
+    assert KinematicInertialEKF(robots["hyq"], engine="python")._native is None
+
+
+def test_estimator_without_the_compiled_cycle(robots, monkeypatch, caplog):
+    monkeypatch.setitem(sys.modules, "wholebody._estimator", None)  # import fails
+    monkeypatch.delattr(wholebody, "_estimator", raising=False)
+    with pytest.raises(ValueError, match="engine: 'native' needs the compiled estimator"):
+        KinematicInertialEKF(robots["hyq"], engine="native")
+    warn_python_fallback.cache_clear()
+    with caplog.at_level(logging.WARNING, logger="wholebody.cycle"):
+        ekf = KinematicInertialEKF(robots["hyq"])
+    assert ekf.engine == "python" and ekf._native is None
+    assert any("wholebody._estimator" in r.message for r in caplog.records)
+    with pytest.raises(ValueError, match="engine: expected one of"):
+        KinematicInertialEKF(robots["hyq"], engine="fast")

@@ -2,7 +2,7 @@
 here (Bloesch et al. 2013: IMU prediction eqs. 5-11, leg-kinematics update eq. 12, world-axes
 orientation error): full transition and measurement matrices, K = P H^T S^-1, the Joseph-form
 covariance, Pinocchio's per-frame placements and velocities for the legs. Random states,
-covariances and readings; the filter's structured products must agree to 1e-9."""
+covariances and readings; the filter's structured products (either engine) must agree to 1e-9."""
 
 from __future__ import annotations
 
@@ -14,6 +14,8 @@ import wholebody as wb
 from wholebody.estimation import EstimatorNoise, KinematicInertialEKF
 from wholebody.robot import GRAVITY
 from wholebody.sim.sensors import Sensors, SensorSpec
+
+from conftest import native_cycle_or_skip
 
 
 def skew(x):
@@ -92,8 +94,11 @@ def textbook_step(robot, noise, x, P, reading, dt):
     return out, P, y.reshape(n, 3), tests
 
 
+@pytest.mark.parametrize("engine", ["python", "native"])
 @pytest.mark.parametrize("name", ["hyq", "talos14"])  # ball feet that roll, soles that do not
-def test_one_step_matches_the_dense_textbook_step(name):
+def test_one_step_matches_the_dense_textbook_step(name, engine):
+    if engine == "native":
+        native_cycle_or_skip("_estimator")
     robot = wb.load_robot(name)
     spec = SensorSpec()
     noise = EstimatorNoise.for_sensors(spec)
@@ -122,7 +127,7 @@ def test_one_step_matches_the_dense_textbook_step(name):
         C = C @ C.T / N + np.eye(N)
         P = stds[:, None] * C * stds[None, :]
 
-        ekf = KinematicInertialEKF(robot, noise)
+        ekf = KinematicInertialEKF(robot, noise, engine=engine)
         ekf.reset(first)
         ekf.position, ekf.velocity, ekf.rotation = x["r"].copy(), x["v"].copy(), R.copy()
         ekf.feet, ekf.P = x["feet"].copy(), P.copy()

@@ -10,6 +10,11 @@ gets a large one, so it follows its measurement and is anchored again where it l
 A ball foot in contact rolls: its centre (the contact frame) moves by omega_foot x (radius z) on
 flat ground, which the prediction adds (without it, HyQ's feet rolling forward in stance make the
 estimate lag 2-3 % of the distance trotted).
+While the readings show the robot at rest (every contact closed, the joints and the
+bias-corrected gyro still within their noise over a short window) the gyro reads its bias: a
+zero angular-rate update, the standard one of inertial navigation, observes the gyro bias about
+the vertical, which the legs' kinematics leave unobserved (Bloesch et al. 2013, observability
+analysis) and which otherwise integrates into the heading.
 
 The filter works on the error state [dr, dv, dphi, dp_1 .. dp_n, db_f, db_w] with the orientation
 error about the world axes (R = exp(dphi) R_hat), which gives the linearisations below in the
@@ -31,6 +36,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg import lapack
 
+from ..cycle import ENGINES, warn_python_fallback
 from ..robot import GRAVITY, Robot
 from ..sim.sensors import SensorReading, SensorSpec
 from .kinematics import LegKinematics
@@ -39,6 +45,7 @@ log = logging.getLogger(__name__)
 
 _GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY])
 _MINUS_ONES3 = -np.ones(3)
+_NO_HEIGHTS = np.zeros(0)  # the compiled cycle's ground heights without a ground map
 # [x]x's off-diagonal entries (0,1) (0,2) (1,0) (1,2) (2,0) (2,1): sign * x[component]
 _SKEW_ROWS, _SKEW_COLUMNS = np.array([0, 0, 1, 1, 2, 2]), np.array([1, 2, 0, 2, 0, 1])
 _SKEW_COMPONENT = np.array([2, 1, 2, 0, 1, 0])
@@ -77,6 +84,28 @@ class EstimatorNoise:
     initial_gyro_bias, initial_accel_bias  std of the initial biases (rad/s, m/s^2)
     ground_noise                     std of a stance foot's height above the known ground (m):
                                      the contact's give, the ground map (with ``ground`` only)
+    encoder_noise                    std of a joint position reading (rad): its quantisation
+                                     (step / sqrt(12)) and noise; a joint velocity reading at rest
+                                     (differenced over dt) then has std sqrt(2) encoder_noise / dt
+    rest_update                      the zero angular-rate update (off by default): while the
+                                     robot is at rest the gyro reads its bias (gyro - b_w = 0 +
+                                     noise); a surer bias lets the filter lean on the gyro
+                                     rather than the stance feet, which cost the small
+                                     quadrupeds heading over 10 m (docs/results.md)
+    rest_window                      time constant (s) of the averages that detect rest, and how
+                                     long every contact must have been closed first
+    rest_gate                        at rest when the averages of the bias-corrected gyro and of
+                                     the joint velocities are within rest_gate standard
+                                     deviations of zero (their spread at rest from gyro_noise and
+                                     b_w's variance, from encoder_noise): each a chi-square with
+                                     as many degrees of freedom as axes, below that number times
+                                     rest_gate^2
+    rest_rate_noise                  std of the angular rate a robot detected at rest may still
+                                     have (rad/s), in the rest update, correlated over
+                                     rest_window: what the rest test lets pass, rest_gate times
+                                     the spread of the joint velocities' average at 1 kHz (the
+                                     base turns as fast as the joints that hold it;
+                                     :meth:`for_sensors`)
     """
 
     gyro_noise: float = 3e-3
@@ -92,18 +121,30 @@ class EstimatorNoise:
     initial_gyro_bias: float = 2e-3
     initial_accel_bias: float = 2e-2
     ground_noise: float = 2e-3
+    encoder_noise: float = 3.4e-5
+    rest_update: bool = False
+    rest_window: float = 0.05
+    rest_gate: float = 2.0
+    rest_rate_noise: float = 1.4e-3
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if f.type in (bool, "bool"):
+                if not isinstance(value, (bool, np.bool_)):
+                    raise ValueError(f"EstimatorNoise.{f.name} must be True or False, got "
+                                     f"{value!r}")
+                continue
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and math.isfinite(value) and value > 0):
                 raise ValueError(f"EstimatorNoise.{f.name} must be a finite number > 0, got "
                                  f"{value!r}")
 
     @classmethod
     def for_sensors(cls, spec: SensorSpec, **overrides) -> "EstimatorNoise":
-        """The IMU terms and initial biases from a sensor spec (each at least a small floor so
-        that the filter stays well posed for exact sensors), the rest from the defaults."""
+        """The IMU terms, initial biases and the encoders' noise from a sensor spec (each at
+        least a small floor so that the filter stays well posed for exact sensors), the rate
+        left at rest from the encoders' (``rest_rate_noise``), the rest from the defaults."""
         floor = 1e-6
         values = dict(gyro_noise=max(spec.gyro_noise, floor),
                       accel_noise=max(spec.accel_noise, floor),
@@ -111,8 +152,17 @@ class EstimatorNoise:
                       accel_bias_walk=max(spec.accel_bias_walk, floor),
                       initial_gyro_bias=max(spec.gyro_bias, floor),
                       initial_accel_bias=max(spec.accel_bias, floor),
-                      initial_orientation=max(spec.attitude_noise, floor) + 1e-3)
+                      initial_orientation=max(spec.attitude_noise, floor) + 1e-3,
+                      encoder_noise=max(math.hypot(spec.encoder_resolution / math.sqrt(12.0),
+                                                   spec.encoder_noise), floor))
         values.update(overrides)
+        defaults = cls()
+        window = values.get("rest_window", defaults.rest_window)
+        alpha = (1.0 - math.exp(-1e-3 / window)
+                 if isinstance(window, (int, float)) and window > 0 else 1.0)
+        values.setdefault("rest_rate_noise", values.get("rest_gate", defaults.rest_gate)
+                          * values["encoder_noise"] * alpha / 1e-3
+                          * math.sqrt(2.0 / (2.0 - alpha)))
         return cls(**values)
 
 
@@ -127,6 +177,7 @@ class StateEstimate:
     foot_test    (ncontact,): each foot's squared innovation normalised by its covariance (a
                  chi-square with 3 degrees of freedom when the foot behaves as modelled)
     feet         (ncontact, 3): the estimated contact positions in the world
+    at_rest      the readings showed the robot at rest (the zero angular-rate update ran)
     """
 
     t: float
@@ -136,6 +187,7 @@ class StateEstimate:
     innovation: np.ndarray
     foot_test: np.ndarray
     feet: np.ndarray
+    at_rest: bool = False
 
 
 class KinematicInertialEKF:
@@ -152,15 +204,21 @@ class KinematicInertialEKF:
     base height is observed only through the feet's anchors, which each touchdown re-sets where
     the kinematics put them: the height drifts, and a controller that places its swings on the
     ground by the estimate lands them short or deep, which the next anchors take as base motion
-    (a trot on the estimate sank 11 cm in 6 s)."""
+    (a trot on the estimate sank 11 cm in 6 s).
+
+    ``engine``: "python" runs the cycle's numerics here (the reference), "native" in the compiled
+    ``wholebody._estimator`` (the same numbers, faster; the forward kinematics and the ground
+    map's queries stay in Python), "auto" (default) the compiled one where it is built."""
 
     def __init__(self, robot: Robot, noise: EstimatorNoise | None = None,
-                 imu_frame: str | None = None, ground=None):
+                 imu_frame: str | None = None, ground=None, engine: str = "auto"):
         self.robot = robot
         self.ground = ground
         self.noise = noise or EstimatorNoise()
         if not isinstance(self.noise, EstimatorNoise):
             raise ValueError(f"noise: expected an EstimatorNoise, got {type(self.noise).__name__}")
+        if engine not in ENGINES:
+            raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
         self.kinematics = LegKinematics(robot, imu_frame)
         n_feet = self.kinematics.count
         if n_feet == 0:
@@ -222,6 +280,9 @@ class KinematicInertialEKF:
         self.estimate: StateEstimate | None = None
         self._t = 0.0
         self._warned = False
+        self.engine = self._resolve_engine(engine)
+        self._native = self._build_native() if self.engine == "native" else None
+        self._nb: dict[str, np.ndarray] = {}
 
     # ------------------------------------------------------------------ start
     def reset(self, reading: SensorReading, base_position=(0.0, 0.0, 0.0),
@@ -257,6 +318,12 @@ class KinematicInertialEKF:
         self._omega = np.asarray(reading.gyro, dtype=float).copy()
         self._innovation = np.zeros((self.n_feet, 3))
         self._foot_test = np.zeros(self.n_feet)
+        # the rest test's averages start at this reading at rest, the contacts' closed time at 0
+        self._rest_gyro, self._rest_joints = self._omega.copy(), np.zeros(self.robot.na)
+        self._closed_for = 0.0
+        self._at_rest = False
+        if self._native is not None:
+            self._bind_native()
         self.estimate = self._output(reading)
         return self.estimate
 
@@ -272,8 +339,10 @@ class KinematicInertialEKF:
         gyro = np.asarray(reading.gyro, dtype=float)
         accel = np.asarray(reading.accel, dtype=float)
         joints = np.asarray(reading.joint_positions, dtype=float)
+        joint_velocities = np.asarray(reading.joint_velocities, dtype=float)
         # a sum is finite when every term is (short of overflowing past 1e308)
-        if not (dt > 0.0 and math.isfinite(gyro.sum() + accel.sum() + joints.sum())):
+        if not (dt > 0.0 and math.isfinite(gyro.sum() + accel.sum() + joints.sum()
+                                           + joint_velocities.sum())):
             self._warn(f"reading at t = {reading.t!r} skipped (not finite or not after "
                        f"t = {self._t:.6f})")
             return self.estimate
@@ -281,14 +350,20 @@ class KinematicInertialEKF:
         if contact.shape != (self.n_feet,):
             contact = np.zeros(self.n_feet, bool)
         omega = gyro - self.gyro_bias
-        measured, foot_rates = self.kinematics.feet_in_imu(joints, omega,
-                                                           reading.joint_velocities)
-        self._predict(omega, accel, contact, foot_rates, dt)
-        self._correct(measured)
-        if self.ground is not None:
-            self._correct_ground(contact)
+        measured, foot_rates = self.kinematics.feet_in_imu(joints, omega, joint_velocities)
+        if self._native is not None:
+            self._native_cycle(dt, gyro, accel, contact, joint_velocities, measured, foot_rates)
+        else:
+            self._at_rest = self.noise.rest_update and self._detect_rest(
+                gyro, joint_velocities, contact, dt)
+            self._predict(omega, accel, contact, foot_rates, dt)
+            self._correct(measured)
+            if self.ground is not None:
+                self._correct_ground(self._ground_heights(contact))
+            if self._at_rest:
+                self._correct_rest(gyro, dt)
         self._t = float(reading.t)
-        self.estimate = self._output(reading)
+        self.estimate = self._output(reading, native=self._native is not None)
         return self.estimate
 
     def _predict(self, omega: np.ndarray, accel: np.ndarray, contact: np.ndarray,
@@ -362,37 +437,158 @@ class KinematicInertialEKF:
         self.accel_bias = self.accel_bias + dx[self._accel_bias]
         self.gyro_bias = self.gyro_bias + dx[self._gyro_bias]
 
-    def _correct_ground(self, contact: np.ndarray) -> None:
-        """Each foot in contact on the known ground: its frame's height is the ground's under it
-        plus its radius (a sole's: the ground's), one scalar update per foot (noise
-        ``ground_noise``); a foot over no ground (a gap) is not measured."""
-        sigma2 = self.noise.ground_noise ** 2
+    def _ground_heights(self, contact: np.ndarray) -> np.ndarray:
+        """The ground's height under each foot in contact, where the kinematic update put it;
+        NaN for the others and over no ground (a gap)."""
+        heights = np.full(self.n_feet, np.nan)
         for i in np.flatnonzero(contact):
-            x, y, z = self.feet[i]
-            height = float(self.ground(float(x), float(y)))
-            if not np.isfinite(height):
-                continue
+            heights[i] = float(self.ground(float(self.feet[i, 0]), float(self.feet[i, 1])))
+        return heights
+
+    def _correct_ground(self, heights: np.ndarray) -> None:
+        """Each foot in contact on the known ground: its frame's height is the ground's under it
+        (``heights``, NaN: not measured) plus its radius (a sole's: the ground's), one scalar
+        update per foot (noise ``ground_noise``)."""
+        sigma2 = self.noise.ground_noise ** 2
+        for i in np.flatnonzero(np.isfinite(heights)):
             j = 9 + 3 * i + 2  # the foot's z in the error state
             column = self.P[:, j].copy()
             gain = column / (column[j] + sigma2)
-            dx = gain * (height + self._radii[i] - z)
+            dx = gain * (heights[i] + self._radii[i] - self.feet[i, 2])
             self._inject(dx)
             P = self.P - np.outer(gain, column)
             self.P = 0.5 * (P + P.T)
 
+    def _detect_rest(self, gyro: np.ndarray, joint_velocities: np.ndarray,
+                     contact: np.ndarray, dt: float) -> bool:
+        """At rest from the readings alone: every contact closed for ``rest_window``, and the
+        averages (first order, time constant ``rest_window``) of the gyro less the present bias
+        estimate and of the joint velocities within ``rest_gate`` standard deviations of zero
+        (their spread at rest: the gyro's white noise averaged plus b_w's variance; the encoders'
+        noise differenced and averaged). Joints still with every foot down hold the base still:
+        the evidence that the gyro then reads its bias. The raw gyro is averaged, so that the
+        test does not lag the bias's estimate. A push or a step moves the averages past the gate
+        within a cycle or two."""
+        noise = self.noise
+        alpha = 1.0 - math.exp(-dt / noise.rest_window)
+        self._rest_gyro += alpha * (gyro - self._rest_gyro)
+        self._rest_joints += alpha * (joint_velocities - self._rest_joints)
+        # a first-order average of white noise of variance s^2: s^2 alpha / (2 - alpha); of
+        # encoder noise e differenced, (e_k - e_k-1) / dt, which telescopes:
+        # 2 (e alpha / dt)^2 / (2 - alpha)
+        gyro_variance = (noise.gyro_noise ** 2 * alpha / (2.0 - alpha)
+                         + self.P.diagonal()[self._gyro_bias])
+        joint_variance = 2.0 * (noise.encoder_noise * alpha / dt) ** 2 / (2.0 - alpha)
+        self._closed_for = self._closed_for + dt if contact.all() else 0.0
+        gate = noise.rest_gate ** 2
+        return (self._closed_for >= noise.rest_window
+                and float(np.sum((self._rest_gyro - self.gyro_bias) ** 2 / gyro_variance))
+                < 3.0 * gate
+                and float(self._rest_joints @ self._rest_joints) / joint_variance
+                < self._rest_joints.size * gate)
+
+    def _correct_rest(self, gyro: np.ndarray, dt: float) -> None:
+        """The zero angular-rate update of inertial navigation: at rest the gyro reads its bias,
+        gyro = b_w + noise, three rows on b_w; it makes the bias about the vertical observable,
+        which the legs' kinematics do not (Bloesch et al. 2013, observability analysis). The
+        noise: the gyro's white noise and the rate left at rest (``rest_rate_noise``), which is
+        correlated over the rest window: counted once per window (its variance times
+        rest_window / dt per sample)."""
+        noise, b = self.noise, self._gyro_bias
+        columns = self.P[:, b].copy()  # P H^T
+        variance = noise.gyro_noise ** 2 + noise.rest_rate_noise ** 2 * noise.rest_window / dt
+        S = columns[b] + variance * np.eye(3)
+        gain = np.linalg.solve(S, columns.T).T
+        self._inject(gain @ (gyro - self.gyro_bias))
+        P = self.P - gain @ columns.T
+        self.P = 0.5 * (P + P.T)
+
+    # ------------------------------------------------------------------ native engine
+    def _resolve_engine(self, engine: str) -> str:
+        """``engine``, with "auto" resolved: native when the compiled estimator is built."""
+        if engine != "auto":
+            return engine
+        try:
+            from .. import _estimator  # noqa: F401
+        except ImportError:
+            warn_python_fallback("KinematicInertialEKF", "the compiled estimator "
+                                                         "wholebody._estimator is not built")
+            return "python"
+        return "native"
+
+    def _build_native(self):
+        try:
+            from .. import _estimator
+        except ImportError as exc:
+            raise ValueError(
+                "engine: 'native' needs the compiled estimator wholebody._estimator, which was "
+                "not built with this install (it needs a C++17 compiler at 'pip install' time; "
+                "WHOLEBODY_NO_NATIVE=1 skips it); use engine='python'") from exc
+        noise = {f.name: float(getattr(self.noise, f.name)) for f in fields(self.noise)
+                 if f.name != "rest_update"}
+        return _estimator.Estimator(noise | {
+            "n_feet": self.n_feet, "n_joints": self.robot.na, "radii": self._radii,
+            "imu_rotation": self._imu_rotation, "lever_imu": self._lever_imu})
+
+    # the state the compiled cycle updates in place: attribute -> buffer name
+    _NATIVE_STATE = {"position": "position", "velocity": "velocity", "rotation": "rotation",
+                     "feet": "feet", "accel_bias": "accel_bias", "gyro_bias": "gyro_bias",
+                     "P": "P", "_innovation": "innovation", "_foot_test": "foot_test",
+                     "_omega": "omega", "_rest_gyro": "rest_gyro", "_rest_joints": "rest_joints"}
+
+    def _bind_native(self) -> None:
+        """The state's arrays (copied, C-ordered) handed to the compiled cycle by name."""
+        nb = {name: np.array(getattr(self, attribute), dtype=float, order="C")
+              for attribute, name in self._NATIVE_STATE.items()}
+        nb |= {"closed_for": np.array([self._closed_for]), "base": np.zeros(7),
+               "twist": np.zeros(6)}
+        for attribute, name in self._NATIVE_STATE.items():
+            setattr(self, attribute, nb[name])
+        self._nb = nb
+        self._native.bind(nb)
+
+    def _native_cycle(self, dt, gyro, accel, contact, joint_velocities, measured,
+                      foot_rates) -> None:
+        """The cycle in the compiled estimator; state set from outside since (an attribute
+        assigned a new array) is copied into its buffer first."""
+        nb = self._nb
+        for attribute, name in self._NATIVE_STATE.items():
+            value = getattr(self, attribute)
+            if value is not nb[name]:
+                np.copyto(nb[name], value)
+                setattr(self, attribute, nb[name])
+        native = self._native
+        self._at_rest = native.predict_correct(
+            dt=dt, gyro=gyro, accel=accel, contact=contact, joint_velocities=joint_velocities,
+            measured=measured, foot_rates=foot_rates, rest_update=self.noise.rest_update)
+        if native.skipped:
+            self._warn("kinematic update skipped: singular innovation covariance")
+        heights = self._ground_heights(contact) if self.ground is not None else _NO_HEIGHTS
+        native.finish(heights=heights, at_rest=self._at_rest, gyro=gyro, dt=dt)
+
+    @property
+    def closed_for(self) -> float:
+        """How long every contact has been closed (s), as the rest test counts it."""
+        return float(self._nb["closed_for"][0]) if self._native is not None else self._closed_for
+
     # ------------------------------------------------------------------ output
-    def _output(self, reading: SensorReading) -> StateEstimate:
-        """The IMU's state carried to the free-flyer (base joint) in Pinocchio's conventions."""
-        R_imu = self.rotation
+    def _output(self, reading: SensorReading, native: bool = False) -> StateEstimate:
+        """The IMU's state carried to the free-flyer (base joint) in Pinocchio's conventions
+        (``native``: as the compiled cycle wrote it)."""
         q = self.kinematics.configuration.copy()  # the joints at this reading's angles
-        q[0:3] = self.position - R_imu @ self._lever_imu
-        q[3:7] = pin.Quaternion(R_imu @ self._imu_rotation.T).normalized().coeffs()
         v = np.empty(self.robot.nv)
-        v[0:6] = self._twist_from_imu @ np.concatenate((self.velocity @ R_imu, self._omega))
+        if native:
+            q[0:7] = self._nb["base"]
+            v[0:6] = self._nb["twist"]
+        else:
+            R_imu = self.rotation
+            q[0:3] = self.position - R_imu @ self._lever_imu
+            q[3:7] = pin.Quaternion(R_imu @ self._imu_rotation.T).normalized().coeffs()
+            v[0:6] = self._twist_from_imu @ np.concatenate((self.velocity @ R_imu, self._omega))
         v[6:] = reading.joint_velocities
         return StateEstimate(t=self._t, q=q, v=v, covariance=self.P.copy(),
                              innovation=self._innovation.copy(), foot_test=self._foot_test.copy(),
-                             feet=self.feet.copy())
+                             feet=self.feet.copy(), at_rest=bool(self._at_rest))
 
     def _warn(self, message: str) -> None:
         if not self._warned:
