@@ -10,6 +10,8 @@
 //   at_rest = est.predict_correct(dt=, gyro=, accel=, contact=, joint_velocities=, measured=,
 //                                 foot_rates=, rest_update=)
 //   est.finish(heights=, at_rest=, gyro=, dt=)   # heights: per foot, NaN where not measured
+#include "py_arrays.hpp"
+
 #include <Eigen/Dense>
 
 #include <pybind11/numpy.h>
@@ -32,8 +34,10 @@ namespace
   using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   using RowMatrix3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
   using Feet = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
-  using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
-  using BoolArray = py::array_t<bool, py::array::c_style | py::array::forcecast>;
+  using wholebody_native::DoubleArray;
+  using BoolArray = wholebody_native::InputArray<bool>;
+  using wholebody_native::get;
+  using wholebody_native::input;
   constexpr double kGravity = 9.81; // wholebody.robot.GRAVITY
 
   Matrix3d skew(const Vector3d & x)
@@ -65,30 +69,6 @@ namespace
 
   Eigen::Map<Vector3d> vec3(double * p) { return Eigen::Map<Vector3d>(p); }
 
-  std::string shape_of(const py::array & a)
-  {
-    std::string s = "(";
-    for (py::ssize_t i = 0; i < a.ndim(); ++i)
-      s += (i ? ", " : "") + std::to_string(a.shape(i));
-    return s + (a.ndim() == 1 ? ",)" : ")");
-  }
-
-  template<typename T>
-  const T * input(const py::array_t<T, py::array::c_style | py::array::forcecast> & a,
-                  py::ssize_t size, const char * field)
-  {
-    if (a.size() != size)
-      throw std::invalid_argument(std::string(field) + ": expected " + std::to_string(size)
-                                  + " values, got shape " + shape_of(a));
-    return a.data();
-  }
-
-  double number(const py::dict & d, const char * key)
-  {
-    if (!d.contains(key))
-      throw std::invalid_argument(std::string("spec: missing key '") + key + "'");
-    return d[key].cast<double>();
-  }
 } // namespace
 
 class Estimator
@@ -96,25 +76,25 @@ class Estimator
 public:
   explicit Estimator(const py::dict & spec)
   {
-    n_ = Index(number(spec, "n_feet"));
-    na_ = Index(number(spec, "n_joints"));
+    n_ = Index(get<double>(spec, "n_feet"));
+    na_ = Index(get<double>(spec, "n_joints"));
     size_ = 15 + 3 * n_;
     ab_ = 9 + 3 * n_;
     gb_ = 12 + 3 * n_;
     // EstimatorNoise's fields, by name
-    noise_ = {number(spec, "gyro_noise"), number(spec, "accel_noise"),
-              number(spec, "gyro_bias_walk"), number(spec, "accel_bias_walk"),
-              number(spec, "stance_foot_walk"), number(spec, "swing_foot_walk"),
-              number(spec, "kinematics_noise"), number(spec, "ground_noise"),
-              number(spec, "encoder_noise"), number(spec, "rest_window"),
-              number(spec, "rest_gate"), number(spec, "rest_rate_noise")};
+    noise_ = {get<double>(spec, "gyro_noise"), get<double>(spec, "accel_noise"),
+              get<double>(spec, "gyro_bias_walk"), get<double>(spec, "accel_bias_walk"),
+              get<double>(spec, "stance_foot_walk"), get<double>(spec, "swing_foot_walk"),
+              get<double>(spec, "kinematics_noise"), get<double>(spec, "ground_noise"),
+              get<double>(spec, "encoder_noise"), get<double>(spec, "rest_window"),
+              get<double>(spec, "rest_gate"), get<double>(spec, "rest_rate_noise")};
     const DoubleArray radii = spec["radii"].cast<DoubleArray>();
-    radii_ = Eigen::Map<const VectorXd>(input(radii, n_, "radii"), n_);
+    radii_ = Eigen::Map<const VectorXd>(input(radii, n_, "radii", false), n_);
     rolls_ = (radii_.array() > 0.0).any();
     const DoubleArray imu = spec["imu_rotation"].cast<DoubleArray>();
-    imu_rotation_ = Eigen::Map<const RowMatrix3>(input(imu, 9, "imu_rotation"));
+    imu_rotation_ = Eigen::Map<const RowMatrix3>(input(imu, 9, "imu_rotation", false));
     const DoubleArray lever = spec["lever_imu"].cast<DoubleArray>();
-    lever_ = Eigen::Map<const Vector3d>(input(lever, 3, "lever_imu"));
+    lever_ = Eigen::Map<const Vector3d>(input(lever, 3, "lever_imu", false));
     twist_from_imu_.setZero();
     twist_from_imu_.topLeftCorner<3, 3>() = imu_rotation_;
     twist_from_imu_.bottomRightCorner<3, 3>() = imu_rotation_;
@@ -158,12 +138,12 @@ public:
   {
     if (!P_)
       throw std::runtime_error("predict_correct: call bind(buffers) first");
-    const Vector3d w = Eigen::Map<const Vector3d>(input(gyro, 3, "gyro"));
-    const Vector3d f = Eigen::Map<const Vector3d>(input(accel, 3, "accel"));
-    const bool * c = input(contact, n_, "contact");
-    const Eigen::Map<const VectorXd> qd(input(joint_velocities, na_, "joint_velocities"), na_);
-    const Eigen::Map<const Feet> s(input(measured, 3 * n_, "measured"), n_, 3);
-    const Eigen::Map<const Feet> rates(input(foot_rates, 3 * n_, "foot_rates"), n_, 3);
+    const Vector3d w = Eigen::Map<const Vector3d>(input(gyro, 3, "gyro", false));
+    const Vector3d f = Eigen::Map<const Vector3d>(input(accel, 3, "accel", false));
+    const bool * c = input(contact, n_, "contact", false);
+    const Eigen::Map<const VectorXd> qd(input(joint_velocities, na_, "joint_velocities", false), na_);
+    const Eigen::Map<const Feet> s(input(measured, 3 * n_, "measured", false), n_, 3);
+    const Eigen::Map<const Feet> rates(input(foot_rates, 3 * n_, "foot_rates", false), n_, 3);
     const Vector3d omega = w - vec3(gyro_bias_);
     const bool at_rest = rest_update && detect_rest(w, qd, c, dt);
     predict(omega, f, c, rates, dt);
@@ -176,9 +156,9 @@ public:
   void finish(const DoubleArray & heights, bool at_rest, const DoubleArray & gyro, double dt)
   {
     if (heights.size() > 0)
-      correct_ground(input(heights, n_, "heights"));
+      correct_ground(input(heights, n_, "heights", false));
     if (at_rest)
-      correct_rest(Eigen::Map<const Vector3d>(input(gyro, 3, "gyro")), dt);
+      correct_rest(Eigen::Map<const Vector3d>(input(gyro, 3, "gyro", false)), dt);
     output();
   }
 
@@ -187,18 +167,7 @@ public:
 private:
   double * buffer(const py::dict & b, const char * name, py::ssize_t size)
   {
-    if (!b.contains(name))
-      throw std::invalid_argument(std::string("bind: missing buffer '") + name + "'");
-    py::object obj = b[name];
-    if (!py::isinstance<py::array_t<double>>(obj))
-      throw std::invalid_argument(std::string("bind: buffer '") + name + "' has the wrong dtype");
-    auto arr = py::reinterpret_borrow<py::array_t<double>>(obj);
-    if (arr.size() != size || !(arr.flags() & py::array::c_style) || !arr.writeable())
-      throw std::invalid_argument(std::string("bind: buffer '") + name
-                                  + "' must be a writable C-contiguous array of "
-                                  + std::to_string(size) + " values, got shape " + shape_of(arr));
-    keep_.push_back(obj);
-    return arr.mutable_data();
+    return wholebody_native::buffer<double>(b, name, size, keep_);
   }
 
   Eigen::Map<RowMatrix> P() { return Eigen::Map<RowMatrix>(P_, size_, size_); }

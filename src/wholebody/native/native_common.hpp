@@ -4,6 +4,7 @@
 #pragma once
 
 #include "legged_model.hpp"
+#include "py_arrays.hpp"
 
 #include <pinocchio/algorithm/centroidal.hpp>
 #include <pinocchio/algorithm/compute-all-terms.hpp>
@@ -38,32 +39,6 @@ namespace wholebody_native
   constexpr double kGravity = 9.81; // as wholebody.tasks.wrench.GRAVITY
   constexpr int kEqual = 5, kFree = 0; // DAQP constraint senses
 
-  using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
-
-  inline std::string shape_of(const py::array & a)
-  {
-    std::string s = "(";
-    for (py::ssize_t i = 0; i < a.ndim(); ++i)
-      s += (i ? ", " : "") + std::to_string(a.shape(i));
-    return s + (a.ndim() == 1 ? ",)" : ")");
-  }
-
-  // A read-only view of an input of exactly ``size`` doubles; ValueError naming ``field``.
-  inline const double * input(const DoubleArray & a, py::ssize_t size, const char * field, bool finite = true)
-  {
-    if (a.size() != size)
-      throw std::invalid_argument(
-        std::string(field) + ": expected " + std::to_string(size) + " values, got shape "
-        + shape_of(a));
-    const double * p = a.data();
-    if (finite)
-      for (py::ssize_t i = 0; i < size; ++i)
-        if (!std::isfinite(p[i]))
-          throw std::invalid_argument(
-            std::string(field) + ": contains NaN or inf at index " + std::to_string(i));
-    return p;
-  }
-
   // input() for a state vector: also refuses arrays of another shape with that many values.
   inline const double * vector_input(const DoubleArray & a, py::ssize_t size, const char * field)
   {
@@ -72,32 +47,6 @@ namespace wholebody_native
         std::string(field) + ": expected a vector of size " + std::to_string(size) + ", got shape "
         + shape_of(a));
     return input(a, size, field);
-  }
-
-  // A writable, C-contiguous buffer owned by Python, kept alive by the holder.
-  template<typename T>
-  T * buffer(const py::dict & buffers, const char * name, py::ssize_t size, std::vector<py::object> & keep)
-  {
-    if (!buffers.contains(name))
-      throw std::invalid_argument(std::string("bind: missing buffer '") + name + "'");
-    py::object obj = buffers[name];
-    if (!py::isinstance<py::array_t<T>>(obj))
-      throw std::invalid_argument(std::string("bind: buffer '") + name + "' has the wrong dtype");
-    auto arr = py::reinterpret_borrow<py::array_t<T>>(obj);
-    if (arr.size() != size || !(arr.flags() & py::array::c_style) || !arr.writeable())
-      throw std::invalid_argument(
-        std::string("bind: buffer '") + name + "' must be a writable C-contiguous array of "
-        + std::to_string(size) + " values, got shape " + shape_of(arr));
-    keep.push_back(obj);
-    return arr.mutable_data();
-  }
-
-  template<typename T>
-  T get(const py::dict & spec, const char * key)
-  {
-    if (!spec.contains(key))
-      throw std::invalid_argument(std::string("spec: missing key '") + key + "'");
-    return spec[key].cast<T>();
   }
 
   inline VectorXd get_vector(const py::dict & spec, const char * key, Index size)
