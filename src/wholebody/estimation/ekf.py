@@ -38,6 +38,7 @@ from scipy.linalg import lapack
 
 from ..cycle import ENGINES, warn_python_fallback
 from ..robot import GRAVITY, Robot
+from ..robots.reference import length_ratio
 from ..sim.sensors import SensorReading, SensorSpec
 from .kinematics import LegKinematics
 
@@ -139,6 +140,18 @@ class EstimatorNoise:
                     and math.isfinite(value) and value > 0):
                 raise ValueError(f"EstimatorNoise.{f.name} must be a finite number > 0, got "
                                  f"{value!r}")
+
+    @classmethod
+    def for_robot(cls, robot: Robot, spec: SensorSpec, **overrides) -> "EstimatorNoise":
+        """:meth:`for_sensors`, with the legs' two lengths, ``kinematics_noise`` and
+        ``stance_foot_walk``, in proportion to the robot's size
+        (:func:`~wholebody.robots.reference.length_ratio`: the defaults on HyQ and talos14, where
+        they were set): a robot of go1's size with the defaults weighs its legs too little
+        against the gyro, whose bias walk then turns the heading (docs/results.md)."""
+        ratio = length_ratio(robot)
+        scaled = {name: getattr(cls, name) * ratio
+                  for name in ("kinematics_noise", "stance_foot_walk")}
+        return cls.for_sensors(spec, **{**scaled, **overrides})
 
     @classmethod
     def for_sensors(cls, spec: SensorSpec, **overrides) -> "EstimatorNoise":

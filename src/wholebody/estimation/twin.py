@@ -35,13 +35,13 @@ class TwinEstimation:
     def for_robot(cls, robot, spec: SensorSpec | None = None, seed: int = 0,
                   ground_map: bool = False, **noise_overrides) -> "TwinEstimation":
         """Sensors of ``spec`` (default :class:`SensorSpec`) seeded with ``seed`` and a filter
-        whose noise model matches them (:meth:`EstimatorNoise.for_sensors`); ``ground_map``: the
-        filter measures its stance feet on the twin's ground
+        whose noise model matches them and the robot's size (:meth:`EstimatorNoise.for_robot`);
+        ``ground_map``: the filter measures its stance feet on the twin's ground
         (:meth:`~wholebody.sim.simulator.Simulator.ground_height`)."""
         spec = spec or SensorSpec()
         sensors = Sensors(robot, spec, np.random.default_rng(seed))
-        return cls(sensors, KinematicInertialEKF(robot, EstimatorNoise.for_sensors(
-            spec, **noise_overrides)), ground_map=ground_map)
+        return cls(sensors, KinematicInertialEKF(robot, EstimatorNoise.for_robot(
+            robot, spec, **noise_overrides)), ground_map=ground_map)
 
     def start(self, sim) -> None:
         self.sim = sim

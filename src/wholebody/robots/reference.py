@@ -46,6 +46,15 @@ def humanoid_mass_ratio(robot) -> float:
     return float(robot.mass) / HUMANOID_MASS
 
 
+def length_ratio(robot) -> float:
+    """``robot``'s standing base height over that of the reference robot of its kind: talos14's
+    for a robot standing on soles (Herzog et al. 2016's set-ups), HyQ's for one on point feet
+    (Fahmi et al. 2019's); exactly 1 on talos14 and on HyQ."""
+    if any(robot.contact(c).spec.type == "rectangle" for c in robot.contact_names):
+        return humanoid_length_ratio(robot)
+    return float(robot.q_ref[2]) / BASE_HEIGHT
+
+
 def froude_ratio(robot) -> float:
     """sqrt(h / BASE_HEIGHT) of ``robot`` (its standing base height h = ``robot.q_ref[2]``):
     speeds and times of HyQ's gaits times this, frequencies divided by it; exactly 1 on HyQ."""
