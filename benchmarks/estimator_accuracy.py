@@ -4,13 +4,13 @@ read the exact state. A measurement, not a test.
 Default: talos14 standing (standing controller) and hyq trotting at 0.3 m/s after 1 s of standing
 (passive WBC), ``--seconds`` each, with default sensors (``SensorSpec()``) and exact ones.
 ``--distance D``: every quadruped preset trotting D m (0.3 m/s on HyQ, Froude-scaled on the
-others), HyQ crawling D m (the crawl's default speed), talos14 standing D s and walking D m
-(``control.Walking`` at 0.4 m/s, ramped in over 1 s); default sensors (``--exact`` adds exact
-ones). The orientation error is split into tilt (roll and pitch, which
-gravity observes) and heading (yaw, which nothing in this filter observes). ``--rest-update``:
-the filter with its zero angular-rate update (off by default); ``--gyro-bias-walk``: the default sensors with
-that gyro bias random walk (rad/s per sqrt(s)); ``--noise NAME=VALUE``: a term of the filter's
-``EstimatorNoise`` (repeatable).
+others), HyQ crawling D m (the crawl's default speed), every humanoid preset standing D s and
+walking D m (``control.Walking`` at 0.4 m/s on talos14, Froude-scaled on the others, ramped in
+over 1 s); default sensors (``--exact`` adds exact ones). The orientation error is split into
+tilt (roll and pitch, which gravity observes) and heading (yaw, which only the stance feet's
+anchors hold). ``--rest-update``: the filter with its zero angular-rate update (off by default);
+``--gyro-bias-walk``: the default sensors with that gyro bias random walk (rad/s per sqrt(s));
+``--noise NAME=VALUE``: a term of the filter's ``EstimatorNoise`` (repeatable).
 
     python benchmarks/estimator_accuracy.py [--seconds 5] [--seed 1]
     python benchmarks/estimator_accuracy.py --distance 10 [--robots hyq go1 ...] [--exact]
@@ -32,7 +32,7 @@ from wholebody.control import Walking
 from wholebody.control.standing import StandingController
 from wholebody.estimation import EstimatorNoise, TwinEstimation
 from wholebody.planning.trunk import VelocityCommand
-from wholebody.robots.reference import froude_ratio
+from wholebody.robots.reference import froude_ratio, humanoid_length_ratio
 from wholebody.scenarios.locomotion import CRAWL_SPEED, run_gait
 from wholebody.scenarios.loop import run_closed_loop
 from wholebody.scenarios.walking_runs import simulate
@@ -40,8 +40,9 @@ from wholebody.sim.sensors import SensorSpec
 from wholebody.sim.simulator import Simulator
 
 QUADRUPEDS = ("hyq", "go1", "go2", "a1", "anymal_c", "solo12")
+HUMANOIDS = ("talos14", "talos", "romeo")
 TROT_SPEED_ON_HYQ = 0.3  # m/s
-WALK_SPEED = 0.4  # m/s, the walk scenario's on talos14
+WALK_SPEED = 0.4  # m/s, the walk scenario's on talos14; another humanoid's times sqrt(h / h_talos14)
 GAIT_START = 1.0  # s of standing before the gait
 
 
@@ -116,7 +117,7 @@ def main() -> None:
                         help="walk this many metres (talos14 stands this many seconds)")
     parser.add_argument("--robots", nargs="+", default=None,
                         help="with --distance: these presets only (default: hyq crawl, every "
-                             "quadruped's trot, talos14 standing)")
+                             "quadruped's trot, every humanoid standing and walking)")
     parser.add_argument("--exact", action="store_true", help="with --distance: exact sensors too")
     parser.add_argument("--rest-update", action="store_true",
                         help="the filter with its zero angular-rate update at rest")
@@ -162,7 +163,9 @@ def main() -> None:
     runs = [("hyq", "crawl", CRAWL_SPEED.default.value(wb.load_robot("hyq")))]
     runs += [(name, "trot", TROT_SPEED_ON_HYQ * froude_ratio(wb.load_robot(name)))
              for name in QUADRUPEDS]
-    runs += [("talos14", None, 0.0), ("talos14", "walk", WALK_SPEED)]
+    for name in HUMANOIDS:
+        speed = WALK_SPEED * math.sqrt(humanoid_length_ratio(wb.load_robot(name)))
+        runs += [(name, None, 0.0), (name, "walk", speed)]
     if args.robots:
         runs = [r for r in runs if r[0] in args.robots]
     for name, gait, speed in runs:
