@@ -63,9 +63,9 @@ DEFAULT_R_DIAG = np.array([0.1, 0.1, 0.01, 2.0, 2.0, 2.0])
 #: uses unless told otherwise (``q_integral=0``: the paper's LQR). With eq. 26's Q/R the vertical
 #: CoG pole is 0.11 rad/s on talos14: a robot whose mass or CoG differ from its model settles
 #: centimetres off its reference, and the integral removes that offset. docs/results.md measures
-#: what it gains under model errors and what it costs in the strongest pushes survived: on talos14
-#: under model errors 3e5 and 1e6 each keep 19 of 20 ``robust-push`` draws, 1e5 16 (too slow for
-#: the lightest draw); 1e6 makes a five-joint leg on 3 cm soles rock after a push.
+#: what it gains under model errors, what it costs in the strongest pushes survived, and why this
+#: weight: a tenth of it is too slow for the lightest of ``robust-push``'s draws, three times it
+#: makes a five-joint leg on narrow soles rock after a push.
 DEFAULT_Q_INTEGRAL = 3e5
 #: Anti-windup bound (m s) of each component of the CoG-error integral (our extension, see the
 #: module docstring); only used when integral action is on. On talos14 with ``q_integral=3e5``
