@@ -149,6 +149,8 @@ def validate(robot, params: dict) -> None:
         raise ValueError("--set frequency and periods must be > 0")
     if not 0.0 <= params["active_margin"] < 1.0:
         raise ValueError("--set active_margin: expected 0 <= margin < 1")
+    if params["variant"] == "cop-active":
+        active_margin(robot, params)  # a derived margin outside (0, 1): refused before simulating
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
