@@ -12,12 +12,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..report.balance_figures import push_figure
-from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
-                   Parameter, Scenario, ScenarioResult, duration_parameter, paper_q_notes)
+from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PARAMETERS,
+                   Q_ANGULAR, Q_INTEGRAL, TIME_SPAN, Parameter, Scenario, ScenarioResult,
+                   duration_parameter, paper_q_notes)
 from .measures import RECORD_TAIL_S, Thresholds
-from .pushes import (ANGULAR_WEIGHT, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL, Q_ORIENTATION,
-                     HumanoidScaled, check_push, ignored_option_notes, peak_force_for,
-                     push_trial)
+from .pushes import (ANGULAR_WEIGHT, LOCATIONS, Q_ORIENTATION, HumanoidScaled, check_push,
+                     ignored_option_notes, peak_force_for, push_trial)
 
 PARAMETERS = (
     Parameter("location", "front", f"push point: {', '.join(LOCATIONS)} (or 'angle')",

@@ -18,12 +18,12 @@ from ..report.balance_figures import push_series_figure
 from ..robot import Robot
 from ..robots import load_robot
 from ..sweep.executors import ordered, scenario_executor
-from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR, TIME_SPAN,
-                   Parameter, Scenario, ScenarioResult, duration_parameter, parse_list)
+from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PARAMETERS,
+                   Q_ANGULAR, Q_INTEGRAL, TIME_SPAN, Parameter, Scenario, ScenarioResult,
+                   duration_parameter, parse_list)
 from .conditions import job_observers
-from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS,
-                     Q_INTEGRAL, Q_ORIENTATION, HumanoidScaled, check_locations, check_push,
-                     push_trial)
+from .pushes import (ANGULAR_WEIGHT, CONTROLLER_PARAMETERS, FIXED_PUSH, LOCATIONS, Q_ORIENTATION,
+                     HumanoidScaled, check_locations, check_push, push_trial)
 
 PARAMETERS = (
     Parameter("locations", ",".join(LOCATIONS), "comma-separated push points",

@@ -37,13 +37,14 @@ from ..sim.mismatch import Mismatch
 from ..sim.simulator import Simulator
 from ..sim.true_com import TrueCoM
 from ..sweep.executors import ordered, scenario_executor
-from .base import (COP_MARGIN, ENGINE, PD_PARAMETERS, POSTURE_PARAMETERS, TIME_SPAN, Parameter,
-                   Scenario, ScenarioResult, duration_parameter, parse_list)
+from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PARAMETERS,
+                   Q_INTEGRAL, TIME_SPAN, Parameter, Scenario, ScenarioResult, duration_parameter,
+                   parse_list)
 from .conditions import job_observers
 from .loop import run_closed_loop
 from .measures import Thresholds, sole_slip, tilt_deg
-from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, INTEGRAL_LIMIT, LOCATIONS, Q_INTEGRAL,
-                     HumanoidScaled, check_locations, check_push, controller_options, make_push)
+from .pushes import (ANGULAR_WEIGHT, FIXED_PUSH, LOCATIONS, HumanoidScaled, check_locations,
+                     check_push, controller_options, ignored_option_notes, make_push)
 
 log = logging.getLogger(__name__)
 
@@ -275,9 +276,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
                 "max_foot_tilt_deg", "max_foot_slip_m", "static_cog_offset_m")}
                 for k, m in baseline.items()},
         }
-    notes = []
-    if controller != "lqr" and params["q_integral"] != Q_INTEGRAL.default:
-        notes.append("q_integral is an LQR option; ignored with the PD gains")
+    notes = ignored_option_notes(controller, params)
     if rate < 1.0:
         lost = [f"{loc} seed {m['seed']}" for loc, v in per_location.items() for m in v["runs"]
                 if not m["survived"]]
