@@ -103,6 +103,13 @@ public:
     PGt_.resize(size_, 3 * n_);
     S_.resize(3 * n_, 3 * n_);
     work_.resize(size_, size_);
+    y_.resize(3 * n_);
+    u_.resize(3 * n_);
+    dx_.resize(size_);
+    column_.resize(size_);
+    gain_.resize(size_);
+    Wt_.resize(3 * n_, size_);
+    llt_ = Eigen::LLT<MatrixXd>(3 * n_);
     skews_.resize(static_cast<std::size_t>(n_));
     blocks_.resize(static_cast<std::size_t>(n_));
   }
@@ -264,9 +271,8 @@ private:
     const Matrix3d Rm = R();
     const Eigen::Map<Vector3d> r(position_);
     const auto p = feet();
-    const Index m = 3 * n_;
     auto Pm = P();
-    VectorXd y(m);
+    VectorXd & y = y_;
     std::vector<Matrix3d> & skews = skews_;
     for (Index i = 0; i < n_; ++i)
     {
@@ -283,7 +289,7 @@ private:
                                 + skews[std::size_t(i)] * PGt_.middleRows<3>(6)
                                 + PGt_.middleRows(9 + 3 * i, 3);
     S_.diagonal().array() += std::pow(noise_.kinematics_noise, 2);
-    Eigen::LLT<MatrixXd> llt(S_);
+    Eigen::LLT<MatrixXd> & llt = llt_.compute(S_);
     if (llt.info() != Eigen::Success)
       return false;
     std::vector<Eigen::LLT<Matrix3d>> & blocks = blocks_;
@@ -294,12 +300,14 @@ private:
         return false;
     }
     // W = P G^T L^-T, u = L^-1 y: dx = W u, P -= W W^T
-    MatrixXd Wt = PGt_.transpose();
+    MatrixXd & Wt = Wt_;
+    Wt = PGt_.transpose();
     llt.matrixL().solveInPlace(Wt);
-    VectorXd u = y;
+    VectorXd & u = u_;
+    u = y;
     llt.matrixL().solveInPlace(u);
-    const VectorXd dx = Wt.transpose() * u;
-    inject(dx);
+    dx_.noalias() = Wt.transpose() * u;
+    inject(dx_);
     work_.noalias() = Wt.transpose() * Wt;
     Pm -= work_;
     symmetrize();
@@ -322,10 +330,12 @@ private:
         continue;
       const Index j = 9 + 3 * i + 2;
       auto Pm = P();
-      const VectorXd column = Pm.col(j);
-      const VectorXd gain = column / (column[j] + sigma2);
-      inject(gain * (heights[i] + radii_[i] - feet()(i, 2)));
-      Pm.noalias() -= gain * column.transpose();
+      VectorXd & column = column_;
+      column = Pm.col(j);
+      gain_ = column / (column[j] + sigma2);
+      dx_ = gain_ * (heights[i] + radii_[i] - feet()(i, 2));
+      inject(dx_);
+      Pm.noalias() -= gain_ * column.transpose();
       symmetrize();
     }
   }
@@ -392,7 +402,9 @@ private:
   Vector3d lever_;
   Eigen::Matrix<double, 6, 6> twist_from_imu_;
   RowMatrix A_, work_;
-  MatrixXd PGt_, S_;
+  MatrixXd PGt_, S_, Wt_;
+  VectorXd y_, u_, dx_, column_, gain_;  // the updates' work vectors, sized once
+  Eigen::LLT<MatrixXd> llt_;
   std::vector<Matrix3d> skews_;
   std::vector<Eigen::LLT<Matrix3d>> blocks_;
   std::vector<py::object> keep_;
