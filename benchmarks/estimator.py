@@ -136,7 +136,7 @@ def main() -> None:
                 medians = [np.median(run[k]) * 1e6 for run in runs]
                 p99 = np.median([np.percentile(run[k], 99) * 1e6 for run in runs])
                 print(f"{name:8s} ({len(robot.contact_names)} contacts, state "
-                      f"{15 + 3 * len(robot.contact_names)}) {label:10s}: {len(runs[0][k])} "
+                      f"{current()(robot).size}) {label:10s}: {len(runs[0][k])} "
                       f"cycles, median {np.median(medians):6.1f} µs (runs "
                       f"{', '.join(f'{m:.1f}' for m in medians)}), p99 {p99:6.1f} µs",
                       flush=True)

@@ -227,3 +227,23 @@ def test_bad_construction_names_the_field():
                                            np.zeros(robot.nv), np.zeros(4))
     with pytest.raises(ValueError, match="base_position"):
         ekf.reset(reading, base_position=(0.0, 1.0))
+
+
+def test_one_sole_holds_the_heading_against_a_gyro_bias():
+    """talos14 at rest on one sole with a gyro biased about the vertical: the sole's heel and toe
+    hold the heading (integrating the bias alone would turn it by bias x time)."""
+    robot = wb.load_robot("talos14")
+    sensors = Sensors(robot, SPEC, np.random.default_rng(0))
+    bias, seconds = 0.005, 5.0
+    ekf = KinematicInertialEKF(robot, EstimatorNoise.for_sensors(SPEC))
+    forces = np.zeros(len(robot.contact_names))
+    forces[0] = robot.mass * GRAVITY
+    yaw = []
+    for k in range(int(seconds / 1e-3)):
+        sensors.gyro_bias = np.array([0.0, 0.0, bias])
+        reading = sensors.measure(k * 1e-3, robot.q_ref, np.zeros(robot.nv), np.zeros(robot.nv),
+                                  forces)
+        estimate = ekf.reset(reading, robot.q_ref[:3]) if k == 0 else ekf.update(reading)
+        yaw.append(tilt_and_yaw_errors([robot.q_ref], [estimate.q])[1][0])
+    assert bias * seconds > 0.02
+    assert max(yaw) < 0.1 * bias * seconds, max(yaw)

@@ -2,11 +2,14 @@
 2013, "State estimation for legged robots: consistent fusion of leg kinematics and IMU").
 
 State (Sect. III-A): the IMU's position r and velocity v in the world, its orientation R (IMU ->
-world), the position p_i of every contact frame of the robot in the world, and the accelerometer
+world), the position p_i of every point of the feet in the world (a point foot's contact frame,
+a sole's heel and toe: two points fix its heading), and the accelerometer
 and gyroscope biases b_f, b_w. The IMU drives the prediction (Sect. III-B, eqs. 5-11); the feet's
 positions relative to the IMU from forward kinematics of the measured joints are the measurement
 (Sect. III-C, eq. 12). A foot in contact stays put up to a small process noise, a swinging foot
 gets a large one, so it follows its measurement and is anchored again where it lands (eq. 9).
+A sole's two points walk together in stance (their walks fully correlated): the sole may slip,
+it does not turn, so in single support its heel and toe hold the heading.
 A ball foot in contact rolls: its centre (the contact frame) moves by omega_foot x (radius z) on
 flat ground, which the prediction adds (without it, HyQ's feet rolling forward in stance make the
 estimate lag 2-3 % of the distance trotted).
@@ -186,10 +189,14 @@ class StateEstimate:
     q, v         configuration (base position, quaternion x y z w, joints) and velocity (base
                  twist in the base frame, joint rates)
     covariance   the error-state covariance [dr, dv, dphi, dp_i..., db_f, db_w] (world axes)
-    innovation   (ncontact, 3): last measured minus predicted foot position in the IMU frame (m)
-    foot_test    (ncontact,): each foot's squared innovation normalised by its covariance (a
+    innovation   (npoint, 3): last measured minus predicted point position in the IMU frame (m)
+    foot_test    (npoint,): each point's squared innovation normalised by its covariance (a
                  chi-square with 3 degrees of freedom when the foot behaves as modelled)
-    feet         (ncontact, 3): the estimated contact positions in the world
+    feet         (npoint, 3): the estimated points' positions in the world
+
+    The points are the feet's (:class:`~wholebody.estimation.kinematics.LegKinematics`): one per
+    point foot, two per sole (heel, toe); ``KinematicInertialEKF.contact_of`` maps them to the
+    robot's contacts.
     at_rest      the readings showed the robot at rest (the zero angular-rate update ran)
     """
 
@@ -233,11 +240,14 @@ class KinematicInertialEKF:
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
         self.kinematics = LegKinematics(robot, imu_frame)
-        n_feet = self.kinematics.count
+        n_feet = self.kinematics.count  # the feet's points (a sole has two)
         if n_feet == 0:
             raise ValueError(f"robot '{robot.name}': contacts: the estimator needs at least one "
                              f"contact frame (a foot)")
-        self.n_feet = n_feet
+        self.n_points = n_feet
+        #: the contact (index in the robot's contacts) of every point
+        self.contact_of = self.kinematics.contact_of
+        self._n_contacts = len(robot.contacts)
         self.size = 15 + 3 * n_feet
         self._feet = slice(9, 9 + 3 * n_feet)
         self._accel_bias = slice(9 + 3 * n_feet, 12 + 3 * n_feet)
@@ -275,6 +285,16 @@ class KinematicInertialEKF:
                                                   - noise.stance_foot_walk ** 2)
         self._noise_basis = basis
         self._noise_coefficients = np.zeros(3 + n_feet)
+        # a sole's heel and toe walk together in stance (the sole slips, it does not turn): their
+        # walks' cross-covariance, stance_foot_walk^2 dt, at these flat indices of P
+        contact_of = self.contact_of
+        #: each point's other point on the same sole, -1 for a point foot
+        self.partner = np.array([next((j for j in range(n_feet) if j != i
+                                       and contact_of[j] == contact_of[i]), -1)
+                                 for i in range(n_feet)])
+        self._pair_point = np.flatnonzero(self.partner >= 0)
+        self._pair_at = np.array([(9 + 3 * i + k) * size + 9 + 3 * self.partner[i] + k
+                                  for i in self._pair_point for k in range(3)], dtype=int)
         # [P G^T ; innovation^T]: the right-hand sides of the triangular solve
         self._right_sides = np.zeros((size + 1, m))
         self._blocks = np.zeros((m, m))
@@ -324,13 +344,13 @@ class KinematicInertialEKF:
         variances = np.concatenate([
             np.full(3, noise.initial_position ** 2), np.full(3, noise.initial_velocity ** 2),
             np.full(3, noise.initial_orientation ** 2),
-            np.full(3 * self.n_feet, noise.initial_position ** 2 + noise.kinematics_noise ** 2),
+            np.full(3 * self.n_points, noise.initial_position ** 2 + noise.kinematics_noise ** 2),
             np.full(3, noise.initial_accel_bias ** 2), np.full(3, noise.initial_gyro_bias ** 2)])
         self.P = np.diag(variances)
         self._t = float(reading.t)
         self._omega = np.asarray(reading.gyro, dtype=float).copy()
-        self._innovation = np.zeros((self.n_feet, 3))
-        self._foot_test = np.zeros(self.n_feet)
+        self._innovation = np.zeros((self.n_points, 3))
+        self._foot_test = np.zeros(self.n_points)
         # the rest test's averages start at this reading at rest, the contacts' closed time at 0
         self._rest_gyro, self._rest_joints = self._omega.copy(), np.zeros(self.robot.na)
         self._closed_for = 0.0
@@ -360,8 +380,8 @@ class KinematicInertialEKF:
                        f"t = {self._t:.6f})")
             return self.estimate
         contact = np.asarray(reading.contact, bool)
-        if contact.shape != (self.n_feet,):
-            contact = np.zeros(self.n_feet, bool)
+        contact = (contact[self.contact_of] if contact.shape == (self._n_contacts,)
+                   else np.zeros(self.n_points, bool))
         omega = gyro - self.gyro_bias
         measured, foot_rates = self.kinematics.feet_in_imu(joints, omega, joint_velocities)
         if self._native is not None:
@@ -408,6 +428,9 @@ class KinematicInertialEKF:
         coefficients[0:3] = dt ** 4, dt * dt, dt
         np.multiply(~contact, dt, out=coefficients[3:])
         P.reshape(-1)[::self.size + 1] += self._noise_basis @ coefficients
+        if self._pair_at.size:
+            P.reshape(-1)[self._pair_at] += (dt * self.noise.stance_foot_walk ** 2) * np.repeat(
+                contact[self._pair_point], 3)
 
     def _correct(self, measured: np.ndarray) -> None:
         """Bloesch et al. 2013, eq. 12: the feet relative to the IMU, s_i = R^T (p_i - r)."""
@@ -453,7 +476,7 @@ class KinematicInertialEKF:
     def _ground_heights(self, contact: np.ndarray) -> np.ndarray:
         """The ground's height under each foot in contact, where the kinematic update put it;
         NaN for the others and over no ground (a gap)."""
-        heights = np.full(self.n_feet, np.nan)
+        heights = np.full(self.n_points, np.nan)
         for i in np.flatnonzero(contact):
             heights[i] = float(self.ground(float(self.feet[i, 0]), float(self.feet[i, 1])))
         return heights
@@ -540,7 +563,8 @@ class KinematicInertialEKF:
         noise = {f.name: float(getattr(self.noise, f.name)) for f in fields(self.noise)
                  if f.name != "rest_update"}
         return _estimator.Estimator(noise | {
-            "n_feet": self.n_feet, "n_joints": self.robot.na, "radii": self._radii,
+            "n_feet": self.n_points, "n_joints": self.robot.na, "radii": self._radii,
+            "partner": self.partner.astype(float),
             "imu_rotation": self._imu_rotation, "lever_imu": self._lever_imu})
 
     # the state the compiled cycle updates in place: attribute -> buffer name

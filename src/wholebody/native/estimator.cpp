@@ -91,6 +91,9 @@ public:
     const DoubleArray radii = spec["radii"].cast<DoubleArray>();
     radii_ = Eigen::Map<const VectorXd>(input(radii, n_, "radii", false), n_);
     rolls_ = (radii_.array() > 0.0).any();
+    // each point's other point on the same sole (-1: a point foot), as KinematicInertialEKF.partner
+    const DoubleArray partner = spec["partner"].cast<DoubleArray>();
+    partner_ = Eigen::Map<const VectorXd>(input(partner, n_, "partner", false), n_).cast<Index>();
     const DoubleArray imu = spec["imu_rotation"].cast<DoubleArray>();
     imu_rotation_ = Eigen::Map<const RowMatrix3>(input(imu, 9, "imu_rotation", false));
     const DoubleArray lever = spec["lever_imu"].cast<DoubleArray>();
@@ -263,6 +266,15 @@ private:
       for (int k = 0; k < 3; ++k)
         Pm(9 + 3 * i + k, 9 + 3 * i + k) += walk * walk * dt;
     }
+    // a sole's heel and toe walk together in stance: their walks' cross-covariance
+    for (Index i = 0; i < n_; ++i)
+    {
+      const Index j = partner_[i];
+      if (j < 0 || !c[i])
+        continue;
+      for (int k = 0; k < 3; ++k)
+        Pm(9 + 3 * i + k, 9 + 3 * j + k) += stance * stance * dt;
+    }
   }
 
   // Bloesch et al. 2013, eq. 12 in world axes: foot i's rows [-I, 0, [p_i - r]x, .. I ..].
@@ -397,6 +409,7 @@ private:
   Index n_ = 0, na_ = 0, size_ = 0, ab_ = 0, gb_ = 0;
   Noise noise_{};
   VectorXd radii_;
+  Eigen::Matrix<Index, Eigen::Dynamic, 1> partner_;
   bool rolls_ = false, skipped_ = false;
   Matrix3d imu_rotation_;
   Vector3d lever_;
