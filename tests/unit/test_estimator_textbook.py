@@ -87,11 +87,11 @@ def textbook_step(robot, noise, x, P, reading, dt):
     q[ba] = noise.accel_bias_walk ** 2 * dt
     q[bg] = noise.gyro_bias_walk ** 2 * dt
     Q = np.diag(q)
-    for i in range(n):  # a sole's points in stance move as one: their walks are the same
-        for j in range(n):
+    for i in range(n):  # a sole's points in stance move as one along the ground: their
+        for j in range(n):  # horizontal walks are the same, their vertical ones independent
             if i != j and contact[i] and feet_points[i][0] == feet_points[j][0]:
                 block = slice(9 + 3 * i, 12 + 3 * i), slice(9 + 3 * j, 12 + 3 * j)
-                Q[block] = noise.stance_foot_walk ** 2 * dt * np.eye(3)
+                Q[block] = noise.stance_foot_walk ** 2 * dt * np.diag([1.0, 1.0, 0.0])
     P = F @ P @ F.T + Q
     H = np.zeros((3 * n, N))
     y = np.zeros(3 * n)

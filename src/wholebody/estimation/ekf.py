@@ -8,8 +8,10 @@ and gyroscope biases b_f, b_w. The IMU drives the prediction (Sect. III-B, eqs. 
 positions relative to the IMU from forward kinematics of the measured joints are the measurement
 (Sect. III-C, eq. 12). A foot in contact stays put up to a small process noise, a swinging foot
 gets a large one, so it follows its measurement and is anchored again where it lands (eq. 9).
-A sole's two points walk together in stance (their walks fully correlated): the sole may slip,
-it does not turn, so in single support its heel and toe hold the heading.
+A sole's two points walk together along the ground in stance (their horizontal walks fully
+correlated, their vertical ones independent): the sole may slip and tilt with what it stands on
+(a tilting board), it does not turn about the vertical, so in single support its heel and toe
+hold the heading.
 A ball foot in contact rolls: its centre (the contact frame) moves by omega_foot x (radius z) on
 flat ground, which the prediction adds (without it, HyQ's feet rolling forward in stance make the
 estimate lag 2-3 % of the distance trotted).
@@ -285,8 +287,9 @@ class KinematicInertialEKF:
                                                   - noise.stance_foot_walk ** 2)
         self._noise_basis = basis
         self._noise_coefficients = np.zeros(3 + n_feet)
-        # a sole's heel and toe walk together in stance (the sole slips, it does not turn): their
-        # walks' cross-covariance, stance_foot_walk^2 dt, at these flat indices of P
+        # a sole's heel and toe walk together along the ground in stance (the sole slips, it does
+        # not turn about the vertical): their horizontal walks' cross-covariance,
+        # stance_foot_walk^2 dt, at these flat indices of P (x and y of each point's partner)
         contact_of = self.contact_of
         #: each point's other point on the same sole, -1 for a point foot
         self.partner = np.array([next((j for j in range(n_feet) if j != i
@@ -294,7 +297,7 @@ class KinematicInertialEKF:
                                  for i in range(n_feet)])
         self._pair_point = np.flatnonzero(self.partner >= 0)
         self._pair_at = np.array([(9 + 3 * i + k) * size + 9 + 3 * self.partner[i] + k
-                                  for i in self._pair_point for k in range(3)], dtype=int)
+                                  for i in self._pair_point for k in range(2)], dtype=int)
         # [P G^T ; innovation^T]: the right-hand sides of the triangular solve
         self._right_sides = np.zeros((size + 1, m))
         self._blocks = np.zeros((m, m))
@@ -430,7 +433,7 @@ class KinematicInertialEKF:
         P.reshape(-1)[::self.size + 1] += self._noise_basis @ coefficients
         if self._pair_at.size:
             P.reshape(-1)[self._pair_at] += (dt * self.noise.stance_foot_walk ** 2) * np.repeat(
-                contact[self._pair_point], 3)
+                contact[self._pair_point], 2)
 
     def _correct(self, measured: np.ndarray) -> None:
         """Bloesch et al. 2013, eq. 12: the feet relative to the IMU, s_i = R^T (p_i - r)."""

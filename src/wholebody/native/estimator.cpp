@@ -266,13 +266,14 @@ private:
       for (int k = 0; k < 3; ++k)
         Pm(9 + 3 * i + k, 9 + 3 * i + k) += walk * walk * dt;
     }
-    // a sole's heel and toe walk together in stance: their walks' cross-covariance
+    // a sole's heel and toe walk together along the ground in stance: their horizontal walks'
+    // cross-covariance (x and y)
     for (Index i = 0; i < n_; ++i)
     {
       const Index j = partner_[i];
       if (j < 0 || !c[i])
         continue;
-      for (int k = 0; k < 3; ++k)
+      for (int k = 0; k < 2; ++k)
         Pm(9 + 3 * i + k, 9 + 3 * j + k) += stance * stance * dt;
     }
   }
