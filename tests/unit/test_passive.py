@@ -184,7 +184,7 @@ def test_swing_gains_checked():
         SwingGains(D=-1.0)
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_one_absurd_velocity_sample_does_not_wind_up_the_stance_anchors(robots, engine):
     """Standing still, one state sample with every velocity at 300 (a sensor glitch) moves the
     stance anchors by at most the feet's radius, so the cycles after it solve again without
@@ -199,7 +199,7 @@ def test_one_absurd_velocity_sample_does_not_wind_up_the_stance_anchors(robots, 
     assert all(after[5:]), after
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_torques_within_limits_under_an_impossible_wrench(robots, rng, plan_for, engine):
     """A 3000 N downward external wrench estimate on a weak knee: whatever the QP does, the torque
     that leaves the controller is finite and within the limits it enforces (the robot's, lowered on
@@ -236,7 +236,7 @@ def _stance_motion(robot, q, base_velocity, slip=None):
     return np.concatenate([base_velocity, joints])
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_stance_task_ignores_rolling_and_opposes_slip(robots, rng, plan_for, engine):
     """Eq. 32 is active only when a foot slips (Fahmi et al. 2019, Sect. IV): the trunk moves over
     four feet that roll without slipping, so the bottoms of the foot spheres travel (checked), and
@@ -483,7 +483,7 @@ def test_quasi_static_baseline_redistributes_forces_within_torque_limits(robots,
     assert np.all(np.abs(sol.tau) <= 0.1)
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 @pytest.mark.parametrize("gain", [0.0, 0.3])
 def test_footholds_get_the_measured_com_velocity(robots, engine, gain):
     """The Raibert feedback of the footholds (``feedback_gain`` k) is fed the CoM velocity of the
