@@ -513,3 +513,20 @@ def test_footholds_get_the_measured_com_velocity(robots, engine, gain):
         base = free.touchdown_target(planner.legs[i], plan.touchdown_time[i]).position
         expected = base[:2] + gain * (measured - v_ref)
         np.testing.assert_allclose(plan.touchdown_position[i][:2], expected, atol=1e-9)
+
+
+@pytest.mark.parametrize("engine", ["python", "stack"])
+def test_nonfinite_external_wrench_is_a_held_cycle(robots, engine):
+    """An external-wrench estimate with a NaN makes W_d of eq. 4 NaN: the cycle is a held value
+    (the previous torque, finite), not an exception, and the next cycle with a finite estimate
+    solves again."""
+    robot = robots["hyq"]
+    wbc = PassiveWBC(robot, engine=engine)
+    q, v = robot.q_ref, np.zeros(robot.nv)
+    first = wbc.compute(q, v, 0.0)
+    wbc.impedance.external_wrench = np.array([0.0, 0.0, np.nan, 0.0, 0.0, 0.0])
+    held = wbc.compute(q, v, 0.004)
+    assert held.outcome is Outcome.HELD and "held" in held.status
+    np.testing.assert_allclose(held.tau, first.tau, atol=1e-12)
+    wbc.impedance.external_wrench = np.zeros(6)
+    assert wbc.compute(q, v, 0.008).ok

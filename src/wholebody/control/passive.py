@@ -43,6 +43,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -781,9 +782,18 @@ class PassiveWBC(PlannedController):
             self.impedance.external_wrench = self.observer.update(
                 robot.h_G, self._commanded_wrench, robot.mass, self.control_period)
         W_d = self.impedance.wrench(robot, plan.trunk)
-        _, variables = self._stack.update(plan, W_d[:3])
         t1 = time.perf_counter()
-        sol = self._stack_cycle.solve(robot.q, robot.v, variables)
+        # failed cycles are values, as in the Python engine: a W_d that is not finite (e.g. the
+        # external wrench), NaN/inf task rows (the state was checked by robot.update)
+        sol = SimpleNamespace(ok=False, status="the desired trunk wrench W_d is not finite",
+                              timings={})
+        if math.isfinite(W_d.sum()):
+            _, variables = self._stack.update(plan, W_d[:3])
+            t1 = time.perf_counter()
+            try:
+                sol = self._stack_cycle.solve(robot.q, robot.v, variables)
+            except ValueError as exc:
+                sol.status = str(exc)
         t2 = time.perf_counter()
         F, swing_errors = np.zeros(self.nf), None
         if sol.ok:
