@@ -3,10 +3,12 @@ the swing slacks, C++ on an i5; issue target here: full cycle median <= 60 µs, 
 
 States (q, v, plan) are recorded from closed-loop HyQ crawl and trot runs in the twin, then replayed:
 full cycle = rigid-body update + assembly + DAQP solve + τ (eq. 19) + the Solution; the QP time is
-the DAQP call. Engines: "python" (Robot.update + numpy assembly) and "native" (the compiled cycle,
-PassiveWBC(engine="native")). Slack modes: per-direction (a weighted least-squares term, no
-variables), single (one slack variable per swing foot + 6 rows; Python engine only), none (hard
-swing equality). For reference the same QP through the generic two-level Formulation
+the DAQP call. Engines: "python" (Robot.update + numpy assembly), "native" (the compiled cycle,
+PassiveWBC(engine="native")) and "stack" (Robot.update for the controller's references, then the
+same QP as a stack of tasks through the compiled HierarchyCycle, method "weighted"; its parts are
+printed: the Python references and task updates, the compiled update, the rows, the QP).
+Slack modes: per-direction (a weighted least-squares term, no variables), single (one slack
+variable per swing foot + 6 rows; Python engine only), none (hard swing equality). For reference the same QP through the generic two-level Formulation
 (``as_stack``, method "weighted"). A benchmark, not a test.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_passive.py [--cycles 1500] [--repeat 3] [--passes 5]
@@ -61,9 +63,9 @@ def time_dedicated(robot, states, swing_slack: str, passes: int = 1, engine: str
     a slight optimistic bias)."""
     wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
                      swing_slack=swing_slack, engine=engine)
-    full, qp, update = [], [], []
+    full, qp, update, parts = [], [], [], []
     for q, v, plan in states:
-        best = (np.inf, np.inf, np.inf)
+        best = (np.inf, np.inf, np.inf, {})
         for _ in range(passes):
             if engine == "python":
                 t0 = time.perf_counter()
@@ -74,11 +76,19 @@ def time_dedicated(robot, states, swing_slack: str, passes: int = 1, engine: str
                 t0 = t1 = time.perf_counter()
                 sol = wbc.cycle(q, v, plan)
             t2 = time.perf_counter()
-            best = min(best, (t2 - t0, t1 - t0, sol.timings["solve"]))
+            best = min(best, (t2 - t0, t1 - t0, sol.timings["solve"], sol.timings),
+                       key=lambda b: b[:3])
         full.append(best[0])
         update.append(best[1])
         qp.append(best[2])
-    return np.array(update) * 1e6, np.array(full) * 1e6, np.array(qp) * 1e6
+        parts.append(best[3])
+    return np.array(update) * 1e6, np.array(full) * 1e6, np.array(qp) * 1e6, parts
+
+
+def stack_parts(parts) -> str:
+    """Medians of the stack engine's parts (µs)."""
+    return " ".join(f"{key} {1e6 * np.median([p[key] for p in parts]):4.0f}"
+                    for key in ("prepare", "update", "rows", "qp"))
 
 
 def time_stack(robot, states):
@@ -113,11 +123,13 @@ def main() -> None:
         for rep in range(args.repeat):
             for engine in ENGINES:
                 for mode in ("per-direction", "single", "none"):
-                    if engine == "native" and mode == "single":
+                    if engine in ("native", "stack") and mode == "single":
                         continue
-                    update, full, qp = time_dedicated(robot, states, mode, args.passes, engine)
+                    update, full, qp, parts = time_dedicated(robot, states, mode, args.passes,
+                                                             engine)
                     medians.setdefault((engine, mode), []).append(np.median(full))
                     extra = f" | update {np.median(update):4.0f}" if engine == "python" else ""
+                    extra += f" | {stack_parts(parts)}" if engine == "stack" else ""
                     print(f"[{rep}] {engine:6s} {mode:14s} full cycle {stats(full)} | QP "
                           f"{np.median(qp):5.0f}{extra}")
         for engine in ENGINES:
@@ -129,6 +141,9 @@ def main() -> None:
         ratio = [n / p for n, p in zip(medians[("native", "per-direction")],
                                        medians[("python", "per-direction")])]
         print(f"native / python (per-direction, paired by repeat): {np.median(ratio):.2f}")
+        ratio = [s / n for s, n in zip(medians[("stack", "per-direction")],
+                                       medians[("native", "per-direction")])]
+        print(f"stack / native (per-direction, paired by repeat): {np.median(ratio):.2f}")
         stack = time_stack(robot, states[:max(200, args.cycles // 5)])
         print(f"generic Formulation, same QP (weighted) {stats(stack)}")
 

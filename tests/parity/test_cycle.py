@@ -25,8 +25,10 @@ from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, Force
                              FrameTask, FrictionCone, FullDynamics, JointAccelerationLimits,
                              JointTrajectoryTask, MomentumForce, MomentumPD, NewtonEuler,
                              NormalForceBounds, PostureTask, TorqueLimits)
+from wholebody.tasks.base import Task, TaskRows
 from wholebody.tasks.regularization import (AccelerationRegularizer, AccelerationTarget,
-                                             TangentialForceRegularizer)
+                                             ContactTorqueRegularizer, TangentialForceRegularizer)
+from wholebody.tasks.wrench import TrunkWrenchTask
 from wholebody.variables import Variables
 
 #: quadprog without a fallback: the settings the engines are compared with
@@ -241,6 +243,42 @@ def talos_stack(robot, full=False):
     ])
 
 
+def passive_stack_kinds(robot, variant=0):
+    """The passive controller's tasks (Fahmi et al. 2019) on HyQ's point feet with non-default
+    parameters: a trunk wrench with a tilted, turned reference, an external wrench and per-row
+    weights (variant 0: with the feed-forward, about the heading frame; 1: neither), the
+    contact-force torques and the leaning tangential forces on contact subsets in non-model
+    order."""
+    from wholebody.planning.trunk import TrunkState
+    from wholebody.tasks.wrench import TrunkImpedance
+    impedance = TrunkImpedance(K_x=[2000.0, 1800.0, 2500.0], D_x=400.0,
+                               K_theta=[900.0, 1000.0, 1100.0], D_theta=200.0,
+                               feedforward=variant == 0)
+    impedance.external_wrench = np.array([5.0, -3.0, 20.0, 1.0, -2.0, 0.5])
+    wrench = TrunkWrenchTask(impedance, name="trunk wrench",
+                             weight=np.array([1.0, 1.0, 1.0, 1.0, 1.4, 1.0]),
+                             contacts=("rh_foot", "lf_foot", "lh_foot"), heading=variant == 0)
+    yaw, pitch = 0.7, 0.1
+    rotation = pin.rpy.rpyToMatrix(0.0, pitch, yaw)
+    wrench.reference = TrunkState(np.array([0.05, -0.02, 0.6]), np.array([0.1, 0.0, -0.05]),
+                                  np.array([0.3, -0.2, 0.1]), rotation, np.array([0.0, 0.1, 0.3]),
+                                  np.array([0.5, -0.4, 1.0]))
+    lean = np.array([60.0, -40.0, 800.0]) if variant == 0 else None
+    return Stack([
+        [NewtonEuler(name="newton-euler"), ContactConstraint(name="contacts", kp=200.0, kd=30.0),
+         FrictionCone(0.7, name="friction"), TorqueLimits(name="torque limits")],
+        [wrench,
+         ContactTorqueRegularizer(name="contact torques", weight=np.linspace(0.01, 0.1, robot.na),
+                                  contacts=("lh_foot", "rf_foot")),
+         TangentialForceRegularizer(name="tangential", weight=0.03,
+                                    contacts=("rf_foot", "lf_foot", "rh_foot"),
+                                    normals={"lf_foot": [0.1, 0.0, 1.0],
+                                             "rh_foot": [0.0, -0.3, 1.0]},
+                                    lean=lean, mu=0.05 if variant == 0 else np.inf),
+         AccelerationRegularizer(name="qdd regularizer", weight=1e-2)],
+    ])
+
+
 # ---------------------------------------------------------------------------- 1. rigid-body terms
 @native
 @pytest.mark.parametrize("name", ["talos14", "talos", "hyq"])
@@ -307,6 +345,7 @@ def test_every_kind_is_exercised(robots):
     for full in (False, True):
         used |= {type(t) for t in hyq_stack(robots["hyq"], full).tasks()}
         used |= {type(t) for t in talos_stack(robots["talos14"], full).tasks()}
+    used |= {type(t) for t in passive_stack_kinds(robots["hyq"]).tasks()}
     assert used == set(kernel_tasks().values())
     assert not python_tasks(hyq_stack(robots["hyq"]))
 
@@ -370,6 +409,38 @@ def test_every_kind_levels_equal_formulation(robots, name, full):
     anchors = s_native.find("contacts").anchors
     assert set(anchors) == set(robot.contact_names)
     assert assert_same_refs(s_native, s_python, name) == n_first_use_refs(s_native) >= 2
+
+
+@native
+@pytest.mark.parametrize("variant", [0, 1], ids=["feedforward-heading", "plain"])
+@pytest.mark.parametrize("full", [False, True], ids=["reduced", "full"])
+def test_passive_kinds_levels_equal_formulation(robots, variant, full):
+    """The passive controller's trunk wrench, contact-torque and tangential-force tasks (see
+    passive_stack_kinds): level arrays equal the Python Formulation's on random states and on
+    smooth motions, all stance feet active and only three; the trunk wrench's target is the
+    impedance's wrench (rows about the heading frame rotate it: its norm with unit weights)."""
+    robot = robots["hyq"]
+    rng = np.random.default_rng(400 + 2 * variant + full)
+    for contacts in (robot.contact_names, ("lf_foot", "rh_foot", "lh_foot")):
+        variables = Variables(robot, contacts)
+        s_native, s_python = (passive_stack_kinds(robot, variant) for _ in range(2))
+        if len(contacts) < len(robot.contact_names):  # the tasks on all active contacts
+            for task in s_native.tasks() + s_python.tasks():
+                if task.per_contact:
+                    task.contacts = None
+        states = random_states(robot, rng, 4) + moving_states(robot, 3)
+        compare_on_states(robot, s_native, s_python, variables, states, reduced=not full,
+                          where=f"passive kinds {variant} {contacts}")
+        task = s_python.find("trunk wrench")
+        q, v = states[-1]
+        robot.update(q, v)
+        wrench = task.impedance.wrench(robot, task.reference)
+        target = task.rows(robot, variables).target
+        for part in (slice(0, 3), slice(3, 6)):
+            np.testing.assert_allclose(np.linalg.norm(target[part]), np.linalg.norm(wrench[part]),
+                                       rtol=1e-12)
+        if variant:
+            np.testing.assert_array_equal(target, wrench)
 
 
 @native
@@ -651,7 +722,17 @@ class SubclassedPosture(PostureTask):
     """A subclass may change the rows: it has no compiled kernel."""
 
 
-@pytest.mark.parametrize("extra", ["subclass", "tangential"])
+class ForceSum(Task):
+    """A user's own task on the contact forces, without a kernel: their sum ≈ the weight."""
+
+    def rows(self, robot, variables):
+        A = np.zeros((3, variables.n_lambda))
+        for sl in variables.lambda_slices.values():
+            A[:, sl.start:sl.start + 3] = np.eye(3)
+        return TaskRows(qdd=None, lam=A, tau=None, target=np.array([0.0, 0.0, robot.mass * 9.81]))
+
+
+@pytest.mark.parametrize("extra", ["subclass", "own"])
 def test_python_task_in_a_native_stack(robots, extra):
     """A task without a compiled kernel (a subclass, a task only the Python engine has) writes
     its rows from Python into the native program while every other task stays compiled: the
@@ -664,11 +745,11 @@ def test_python_task_in_a_native_stack(robots, extra):
             stack.levels[2][1] = SubclassedPosture(name="odd posture", weight=0.1, base_kp=50.0,
                                                    base_kd=14.0)
         else:
-            stack.levels[2].append(TangentialForceRegularizer(name="odd tangential", weight=1e-4))
+            stack.levels[2].append(ForceSum(name="odd force sum", weight=1e-4))
         return stack
 
     stack = build()
-    odd = "odd posture" if extra == "subclass" else "odd tangential"
+    odd = "odd posture" if extra == "subclass" else "odd force sum"
     assert [t.name for t in python_tasks(stack)] == [odd]
     if not native_available():
         return

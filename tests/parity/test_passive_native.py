@@ -1,8 +1,11 @@
-"""PassiveWBC(engine="native"): the compiled cycle (src/wholebody/native/passive_cycle.cpp) against
-the Python engine — its tested reference — on closed-loop HyQ trot states, against Robot.update's
-Pinocchio terms (the compiled cycle rebuilds the model from arrays), and in closed loop in the
-twin. The compiled QP leaves out the swing feet's force variables and the free rows; equal
-torques also check that this changes nothing."""
+"""PassiveWBC's compiled engines against the Python engine — the hand-assembled QP, their tested
+reference — on closed-loop HyQ trot and crawl states: engine="native", the compiled cycle
+(src/wholebody/native/passive_cycle.cpp), also against Robot.update's Pinocchio terms (it
+rebuilds the model from arrays) and in closed loop in the twin; engine="stack", the same QP as a
+stack of library tasks (control/passive_stack.py) through the compiled hierarchy program
+(HierarchyCycle, method "weighted"), its tasks and programs kept across cycles. The compiled QP
+leaves out the swing feet's force variables and the free rows; equal torques also check that
+this changes nothing."""
 
 from dataclasses import replace
 from types import SimpleNamespace
@@ -17,11 +20,14 @@ from wholebody.control.passive import PassiveWBC
 from conftest import native_cycle_or_skip
 
 native_cycle_or_skip()
+native_cycle_or_skip("_hierarchy_cycle")
+
+ENGINES = ("native", "stack")
 
 
-@pytest.fixture(scope="module")
-def trot_states(robots):
-    """(q, v, plan) of every WBC cycle of 2 s of closed-loop trot (Python engine), every 3rd kept."""
+def gait_states(robot, gait, duration):
+    """(q, v, plan) of every WBC cycle of a closed-loop run of ``gait`` (a speed ramp from
+    standing), every 3rd kept."""
     from wholebody.planning.trunk import VelocityCommand
     from wholebody.scenarios.locomotion import run_gait
     states = []
@@ -30,9 +36,21 @@ def trot_states(robots):
         q, v = sim.state()
         states.append((q, v, ctrl.last_plan.copy()))
 
-    run_gait(robots["hyq"], "passive", "trot", VelocityCommand.speed_ramp(0.0, 0.3, 1.0, 2.0),
-             duration=2.0, on_cycle=keep)
+    run_gait(robot, "passive", gait, VelocityCommand.speed_ramp(0.0, 0.3, 1.0, 2.0),
+             duration=duration, on_cycle=keep)
     return states[::3]
+
+
+@pytest.fixture(scope="module")
+def trot_states(robots):
+    """2 s of trot."""
+    return gait_states(robots["hyq"], "trot", 2.0)
+
+
+@pytest.fixture(scope="module")
+def crawl_states(robots):
+    """3 s of crawl (its legs swing one at a time)."""
+    return gait_states(robots["hyq"], "crawl", 3.0)
 
 
 def planner(robot):
@@ -90,22 +108,25 @@ CONFIGS = {
 }
 
 
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("gait", ["trot", "crawl"])
 @pytest.mark.parametrize("name", list(CONFIGS))
 @pytest.mark.parametrize("ramp", [False, True], ids=["flat", "ramp"])
-def test_matches_python_engine(robots, trot_states, name, ramp):
+def test_matches_python_engine(robots, request, gait, name, ramp, engine):
     """Same torques, forces, accelerations and task reports as the Python engine, cycle by cycle
     (the stance anchors of eq. 32 evolve in both)."""
     robot = robots["hyq"]
+    states = request.getfixturevalue(f"{gait}_states")
     options = CONFIGS[name]
     python = PassiveWBC(robot, planner=planner(robot), engine="python", **options)
-    native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
+    native = PassiveWBC(robot, planner=planner(robot), engine=engine, **options)
     if name.startswith("no feed-forward"):
         for wbc in (python, native):
             wbc.impedance.feedforward = False
             wbc.swing.feedforward = False
             wbc.configure()
     swinging = 0
-    for k, (q, v, plan) in enumerate(trot_states):
+    for k, (q, v, plan) in enumerate(states):
         plan = tilted(plan) if ramp else plan
         a = python.cycle(q, v, plan)
         b = native.cycle(q, v, plan)
@@ -113,16 +134,17 @@ def test_matches_python_engine(robots, trot_states, name, ramp):
         np.testing.assert_allclose(native.impedance.last_errors, python.impedance.last_errors,
                                    atol=1e-12)
         swinging += not plan.contact.all()
-    assert swinging > len(trot_states) // 3  # the states exercise the swing rows
+    assert swinging > len(states) // 4  # the states exercise the swing rows
 
 
-def test_heading_weights_match_python_engine(robots, trot_states):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_heading_weights_match_python_engine(robots, trot_states, engine):
     """Trunk weights that differ about x and y act in the heading frame of the trunk reference:
     with the references turned by 0.7 rad about z both engines weigh the wrench error alike."""
     robot = robots["hyq"]
     Q = (1.0, 0.8, 1.0, 1.2, 0.6, 1.0)
     python = PassiveWBC(robot, planner=planner(robot), engine="python", Q=Q)
-    native = PassiveWBC(robot, planner=planner(robot), engine="native", Q=Q)
+    native = PassiveWBC(robot, planner=planner(robot), engine=engine, Q=Q)
     turn = pin.rpy.rpyToMatrix(0.0, 0.0, 0.7)
     for k, (q, v, plan) in enumerate(trot_states[:120]):
         plan = plan.copy()
@@ -130,14 +152,15 @@ def test_heading_weights_match_python_engine(robots, trot_states):
         assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan), f"cycle {k}")
 
 
-def test_observer_matches_python_engine(robots, trot_states):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_observer_matches_python_engine(robots, trot_states, engine):
     """With the W_ext observer (its input is the engine's centroidal momentum and commanded
     wrench) both engines stay equal."""
     robot = robots["hyq"]
     python = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
                          engine="python")
     native = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
-                        engine="native")
+                        engine=engine)
     for q, v, plan in trot_states[:150]:
         assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan))
     np.testing.assert_allclose(native.impedance.external_wrench,
@@ -145,11 +168,12 @@ def test_observer_matches_python_engine(robots, trot_states):
     assert np.abs(python.impedance.external_wrench).max() > 0.1  # the observer did something
 
 
-def test_configure_hands_over_changed_settings(robots, trot_states):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_configure_hands_over_changed_settings(robots, trot_states, engine):
     """Settings are copied when the engine is built: a change is seen only after configure()."""
     robot = robots["hyq"]
     python = PassiveWBC(robot, planner=planner(robot), engine="python")
-    native = PassiveWBC(robot, planner=planner(robot), engine="native")
+    native = PassiveWBC(robot, planner=planner(robot), engine=engine)
     q, v, plan = next(s for s in trot_states if not s[2].contact.all())
     for wbc in (python, native):
         wbc.Q[:] = (1.0, 1.0, 1.0, 10.0, 10.0, 10.0)
@@ -161,13 +185,15 @@ def test_configure_hands_over_changed_settings(robots, trot_states):
     assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan))
 
 
-def test_infeasible_is_a_flagged_value(robots, rng):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_infeasible_is_a_flagged_value(robots, rng, engine):
     """An infeasible QP (normal-force floor above the weight share): ok False, the reason, and the
-    same finite, limited torque as the Python engine."""
+    same finite, limited torque as the Python engine (the compiled cycle; the stack of tasks
+    through the hierarchy program)."""
     robot = robots["hyq"]
     options = {"f_min": 1500.0, "f_max": 2000.0, "torque_limit_override": {"lf_kfe_joint": 1.0}}
     python = PassiveWBC(robot, planner=planner(robot), engine="python", **options)
-    native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
+    native = PassiveWBC(robot, planner=planner(robot), engine=engine, **options)
     q = robot.q_ref.copy()
     q[7:] += rng.normal(scale=0.02, size=robot.na)
     v = rng.normal(scale=0.05, size=robot.nv)
@@ -180,11 +206,27 @@ def test_infeasible_is_a_flagged_value(robots, rng):
                               acceleration=np.zeros(3), rotation=np.eye(3),
                               angular_velocity=np.zeros(3), angular_acceleration=np.zeros(3)))
     a, b = python.cycle(q, v, plan), native.cycle(q, v, plan)
-    assert not b.ok and "daqp" in b.status
+    assert not b.ok and "previous torque held" in b.status
     np.testing.assert_allclose(b.tau, a.tau, atol=1e-9)
     hi = robot.torque_bounds()[1]
     hi[robot.joint_names.index("lf_kfe_joint")] = 1.0
     assert np.all(np.isfinite(b.tau)) and np.all(np.abs(b.tau) <= hi + 1e-12)
+
+
+@pytest.mark.parametrize("gait", ["trot", "crawl"])
+def test_stack_tasks_and_programs_kept_across_cycles(robots, request, gait):
+    """engine="stack" builds its tasks once and only changes their references; the compiled
+    cycle builds one program per stance set met (with its swing tasks' level), no more."""
+    robot = robots["hyq"]
+    wbc = PassiveWBC(robot, planner=planner(robot), engine="stack")
+    tasks = {id(t) for t in wbc._stack.hard + wbc._stack.objective + wbc._stack.swing}
+    stance_sets = set()
+    for q, v, plan in request.getfixturevalue(f"{gait}_states"):
+        wbc.cycle(q, v, plan)
+        stance_sets.add(tuple(plan.contact.tolist()))
+        assert {id(t) for t in wbc._stack.stack.tasks()} <= tasks
+    assert len(stance_sets) > 1
+    assert len(wbc._stack_cycle._programs) == len(stance_sets)
 
 
 @pytest.mark.parametrize("field,args", [
@@ -199,9 +241,10 @@ def test_bad_state_names_the_field(robots, field, args):
         native.compute(*args(robot), 0.0)
 
 
-@pytest.mark.parametrize("kwargs,match", [({"engine": "gpu"}, "engine"),
-                                          ({"engine": "native", "swing_slack": "single"},
-                                           "engine")])
+@pytest.mark.parametrize("kwargs,match", [
+    ({"engine": "gpu"}, "engine: expected one of .*'stack'"),
+    ({"engine": "native", "swing_slack": "single"}, "engine: 'native' supports swing_slack"),
+    ({"engine": "stack", "swing_slack": "single"}, "engine: 'stack' supports swing_slack")])
 def test_bad_engine_options_name_the_field(robots, kwargs, match):
     with pytest.raises(ValueError, match=match):
         PassiveWBC(robots["hyq"], planner=planner(robots["hyq"]), **kwargs)

@@ -184,7 +184,7 @@ def test_swing_gains_checked():
         SwingGains(D=-1.0)
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_one_absurd_velocity_sample_does_not_wind_up_the_stance_anchors(robots, engine):
     """Standing still, one state sample with every velocity at 300 (a sensor glitch) moves the
     stance anchors by at most the feet's radius, so the cycles after it solve again without
@@ -199,7 +199,7 @@ def test_one_absurd_velocity_sample_does_not_wind_up_the_stance_anchors(robots, 
     assert all(after[5:]), after
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_torques_within_limits_under_an_impossible_wrench(robots, rng, plan_for, engine):
     """A 3000 N downward external wrench estimate on a weak knee: whatever the QP does, the torque
     that leaves the controller is finite and within the limits it enforces (the robot's, lowered on
@@ -236,7 +236,7 @@ def _stance_motion(robot, q, base_velocity, slip=None):
     return np.concatenate([base_velocity, joints])
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_stance_task_ignores_rolling_and_opposes_slip(robots, rng, plan_for, engine):
     """Eq. 32 is active only when a foot slips (Fahmi et al. 2019, Sect. IV): the trunk moves over
     four feet that roll without slipping, so the bottoms of the foot spheres travel (checked), and
@@ -483,7 +483,7 @@ def test_quasi_static_baseline_redistributes_forces_within_torque_limits(robots,
     assert np.all(np.abs(sol.tau) <= 0.1)
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 @pytest.mark.parametrize("gain", [0.0, 0.3])
 def test_footholds_get_the_measured_com_velocity(robots, engine, gain):
     """The Raibert feedback of the footholds (``feedback_gain`` k) is fed the CoM velocity of the
@@ -513,3 +513,20 @@ def test_footholds_get_the_measured_com_velocity(robots, engine, gain):
         base = free.touchdown_target(planner.legs[i], plan.touchdown_time[i]).position
         expected = base[:2] + gain * (measured - v_ref)
         np.testing.assert_allclose(plan.touchdown_position[i][:2], expected, atol=1e-9)
+
+
+@pytest.mark.parametrize("engine", ["python", "stack"])
+def test_nonfinite_external_wrench_is_a_held_cycle(robots, engine):
+    """An external-wrench estimate with a NaN makes W_d of eq. 4 NaN: the cycle is a held value
+    (the previous torque, finite), not an exception, and the next cycle with a finite estimate
+    solves again."""
+    robot = robots["hyq"]
+    wbc = PassiveWBC(robot, engine=engine)
+    q, v = robot.q_ref, np.zeros(robot.nv)
+    first = wbc.compute(q, v, 0.0)
+    wbc.impedance.external_wrench = np.array([0.0, 0.0, np.nan, 0.0, 0.0, 0.0])
+    held = wbc.compute(q, v, 0.004)
+    assert held.outcome is Outcome.HELD and "held" in held.status
+    np.testing.assert_allclose(held.tau, first.tau, atol=1e-12)
+    wbc.impedance.external_wrench = np.zeros(6)
+    assert wbc.compute(q, v, 0.008).ok

@@ -31,6 +31,9 @@ from the previous cycle's multipliers (the layout never changes size).
 ``engine="native"`` runs the same cycle — rigid-body terms, assembly, eq. 19 — in the compiled
 ``wholebody._passive_cycle`` (src/wholebody/native/passive_cycle.cpp, Pinocchio's C++ templates),
 writing into the very arrays DAQP is called with; this Python assembly is its tested reference.
+``engine="stack"`` solves the same QP as a stack of library tasks
+(:class:`~wholebody.control.passive_stack.PassiveStack`) through the compiled
+:class:`~wholebody.cycle.HierarchyCycle` (method "weighted").
 """
 
 from __future__ import annotations
@@ -40,16 +43,18 @@ import logging
 import math
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
 
-from ..cycle import warn_python_fallback
+from ..cycle import HierarchyCycle, native_available, warn_python_fallback
 from ..formulation import Solution, TaskReport
 from ..guard import Outcome, guard_torque
 from ..robot import Robot
 from ..robots.reference import froude_ratio
 from ..robots.roles import leg_joints
+from ..solvers import SolverSettings
 from ..solvers.backends import DaqpResult, solve_daqp_qp
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import (F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound,
@@ -57,7 +62,7 @@ from ..tasks.wrench import (F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, f
 from ..validation import finite_array, nonnegative, number, positive
 from .base import PlannedController
 from .passive_qp import FREE, PassiveQP, StancePattern
-from .passive_stack import passive_stack
+from .passive_stack import PassiveStack, passive_stack
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +128,12 @@ def independent_rank(J: np.ndarray | None = None, singular: np.ndarray | None = 
 
 
 SLACKS = ("per-direction", "single", "none")
-ENGINES = ("auto", "native", "python")
+ENGINES = ("auto", "native", "python", "stack")
+
+#: how engine "stack" solves its two levels: one weighted QP by DAQP (eq. 7), ε negligible next
+#: to the R terms, no cascade fallback (a failed QP holds the previous torque, as the other engines)
+STACK_SETTINGS = SolverSettings(method="weighted", backend="daqp", regularization=1e-12,
+                                fallback_backend=None)
 REGULARIZATIONS = ("force-normal", "force-parallel", "torque")
 
 
@@ -152,7 +162,8 @@ class PassiveConfig:
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
     ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, else Python with
-    one logged warning).
+    one logged warning; "stack": the same QP as a two-level stack of library tasks solved by
+    the compiled :class:`~wholebody.cycle.HierarchyCycle`, :class:`PassiveStack`).
     """
 
     mu: float | None = None
@@ -183,9 +194,9 @@ class PassiveConfig:
                              f"got '{self.regularization}'")
         if self.engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got '{self.engine}'")
-        if self.engine == "native" and self.swing_slack == "single":
-            raise ValueError("engine: 'native' supports swing_slack 'per-direction' and 'none', "
-                             "not 'single'")
+        if self.engine in ("native", "stack") and self.swing_slack == "single":
+            raise ValueError(f"engine: '{self.engine}' supports swing_slack 'per-direction' and "
+                             "'none', not 'single'")
         if self.mu is not None:
             number(self.mu, "mu", low=0.0, low_open=True)
         number(self.f_min, "f_min", low=0.0)
@@ -352,9 +363,13 @@ class PassiveWBC(PlannedController):
         #: than three joints): each cycle they are replaced by an independent set
         self.dependent_stance = stance_rank(robot, self.contacts) < 3 * c
         self.engine = self._resolve_engine(config, self.dependent_stance)
-        self._native = None
+        self._native = self._stack = None
         if self.engine == "native":
             self._native = self._build_native()
+        elif self.engine == "stack":
+            self._stack = PassiveStack(self)
+            self._stack_cycle = HierarchyCycle(robot, self._stack.stack, engine="native",
+                                               settings=STACK_SETTINGS)
 
     # the QP's arrays (those of the last cycle)
     A = property(lambda self: self.qp.A)
@@ -371,6 +386,8 @@ class PassiveWBC(PlannedController):
         if self._native is not None:
             self._native.update(self.robot.q, self.robot.v)
             return self._solve_native(plan, self.robot.q)
+        if self._stack is not None:
+            return self._solve_stack(plan)
         t0 = time.perf_counter()
         self.last_plan = plan
         bad = nonfinite_plan_field(plan)
@@ -470,8 +487,15 @@ class PassiveWBC(PlannedController):
     def _swing_rows(self, plan, pat: StancePattern) -> None:
         """Swing feet: eq. 6 (desired foot acceleration) and eq. 12 rows J q̈ = v̇_d − J̇ v, all
         swing feet at once; the planner's swing trajectory is the foot frame's."""
-        robot, nv = self.robot, self.robot.nv
-        sw = pat.swing
+        nv = self.robot.nv
+        Jsw, target = self._swing_targets_of(plan, pat.swing)
+        self.qp.set_swing(Jsw.reshape(-1, nv), target.reshape(-1), pat, self.swing_slack,
+                          self.slack_weight)
+
+    def _swing_targets_of(self, plan, sw) -> tuple[np.ndarray, np.ndarray]:
+        """(J_sw (k, 3, nv), v̇_d − J̇ v (k, 3)) of the swing feet ``sw`` (indices), kept in
+        ``_swing_targets``."""
+        robot = self.robot
         idx = self._contact_order[sw]
         legs = self._leg[sw]
         Jsw = robot.contact_frame_jacobians[idx, :3]  # (k, 3, nv), frame origins (sphere centres)
@@ -483,8 +507,7 @@ class PassiveWBC(PlannedController):
             a_d += plan.foot_acceleration[legs]
         target = a_d - robot.contact_frame_drifts[idx, :3]
         self._swing_targets[sw] = target
-        self.qp.set_swing(Jsw.reshape(-1, nv), target.reshape(-1), pat, self.swing_slack,
-                          self.slack_weight)
+        return Jsw, target
 
     def _solve_qp(self) -> DaqpResult:
         """DAQP on the assembled QP (warm-started)."""
@@ -585,14 +608,17 @@ class PassiveWBC(PlannedController):
         """``config.engine``, with "auto" resolved: native when built and the slack and the
         stance rows supported."""
         if dependent_stance:
-            if config.engine == "native":
-                raise ValueError("engine: 'native' needs linearly independent stance rows (legs "
-                                 "of three joints or more); this robot's are dependent, use "
-                                 "engine='python' or 'auto'")
+            if config.engine in ("native", "stack"):
+                raise ValueError(f"engine: '{config.engine}' needs linearly independent stance "
+                                 "rows (legs of three joints or more); this robot's are "
+                                 "dependent, use engine='python' or 'auto'")
             if config.engine == "auto":
                 warn_python_fallback("PassiveWBC", "the stance feet's rows are linearly "
                                                    "dependent (legs of fewer than three joints)")
                 return "python"
+        if config.engine == "stack" and not native_available():
+            raise ValueError("engine: 'stack' needs the compiled extension "
+                             "wholebody._hierarchy_cycle (install with a C++ compiler)")
         if config.engine != "auto":
             return config.engine
         if config.swing_slack == "single":
@@ -665,7 +691,12 @@ class PassiveWBC(PlannedController):
             "steepness": float(lim.steepness)}
 
     def configure(self) -> None:
-        """Hand changed weights, gains or limits to the native engine (no-op for "python")."""
+        """Hand changed weights, gains or limits to the native engine (the stack engine's tasks
+        built anew; no-op for "python")."""
+        if self._stack is not None:
+            self._stack = PassiveStack(self)
+            self._stack_cycle = HierarchyCycle(self.robot, self._stack.stack, engine="native",
+                                               settings=STACK_SETTINGS)
         if self._native is not None:
             self._native.configure(self._native_spec())
             if self._nb["errors"] is not self.impedance.last_errors:  # a new impedance object
@@ -729,6 +760,62 @@ class PassiveWBC(PlannedController):
         return self._report(ok, qdd, F, tau, status, commanded, nb["wrench_d"].copy(), stance,
                             swing_errors, {"assemble": t1 - t0, "solve": t2 - t1,
                                            "iterations": result.iterations})
+
+    # ------------------------------------------------------------------ the stack engine
+    def _solve_stack(self, plan) -> Solution:
+        """:meth:`solve` through the compiled hierarchy program: the controller's state-dependent
+        references (stance anchors, observer, W_d) from the robot's cached state as the Python
+        engine, then the persistent :class:`PassiveStack` updated and solved by its
+        :class:`~wholebody.cycle.HierarchyCycle` (weighted, one program per stance set)."""
+        t0 = time.perf_counter()
+        self.last_plan = plan
+        robot = self.robot
+        bad = nonfinite_plan_field(plan)
+        if bad is not None:
+            return self._bad_plan(plan, bad, robot.q, robot.h[6:], t0)
+        stance = plan.contact[self._leg]
+        self._tau_bounds = self._torque_bounds()
+        points = robot.contact_points[self._contact_order]
+        J = robot.stacked_contact_jacobian(self.contacts)
+        self._stance_anchors(stance, points, (J @ robot.v).reshape(-1, 3))
+        if self.observer is not None and self._commanded_wrench is not None:
+            self.impedance.external_wrench = self.observer.update(
+                robot.h_G, self._commanded_wrench, robot.mass, self.control_period)
+        W_d = self.impedance.wrench(robot, plan.trunk)
+        t1 = time.perf_counter()
+        # failed cycles are values, as in the Python engine: a W_d that is not finite (e.g. the
+        # external wrench), NaN/inf task rows (the state was checked by robot.update)
+        sol = SimpleNamespace(ok=False, status="the desired trunk wrench W_d is not finite",
+                              timings={})
+        if math.isfinite(W_d.sum()):
+            _, variables = self._stack.update(plan, W_d[:3])
+            t1 = time.perf_counter()
+            try:
+                sol = self._stack_cycle.solve(robot.q, robot.v, variables)
+            except ValueError as exc:
+                sol.status = str(exc)
+        t2 = time.perf_counter()
+        F, swing_errors = np.zeros(self.nf), None
+        if sol.ok:
+            qdd, tau, status = sol.qdd, sol.tau, "solved"
+            for i, name in enumerate(self.contacts):
+                if name in sol.forces:
+                    F[3 * i:3 * i + 3] = sol.forces[name]
+            sw = np.flatnonzero(~stance)
+            if sw.size:
+                Jsw, target = self._swing_targets_of(plan, sw)
+                swing_errors = np.zeros(len(self.contacts))
+                swing_errors[sw] = np.linalg.norm(Jsw @ qdd - target, axis=1)
+        else:
+            qdd, F, tau, status = self._failed(sol.status, robot.h[6:])
+        parts = sol.timings
+        rows = parts.get("update", 0.0) + parts.get("rows", 0.0)
+        G = contact_wrench_map(robot, self.contacts, self._G, points)
+        return self._report(sol.ok, qdd, F, tau, status, G @ F, W_d, stance, swing_errors,
+                            {"assemble": t1 - t0 + rows, "solve": t2 - t1 - rows,
+                             "prepare": t1 - t0, "update": parts.get("update", np.nan),
+                             "rows": parts.get("rows", np.nan),
+                             "qp": parts.get("solve", np.nan)})
 
     # ------------------------------------------------------------------ the same problem as a stack
     def as_stack(self, plan):

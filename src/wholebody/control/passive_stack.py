@@ -1,7 +1,8 @@
 """PassiveWBC's QP (Fahmi et al. 2019, eq. 7) as a two-level stack of library tasks: hard
 constraints (eqs. 9-10/32, 13-18, hard swing rows of eq. 11), then the weighted objective (eqs.
-4/7a/8, the regulariser, swing tasks softened by eq. 33) — for ``Formulation.solve`` with
-``SolverSettings(method="weighted")``, an independent assembly of the same problem."""
+4/7a/8, the regulariser, swing tasks softened by eq. 33) — for ``Formulation.solve`` or a
+:class:`~wholebody.cycle.HierarchyCycle` with ``SolverSettings(method="weighted")``, an
+independent assembly of the same problem."""
 
 from __future__ import annotations
 
@@ -16,43 +17,86 @@ from ..tasks.wrench import TrunkWrenchTask
 from ..variables import Variables
 
 
+class PassiveStack:
+    """The tasks of a :class:`~wholebody.control.passive.PassiveWBC`'s QP, built once; each
+    :meth:`update` sets their references (stance anchors and normals, trunk reference, posture
+    and lean, swing references) for a plan and puts the swing feet's tasks on their level, so
+    that a compiled cycle keeps one program per stance set. The weights and gains are the
+    controller's when built. The per-contact tasks apply to all active contacts: the stance
+    feet of :meth:`update`'s variables. The single-slack mode has no stack form (its cost is an
+    ∞-norm, not a weighted task)."""
+
+    def __init__(self, wbc):
+        if wbc.swing_slack == "single":
+            raise ValueError("swing_slack: 'single' has no two-level stack form")
+        self.wbc = wbc
+        robot = wbc.robot
+        self.contact = ContactConstraint(kp=wbc.K_st, kd=wbc.D_st)
+        self.friction = FrictionCone(wbc.mu)
+        self.normal_bounds = NormalForceBounds(wbc.f_min, wbc.f_max)
+        self.hard = [NewtonEuler(), self.contact, self.friction, self.normal_bounds,
+                     wbc.torque_limits, wbc.joint_limits]
+        self.wrench = TrunkWrenchTask(wbc.impedance, weight=np.sqrt(wbc.Q), heading=True)
+        self.posture = AccelerationTarget(np.zeros(robot.nv), weight=np.sqrt(wbc.R_qdd))
+        self.objective = [self.wrench, self.posture,
+                          ForceRegularizer(weight=np.sqrt(wbc.R_force))]
+        self.tangential = None
+        if wbc.regularization == "torque":
+            self.objective.append(ContactTorqueRegularizer(weight=np.sqrt(wbc.torque_weights)))
+        elif wbc.tangential_weight:
+            self.tangential = TangentialForceRegularizer(
+                weight=np.sqrt(wbc.tangential_weight), mu=wbc.mu)
+            self.objective.append(self.tangential)
+        self.swing = [FrameTask(robot.contact(n).frame, kp=wbc.swing.K, kd=wbc.swing.D,
+                                mask="position", name=f"swing {n}",
+                                weight=1.0 if wbc.swing_slack == "none"
+                                else np.sqrt(wbc.slack_weight))
+                      for n in wbc.contacts]
+        self.swing_level = 0 if wbc.swing_slack == "none" else 1
+        self.stack = Stack([list(self.hard), list(self.objective)])
+        self._variables: dict[tuple, Variables] = {}
+        self._normals = None  # (stance, their normals) last set on the tasks
+
+    def update(self, plan, lean=None) -> tuple[Stack, Variables]:
+        """The stack and variables of ``plan`` at the controller's state (its stance anchors of
+        the cycle; ``lean``: the desired net force of the cycle, for "force-parallel")."""
+        wbc, robot = self.wbc, self.wbc.robot
+        contacts, leg = wbc.contacts, wbc._leg
+        in_stance = plan.contact[leg].tolist()
+        stance = tuple(n for n, s in zip(contacts, in_stance) if s)
+        for i, n in enumerate(contacts):  # the task anchors frame origins, the controller the
+            if in_stance[i]:             # sphere bottoms
+                self.contact.anchors[n] = wbc._anchors[i] + [0.0, 0.0, wbc._radii[i]]
+        normals = plan.touchdown_normal[leg[np.asarray(in_stance)]]
+        if self._normals is None or not np.array_equal(normals, self._normals[1]) \
+                or self._normals[0] != stance:  # checked and set when they change only
+            self._normals = stance, normals.copy()
+            self.friction.normals = self.normal_bounds.normals = dict(zip(stance, normals))
+            if self.tangential is not None:
+                self.tangential.normals = self.friction.normals
+        self.wrench.reference = plan.trunk
+        self.posture.target = np.concatenate([np.zeros(6), wbc.posture_acceleration()])
+        if self.tangential is not None:
+            self.tangential.lean = lean if wbc.regularization == "force-parallel" else None
+        levels = [list(self.hard), list(self.objective)]
+        for i, task in enumerate(self.swing):
+            if in_stance[i]:
+                continue
+            foot = leg[i]
+            task.position = plan.foot_position[foot]
+            task.velocity[:3] = plan.foot_velocity[foot]
+            task.acceleration[:3] = plan.foot_acceleration[foot] if wbc.swing.feedforward else 0.0
+            levels[self.swing_level].append(task)
+        self.stack.levels[:] = levels
+        variables = self._variables.get(stance)
+        if variables is None:
+            variables = self._variables[stance] = Variables(robot, stance)
+        return self.stack, variables
+
+
 def passive_stack(wbc, plan):
     """The QP of ``wbc.solve(plan)`` (a :class:`~wholebody.control.passive.PassiveWBC`) as
-    (stack, variables). Needs a prior ``wbc.solve`` on the same plan (stance anchors). The
-    single-slack mode has no stack form (its cost is an ∞-norm, not a weighted task)."""
-    if wbc.swing_slack == "single":
-        raise ValueError("swing_slack: 'single' has no two-level stack form")
-    robot, contacts, leg = wbc.robot, wbc.contacts, wbc._leg
-    stance = [n for i, n in enumerate(contacts) if plan.contact[leg[i]]]
-    swing = [(i, n) for i, n in enumerate(contacts) if not plan.contact[leg[i]]]
-    normals = {n: plan.touchdown_normal[leg[contacts.index(n)]] for n in stance}
-    contact = ContactConstraint(contacts=stance, kp=wbc.K_st, kd=wbc.D_st)
-    for n in stance:  # the task anchors frame origins; the controller's are the sphere bottoms
-        i = contacts.index(n)
-        contact.anchors[n] = wbc._anchors[i] + [0.0, 0.0, robot.contact(n).spec.radius]
-    hard = [NewtonEuler(), contact, FrictionCone(wbc.mu, contacts=stance, normals=normals),
-            NormalForceBounds(wbc.f_min, wbc.f_max, contacts=stance, normals=normals),
-            wbc.torque_limits, wbc.joint_limits]
-    wrench = TrunkWrenchTask(wbc.impedance, weight=np.sqrt(wbc.Q), contacts=stance)
-    wrench.reference = plan.trunk
-    posture = np.concatenate([np.zeros(6), wbc.posture_acceleration()])
-    objective = [wrench, AccelerationTarget(posture, weight=np.sqrt(wbc.R_qdd)),
-                 ForceRegularizer(weight=np.sqrt(wbc.R_force), contacts=stance)]
-    if wbc.regularization == "torque":
-        objective.append(ContactTorqueRegularizer(weight=np.sqrt(wbc.torque_weights),
-                                                  contacts=stance))
-    elif wbc.tangential_weight:
-        lean = wbc.last_desired_wrench[:3] if wbc.regularization == "force-parallel" else None
-        objective.append(TangentialForceRegularizer(weight=np.sqrt(wbc.tangential_weight),
-                                                    contacts=stance, normals=normals, lean=lean,
-                                                    mu=wbc.mu))
-    for i, n in swing:
-        foot = leg[i]
-        task = FrameTask(robot.contact(n).frame, kp=wbc.swing.K, kd=wbc.swing.D,
-                         mask="position", name=f"swing {n}",
-                         weight=1.0 if wbc.swing_slack == "none" else np.sqrt(wbc.slack_weight))
-        task.position = np.array(plan.foot_position[foot], dtype=float)
-        task.velocity[:3] = plan.foot_velocity[foot]
-        task.acceleration[:3] = plan.foot_acceleration[foot]
-        (hard if wbc.swing_slack == "none" else objective).append(task)
-    return Stack([hard, objective]), Variables(robot, stance)
+    (stack, variables), new tasks. Needs a prior ``wbc.solve`` on the same plan (stance anchors,
+    the desired wrench)."""
+    lean = None if wbc.last_desired_wrench is None else wbc.last_desired_wrench[:3]
+    return PassiveStack(wbc).update(plan, lean)

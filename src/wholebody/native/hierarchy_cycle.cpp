@@ -366,6 +366,15 @@ private:
        {true, {{"targets", 1, Unit::ContactDim}}, {}, &C::rows_contact_dims, &C::fill_force_regularizer}},
       {"acceleration_regularizer", {true, {}, {}, &C::rows_nv, &C::fill_acceleration_regularizer}},
       {"acceleration_target", {true, {{"target", 1, Unit::Nv}}, {}, &C::rows_nv, &C::fill_acceleration_target}},
+      {"trunk_wrench",
+       {true, {{"K_x", 3}, {"D_x", 3}, {"K_theta", 3}, {"D_theta", 3}, {"feedforward"}, {"external_wrench", 6},
+               {"position", 3}, {"velocity", 3}, {"acceleration", 3}, {"rotation", 9}, {"angular_velocity", 3},
+               {"angular_acceleration", 3}, {"heading"}},
+        {}, &C::rows_fixed<6>, &C::fill_trunk_wrench}},
+      {"contact_torque_regularizer", {true, {}, {}, &C::rows_na, &C::fill_contact_torque_regularizer}},
+      {"tangential_force_regularizer",
+       {true, {{"mu"}, {"lean", 3}, {"normals", 3, Unit::Contact}}, {}, &C::rows_per_contact<2>,
+        &C::fill_tangential_force_regularizer}},
       {"joint_trajectory",
        {true, {{"position", 1, Unit::Rows}, {"velocity", 1, Unit::Rows}, {"acceleration", 1, Unit::Rows},
                {"kp", 1, Unit::Rows}, {"kd", 1, Unit::Rows}},
@@ -486,6 +495,8 @@ private:
   Index rows_na(const Program &, const Slot &) const { return na_; }
   Index rows_contact_dims(const Program & P, const Slot & s) const { return contact_dims(s, P); }
   Index rows_contacts(const Program &, const Slot & s) const { return Index(s.contacts.size()); }
+  template<Index N>
+  Index rows_per_contact(const Program &, const Slot & s) const { return N * Index(s.contacts.size()); }
   Index rows_picked(const Program &, const Slot & s) const { return Index(s.pick(0).size()); }
   Index rows_posture(const Program &, const Slot & s) const { return s.flag(0) ? nv_ : na_; }
   Index soles(const Program & P, const Slot & s) const
@@ -794,6 +805,75 @@ private:
   {
     A.leftCols(nv_).setIdentity();
     e = Map<const VectorXd>(s.p(0), nv_);
+  }
+
+  // Fahmi et al. 2019 eqs. 2, 4, 8: sum_i [f_i; (p_i - c) x f_i] = W_com,d (point contacts), the
+  // trunk impedance's desired wrench (TrunkImpedance.wrench); with "heading" both sides in the
+  // heading frame of the reference rotation (wrench.heading_rotation), so that per-row weights
+  // are the weights about that frame (wrench.heading_weights)
+  void fill_trunk_wrench(const Program & P, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const Vector3d c = data_.com[0];
+    for (Index a : s.contacts)
+    {
+      auto B = A.block(0, nv_ + P.offsets[a], 6, 3);
+      B.topRows(3).setIdentity();
+      B.bottomRows(3) = pinocchio::skew(Vector3d(points_.row(P.contacts[a]).transpose() - c));
+    }
+    using Vec3 = Map<const Vector3d>;
+    const Vec3 K_x(s.p(0)), D_x(s.p(1)), K_theta(s.p(2)), D_theta(s.p(3));
+    const bool feedforward = *s.p(4) != 0.0, heading = *s.p(12) != 0.0;
+    const Matrix3d R_ref = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(s.p(9));
+    const Matrix3d R = data_.oMi[1].rotation();
+    const Vector3d omega = R * v_.segment<3>(3);
+    Vector6d w;
+    w.head<3>() = K_x.cwiseProduct(Vec3(s.p(6)) - c) + D_x.cwiseProduct(Vec3(s.p(7)) - data_.vcom[0]);
+    w.tail<3>() = K_theta.cwiseProduct(pinocchio::log3(Matrix3d(R_ref * R.transpose())))
+                  + D_theta.cwiseProduct(Vec3(s.p(10)) - omega);
+    w[2] += mass_ * kGravity; // gravity compensation
+    if (feedforward)          // W_ff with the locked centroidal inertia
+    {
+      w.head<3>() += mass_ * Vec3(s.p(8));
+      w.tail<3>() += data_.Ig.inertia().matrix() * Vec3(s.p(11));
+    }
+    w -= Map<const Vector6d>(s.p(5));
+    e = w;
+    const double norm = std::hypot(R_ref(0, 0), R_ref(1, 0));
+    if (!heading || norm == 0.0)
+      return;
+    Matrix3d Rh = Matrix3d::Identity(); // the rotation about z by the heading, transposed
+    Rh.topLeftCorner<2, 2>() << R_ref(0, 0) / norm, R_ref(1, 0) / norm, -R_ref(1, 0) / norm, R_ref(0, 0) / norm;
+    for (Index a : s.contacts)
+      for (Index half : {0, 3})
+      {
+        auto B = A.block(half, nv_ + P.offsets[a], 3, 3);
+        B = (Rh * B).eval();
+      }
+    e.head(3) = Rh * w.head<3>();
+    e.tail(3) = Rh * w.tail<3>();
+  }
+
+  // joint torques of the contact forces, -J_st,j^T lambda (Fahmi et al. 2019 Sect. V-D, fn. 16)
+  void fill_contact_torque_regularizer(const Program & P, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    for (Index a : s.contacts)
+    {
+      const Index d = contact_dims_[P.contacts[a]];
+      A.middleCols(nv_ + P.offsets[a], d) = -P.Jc.block(P.offsets[a], 6, d, na_).transpose();
+    }
+    e.setZero();
+  }
+
+  // the force's part off the lean's direction about each normal ≈ 0 (Fahmi et al. 2019 Sect. V-D)
+  void fill_tangential_force_regularizer(const Program & P, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const double mu = *s.p(0);
+    const Map<const Vector3d> lean(s.p(1));
+    const double * normals = s.p(2);
+    for (std::size_t k = 0; k < s.contacts.size(); ++k)
+      A.block(2 * Index(k), nv_ + P.offsets[s.contacts[k]], 2, 3) =
+        tangent_rows(Map<const Vector3d>(normals + 3 * k), lean, mu);
+    e.setZero();
   }
 
   // named joints track (position, velocity, acceleration) with a PD (Herzog et al. 2016 Sect. 5.4)

@@ -37,7 +37,9 @@ PARAMETERS = (
               **TIME_SPAN),
     GAIT,
     Parameter("engine", "auto", "passive WBC engine: native (the compiled cycle), python (the "
-                                "reference) or auto (native when built)", choices=ENGINES),
+                                "reference), stack (the same QP as a stack of tasks through the "
+                                "compiled hierarchy program) or auto (native when built)",
+              choices=ENGINES),
     Parameter("baseline_feedforward", True, "quasi-static baseline: add the trunk impedance's "
               "feed-forward W_ff = M_com v̇_com,d (as the passive WBC does); false: feedback and "
               "gravity compensation only"),
@@ -86,10 +88,11 @@ def validate(robot, params: dict) -> None:
     check_quadruped(robot, "the crawl scenario", params["gait"])
     if params["engine"] not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
-    if params["engine"] == "native" and stance_rank(robot, robot.contact_names) < 3 * len(
-            robot.contact_names):
-        raise ValueError("--set engine: 'native' needs linearly independent stance rows (legs of "
-                         f"three joints or more); {robot.name}'s are dependent: use auto or python")
+    if params["engine"] in ("native", "stack") and stance_rank(
+            robot, robot.contact_names) < 3 * len(robot.contact_names):
+        raise ValueError(f"--set engine: '{params['engine']}' needs linearly independent stance "
+                         f"rows (legs of three joints or more); {robot.name}'s are dependent: use "
+                         "auto or python")
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,

@@ -8,10 +8,10 @@ import math
 import numpy as np
 
 from ..robot import FREE_FLYER_NV
-from .base import (Task, TaskRows, checked_attribute, contact_list, contact_subset, normal_map,
-                   scalar_rule, vector_rule)
+from .base import (Task, TaskRows, checked_attribute, contact_list, contact_subset, scalar_rule,
+                   vector_rule)
 from . import schema
-from .contact import WORLD_UP, tangent_rows
+from .contact import _PerContact, tangent_rows
 
 
 class AccelerationRegularizer(Task):
@@ -42,7 +42,7 @@ class AccelerationTarget(AccelerationRegularizer):
         return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None, target=self.target.copy())
 
 
-class TangentialForceRegularizer(Task):
+class TangentialForceRegularizer(_PerContact):
     """Tangential components of point-contact forces ≈ 0: forces near the cone normals (Sect. V-D,
     "robustness to uncertainties in the friction parameters"). 2 rows per contact. ``contacts``:
     None = all active contacts, an empty list = none (no rows); ``normals`` finite, non-zero.
@@ -52,27 +52,33 @@ class TangentialForceRegularizer(Task):
     its ratio capped at ``mu``), so that every contact uses the same friction ratio and none is
     pushed to its cone's edge while others stay near the normal."""
 
-    contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
-    normals = checked_attribute(normal_map, "contact name -> non-zero surface normal.")
     lean = checked_attribute(vector_rule(3, optional=True), "None or a finite force (3,).")
     mu = checked_attribute(scalar_rule(low=0.0, low_open=True, allow_inf=True),
                            "Largest friction ratio of the lean, > 0 (inf: no cap).")
+    kernel = "tangential_force_regularizer"
+    # a lean of zero presses into no surface: the same rows as None
+    params = (schema.scalar("mu"),
+              schema.vector("lean", 3,
+                            get=lambda t, layout, state: 0.0 if t.lean is None else t.lean),
+              schema.vector("normals", 3, "contact",
+                            get=lambda t, layout, state: t.stacked_normals(layout)))
 
     def __init__(self, name=None, weight=1.0, contacts=None, normals=None, lean=None,
                  mu: float = math.inf):
-        super().__init__(name, weight)
-        self.contacts = contacts
-        self.normals = normals
+        super().__init__(name, weight, contacts, normals)
         self.lean = lean
         self.mu = mu
+
+    def row_count(self, layout):
+        return 2 * layout.count("contact")
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
         A = np.zeros((2 * len(names), variables.n_lambda))
         for i, n in enumerate(names):
             sl = variables.lambda_slices[n]
-            A[2 * i:2 * i + 2, sl.start:sl.start + 3] = tangent_rows(
-                np.asarray(self.normals.get(n, WORLD_UP), dtype=float), self.lean, self.mu)
+            A[2 * i:2 * i + 2, sl.start:sl.start + 3] = tangent_rows(self.normal(n), self.lean,
+                                                                      self.mu)
         return TaskRows(qdd=None, lam=A, tau=None, target=np.zeros(A.shape[0]))
 
 
@@ -82,10 +88,15 @@ class ContactTorqueRegularizer(Task):
     None = all active contacts, an empty list = none (the rows are then zero)."""
 
     contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
+    per_contact = True
+    kernel = "contact_torque_regularizer"
 
     def __init__(self, name=None, weight=1.0, contacts=None):
         super().__init__(name, weight)
         self.contacts = contacts
+
+    def row_count(self, layout):
+        return layout.robot.na
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)

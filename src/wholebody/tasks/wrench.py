@@ -17,6 +17,7 @@ from ..planning.trunk import TrunkState
 from ..robot import GRAVITY
 from ..robots import reference
 from ..validation import finite_array, nonnegative, positive
+from . import schema
 from .base import Task, TaskRows, checked_attribute, contact_list, contact_subset, flag
 
 # The trunk gains and normal-force bound of Fahmi et al. 2019, Sect. V (K_x = 2000 N/m,
@@ -124,16 +125,22 @@ def heading_weights(Q, rotation) -> np.ndarray:
     W = np.diag(Q)
     if Q[0] == Q[1] and Q[3] == Q[4]:
         return W
+    Rh = heading_rotation(rotation)
+    W[:3, :3] = (Rh * Q[:3]) @ Rh.T
+    W[3:, 3:] = (Rh * Q[3:]) @ Rh.T
+    return W
+
+
+def heading_rotation(rotation) -> np.ndarray:
+    """R_h (3 x 3): the rotation about z by the heading of ``rotation`` (the direction of its x
+    axis on the ground; a vertical x axis: the identity)."""
     R = np.asarray(rotation, dtype=float)
     c, s = R[0, 0], R[1, 0]
     norm = math.hypot(c, s)
     if norm == 0.0:
-        return W
+        return np.eye(3)
     c, s = c / norm, s / norm
-    Rh = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    W[:3, :3] = (Rh * Q[:3]) @ Rh.T
-    W[3:, 3:] = (Rh * Q[3:]) @ Rh.T
-    return W
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def force_bound(robot, weights: float = F_MAX_WEIGHTS) -> float:
@@ -232,23 +239,59 @@ class TrunkWrenchTask(Task):
     the contact forces (point contacts). ``reference`` is a trunk sample (:class:`~wholebody.planning.trunk.TrunkState`: CoM position/velocity/
     acceleration, rotation, angular velocity/acceleration, world axes);
     ``impedance`` a :class:`TrunkImpedance`; weights are per row (√ of the diagonal of Q).
-    ``contacts``: None = all active contacts, an empty list = none."""
+    ``contacts``: None = all active contacts, an empty list = none. ``heading``: both sides in
+    the heading frame of the reference rotation (:func:`heading_rotation`), so that the per-row
+    weights are the weights about that frame, as :func:`heading_weights`."""
 
     contacts = checked_attribute(contact_list, "None (all active contacts) or contact names.")
+    heading = checked_attribute(flag, "Rows in the heading frame of the reference rotation.")
+    per_contact = True
+    kernel = "trunk_wrench"
+    params = (schema.diagonal("K_x", 3, get=lambda t, layout, state: t.impedance.K_x),
+              schema.diagonal("D_x", 3, get=lambda t, layout, state: t.impedance.D_x),
+              schema.diagonal("K_theta", 3, get=lambda t, layout, state: t.impedance.K_theta),
+              schema.diagonal("D_theta", 3, get=lambda t, layout, state: t.impedance.D_theta),
+              schema.flag("feedforward", get=lambda t, layout, state: t.impedance.feedforward),
+              schema.vector("external_wrench", 6,
+                            get=lambda t, layout, state: t.impedance.external_wrench),
+              schema.vector("position", 3, get=lambda t, layout, state: t.reference.position),
+              schema.vector("velocity", 3, get=lambda t, layout, state: t.reference.velocity),
+              schema.vector("acceleration", 3,
+                            get=lambda t, layout, state: t.reference.acceleration),
+              schema.matrix("rotation", 9, get=lambda t, layout, state: t.reference.rotation),
+              schema.vector("angular_velocity", 3,
+                            get=lambda t, layout, state: t.reference.angular_velocity),
+              schema.vector("angular_acceleration", 3,
+                            get=lambda t, layout, state: t.reference.angular_acceleration),
+              schema.flag("heading"))
 
     def __init__(self, impedance: TrunkImpedance | None = None, name="trunk wrench", weight=1.0,
-                 contacts=None):
+                 contacts=None, heading: bool = False):
         super().__init__(name, weight)
         self.impedance = impedance or TrunkImpedance()
         self.reference = TrunkState()
         self.contacts = contacts
+        self.heading = heading
+
+    def row_count(self, layout):
+        self._point_contacts(layout.robot, layout.contacts)
+        return 6
+
+    @staticmethod
+    def _point_contacts(robot, names) -> None:
+        if any(robot.contact(n).dim != 3 for n in names):
+            raise ValueError("TrunkWrenchTask: point contacts (3D forces) only")
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
-        if any(robot.contact(n).dim != 3 for n in names):
-            raise ValueError("TrunkWrenchTask: point contacts (3D forces) only")
+        self._point_contacts(robot, names)
         G = contact_wrench_map(robot, names)
         A = np.zeros((6, variables.n_lambda))
         for i, n in enumerate(names):
             A[:, variables.lambda_slices[n]] = G[:, 3 * i:3 * i + 3]
-        return TaskRows(qdd=None, lam=A, tau=None, target=self.impedance.wrench(robot, self.reference))
+        target = self.impedance.wrench(robot, self.reference)
+        if self.heading:
+            Rt = heading_rotation(self.reference.rotation).T
+            A, target = A.reshape(2, 3, -1), target.reshape(2, 3)
+            A, target = (Rt @ A).reshape(6, -1), (target @ Rt.T).reshape(6)
+        return TaskRows(qdd=None, lam=A, tau=None, target=target)
