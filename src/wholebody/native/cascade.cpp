@@ -15,6 +15,8 @@
 //   x, costs, ... = run.result()
 //   (or run.advance_daqp(DaqpSolver(...)): the level QPs solved by DAQP here, see DaqpSolver)
 //   run.reset()  # and again, on the arrays' new contents
+// WeightedRun (below) is the weighted method's single QP (weighted._solve_weighted) compiled the
+// same way; both hold the level arrays through LevelArrays.
 #include <Eigen/Dense>
 
 #include <pybind11/eigen.h>
@@ -1188,7 +1190,7 @@ private:
 // row counts; the arrays are held, not copied (a control loop's level buffers). Usage:
 //   run = WeightedRun(B, b, w, C, lower, upper, V, names, n, eps, feas_tol)
 //   kind = run.solve_daqp(DaqpSolver(...))  # or: kind = run.give(backend(*run.qp()))
-//   x, costs, residuals, violations, qp_seconds = run.result()  # when kind == "done"
+//   x, costs, residuals, violations, level_seconds, qp_seconds = run.result()  # kind "done"
 class WeightedRun : public LevelArrays
 {
 public:
@@ -1263,10 +1265,10 @@ public:
   // a free row then; the cascade leaves such QPs to Python alike).
   std::string solve_daqp(DaqpSolver & daqp)
   {
-    const auto t0 = Clock::now();
     assemble();
     if (rows_ == 0)
       return "qp";
+    const auto t0 = Clock::now();
     status_ = daqp.solve(g_, A_.topRows(rows_), lower_.data(), upper_.data(), y_, H_.data());
     qp_time_ = std::chrono::duration<double>(Clock::now() - t0).count();
     if (!status_.empty())
@@ -1285,11 +1287,14 @@ public:
     return accept();
   }
 
-  // (x, costs, residuals, violations — LevelArrays::evaluate —, seconds in DAQP here).
+  // (x, costs, residuals, violations — LevelArrays::evaluate —, per-level seconds: NaN, one QP
+  // for all levels, seconds in DAQP here).
   py::tuple result() const
   {
     const py::tuple ev = evaluate(x_);
-    return py::make_tuple(VectorXd(x_), ev[0], ev[1], ev[2], qp_time_);
+    return py::make_tuple(VectorXd(x_), ev[0], ev[1], ev[2],
+                          VectorXd::Constant(Index(nl_), std::numeric_limits<double>::quiet_NaN()),
+                          qp_time_);
   }
 
   const std::string & status() const { return status_; }

@@ -9,6 +9,7 @@ The method modules (:mod:`.cascade`, :mod:`.compiled_cascade`, :mod:`.daqp_hiera
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -155,7 +156,7 @@ def _finish(levels, x, status, ok, t_start, level_times, method, solved, zdims, 
     """The HierarchySolution of x; ``evaluated``: :func:`evaluate_levels` at x if already computed
     (compiled), ``timings``: entries besides "total" and "levels"."""
     costs, res, vio = evaluated if evaluated is not None else evaluate_levels(levels, x)
-    if ok and not np.isfinite(costs.sum()):  # entries so large that the products overflow
+    if ok and not math.isfinite(np.add.reduce(costs)):  # entries so large the products overflow
         ok = False
         status = (f"level costs not finite at the solution (level "
                   f"{int(np.argmin(np.isfinite(costs)))}: entries too large, the products overflow)")

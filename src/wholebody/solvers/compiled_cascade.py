@@ -48,6 +48,8 @@ except ImportError:  # not built (no C++ compiler at install): the Python cascad
 
 __all__ = ["BoundCascade", "BoundWeighted"]
 
+_NO_DIMS = np.zeros(0, dtype=int)  # the weighted QP's null-space dimensions: none (shared: empty)
+
 
 def _solve_compiled(levels, n, settings, fls, tols, t0):
     """The cascade compiled (``wholebody._cascade.CascadeRun``, a line-for-line mirror of
@@ -126,14 +128,8 @@ class BoundCascade:
     def __init__(self, levels, settings: SolverSettings | None = None, *,
                  first_level_solution=None, rank_tol: float = 1e-9, drop_tol: float = 1e-9,
                  relax_tol: float = 1e-9, feas_tol: float = 1e-6):
-        if _CompiledCascade is None:
-            raise RuntimeError("BoundCascade needs the compiled cascade (wholebody._cascade), "
-                               "which is not built")
-        settings = settings_or_default(settings, HIERARCHY_DEFAULT)
-        if settings.method != "cascade":
-            raise ValueError(f"settings: BoundCascade runs method 'cascade', got {settings.method!r}")
-        levels, n, fls = _checked_arguments(levels, settings, first_level_solution)
-        _check_held(levels, "BoundCascade")
+        levels, n, fls, settings = _bound_arguments("BoundCascade", "cascade", self.available,
+                                                    levels, settings, first_level_solution)
         self.levels, self.settings = levels, settings
         self._run = _new_run(levels, n, settings.regularization, fls,
                              (rank_tol, drop_tol, relax_tol, feas_tol))
@@ -146,15 +142,24 @@ class BoundCascade:
         return _run_compiled(self._run, self.levels, self.settings, t0, self._daqp)
 
 
-def _check_held(levels, who):
-    """ValueError unless every array of ``levels`` can be held by a compiled run: held, not
-    copied, since a converted copy would never see the new contents."""
+def _bound_arguments(who, method, built, levels, settings, first_level_solution):
+    """A bound run's arguments checked → (levels, n, first_level_solution, settings):
+    RuntimeError if the extension is not ``built``, ValueError for another method than
+    ``method``, for what :func:`solve_hierarchy` refuses, or for arrays a compiled run cannot hold
+    (held, not copied: a converted copy would never see the new contents)."""
+    if not built:
+        raise RuntimeError(f"{who} needs wholebody._cascade, which is not built")
+    settings = settings_or_default(settings, HIERARCHY_DEFAULT)
+    if settings.method != method:
+        raise ValueError(f"settings: {who} runs method {method!r}, got {settings.method!r}")
+    levels, n, fls = _checked_arguments(levels, settings, first_level_solution)
     for L in levels:
         for field_name in ("B", "b", "w", "C", "lower", "upper", "v"):
             a = getattr(L, field_name)
             if a.dtype != np.float64 or not a.flags.c_contiguous:
                 raise ValueError(f"{who}: level {L.name!r} {field_name}: needs a C-contiguous "
                                  f"float64 array (it is held, not copied)")
+    return levels, n, fls, settings
 
 
 def _new_weighted_run(levels, n, eps, feas_tol):
@@ -186,9 +191,9 @@ def _run_weighted(run, levels, settings, t0, daqp=None):
     if kind != "done":
         log.debug("weighted QP: %s", run.status)
         return None
-    x, costs, res, vio, run_qp_time = run.result()
-    return _finish(levels, x, "optimal", True, t0, np.full(len(levels), np.nan), "weighted",
-                   len(levels), np.zeros(0), [], evaluated=(costs, res, vio),
+    x, costs, res, vio, level_times, run_qp_time = run.result()
+    return _finish(levels, x, "optimal", True, t0, level_times, "weighted",
+                   len(levels), _NO_DIMS, (), evaluated=(costs, res, vio),
                    timings={"qp": run_qp_time if qp_time is None else qp_time, "qps": 1})
 
 
@@ -210,16 +215,10 @@ class BoundWeighted:
 
     def __init__(self, levels, settings: SolverSettings | None = None, *, rank_tol: float = 1e-9,
                  drop_tol: float = 1e-9, relax_tol: float = 1e-9, feas_tol: float = 1e-6):
-        if _WeightedRun is None:
-            raise RuntimeError("BoundWeighted needs the compiled weighted QP (wholebody._cascade), "
-                               "which is not built")
-        settings = settings_or_default(settings, HIERARCHY_DEFAULT)
-        if settings.method != "weighted":
-            raise ValueError(f"settings: BoundWeighted runs method 'weighted', got {settings.method!r}")
-        levels, n, _ = _checked_arguments(levels, settings, None)
+        levels, n, _, settings = _bound_arguments("BoundWeighted", "weighted", self.available,
+                                                  levels, settings, None)
         if len(levels) > 2:
             raise ValueError(f"method 'weighted' takes [hard, objective] levels, got {len(levels)} levels")
-        _check_held(levels, "BoundWeighted")
         self.levels, self.settings, self.n = levels, settings, n
         self._tols = (rank_tol, drop_tol, relax_tol, feas_tol)
         self._run = _new_weighted_run(levels, n, settings.regularization, feas_tol) if n else None

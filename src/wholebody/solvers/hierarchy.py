@@ -106,8 +106,9 @@ def solve_hierarchy(
         penalty instead of uniform per-row weights (which give eq. 5's Σ s² trade-off).
     compiled : cascade and weighted — run the compiled cascade or weighted QP
         (``wholebody._cascade``, when built): the same algorithm line for line, with the QPs
-        still solved by the backend (and the fallback) from Python, except DAQP's, solved in C++
-        with the adapter's rows, settings and verdict. ``False`` runs the Python reference.
+        still solved by the backend (and, in the cascade, the fallback) from Python, except
+        DAQP's, solved in C++ with the adapter's rows, settings and verdict. ``False`` runs the
+        Python reference.
         Warnings from the compiled cascade list its own (frozen rows) before the fallback notes.
 
     Bad input (NaN/inf in data, inconsistent column counts, unknown names) raises ValueError
