@@ -208,8 +208,9 @@ class BoundWeighted:
     :class:`BoundCascade` is for the cascade: :meth:`solve` returns what
     ``solve_hierarchy(levels, settings)`` (``settings.method`` "weighted") would for the arrays'
     current contents — the cascade's result, recorded in ``method`` and ``warnings``, where the
-    weighted QP gives none. The arrays must keep their shapes and stay finite (not re-checked).
-    Needs the compiled extension (:data:`available`)."""
+    weighted QP gives none. ``feas_tol`` checks the hard level; the other tolerances are those of
+    that cascade (as :func:`solve_hierarchy`'s). The arrays must keep their shapes and stay
+    finite (not re-checked). Needs the compiled extension (:data:`available`)."""
 
     available = _WeightedRun is not None
 
