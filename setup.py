@@ -3,8 +3,8 @@ metadata is in pyproject.toml):
 
 - ``wholebody._passive_cycle``: the passive WBC's whole cycle (``PassiveWBC(engine="native")``);
 - ``wholebody._hierarchy_cycle``: the rigid-body terms and task rows of ``HierarchyCycle``;
-- ``wholebody._cascade``: the cascade of QPs, which solves DAQP's level QPs itself and hands the
-  other backends' level QPs to Python;
+- ``wholebody._cascade``: the cascade of QPs and the single weighted QP, which solve DAQP's QPs
+  themselves and hand the other backends' QPs to Python;
 - ``wholebody._estimator``: the state estimator's per-cycle numerics
   (``KinematicInertialEKF(engine="native")``).
 

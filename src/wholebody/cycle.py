@@ -28,11 +28,12 @@ from typing import Sequence
 
 import numpy as np
 
-from .formulation import (Formulation, Solution, Stack, eq14_blocks, make_solution,
-                          overflow_status, place_rows, solve_levels, unsolved_solution)
+from .formulation import (Formulation, Solution, Stack, _without_fallback, eq14_blocks,
+                          make_solution, overflow_status, place_rows, solve_levels,
+                          unsolved_solution)
 from .robot import Robot
 from .solvers import Level, SolverSettings
-from .solvers.compiled_cascade import BoundCascade
+from .solvers.compiled_cascade import BoundCascade, BoundWeighted
 from .solvers.settings import settings_or_default
 from .tasks import FullDynamics
 from .tasks.base import Task, contact_subset
@@ -177,7 +178,7 @@ class _Program:
                               (s.task, "ineq", self.mat[s.start:s.stop], self.lower[s.start:s.stop],
                                self.upper[s.start:s.stop]) for s in entries])
         self.w_min = np.where(self.ineq_rows, np.nextafter(0.0, 1.0), 0.0)
-        self._bound: BoundCascade | None = None  # the compiled cascade on self.levels
+        self._bound: BoundCascade | BoundWeighted | None = None  # compiled, on self.levels
         self._bound_key = None
 
     def _writers(self, slot: _Slot, cycle: "HierarchyCycle") -> list:
@@ -191,10 +192,11 @@ class _Program:
                                           self.params[a:a + len(scalars)], slot.layout, cycle))
         return writers
 
-    def bound(self, cycle: "HierarchyCycle") -> BoundCascade | None:
-        """The compiled cascade bound to these levels for the cycle's current solver settings
-        (rebuilt if they changed: equal settings share it), None where it does not apply
-        (another method, not built)."""
+    def bound(self, cycle: "HierarchyCycle") -> BoundCascade | BoundWeighted | None:
+        """The compiled cascade or weighted QP bound to these levels for the cycle's current
+        solver settings (rebuilt if they changed: equal settings share it; the weighted QP's
+        without the fallback backend, as :func:`solve_levels` solves it), None where it does not
+        apply (method "daqp", not built)."""
         key = cycle.settings  # (with the cycle's stack, it decides cycle.analytic too)
         if key != self._bound_key:
             self._bound_key, self._bound = key, None
@@ -202,6 +204,8 @@ class _Program:
                 self._bound = BoundCascade(
                     self.levels, key,
                     first_level_solution="analytic" if cycle.analytic else None)
+            elif key.method == "weighted" and BoundWeighted.available:
+                self._bound = BoundWeighted(self.levels, _without_fallback(key))
         return self._bound
 
     def pack(self, cycle: "HierarchyCycle") -> None:

@@ -25,7 +25,7 @@ import numpy as np
 from .guard import Outcome, guard_torque
 from .robot import FREE_FLYER_NV, GRAVITY, Robot
 from .solvers import Level, SolverSettings, solve_hierarchy
-from .solvers.compiled_cascade import BoundCascade
+from .solvers.compiled_cascade import BoundCascade, BoundWeighted
 from .solvers.hierarchy import analytic_first_level
 from .solvers.settings import settings_or_default
 from .tasks.base import Task, TaskRows
@@ -310,14 +310,14 @@ class Formulation:
 
 
 def solve_levels(levels: list[Level], analytic_first_level: bool, settings: SolverSettings,
-                 bound: BoundCascade | None = None):
+                 bound: BoundCascade | BoundWeighted | None = None):
     """The levels solved as :meth:`Formulation.solve` does with ``settings`` → (HierarchySolution,
     Outcome, status): the analytic first level (eq. 17) when ``analytic_first_level`` (resolved
     by :meth:`Formulation.uses_analytic_first_level`), a failed cascade level QP retried with
     ``settings.fallback_backend`` (one QP, not the whole cascade again; outcome FALLBACK), other
     methods re-solved as a cascade with it. ``bound``: a :class:`BoundCascade` made with these
-    same settings on these levels' arrays, used for the first attempt (a control loop's fast
-    path). ``backend_options`` are ``backend``'s (not passed to the fallback backend)."""
+    same settings, or a :class:`BoundWeighted` made with them without the fallback backend, on
+    these levels' arrays, used for the first attempt (a control loop's fast path). ``backend_options`` are ``backend``'s (not passed to the fallback backend)."""
     cascade = settings.method == "cascade"
     fls = "analytic" if analytic_first_level and cascade else None
     backend, fallback = settings.backend, settings.fallback_backend

@@ -15,6 +15,8 @@
 //   x, costs, ... = run.result()
 //   (or run.advance_daqp(DaqpSolver(...)): the level QPs solved by DAQP here, see DaqpSolver)
 //   run.reset()  # and again, on the arrays' new contents
+// WeightedRun (below) is the weighted method's single QP (weighted._solve_weighted) compiled the
+// same way; both hold the level arrays through LevelArrays.
 #include <Eigen/Dense>
 
 #include <pybind11/eigen.h>
@@ -504,23 +506,26 @@ public:
   // How often DAQP was called (retries included).
   long calls() const { return calls_; }
 
-  // Solves min ½‖y‖² + gᵀy s.t. lower ≤ A y ≤ upper (A has rows); "" and y, or why it failed.
-  std::string solve(const VectorXd & g, const MatrixXd & A, const VectorXd & lower,
-                    const VectorXd & upper, VectorXd & y)
+  // Solves min ½yᵀHy + gᵀy s.t. lower ≤ A y ≤ upper (A has rows; H null: the identity, the
+  // cascade's level QPs); "" and y, or why it failed.
+  template <typename Matrix>
+  std::string solve(const VectorXd & g, const Matrix & A, const double * lower,
+                    const double * upper, VectorXd & y, const double * H = nullptr)
   {
     const Index m = A.rows(), n = A.cols();
     unit_A_.resize(m, n);
     bu_.resize(m);
     bl_.resize(m);
     sense_.resize(std::size_t(m));
-    scale_rows(A, lower.data(), upper.data(), unit_A_, bu_.data(), bl_.data(), sense_.data());
-    if (H_.rows() != n)
-      H_ = RowMatrix::Identity(n, n);
+    scale_rows(A, lower, upper, unit_A_, bu_.data(), bl_.data(), sense_.data());
+    if (!H && I_.rows() != n)
+      I_ = RowMatrix::Identity(n, n);
     y.resize(n);
     lam_.resize(m);
     gradient_ = g;
-    daqp_c::Problem problem{int(n), int(m), 0, H_.data(), gradient_.data(), unit_A_.data(),
-                            bu_.data(), bl_.data(), sense_.data(), nullptr, 0, 0};
+    daqp_c::Problem problem{int(n), int(m), 0, const_cast<double *>(H ? H : I_.data()),
+                            gradient_.data(), unit_A_.data(), bu_.data(), bl_.data(),
+                            sense_.data(), nullptr, 0, 0};
     daqp_c::Result result{y.data(), lam_.data(), 0.0, 0.0, 0, 0, 0, 0.0, 0.0};
     daqp_c::Settings settings = settings_;
     quadprog_(&result, &problem, &settings);
@@ -539,7 +544,7 @@ public:
       return "daqp: " + (name == exit_names_.end() ? std::string("exitflag") : name->second) + " ("
              + std::to_string(result.exitflag) + ")";
     }
-    const double over = violation(A, y, lower.data(), upper.data());
+    const double over = violation(A, y, lower, upper);
     if (!std::isfinite(over))
       return "daqp: non-finite solution";
     if (over > raw_tol_)
@@ -563,12 +568,82 @@ private:
   long calls_ = 0;
   std::map<int, std::string> exit_names_;
   double raw_tol_;
-  RowMatrix unit_A_, H_;
+  RowMatrix unit_A_, I_;
   VectorXd bu_, bl_, lam_, gradient_;
   std::vector<int32_t> sense_;
 };
 
-class CascadeRun
+// The arrays of a list of levels (common.Level: B, b, w, C, lower, upper, V per level), held,
+// not copied — a control loop changes their contents in place between solves — with the row
+// checks, the views and the per-level evaluation the compiled methods share.
+class LevelArrays
+{
+public:
+  // Per-level costs ‖W(Bx − b)‖² + ‖V viol‖², weighted residuals and violations at x
+  // (common.evaluate_levels).
+  py::tuple evaluate(const VectorXd & x) const
+  {
+    VectorXd costs = VectorXd::Zero(Index(nl_));
+    py::list res, vio;
+    for (std::size_t r = 0; r < nl_; ++r)
+    {
+      const ConstRowMap B = matrix(Bs_, r), C = matrix(Cs_, r);
+      const VectorXd e = vec(ws_, r).cwiseProduct(B * x - vec(bs_, r));
+      const VectorXd cx = C * x;
+      const VectorXd s = vec(Vs_, r).cwiseProduct(
+        (vec(lowers_, r) - cx).cwiseMax(cx - vec(uppers_, r)).cwiseMax(0.0));
+      costs[Index(r)] = e.squaredNorm() + s.squaredNorm();
+      res.append(e);
+      vio.append(s);
+    }
+    return py::make_tuple(costs, res, vio);
+  }
+
+protected:
+  LevelArrays(const char * who, std::vector<DoubleArray> Bs, std::vector<DoubleArray> bs,
+              std::vector<DoubleArray> ws, std::vector<DoubleArray> Cs,
+              std::vector<DoubleArray> lowers, std::vector<DoubleArray> uppers,
+              std::vector<DoubleArray> Vs, std::vector<std::string> names, Index n)
+  : Bs_(std::move(Bs)), bs_(std::move(bs)), ws_(std::move(ws)), Cs_(std::move(Cs)),
+    lowers_(std::move(lowers)), uppers_(std::move(uppers)), Vs_(std::move(Vs)),
+    names_(std::move(names)), nl_(Bs_.size()), n_(n)
+  {
+    const std::string name(who);
+    for (auto * list : {&bs_, &ws_, &Cs_, &lowers_, &uppers_, &Vs_})
+      if (list->size() != nl_)
+        throw std::invalid_argument(name + ": per-level lists differ in length");
+    if (names_.size() != nl_)
+      throw std::invalid_argument(name + ": names differ in length from the levels");
+    for (std::size_t r = 0; r < nl_; ++r)
+      if (rows_of_level(Bs_, r) != bs_[r].size() || rows_of_level(Bs_, r) != ws_[r].size()
+          || rows_of_level(Cs_, r) != lowers_[r].size() || rows_of_level(Cs_, r) != uppers_[r].size()
+          || rows_of_level(Cs_, r) != Vs_[r].size())
+        throw std::invalid_argument(name + ": level " + std::to_string(r)
+                                    + ": row counts of its arrays differ");
+  }
+
+  // a matrix without n columns is an empty level (common._rows)
+  Index rows_of_level(const std::vector<DoubleArray> & list, std::size_t r) const
+  {
+    const DoubleArray & a = list[r];
+    return a.ndim() == 2 && a.shape(1) == n_ ? Index(a.shape(0)) : 0;
+  }
+  ConstRowMap matrix(const std::vector<DoubleArray> & list, std::size_t r) const
+  {
+    return ConstRowMap(list[r].data(), rows_of_level(list, r), n_);
+  }
+  static ConstVecMap vec(const std::vector<DoubleArray> & list, std::size_t r)
+  {
+    return ConstVecMap(list[r].data(), Index(list[r].size()));
+  }
+
+  std::vector<DoubleArray> Bs_, bs_, ws_, Cs_, lowers_, uppers_, Vs_;
+  std::vector<std::string> names_;
+  std::size_t nl_ = 0;
+  Index n_;
+};
+
+class CascadeRun : public LevelArrays
 {
 public:
   enum class Kind { Done, QP, Failed };
@@ -580,17 +655,11 @@ public:
              const std::optional<VectorXd> & x1, const std::optional<MatrixXd> & Z1,
              bool analytic_first, double rank_tol, double drop_tol, double relax_tol,
              double feas_tol, py::object nnls)
-  : nnls_(std::move(nnls)), Bs_(std::move(Bs)), bs_(std::move(bs)), ws_(std::move(ws)), Cs_(std::move(Cs)),
-    lowers_(std::move(lowers)), uppers_(std::move(uppers)), Vs_(std::move(Vs)),
-    names_(std::move(names)), n_(n), eps_(eps), rank_tol_(rank_tol),
-    drop2_(drop_tol * drop_tol), relax_tol_(relax_tol), feas_tol_(feas_tol)
+  : LevelArrays("CascadeRun", std::move(Bs), std::move(bs), std::move(ws), std::move(Cs),
+                std::move(lowers), std::move(uppers), std::move(Vs), std::move(names), n),
+    nnls_(std::move(nnls)), eps_(eps), rank_tol_(rank_tol), drop2_(drop_tol * drop_tol),
+    relax_tol_(relax_tol), feas_tol_(feas_tol)
   {
-    nl_ = Bs_.size();
-    for (auto * list : {&bs_, &ws_, &Cs_, &lowers_, &uppers_, &Vs_})
-      if (list->size() != nl_)
-        throw std::invalid_argument("CascadeRun: per-level lists differ in length");
-    if (names_.size() != nl_)
-      throw std::invalid_argument("CascadeRun: names differ in length from the levels");
     if (x1.has_value() != Z1.has_value())
       throw std::invalid_argument("CascadeRun: give both x1 and Z1, or neither");
     if (x1 && analytic_first)
@@ -604,12 +673,6 @@ public:
       Z1_ = *Z1;
       have_first_ = true;
     }
-    for (std::size_t r = 0; r < nl_; ++r)
-      if (rows_of_level(Bs_, r) != bs_[r].size() || rows_of_level(Bs_, r) != ws_[r].size()
-          || rows_of_level(Cs_, r) != lowers_[r].size() || rows_of_level(Cs_, r) != uppers_[r].size()
-          || rows_of_level(Cs_, r) != Vs_[r].size())
-        throw std::invalid_argument("CascadeRun: level " + std::to_string(r)
-                                    + ": row counts of its arrays differ");
     reset();
   }
 
@@ -674,7 +737,7 @@ public:
         break;
       const auto t0 = Clock::now();
       ++qp_count_;
-      daqp_status_ = daqp.solve(qp_g_, qp_A_, qp_lower_, qp_upper_, qp_y_);
+      daqp_status_ = daqp.solve(qp_g_, qp_A_, qp_lower_.data(), qp_upper_.data(), qp_y_);
       qp_times_[r_] += seconds_since(t0);
       if (!daqp_status_.empty())
         break;
@@ -719,33 +782,13 @@ public:
     times_[r] += seconds_since(t0);
   }
 
-  // Per-level costs ‖W(Bx − b)‖² + ‖V viol‖², weighted residuals and violations at x
-  // (hierarchy.evaluate_levels).
-  py::tuple evaluate() const
-  {
-    VectorXd costs = VectorXd::Zero(Index(nl_));
-    py::list res, vio;
-    for (std::size_t r = 0; r < nl_; ++r)
-    {
-      const ConstRowMap B = matrix(Bs_, r), C = matrix(Cs_, r);
-      const VectorXd e = vec(ws_, r).cwiseProduct(B * x_ - vec(bs_, r));
-      const VectorXd cx = C * x_;
-      const VectorXd s = vec(Vs_, r).cwiseProduct(
-        (vec(lowers_, r) - cx).cwiseMax(cx - vec(uppers_, r)).cwiseMax(0.0));
-      costs[Index(r)] = e.squaredNorm() + s.squaredNorm();
-      res.append(e);
-      vio.append(s);
-    }
-    return py::make_tuple(costs, res, vio);
-  }
-
   // Everything a HierarchySolution takes from the run, in one call (a control loop pays per
   // call): (x, costs, residuals, violations — see evaluate —, per-level seconds with the QPs
   // solved here, seconds in those QPs, their count, null-space dimensions, warnings, levels
   // solved, status).
   py::tuple result() const
   {
-    const py::tuple ev = evaluate();
+    const py::tuple ev = evaluate(x_);
     VectorXd level_times = VectorXd::Zero(Index(nl_));
     double qp = 0.0;
     for (std::size_t r = 0; r < nl_; ++r)
@@ -773,20 +816,6 @@ private:
     return std::chrono::duration<double>(Clock::now() - t0).count();
   }
 
-  // a matrix without n columns is an empty level (common._rows)
-  Index rows_of_level(const std::vector<DoubleArray> & list, std::size_t r) const
-  {
-    const DoubleArray & a = list[r];
-    return a.ndim() == 2 && a.shape(1) == n_ ? Index(a.shape(0)) : 0;
-  }
-  ConstRowMap matrix(const std::vector<DoubleArray> & list, std::size_t r) const
-  {
-    return ConstRowMap(list[r].data(), rows_of_level(list, r), n_);
-  }
-  static ConstVecMap vec(const std::vector<DoubleArray> & list, std::size_t r)
-  {
-    return ConstVecMap(list[r].data(), Index(list[r].size()));
-  }
   std::string level_name(std::size_t r) const { return "'" + names_[r] + "'"; }
 
   void fail(const std::string & why)
@@ -1120,10 +1149,6 @@ private:
 
   // problem
   py::object nnls_;
-  std::vector<DoubleArray> Bs_, bs_, ws_, Cs_, lowers_, uppers_, Vs_;
-  std::vector<std::string> names_;
-  std::size_t nl_ = 0;
-  Index n_;
   double eps_, rank_tol_, drop2_, relax_tol_, feas_tol_;
   bool have_first_ = false, analytic_first_ = false;
   VectorXd x1_;
@@ -1152,6 +1177,177 @@ private:
   // its QP
   MatrixXd qp_A_;
   VectorXd qp_g_, qp_lower_, qp_upper_, qp_y_;
+};
+
+// The weighted method (weighted._solve_weighted, line for line; Fahmi et al. 2019, eq. 7):
+// levels = [hard, objective] (or [objective]) as one QP over y = [x; s] — H = (WB)ᵀWB + ε I on x
+// and I on the objective's slacks s, g = −(WB)ᵀ W b; as rows the hard level's equalities of
+// positive weight and its inequalities, and the objective's inequality rows V C x + s ≥ V lower,
+// V C x − s ≤ V upper, one slack each. DAQP's QP is solved here (DaqpSolver: the adapter's rows,
+// settings, retry and verdict, as for the cascade's level QPs); another backend's comes from
+// qp() and its solution back through give(). The solution is refused (the caller then runs the
+// cascade) unless the hard level holds within feas_tol. Buffers are sized once for the levels'
+// row counts; the arrays are held, not copied (a control loop's level buffers). Usage:
+//   run = WeightedRun(B, b, w, C, lower, upper, V, names, n, eps, feas_tol)
+//   kind = run.solve_daqp(DaqpSolver(...))  # or: kind = run.give(backend(*run.qp()))
+//   x, costs, residuals, violations, level_seconds, qp_seconds = run.result()  # kind "done"
+class WeightedRun : public LevelArrays
+{
+public:
+  WeightedRun(std::vector<DoubleArray> Bs, std::vector<DoubleArray> bs, std::vector<DoubleArray> ws,
+              std::vector<DoubleArray> Cs, std::vector<DoubleArray> lowers,
+              std::vector<DoubleArray> uppers, std::vector<DoubleArray> Vs,
+              std::vector<std::string> names, Index n, double eps, double feas_tol)
+  : LevelArrays("WeightedRun", std::move(Bs), std::move(bs), std::move(ws), std::move(Cs),
+                std::move(lowers), std::move(uppers), std::move(Vs), std::move(names), n),
+    eps_(eps), feas_tol_(feas_tol)
+  {
+    if (nl_ < 1 || nl_ > 2)
+      throw std::invalid_argument("WeightedRun: takes [hard, objective] levels, got "
+                                  + std::to_string(nl_) + " levels");
+    obj_ = nl_ - 1;
+    const Index m = rows_of_level(Cs_, obj_), nv = n_ + m;
+    const Index most = (nl_ == 2 ? rows_of_level(Bs_, 0) + rows_of_level(Cs_, 0) : 0) + 2 * m;
+    H_.setZero(nv, nv);
+    g_.setZero(nv);
+    A_.setZero(most, nv);
+    lower_.setZero(most);
+    upper_.setZero(most);
+    wB_.setZero(rows_of_level(Bs_, obj_), n_);
+    x_.setZero(n_);
+  }
+
+  // The QP of the arrays' current contents, as _solve_weighted builds it up to solve_qp.
+  void assemble()
+  {
+    const ConstRowMap Bo = matrix(Bs_, obj_), Co = matrix(Cs_, obj_);
+    const ConstVecMap wo = vec(ws_, obj_), bo = vec(bs_, obj_);
+    const Index n = n_, m = Co.rows();
+    wB_.noalias() = wo.asDiagonal() * Bo;
+    H_.topLeftCorner(n, n).noalias() = wB_.transpose() * wB_;
+    H_.diagonal().head(n).array() += eps_;
+    H_.diagonal().tail(m).setOnes(); // (the rest of H stays zero from the constructor)
+    g_.head(n).noalias() = -(wB_.transpose() * wo.cwiseProduct(bo));
+    rows_ = 0;
+    if (nl_ == 2)
+    {
+      const ConstRowMap Bh = matrix(Bs_, 0), Ch = matrix(Cs_, 0);
+      const ConstVecMap wh = vec(ws_, 0), bh = vec(bs_, 0), lh = vec(lowers_, 0),
+                        uh = vec(uppers_, 0);
+      for (Index i = 0; i < Bh.rows(); ++i)
+        if (wh[i] > 0) // a zero-weight row is not part of the hard level's cost
+          add_row(Bh.row(i), 1.0, -1, 0.0, bh[i], bh[i]);
+      for (Index i = 0; i < Ch.rows(); ++i)
+        add_row(Ch.row(i), 1.0, -1, 0.0, lh[i], uh[i]);
+    }
+    if (m) // soft rows of the objective level, one slack each (as in the cascade)
+    {
+      const ConstVecMap vo = vec(Vs_, obj_), lo = vec(lowers_, obj_), uo = vec(uppers_, obj_);
+      for (Index i = 0; i < m; ++i)
+        if (std::isfinite(lo[i]))
+          add_row(Co.row(i), vo[i], n + i, 1.0, vo[i] * lo[i], kInf);
+      for (Index i = 0; i < m; ++i)
+        if (std::isfinite(uo[i]))
+          add_row(Co.row(i), vo[i], n + i, -1.0, -kInf, vo[i] * uo[i]);
+    }
+  }
+
+  // The QP as (H, g, A, lower, upper), new arrays, for a backend called from Python.
+  py::tuple qp()
+  {
+    assemble();
+    return py::make_tuple(RowMatrix(H_), VectorXd(g_), RowMatrix(A_.topRows(rows_)),
+                          VectorXd(lower_.head(rows_)), VectorXd(upper_.head(rows_)));
+  }
+
+  // The QP solved by ``daqp`` here: "done" (x accepted), "failed" (DAQP failed or the hard level
+  // does not hold: ``status`` says why) or "qp" — no rows, left to the caller (the adapter adds
+  // a free row then; the cascade leaves such QPs to Python alike).
+  std::string solve_daqp(DaqpSolver & daqp)
+  {
+    assemble();
+    if (rows_ == 0)
+      return "qp";
+    const auto t0 = Clock::now();
+    status_ = daqp.solve(g_, A_.topRows(rows_), lower_.data(), upper_.data(), y_, H_.data());
+    qp_time_ = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (!status_.empty())
+      return "failed";
+    return accept();
+  }
+
+  // The solution y = [x; s] of qp() from a backend: "done" or "failed" (the hard level).
+  std::string give(const VectorXd & y)
+  {
+    if (y.size() != H_.rows())
+      throw std::invalid_argument("WeightedRun.give: y must have one value per QP variable");
+    y_ = y;
+    qp_time_ = 0.0;
+    status_.clear();
+    return accept();
+  }
+
+  // (x, costs, residuals, violations — LevelArrays::evaluate —, per-level seconds: NaN, one QP
+  // for all levels, seconds in DAQP here).
+  py::tuple result() const
+  {
+    const py::tuple ev = evaluate(x_);
+    return py::make_tuple(VectorXd(x_), ev[0], ev[1], ev[2],
+                          VectorXd::Constant(Index(nl_), std::numeric_limits<double>::quiet_NaN()),
+                          qp_time_);
+  }
+
+  const std::string & status() const { return status_; }
+
+private:
+  // Row ``rows_`` of the QP: scale · a on x, ``slack_sign`` in column ``slack`` (none if < 0).
+  template <typename Row>
+  void add_row(const Row & a, double scale, Index slack, double slack_sign, double lo, double up)
+  {
+    auto row = A_.row(rows_);
+    row.head(n_) = scale * a;
+    row.tail(A_.cols() - n_).setZero();
+    if (slack >= 0)
+      row[slack] = slack_sign;
+    lower_[rows_] = lo;
+    upper_[rows_] = up;
+    ++rows_;
+  }
+
+  // x = y[:n], kept if the hard level holds: |B x − b| ≤ feas_tol (1 + |b|) on its rows of
+  // positive weight, violations ≤ feas_tol (1 + |C x|).
+  std::string accept()
+  {
+    x_ = y_.head(n_);
+    if (nl_ == 2)
+    {
+      const ConstRowMap Bh = matrix(Bs_, 0), Ch = matrix(Cs_, 0);
+      const ConstVecMap wh = vec(ws_, 0), bh = vec(bs_, 0), lh = vec(lowers_, 0),
+                        uh = vec(uppers_, 0);
+      bool bad = false;
+      for (Index i = 0; i < Bh.rows() && !bad; ++i)
+        bad = wh[i] > 0 && std::abs(Bh.row(i).dot(x_) - bh[i]) > feas_tol_ * (1.0 + std::abs(bh[i]));
+      for (Index i = 0; i < Ch.rows() && !bad; ++i)
+      {
+        const double cx = Ch.row(i).dot(x_);
+        bad = std::max(std::max(lh[i] - cx, cx - uh[i]), 0.0) > feas_tol_ * (1.0 + std::abs(cx));
+      }
+      if (bad)
+      {
+        status_ = "hard level not satisfied";
+        return "failed";
+      }
+    }
+    return "done";
+  }
+
+  double eps_, feas_tol_;
+  std::size_t obj_ = 0;
+  Index rows_ = 0;
+  RowMatrix H_, A_, wB_;
+  VectorXd g_, lower_, upper_, y_, x_;
+  double qp_time_ = 0.0;
+  std::string status_;
 };
 
 // The rows DAQP is given, as a tuple of new arrays (backends.solve_daqp; see scale_rows).
@@ -1204,7 +1400,7 @@ double CascadeRun::qp_violation(const DoubleArray & y) const
 
 PYBIND11_MODULE(_cascade, m)
 {
-  m.doc() = "The cascade of wholebody.solvers.hierarchy, compiled; QPs are solved by the caller.";
+  m.doc() = "The cascade and the weighted QP of wholebody.solvers.hierarchy, compiled.";
   m.def("daqp_rows", &daqp_rows, py::arg("A"), py::arg("lower"), py::arg("upper"));
   m.def("row_violation", &row_violation, py::arg("A"), py::arg("x"), py::arg("lower"),
         py::arg("upper"));
@@ -1236,4 +1432,15 @@ PYBIND11_MODULE(_cascade, m)
     .def("result", &CascadeRun::result)
     .def_property_readonly("level", &CascadeRun::level)
     .def_property_readonly("daqp_status", &CascadeRun::daqp_status);
+  py::class_<WeightedRun>(m, "WeightedRun")
+    .def(py::init<std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
+                  std::vector<DoubleArray>, std::vector<DoubleArray>, std::vector<DoubleArray>,
+                  std::vector<DoubleArray>, std::vector<std::string>, Index, double, double>(),
+         py::arg("B"), py::arg("b"), py::arg("w"), py::arg("C"), py::arg("lower"), py::arg("upper"),
+         py::arg("V"), py::arg("names"), py::arg("n"), py::arg("eps"), py::arg("feas_tol"))
+    .def("qp", &WeightedRun::qp)
+    .def("solve_daqp", &WeightedRun::solve_daqp, py::arg("daqp"))
+    .def("give", &WeightedRun::give, py::arg("y"))
+    .def("result", &WeightedRun::result)
+    .def_property_readonly("status", &WeightedRun::status);
 }

@@ -9,6 +9,7 @@ The method modules (:mod:`.cascade`, :mod:`.compiled_cascade`, :mod:`.daqp_hiera
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -28,7 +29,8 @@ class HierarchySolution:
     ``costs[r] = ‖W_r(B_r x − b_r)‖² + ‖v_r‖²`` at the returned x (eq. 5 without ε);
     ``eq_residuals[r] = W_r(B_r x − b_r)``; ``ineq_violations[r] = v_r = V_r · violation ≥ 0``
     (weighted, as it enters the cost); ``timings = {"total": s, "levels": array of s}``, and
-    for the compiled cascade also ``"qp"`` (s spent in the QP backends) and ``"qps"`` (their count)
+    for the compiled cascade and the compiled weighted QP also ``"qp"`` (s spent in the QP
+    backends) and ``"qps"`` (their count)
     (per-level times are NaN for the daqp and weighted methods, which solve in one call).
     ``levels_solved`` counts the levels whose optimisation succeeded; ``nullspace_dims[r]`` is
     the number of free directions left after level r (cascade only);
@@ -149,15 +151,18 @@ def evaluate_levels(levels, x):
     return costs, res, vio
 
 
-def _finish(levels, x, status, ok, t_start, level_times, method, solved, zdims, warns):
-    costs, res, vio = evaluate_levels(levels, x)
-    if ok and not np.isfinite(costs.sum()):  # entries so large that the products overflow
+def _finish(levels, x, status, ok, t_start, level_times, method, solved, zdims, warns,
+            evaluated=None, timings=None):
+    """The HierarchySolution of x; ``evaluated``: :func:`evaluate_levels` at x if already computed
+    (compiled), ``timings``: entries besides "total" and "levels"."""
+    costs, res, vio = evaluated if evaluated is not None else evaluate_levels(levels, x)
+    if ok and not math.isfinite(np.add.reduce(costs)):  # entries so large the products overflow
         ok = False
         status = (f"level costs not finite at the solution (level "
                   f"{int(np.argmin(np.isfinite(costs)))}: entries too large, the products overflow)")
     return HierarchySolution(
         x=x, costs=costs, eq_residuals=res, ineq_violations=vio, status=status, ok=ok,
-        timings={"total": time.perf_counter() - t_start, "levels": level_times},
+        timings={"total": time.perf_counter() - t_start, "levels": level_times, **(timings or {})},
         method=method, levels_solved=solved, nullspace_dims=np.asarray(zdims, dtype=int),
         warnings=tuple(warns),
     )

@@ -1,4 +1,5 @@
-"""The cascade compiled: the bridge to ``wholebody._cascade`` (src/wholebody/native/cascade.cpp).
+"""The cascade and the weighted QP compiled: the bridge to ``wholebody._cascade``
+(src/wholebody/native/cascade.cpp).
 
 ``wholebody._cascade.CascadeRun`` is the algorithm of :mod:`.cascade` line for line in C++
 (Eigen: Householder QR, QR with column pivoting, the same tolerances); it hands each level QP
@@ -11,6 +12,14 @@ built (``compiled=True``); the Python cascade is the reference the tests compare
 rounding: Eigen's and LAPACK's factorisations pivot alike but round differently.
 
 :class:`BoundCascade` keeps a compiled run bound to a control loop's level arrays.
+
+``wholebody._cascade.WeightedRun`` is :func:`.weighted._solve_weighted` line for line in C++: it
+assembles the single weighted QP (Fahmi et al. 2019, eq. 7) into buffers sized once, solves it
+with DAQP through the same ``DaqpSolver`` as the cascade's level QPs (the adapter's rows,
+settings, retry and verdict) and checks the hard level with ``feas_tol``; another backend gets
+the assembled QP from Python (:func:`_run_weighted`). ``solve_hierarchy(method="weighted")`` uses
+it when built (``compiled=True``), :class:`BoundWeighted` keeps it bound to a control loop's
+level arrays; where it gives no solution the cascade's result is returned, as in Python.
 """
 
 from __future__ import annotations
@@ -24,18 +33,22 @@ import numpy as np
 
 from . import cascade
 from .backends import (BACKENDS, DAQP_DEFAULTS, DAQP_EXIT, DAQP_RAW_TOL, QP_ERRORS,
-                       daqp_verdict, solve_daqp, solve_daqp_unit_rows)
-from .common import HierarchySolution, _backend_solve, _checked_arguments, log
+                       daqp_verdict, solve_daqp, solve_daqp_unit_rows, solve_qp)
+from .common import HierarchySolution, _backend_solve, _checked_arguments, _finish, log
 from .settings import HIERARCHY_DEFAULT, SolverSettings, settings_or_default
+from .weighted import _cascade_instead
 
 try:  # the cascade, compiled (src/wholebody/native/cascade.cpp); optional
     from .._cascade import CascadeRun as _CompiledCascade
     from .._cascade import DAQP_C_VERSION as _DAQP_C_VERSION
     from .._cascade import DaqpSolver as _DaqpSolver
+    from .._cascade import WeightedRun as _WeightedRun
 except ImportError:  # not built (no C++ compiler at install): the Python cascade does everything
-    _CompiledCascade = _DaqpSolver = _DAQP_C_VERSION = None
+    _CompiledCascade = _DaqpSolver = _DAQP_C_VERSION = _WeightedRun = None
 
-__all__ = ["BoundCascade"]
+__all__ = ["BoundCascade", "BoundWeighted"]
+
+_NO_DIMS = np.zeros(0, dtype=int)  # the weighted QP's null-space dimensions: none (shared: empty)
 
 
 def _solve_compiled(levels, n, settings, fls, tols, t0):
@@ -115,19 +128,8 @@ class BoundCascade:
     def __init__(self, levels, settings: SolverSettings | None = None, *,
                  first_level_solution=None, rank_tol: float = 1e-9, drop_tol: float = 1e-9,
                  relax_tol: float = 1e-9, feas_tol: float = 1e-6):
-        if _CompiledCascade is None:
-            raise RuntimeError("BoundCascade needs the compiled cascade (wholebody._cascade), "
-                               "which is not built")
-        settings = settings_or_default(settings, HIERARCHY_DEFAULT)
-        if settings.method != "cascade":
-            raise ValueError(f"settings: BoundCascade runs method 'cascade', got {settings.method!r}")
-        levels, n, fls = _checked_arguments(levels, settings, first_level_solution)
-        for L in levels:  # held, not copied: a converted copy would never see the new contents
-            for field_name in ("B", "b", "w", "C", "lower", "upper", "v"):
-                a = getattr(L, field_name)
-                if a.dtype != np.float64 or not a.flags.c_contiguous:
-                    raise ValueError(f"BoundCascade: level {L.name!r} {field_name}: needs a "
-                                     f"C-contiguous float64 array (it is held, not copied)")
+        levels, n, fls, settings = _bound_arguments("BoundCascade", "cascade", self.available,
+                                                    levels, settings, first_level_solution)
         self.levels, self.settings = levels, settings
         self._run = _new_run(levels, n, settings.regularization, fls,
                              (rank_tol, drop_tol, relax_tol, feas_tol))
@@ -138,6 +140,100 @@ class BoundCascade:
         t0 = time.perf_counter()
         self._run.reset()
         return _run_compiled(self._run, self.levels, self.settings, t0, self._daqp)
+
+
+def _bound_arguments(who, method, built, levels, settings, first_level_solution):
+    """A bound run's arguments checked → (levels, n, first_level_solution, settings):
+    RuntimeError if the extension is not ``built``, ValueError for another method than
+    ``method``, for what :func:`solve_hierarchy` refuses, or for arrays a compiled run cannot hold
+    (held, not copied: a converted copy would never see the new contents)."""
+    if not built:
+        raise RuntimeError(f"{who} needs wholebody._cascade, which is not built")
+    settings = settings_or_default(settings, HIERARCHY_DEFAULT)
+    if settings.method != method:
+        raise ValueError(f"settings: {who} runs method {method!r}, got {settings.method!r}")
+    levels, n, fls = _checked_arguments(levels, settings, first_level_solution)
+    for L in levels:
+        for field_name in ("B", "b", "w", "C", "lower", "upper", "v"):
+            a = getattr(L, field_name)
+            if a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"{who}: level {L.name!r} {field_name}: needs a C-contiguous "
+                                 f"float64 array (it is held, not copied)")
+    return levels, n, fls, settings
+
+
+def _new_weighted_run(levels, n, eps, feas_tol):
+    """A compiled weighted QP on the arrays of ``levels`` = [hard, objective] (held, not copied)."""
+    return _WeightedRun([L.B for L in levels], [L.b for L in levels], [L.w for L in levels],
+                        [L.C for L in levels], [L.lower for L in levels],
+                        [L.upper for L in levels], [L.v for L in levels],
+                        [L.name for L in levels], n, eps, feas_tol)
+
+
+def _run_weighted(run, levels, settings, t0, daqp=None):
+    """:func:`.weighted._solve_weighted` on a compiled run → HierarchySolution, or None where the
+    Python function gives None (the QP failed, or the hard level does not hold). ``daqp`` (a
+    :func:`_daqp_in_cascade` solver) lets the run solve the QP itself; otherwise, or when the QP
+    has no rows, ``settings.backend`` solves it from Python."""
+    if daqp is not None and BACKENDS.get(settings.backend) is solve_daqp:
+        kind = run.solve_daqp(daqp)
+    else:
+        kind = "qp"
+    qp_time = None  # of the QP solved here (not by the run)
+    if kind == "qp":
+        tq = time.perf_counter()
+        y, status, ok = solve_qp(*run.qp(), backend=settings.backend, **settings.options)
+        qp_time = time.perf_counter() - tq
+        if not ok:
+            log.debug("weighted QP failed: %s", status)
+            return None
+        kind = run.give(y)
+    if kind != "done":
+        log.debug("weighted QP: %s", run.status)
+        return None
+    x, costs, res, vio, level_times, run_qp_time = run.result()
+    return _finish(levels, x, "optimal", True, t0, level_times, "weighted",
+                   len(levels), _NO_DIMS, (), evaluated=(costs, res, vio),
+                   timings={"qp": run_qp_time if qp_time is None else qp_time, "qps": 1})
+
+
+def _solve_weighted_compiled(levels, n, settings, feas_tol, t0):
+    """:func:`.weighted._solve_weighted`, compiled (``wholebody._cascade.WeightedRun``)."""
+    return _run_weighted(_new_weighted_run(levels, n, settings.regularization, feas_tol), levels,
+                         settings, t0, _daqp_in_cascade(settings.backend, settings.options))
+
+
+class BoundWeighted:
+    """The compiled weighted QP bound to the arrays of ``levels`` = [hard, objective], as
+    :class:`BoundCascade` is for the cascade: :meth:`solve` returns what
+    ``solve_hierarchy(levels, settings)`` (``settings.method`` "weighted") would for the arrays'
+    current contents — the cascade's result, recorded in ``method`` and ``warnings``, where the
+    weighted QP gives none. ``feas_tol`` checks the hard level; the other tolerances are those of
+    that cascade (as :func:`solve_hierarchy`'s). The arrays must keep their shapes and stay
+    finite (not re-checked). Needs the compiled extension (:data:`available`)."""
+
+    available = _WeightedRun is not None
+
+    def __init__(self, levels, settings: SolverSettings | None = None, *, rank_tol: float = 1e-9,
+                 drop_tol: float = 1e-9, relax_tol: float = 1e-9, feas_tol: float = 1e-6):
+        levels, n, _, settings = _bound_arguments("BoundWeighted", "weighted", self.available,
+                                                  levels, settings, None)
+        if len(levels) > 2:
+            raise ValueError(f"method 'weighted' takes [hard, objective] levels, got {len(levels)} levels")
+        self.levels, self.settings, self.n = levels, settings, n
+        self._tols = (rank_tol, drop_tol, relax_tol, feas_tol)
+        self._run = _new_weighted_run(levels, n, settings.regularization, feas_tol) if n else None
+        self._daqp = _daqp_in_cascade(settings.backend, settings.options)
+
+    def solve(self) -> HierarchySolution:
+        """The weighted QP on the arrays' current contents (or the cascade's result)."""
+        t0 = time.perf_counter()
+        if self._run is None:  # no variable: the cascade evaluates, as in solve_hierarchy
+            return _solve_compiled(self.levels, 0, self.settings, None, self._tols, t0)
+        sol = _run_weighted(self._run, self.levels, self.settings, t0, self._daqp)
+        if sol is None:
+            sol = _cascade_instead(self.levels, self.n, self.settings, self._tols, t0)
+        return sol
 
 
 def _daqp_on_run(run, opts):

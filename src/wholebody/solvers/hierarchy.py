@@ -32,7 +32,9 @@ Methods
 ``weighted``: :mod:`.weighted`
     One QP over ``levels = [hard, objective]`` (Fahmi et al. 2019, eq. 7), the hard level's rows as
     constraints; if the hard level is infeasible or the QP fails, the cascade's result is
-    returned, recorded in ``method`` and ``warnings``.
+    returned, recorded in ``method`` and ``warnings``. :mod:`.compiled_cascade` assembles and
+    (DAQP) solves it compiled, the default when built; :class:`BoundWeighted` keeps it bound to
+    a control loop's level arrays.
 
 The solution type and what the methods share are in :mod:`.common`; the analytic first level
 (§2.4, eq. 17) is :func:`analytic_first_level`.
@@ -47,15 +49,15 @@ from scipy.linalg import lapack
 
 from . import compiled_cascade
 from .cascade import _solve_cascade
-from .common import FirstLevelSolution, HierarchySolution, _checked_arguments, evaluate_levels, log
-from .compiled_cascade import BoundCascade, _solve_compiled
+from .common import FirstLevelSolution, HierarchySolution, _checked_arguments, evaluate_levels
+from .compiled_cascade import BoundCascade, BoundWeighted, _solve_compiled, _solve_weighted_compiled
 from .daqp_hierarchy import _solve_daqp, row_normalised
 from .level import Level
 from .settings import HIERARCHY_DEFAULT, SolverSettings, settings_or_default
-from .weighted import _solve_weighted
+from .weighted import _cascade_instead, _solve_weighted
 
 __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
-           "row_normalised", "analytic_first_level", "BoundCascade"]
+           "row_normalised", "analytic_first_level", "BoundCascade", "BoundWeighted"]
 
 
 def solve_hierarchy(
@@ -102,9 +104,11 @@ def solve_hierarchy(
     feas_tol : tolerance for checking dropped rows and the weighted method's hard level.
     daqp_native_weights : method ``daqp`` only — use DAQP's native (row-normalised) soft
         penalty instead of uniform per-row weights (which give eq. 5's Σ s² trade-off).
-    compiled : cascade only — run the compiled cascade (``wholebody._cascade``, when built): the
-        same algorithm line for line, with the level QPs still solved by the backend (and the
-        fallback) from Python. ``False`` runs the Python cascade (the reference).
+    compiled : cascade and weighted — run the compiled cascade or weighted QP
+        (``wholebody._cascade``, when built): the same algorithm line for line, with the QPs
+        still solved by the backend (and, in the cascade, the fallback) from Python, except
+        DAQP's, solved in C++ with the adapter's rows, settings and verdict. ``False`` runs the
+        Python reference.
         Warnings from the compiled cascade list its own (frozen rows) before the fallback notes.
 
     Bad input (NaN/inf in data, inconsistent column counts, unknown names) raises ValueError
@@ -126,14 +130,10 @@ def solve_hierarchy(
     if method == "weighted":
         if len(levels) > 2:
             raise ValueError(f"method 'weighted' takes [hard, objective] levels, got {len(levels)} levels")
-        sol = _solve_weighted(levels, n, settings, feas_tol, t0)
-        if sol is not None:
-            return sol
-        warn = "weighted: hard level infeasible or the single QP failed; result of the cascade"
-        log.debug(warn)
-        sol = _solve_cascade(levels, n, settings, None, tols, t0)
-        sol.warnings = (warn,) + sol.warnings
-        return sol
+        solve = (_solve_weighted_compiled if compiled and compiled_cascade._WeightedRun is not None
+                 else _solve_weighted)
+        sol = solve(levels, n, settings, feas_tol, t0)
+        return sol if sol is not None else _cascade_instead(levels, n, settings, tols, t0)
     if compiled and compiled_cascade._CompiledCascade is not None:
         return _solve_compiled(levels, n, settings, first_level_solution, tols, t0)
     if analytic:

@@ -6,7 +6,10 @@ hard level is feasible, up to the ε effect of the cascade's soft first level (i
 O(ε) violation for norm; the hard rows do not), i.e. exactly equal as ε → 0. If the hard level
 is infeasible (or the backend fails on the single QP, e.g. quadprog on inconsistent equality
 rows), :func:`_solve_weighted` returns None and ``solve_hierarchy`` returns the cascade's
-result instead, recorded in ``method`` and ``warnings``.
+result instead (:func:`_cascade_instead`), recorded in ``method`` and ``warnings``.
+
+:func:`_solve_weighted` is the reference; :mod:`.compiled_cascade` assembles the same QP in C++
+(``wholebody._cascade.WeightedRun``) and solves DAQP's there, the default when built.
 """
 
 from __future__ import annotations
@@ -14,7 +17,11 @@ from __future__ import annotations
 import numpy as np
 
 from .backends import solve_qp
+from .cascade import _solve_cascade
 from .common import _finish, _rows, log
+
+FALLBACK_WARNING = "weighted: hard level infeasible or the single QP failed; result of the cascade"
+
 
 def _solve_weighted(levels, n, settings, feas_tol, t0):
     """One QP: rows of levels[0] as hard constraints, levels[-1] as weighted objective (Fahmi et al. 2019, eq. 7),
@@ -72,3 +79,12 @@ def _solve_weighted(levels, n, settings, feas_tol, t0):
             return None
     times = np.full(len(levels), np.nan)
     return _finish(levels, x, "optimal", True, t0, times, "weighted", len(levels), np.zeros(0), [])
+
+
+def _cascade_instead(levels, n, settings, tols, t0):
+    """The cascade's result where the weighted QP gave none, with :data:`FALLBACK_WARNING` first
+    among its warnings (``method`` "cascade")."""
+    log.debug(FALLBACK_WARNING)
+    sol = _solve_cascade(levels, n, settings, None, tols, t0)
+    sol.warnings = (FALLBACK_WARNING,) + sol.warnings
+    return sol
