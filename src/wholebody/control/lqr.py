@@ -438,8 +438,11 @@ class MomentumLQR:
         return self.q_orientation is not None
 
     def clamp_integral(self, z) -> np.ndarray:
-        """The CoG-error integral clamped elementwise to ``+-integral_limit`` (anti-windup)."""
-        return np.clip(vector(z, 3, "integral"), -self.integral_limit, self.integral_limit)
+        """The CoG-error integral clamped elementwise to ``+-integral_limit`` (anti-windup): what
+        np.clip selects, by np.maximum and np.minimum (called every cycle: without np.clip's
+        Python wrapper)."""
+        limit = self.integral_limit
+        return np.minimum(np.maximum(vector(z, 3, "integral"), -limit), limit)
 
     @staticmethod
     def _check_contacts(robot, contacts) -> tuple[str, ...]:

@@ -36,7 +36,7 @@ from ..sim.simulator import Simulator
 from ..tasks.wrench import DAMPING_RATIO_THETA, DAMPING_RATIO_X, TrunkImpedance, trunk_weights
 from .base import TIME_SPAN, BaseHeight, Parameter, RobotRelative
 from .loop import run_closed_loop
-from .measures import FALL_HEIGHT_FRACTION
+from .measures import FALL_HEIGHT_FRACTION, update_to_state
 
 CONTROLLERS = ("passive", "quasi-static")
 
@@ -501,8 +501,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         nonlocal fell_at
         plan = ctrl.last_plan
         q, v = sim.state()
-        if not (np.array_equal(robot.q, q) and np.array_equal(robot.v, v)):
-            robot.update(q, v)  # controllers that keep their own terms (PassiveWBC engine="native")
+        update_to_state(robot, q, v)  # (an estimate, or a controller keeping its own terms)
         pin.framesForwardKinematics(robot.model, pin_data, q)
         imp = ctrl.impedance
         lo, hi = ctrl.torque_limits.bounds(robot)

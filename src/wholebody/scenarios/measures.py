@@ -90,6 +90,16 @@ class Thresholds:
         return bool(last is None or last < min(end + window, t[-1] - RECORD_TAIL_S)), recovery
 
 
+def update_to_state(robot, q: np.ndarray, v: np.ndarray) -> None:
+    """``robot.update(q, v)`` unless the robot's cycle is of that state already (the controller
+    read it): the measures read the twin's state. The same bytes are the same state; other
+    numbers equal in value (+0.0 and -0.0) count as the same too, as ``np.array_equal`` says."""
+    if ((robot.q.tobytes() == q.tobytes() and robot.v.tobytes() == v.tobytes())
+            or (np.array_equal(robot.q, q) and np.array_equal(robot.v, v))):
+        return
+    robot.update(q, v)
+
+
 def tilt_deg(rotation: np.ndarray) -> float:
     """Angle (deg) between the z axis of ``rotation`` and the world's (or the support's, for a
     rotation relative to it). Measured every cycle: Python's min/max clip one number (np.clip's

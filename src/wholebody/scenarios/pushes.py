@@ -24,7 +24,7 @@ from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PA
                    Q_INTEGRAL, Parameter,
                    RobotRelative, check_engine, momentum_gains, parse_list, task_gains)
 from .loop import run_closed_loop
-from .measures import Thresholds, rotation_angle_deg, sole_slip, tilt_deg
+from .measures import Thresholds, rotation_angle_deg, sole_slip, tilt_deg, update_to_state
 
 # location -> (the robot's frame, ``trunk_frame`` or ``base_frame``, direction of the force, point
 # of application in that frame, in m on talos14: scaled by the robot's standing height,
@@ -321,8 +321,7 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
 
     def observe(t, result):
         q, v = sim.state()
-        if not (np.array_equal(robot.q, q) and np.array_equal(robot.v, v)):
-            robot.update(q, v)  # the controller read an estimate; the measures read the twin
+        update_to_state(robot, q, v)  # (an estimate, or a controller keeping its own terms)
         trunk.append(rotation_angle_deg(q[3:7], base_quat0))
         com.append(robot.com - ctrl.com_ref)
         momentum.append(robot.h_G.copy())

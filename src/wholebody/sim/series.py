@@ -17,6 +17,7 @@ import numpy as np
 
 #: rows of the first chunk, and the most rows one chunk holds
 FIRST_CHUNK, MAX_CHUNK = 256, 16384
+_FLOAT = np.dtype(np.float64)
 
 
 class Series:
@@ -43,8 +44,16 @@ class Series:
     def append(self, row) -> None:
         """Copy ``row`` (an array, a sequence of numbers or a number) in as the next row.
         ValueError if its shape differs from the first row's."""
-        row = np.asarray(row, dtype=self._fixed_dtype)
         last = self._last
+        if last is not None and self._filled < len(last) and (
+                (type(row) is np.ndarray and row.dtype == last.dtype and row.shape == self._shape)
+                or (type(row) is float and last.dtype == _FLOAT and not self._shape)):
+            # a row as the chunk stores it (the per-step case): copied in as it is
+            last[self._filled] = row
+            self._filled += 1
+            self._rows += 1
+            return
+        row = np.asarray(row, dtype=self._fixed_dtype)
         if last is None:
             self._shape = row.shape
             last = self._add_chunk(FIRST_CHUNK, row.dtype)

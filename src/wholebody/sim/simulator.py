@@ -87,6 +87,15 @@ class SimObserver(Protocol):
     def controller_result(self, sim: "Simulator", result) -> None: ...
 
 
+def _as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """``index`` as the slice it equals when its entries are consecutive and ascending (a view
+    of the same entries), else itself."""
+    index = np.asarray(index)
+    if index.ndim == 1 and index.size and (np.diff(index) == 1).all():
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
+
+
 #: how many robot surfaces a ground ray may pass before it gives up (ground_height)
 _RAY_PASSES = 64
 
@@ -133,11 +142,16 @@ class Simulator:
         self.plant = twin.label
         # MuJoCo's qpos of the robot holds the joints' angles (a continuous joint's one angle
         # where Pinocchio's q has its (cos, sin)): 7 + na numbers
-        self._qpos = (np.arange(7 + robot.na) if twin.qpos_index is None else twin.qpos_index)
-        self._qvel = (np.arange(robot.nv) if twin.dof_index is None else twin.dof_index)
-        self._ctrl = (np.arange(robot.na) if twin.actuator_index is None
-                      else twin.actuator_index)
-        self._ctrl_scale = (np.ones(robot.na) if twin.actuator_scale is None
+        # (a run of consecutive indices is kept as a slice: a view, read without numpy's fancy
+        # indexing, per step)
+        self._qpos = _as_slice(np.arange(7 + robot.na) if twin.qpos_index is None
+                               else twin.qpos_index)
+        self._qvel = _as_slice(np.arange(robot.nv) if twin.dof_index is None else twin.dof_index)
+        self._ctrl = _as_slice(np.arange(robot.na) if twin.actuator_index is None
+                               else twin.actuator_index)
+        # None: every actuator's scale is 1 (x * 1.0 is x: nothing to multiply)
+        self._ctrl_scale = (None if twin.actuator_scale is None
+                            or (np.asarray(twin.actuator_scale) == 1.0).all()
                             else twin.actuator_scale)
         self._held = twin.held_qpos
         self.model = self.twin.model
@@ -284,6 +298,9 @@ class Simulator:
 
     def _apply_pushes(self, t: float) -> np.ndarray:
         """Apply the pushes acting at ``t``; their (point, force) in ``active_pushes`` (world)."""
+        if not self._pushes:  # nothing was ever applied: xfrc_applied holds the zeros of reset
+            self.active_pushes = []
+            return np.zeros(3)
         self.data.xfrc_applied[:] = 0.0
         self.active_pushes = []
         total = np.zeros(3)
@@ -334,7 +351,7 @@ class Simulator:
             lo, hi = np.maximum(lo, self.twin.torque_lower), np.minimum(hi, self.twin.torque_upper)
         clipped = applied.clip(lo, hi)
         self.last_clipped = applied - clipped
-        data.ctrl[self._ctrl] = clipped * self._ctrl_scale
+        data.ctrl[self._ctrl] = clipped if self._ctrl_scale is None else clipped * self._ctrl_scale
         t_start = data.time
         push_force = self._apply_pushes(t_start)
         self._set_platform(t_start)
