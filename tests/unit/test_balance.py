@@ -191,6 +191,29 @@ def test_measures_tilt_slip_and_recovery():
     assert "within 5.0 mm" in talos14.push_criteria()
 
 
+def test_measures_update_the_robot_only_to_a_new_state(robots):
+    """The measures' update of the robot: none for the state of its cycle (the same bytes, or
+    +0.0 where it has -0.0: equal numbers), one for any other state, after which the robot's CoM
+    is Pinocchio's of that state."""
+    import pinocchio as pin
+
+    from wholebody.scenarios.measures import update_to_state
+
+    robot = robots["talos14"]
+    q, v = robot.q_ref.copy(), np.zeros(robot.nv)
+    v[-1] = -0.0
+    robot.update(q, v)
+    cycle = robot.cycle
+    update_to_state(robot, q.copy(), np.abs(v))  # -0.0 -> +0.0: equal numbers
+    assert robot.cycle == cycle
+    moved = q.copy()
+    moved[0] += 0.01
+    update_to_state(robot, moved, v)
+    assert robot.cycle == cycle + 1
+    data = robot.model.createData()
+    np.testing.assert_allclose(robot.com, pin.centerOfMass(robot.model, data, moved), atol=1e-12)
+
+
 @pytest.mark.parametrize("name", ["romeo", "g1"])
 def test_thresholds_keep_talos14s_proportions(robots, name):
     """The survival thresholds are talos14's (1 cm slip, 5 mm CoG, 10 cm fall) on talos14 and

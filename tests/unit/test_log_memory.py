@@ -29,7 +29,8 @@ def test_series_equals_numpy_of_the_list_across_chunks_and_reads(rng):
 
 
 @pytest.mark.parametrize("values", [[True, False, True], [0, 1, 2.5], [0, 0, 0], [True, 2, 0.5],
-                                    [np.float32(1.5), 2.25]])
+                                    [np.float32(1.5), 2.25], [0.5, np.float64(-0.0), 3, 2.5],
+                                    [np.nan, 1.0, np.inf]])
 def test_series_dtype_is_numpys(values):
     series = Series()
     for v in values:
@@ -44,6 +45,8 @@ def test_series_refuses_a_row_of_another_shape_and_writes_to_its_array():
     series.append(np.zeros(3))
     with pytest.raises(ValueError, match="shape"):
         series.append(np.zeros(4))
+    with pytest.raises(ValueError, match="shape"):
+        series.append(1.0)
     with pytest.raises(ValueError):
         series.array()[0, 0] = 1.0
     assert Series(float).array().shape == (0,)
