@@ -57,9 +57,10 @@ class PassiveStack:
         self._variables: dict[tuple, Variables] = {}
         self._normals = None  # (stance, their normals) last set on the tasks
 
-    def update(self, plan, lean=None) -> tuple[Stack, Variables]:
+    def update(self, plan, lean=None, q=None, v=None) -> tuple[Stack, Variables]:
         """The stack and variables of ``plan`` at the controller's state (its stance anchors of
-        the cycle; ``lean``: the desired net force of the cycle, for "force-parallel")."""
+        the cycle; ``lean``: the desired net force of the cycle, for "force-parallel"; the
+        posture regulariser's (q, v), default the robot's cached state)."""
         wbc, robot = self.wbc, self.wbc.robot
         contacts, leg = wbc.contacts, wbc._leg
         in_stance = plan.contact[leg].tolist()
@@ -75,7 +76,7 @@ class PassiveStack:
             if self.tangential is not None:
                 self.tangential.normals = self.friction.normals
         self.wrench.reference = plan.trunk
-        self.posture.target = np.concatenate([np.zeros(6), wbc.posture_acceleration()])
+        self.posture.target = np.concatenate([np.zeros(6), wbc.posture_acceleration(q, v)])
         if self.tangential is not None:
             self.tangential.lean = lean if wbc.regularization == "force-parallel" else None
         levels = [list(self.hard), list(self.objective)]
