@@ -159,6 +159,8 @@ class _Program:
         # the packers' views (made once), the Python tasks' row views, the solver's levels
         self.packs = [(s.task, self.weights[s.start:s.stop], self._writers(s, cycle))
                       for s in self.slots if id(s.task) not in python_rows]
+        self.weight_views = [(task, weights) for task, weights, _ in self.packs]
+        self.writers = [write for _, _, writers in self.packs for write in writers]
         self.python = [(s.task, s.eq, self.mat[s.start:s.stop], self.target[s.start:s.stop],
                         self.lower[s.start:s.stop], self.upper[s.start:s.stop],
                         self.weights[s.start:s.stop])
@@ -212,10 +214,10 @@ class _Program:
     def pack(self, cycle: "HierarchyCycle") -> None:
         """Every compiled task's current parameters (by its schema) and weights into the arrays
         (Python, every cycle)."""
-        for task, weights, writers in self.packs:
+        for task, weights in self.weight_views:
             weights[:] = task.weight
-            for write in writers:
-                write()
+        for write in self.writers:
+            write()
 
     def write_python_rows(self, cycle: "HierarchyCycle", python_rows: dict) -> None:
         """The rows of the tasks without a kernel (unscaled, as Formulation places them; the
@@ -347,14 +349,16 @@ class HierarchyCycle:
         (robot order) ``points`` (sphere bottoms, as ``Robot.contact_points``) and their
         ``point_velocities``, and of the contact frames' origins ``frame_positions``,
         ``frame_jacobians`` (linear rows, (nc, 3, nv)), ``frame_drifts`` (classical
-        accelerations) and ``frame_velocities``."""
+        accelerations) and ``frame_velocities``; ``tau_max`` the robot's torque bounds
+        τ_max(q) (``robot.torque_limits.upper``)."""
         if getattr(self, "_terms", None) is None:
             robot, nc = self.robot, len(self.robot.contacts)
             arrays = {"q": (robot.nq,), "v": (robot.nv,), "nle": (robot.nv,), "h_G": (6,),
                       "com": (3,), "vcom": (3,), "rotation": (3, 3), "Ig": (3, 3),
                       "points": (nc, 3), "point_velocities": (nc, 3),
                       "frame_positions": (nc, 3), "frame_jacobians": (nc, 3, robot.nv),
-                      "frame_drifts": (nc, 3), "frame_velocities": (nc, 3)}
+                      "frame_drifts": (nc, 3), "frame_velocities": (nc, 3),
+                      "tau_max": (robot.na,)}
             buffers = {name: np.zeros(shape) for name, shape in arrays.items()}
             self.engine.bind_state(buffers)
             self._terms = SimpleNamespace(mass=robot.mass, **buffers)

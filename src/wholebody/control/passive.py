@@ -79,6 +79,9 @@ PLAN_ARRAYS = ("touchdown_normal", "foot_position", "foot_velocity", "foot_accel
                "trunk.angular_velocity", "trunk.angular_acceleration")
 
 
+_total = np.add.reduce  # an array's sum without np.sum's dispatch (a cycle sums ten)
+
+
 def nonfinite_plan_field(plan) -> str | None:
     """The first of :data:`PLAN_ARRAYS` of ``plan`` with a NaN/inf entry, or None (one sum per
     array on the fast path; a finite array whose sum overflows is looked at entry by entry)."""
@@ -86,7 +89,7 @@ def nonfinite_plan_field(plan) -> str | None:
     arrays = (plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
               plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
               trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration)
-    if math.isfinite(sum(float(np.sum(a)) for a in arrays)):
+    if math.isfinite(sum([float(_total(a, None)) for a in arrays])):
         return None
     for name, a in zip(PLAN_ARRAYS, arrays):
         if not np.isfinite(a).all():
@@ -522,9 +525,10 @@ class PassiveWBC(PlannedController):
         self.last_x = result.x
         return result
 
-    def _torque_bounds(self, q=None) -> tuple[np.ndarray, np.ndarray]:
+    def _torque_bounds(self, q=None, upper=None) -> tuple[np.ndarray, np.ndarray]:
         """τ_min(q), τ_max(q) of eq. 15 with the weak-joint overrides (indices cached); ``q``
-        defaults to the robot's cached state."""
+        defaults to the robot's cached state, ``upper`` (the robot's τ_max(q), when known) to
+        ``robot.torque_limits.upper(q)``."""
         limits, robot = self.torque_limits, self.robot
         key = tuple(limits.upper_override.items())
         if key != self._override_key:
@@ -532,7 +536,9 @@ class PassiveWBC(PlannedController):
             self._override_index = np.array([robot.joint_names.index(j) for j, _ in key], int)
             self._override_value = np.array([value for _, value in key], float)
             self._override_key = key
-        hi = robot.torque_limits.upper((robot.q if q is None else q)[7:]) * limits.scale
+        if upper is None:
+            upper = robot.torque_limits.upper((robot.q if q is None else q)[7:])
+        hi = upper * limits.scale
         if self._override_index.size:
             hi[self._override_index] = np.minimum(hi[self._override_index], self._override_value)
         return -hi, hi
@@ -799,7 +805,7 @@ class PassiveWBC(PlannedController):
         if bad is not None:
             return self._bad_plan(plan, bad, terms.q, terms.nle[6:], t0)
         stance = plan.contact[self._leg]
-        self._tau_bounds = self._torque_bounds(terms.q)
+        self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
         points = terms.points[self._contact_order]
         self._stance_anchors(stance, points, terms.point_velocities[self._contact_order])
         if self.observer is not None and self._commanded_wrench is not None:
@@ -824,9 +830,7 @@ class PassiveWBC(PlannedController):
         F, swing_errors = np.zeros(self.nf), None
         if sol.ok:
             qdd, tau, status = sol.qdd, sol.tau, "solved"
-            for i, name in enumerate(self.contacts):
-                if name in sol.forces:
-                    F[3 * i:3 * i + 3] = sol.forces[name]
+            F[np.repeat(stance, 3)] = sol.lam  # the stance feet's forces, in contact order
             sw = np.flatnonzero(~stance)
             if sw.size:
                 Jsw, target = self._swing_targets_of(plan, sw, terms)

@@ -165,7 +165,8 @@ public:
   // the task rows (wholebody.cycle.HierarchyCycle.state): q, v, nle, h_G, com, vcom, the base's
   // rotation (row-major), the locked centroidal inertia Ig, and per contact its point (the bottom
   // of a foot sphere) and that point's velocity, its frame's origin, the origin's Jacobian
-  // (linear rows, nc x 3 x nv), classical acceleration drift and velocity.
+  // (linear rows, nc x 3 x nv), classical acceleration drift and velocity; the robot's torque
+  // bounds tau_max(q) (TorqueProfile.upper, Robot.torque_limits).
   void bind_state(const py::dict & b)
   {
     StateOut s;
@@ -183,6 +184,7 @@ public:
     s.frame_jacobians = buffer<double>(b, "frame_jacobians", 3 * nc_ * nv_, s.keep);
     s.frame_drifts = buffer<double>(b, "frame_drifts", 3 * nc_, s.keep);
     s.frame_velocities = buffer<double>(b, "frame_velocities", 3 * nc_, s.keep);
+    s.tau_max = buffer<double>(b, "tau_max", na_, s.keep);
     state_ = std::move(s);
     if (updated_)
       write_state();
@@ -339,7 +341,7 @@ private:
     double *q = nullptr, *v = nullptr, *nle = nullptr, *h_G = nullptr, *com = nullptr,
            *vcom = nullptr, *rotation = nullptr, *Ig = nullptr, *points = nullptr,
            *point_velocities = nullptr, *frame_positions = nullptr, *frame_jacobians = nullptr,
-           *frame_drifts = nullptr, *frame_velocities = nullptr;
+           *frame_drifts = nullptr, *frame_velocities = nullptr, *tau_max = nullptr;
     std::vector<py::object> keep;
   };
 
@@ -354,6 +356,8 @@ private:
     Map<Vector3d>(state_.vcom) = data_.vcom[0];
     Map<Mat3>(state_.rotation) = data_.oMi[1].rotation();
     Map<Mat3>(state_.Ig) = data_.Ig.inertia().matrix();
+    Map<VectorXd> tau_max(state_.tau_max, na_);
+    torque_upper(tau_max);
     for (Index i = 0; i < nc_; ++i)
     {
       const auto fid = frames_[contact_frames_[i]];
