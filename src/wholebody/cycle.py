@@ -24,6 +24,7 @@ import functools
 import logging
 import math
 import time
+from types import SimpleNamespace
 from typing import Sequence
 
 import numpy as np
@@ -158,6 +159,8 @@ class _Program:
         # the packers' views (made once), the Python tasks' row views, the solver's levels
         self.packs = [(s.task, self.weights[s.start:s.stop], self._writers(s, cycle))
                       for s in self.slots if id(s.task) not in python_rows]
+        self.weight_views = [(task, weights) for task, weights, _ in self.packs]
+        self.writers = [write for _, _, writers in self.packs for write in writers]
         self.python = [(s.task, s.eq, self.mat[s.start:s.stop], self.target[s.start:s.stop],
                         self.lower[s.start:s.stop], self.upper[s.start:s.stop],
                         self.weights[s.start:s.stop])
@@ -211,10 +214,10 @@ class _Program:
     def pack(self, cycle: "HierarchyCycle") -> None:
         """Every compiled task's current parameters (by its schema) and weights into the arrays
         (Python, every cycle)."""
-        for task, weights, writers in self.packs:
+        for task, weights in self.weight_views:
             weights[:] = task.weight
-            for write in writers:
-                write()
+        for write in self.writers:
+            write()
 
     def write_python_rows(self, cycle: "HierarchyCycle", python_rows: dict) -> None:
         """The rows of the tasks without a kernel (unscaled, as Formulation places them; the
@@ -339,6 +342,28 @@ class HierarchyCycle:
         """Centroidal momentum [linear; angular] at the last solved state."""
         return self.engine.h_G if self.native else self.robot.h_G.copy()
 
+    def terms_view(self) -> SimpleNamespace:
+        """Arrays the native engine rewrites at every :meth:`update` (bound on first call, the
+        same objects afterwards): ``q``, ``v``, ``nle`` (h), ``h_G``, ``com``, ``vcom``,
+        ``rotation`` (the base's), ``Ig`` (locked centroidal inertia, world axes); per contact
+        (robot order) ``points`` (sphere bottoms, as ``Robot.contact_points``) and their
+        ``point_velocities``, and of the contact frames' origins ``frame_positions``,
+        ``frame_jacobians`` (linear rows, (nc, 3, nv)), ``frame_drifts`` (classical
+        accelerations) and ``frame_velocities``; ``tau_max`` the robot's torque bounds
+        τ_max(q) (``robot.torque_limits.upper``)."""
+        if getattr(self, "_terms", None) is None:
+            robot, nc = self.robot, len(self.robot.contacts)
+            arrays = {"q": (robot.nq,), "v": (robot.nv,), "nle": (robot.nv,), "h_G": (6,),
+                      "com": (3,), "vcom": (3,), "rotation": (3, 3), "Ig": (3, 3),
+                      "points": (nc, 3), "point_velocities": (nc, 3),
+                      "frame_positions": (nc, 3), "frame_jacobians": (nc, 3, robot.nv),
+                      "frame_drifts": (nc, 3), "frame_velocities": (nc, 3),
+                      "tau_max": (robot.na,)}
+            buffers = {name: np.zeros(shape) for name, shape in arrays.items()}
+            self.engine.bind_state(buffers)
+            self._terms = SimpleNamespace(mass=robot.mass, **buffers)
+        return self._terms
+
     def frame_index(self, frame: str) -> int:
         """The compiled cycle's index of a model frame (added to it on first use)."""
         return self.frame_slot(self.robot.frame_id(frame, "frame"))
@@ -398,6 +423,24 @@ class HierarchyCycle:
             sol.timings["update"] = t1 - t0
             sol.timings["total"] = time.perf_counter() - t0
             return sol
+        self.update(q, v)
+        return self.solve_updated(variables, diagnostics)
+
+    def update(self, q, v) -> None:
+        """The native engine's rigid-body terms at (q, v), for :meth:`solve_updated` (what
+        :meth:`solve` does first; a controller reads the terms in between, :meth:`terms_view`).
+        Bad q/v (size, NaN) raise ValueError naming the field."""
+        t0 = time.perf_counter()
+        self.engine.update(q, v)
+        self._q, self._qv = q, (q, v)
+        self._update_time = time.perf_counter() - t0
+
+    def solve_updated(self, variables: Variables | None = None,
+                      diagnostics: bool = False) -> Solution:
+        """:meth:`solve` at the state of the last :meth:`update` (native engine)."""
+        robot = self.robot
+        variables = variables or self._default_variables()
+        q, v = self._qv
         t0 = time.perf_counter()
         python_rows = {}
         tasks = self.stack.tasks()
@@ -405,8 +448,9 @@ class HierarchyCycle:
             robot.update(q, v)
             python_rows = {id(t): t.rows(robot, variables) for t in self._python}
         program = self._program_for(variables, tasks, python_rows)
-        self.engine.update(q, v)
-        self._q = q
+        if self._q is None:  # a frame was added to the compiled model: update it again
+            self.engine.update(q, v)
+            self._q = q
         t1 = time.perf_counter()
         program.pack(self)
         program.write_python_rows(self, python_rows)
@@ -428,8 +472,8 @@ class HierarchyCycle:
                                  variables)
         if diagnostics:
             solution.tasks = Formulation.task_reports(result.x, program.meta)
-        solution.timings = {"update": t1 - t0, "rows": t_rows - t1, "solve": t_solve - t_rows,
-                            "total": time.perf_counter() - t0,
+        solution.timings = {"update": self._update_time + t1 - t0, "rows": t_rows - t1, "solve": t_solve - t_rows,
+                            "total": self._update_time + time.perf_counter() - t0,
                             "qp": result.timings.get("qp", np.nan),
                             "qps": result.timings.get("qps", 0)}
         return solution

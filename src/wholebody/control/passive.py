@@ -79,6 +79,9 @@ PLAN_ARRAYS = ("touchdown_normal", "foot_position", "foot_velocity", "foot_accel
                "trunk.angular_velocity", "trunk.angular_acceleration")
 
 
+_total = np.add.reduce  # an array's sum without np.sum's dispatch (a cycle sums ten)
+
+
 def nonfinite_plan_field(plan) -> str | None:
     """The first of :data:`PLAN_ARRAYS` of ``plan`` with a NaN/inf entry, or None (one sum per
     array on the fast path; a finite array whose sum overflows is looked at entry by entry)."""
@@ -86,7 +89,7 @@ def nonfinite_plan_field(plan) -> str | None:
     arrays = (plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
               plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
               trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration)
-    if math.isfinite(sum(float(np.sum(a)) for a in arrays)):
+    if math.isfinite(sum([float(_total(a, None)) for a in arrays])):
         return None
     for name, a in zip(PLAN_ARRAYS, arrays):
         if not np.isfinite(a).all():
@@ -367,9 +370,7 @@ class PassiveWBC(PlannedController):
         if self.engine == "native":
             self._native = self._build_native()
         elif self.engine == "stack":
-            self._stack = PassiveStack(self)
-            self._stack_cycle = HierarchyCycle(robot, self._stack.stack, engine="native",
-                                               settings=STACK_SETTINGS)
+            self._build_stack()
 
     # the QP's arrays (those of the last cycle)
     A = property(lambda self: self.qp.A)
@@ -387,6 +388,7 @@ class PassiveWBC(PlannedController):
             self._native.update(self.robot.q, self.robot.v)
             return self._solve_native(plan, self.robot.q)
         if self._stack is not None:
+            self._stack_cycle.update(self.robot.q, self.robot.v)
             return self._solve_stack(plan)
         t0 = time.perf_counter()
         self.last_plan = plan
@@ -440,12 +442,14 @@ class PassiveWBC(PlannedController):
         t2 = time.perf_counter()
         return self._solution(result, J, W_d, G, pat, {"assemble": t1 - t0, "solve": t2 - t1})
 
-    def posture_acceleration(self) -> np.ndarray:
+    def posture_acceleration(self, q=None, v=None) -> np.ndarray:
         """The joints' q̈ the ‖q̈‖²_R term pulls toward: K (q_ref − q) − D q̇ (Lie difference, so
-        continuous joints count their angle)."""
+        continuous joints count their angle); (q, v) default to the robot's cached state."""
         robot = self.robot
-        error = pin.difference(robot.model, robot.q, robot.q_ref)[6:]
-        return self.posture_mask * (self.posture_K * error - self.posture_D * robot.v[6:])
+        q = robot.q if q is None else q
+        v = robot.v if v is None else v
+        error = pin.difference(robot.model, q, robot.q_ref)[6:]
+        return self.posture_mask * (self.posture_K * error - self.posture_D * v[6:])
 
     def _stance_anchors(self, stance, points, velocity) -> None:
         """Writes x̂_st of eq. 32 into ``_anchors``, consistent with a rolling foot: the contact
@@ -492,20 +496,26 @@ class PassiveWBC(PlannedController):
         self.qp.set_swing(Jsw.reshape(-1, nv), target.reshape(-1), pat, self.swing_slack,
                           self.slack_weight)
 
-    def _swing_targets_of(self, plan, sw) -> tuple[np.ndarray, np.ndarray]:
+    def _swing_targets_of(self, plan, sw, terms=None) -> tuple[np.ndarray, np.ndarray]:
         """(J_sw (k, 3, nv), v̇_d − J̇ v (k, 3)) of the swing feet ``sw`` (indices), kept in
-        ``_swing_targets``."""
-        robot = self.robot
+        ``_swing_targets``; at the robot's cached state, or at the compiled cycle's ``terms``
+        (:meth:`HierarchyCycle.terms_view <wholebody.cycle.HierarchyCycle.terms_view>`)."""
         idx = self._contact_order[sw]
         legs = self._leg[sw]
-        Jsw = robot.contact_frame_jacobians[idx, :3]  # (k, 3, nv), frame origins (sphere centres)
-        pos = robot.contact_points[idx]
-        pos[:, 2] += self._radii[sw]
+        if terms is None:
+            robot = self.robot
+            Jsw = robot.contact_frame_jacobians[idx, :3]  # (k, 3, nv), frame origins
+            pos = robot.contact_points[idx]               # (sphere centres)
+            pos[:, 2] += self._radii[sw]
+            velocity, drift = Jsw @ robot.v, robot.contact_frame_drifts[idx, :3]
+        else:
+            Jsw, pos = terms.frame_jacobians[idx], terms.frame_positions[idx]
+            velocity, drift = terms.frame_velocities[idx], terms.frame_drifts[idx]
         a_d = self.swing.K * (plan.foot_position[legs] - pos)
-        a_d += self.swing.D * (plan.foot_velocity[legs] - Jsw @ robot.v)
+        a_d += self.swing.D * (plan.foot_velocity[legs] - velocity)
         if self.swing.feedforward:
             a_d += plan.foot_acceleration[legs]
-        target = a_d - robot.contact_frame_drifts[idx, :3]
+        target = a_d - drift
         self._swing_targets[sw] = target
         return Jsw, target
 
@@ -515,9 +525,10 @@ class PassiveWBC(PlannedController):
         self.last_x = result.x
         return result
 
-    def _torque_bounds(self, q=None) -> tuple[np.ndarray, np.ndarray]:
+    def _torque_bounds(self, q=None, upper=None) -> tuple[np.ndarray, np.ndarray]:
         """τ_min(q), τ_max(q) of eq. 15 with the weak-joint overrides (indices cached); ``q``
-        defaults to the robot's cached state."""
+        defaults to the robot's cached state, ``upper`` (the robot's τ_max(q), when known) to
+        ``robot.torque_limits.upper(q)``."""
         limits, robot = self.torque_limits, self.robot
         key = tuple(limits.upper_override.items())
         if key != self._override_key:
@@ -525,7 +536,9 @@ class PassiveWBC(PlannedController):
             self._override_index = np.array([robot.joint_names.index(j) for j, _ in key], int)
             self._override_value = np.array([value for _, value in key], float)
             self._override_key = key
-        hi = robot.torque_limits.upper((robot.q if q is None else q)[7:]) * limits.scale
+        if upper is None:
+            upper = robot.torque_limits.upper((robot.q if q is None else q)[7:])
+        hi = upper * limits.scale
         if self._override_index.size:
             hi[self._override_index] = np.minimum(hi[self._override_index], self._override_value)
         return -hi, hi
@@ -694,17 +707,30 @@ class PassiveWBC(PlannedController):
         """Hand changed weights, gains or limits to the native engine (the stack engine's tasks
         built anew; no-op for "python")."""
         if self._stack is not None:
-            self._stack = PassiveStack(self)
-            self._stack_cycle = HierarchyCycle(self.robot, self._stack.stack, engine="native",
-                                               settings=STACK_SETTINGS)
+            self._build_stack()
         if self._native is not None:
             self._native.configure(self._native_spec())
             if self._nb["errors"] is not self.impedance.last_errors:  # a new impedance object
                 self._nb["errors"] = self.impedance.last_errors
                 self._native.bind(self._nb)
 
+    def _build_stack(self) -> None:
+        """The stack engine's tasks, its compiled cycle and the terms it reads every cycle."""
+        self._stack = PassiveStack(self)
+        self._stack_cycle = HierarchyCycle(self.robot, self._stack.stack, engine="native",
+                                           settings=STACK_SETTINGS)
+        self._terms = self._stack_cycle.terms_view()
+        #: per leg of the planner, its contact (the planner's feet are in leg order)
+        self._leg_contact = self._contact_order[np.argsort(self._leg)]
+
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) at time ``t`` (see PlannedController.compute)."""
+        if self._stack is not None:  # the compiled cycle's terms, as the native engine's
+            self._stack_cycle.update(q, v)
+            terms = self._terms
+            plan = self.planner.update(t, feet=terms.frame_positions[self._leg_contact],
+                                       com_velocity=terms.vcom.copy())
+            return self._solve_stack(plan)
         if self._native is None:
             return super().compute(q, v, t)
         self._native.update(q, v)
@@ -715,6 +741,9 @@ class PassiveWBC(PlannedController):
 
     def cycle(self, q, v, plan) -> Solution:
         """One cycle at the state (q, v) for a given ``plan``: update + QP + torques."""
+        if self._stack is not None:
+            self._stack_cycle.update(q, v)
+            return self._solve_stack(plan)
         if self._native is None:
             self.robot.update(q, v)
             return self.solve(plan)
@@ -763,54 +792,55 @@ class PassiveWBC(PlannedController):
 
     # ------------------------------------------------------------------ the stack engine
     def _solve_stack(self, plan) -> Solution:
-        """:meth:`solve` through the compiled hierarchy program: the controller's state-dependent
-        references (stance anchors, observer, W_d) from the robot's cached state as the Python
-        engine, then the persistent :class:`PassiveStack` updated and solved by its
-        :class:`~wholebody.cycle.HierarchyCycle` (weighted, one program per stance set)."""
+        """:meth:`solve` through the compiled hierarchy program, updated to the state already:
+        the controller's state-dependent references (stance anchors, observer, W_d) from the
+        compiled cycle's terms (:meth:`HierarchyCycle.terms_view
+        <wholebody.cycle.HierarchyCycle.terms_view>`), then the persistent :class:`PassiveStack`
+        updated and solved by its :class:`~wholebody.cycle.HierarchyCycle` (weighted, one
+        program per stance set)."""
         t0 = time.perf_counter()
         self.last_plan = plan
-        robot = self.robot
+        terms = self._terms
         bad = nonfinite_plan_field(plan)
         if bad is not None:
-            return self._bad_plan(plan, bad, robot.q, robot.h[6:], t0)
+            return self._bad_plan(plan, bad, terms.q, terms.nle[6:], t0)
         stance = plan.contact[self._leg]
-        self._tau_bounds = self._torque_bounds()
-        points = robot.contact_points[self._contact_order]
-        J = robot.stacked_contact_jacobian(self.contacts)
-        self._stance_anchors(stance, points, (J @ robot.v).reshape(-1, 3))
+        self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
+        points = terms.points[self._contact_order]
+        self._stance_anchors(stance, points, terms.point_velocities[self._contact_order])
         if self.observer is not None and self._commanded_wrench is not None:
             self.impedance.external_wrench = self.observer.update(
-                robot.h_G, self._commanded_wrench, robot.mass, self.control_period)
-        W_d = self.impedance.wrench(robot, plan.trunk)
+                terms.h_G, self._commanded_wrench, terms.mass, self.control_period)
+        R = terms.rotation
+        W_d = self.impedance.wrench_at(R, R @ terms.v[3:6], terms.com, terms.vcom, terms.mass,
+                                       terms.Ig, plan.trunk)
         t1 = time.perf_counter()
         # failed cycles are values, as in the Python engine: a W_d that is not finite (e.g. the
-        # external wrench), NaN/inf task rows (the state was checked by robot.update)
+        # external wrench), NaN/inf task rows (the state was checked by the update)
         sol = SimpleNamespace(ok=False, status="the desired trunk wrench W_d is not finite",
                               timings={})
         if math.isfinite(W_d.sum()):
-            _, variables = self._stack.update(plan, W_d[:3])
+            _, variables = self._stack.update(plan, W_d[:3], terms.q, terms.v)
             t1 = time.perf_counter()
             try:
-                sol = self._stack_cycle.solve(robot.q, robot.v, variables)
+                sol = self._stack_cycle.solve_updated(variables)
             except ValueError as exc:
                 sol.status = str(exc)
         t2 = time.perf_counter()
         F, swing_errors = np.zeros(self.nf), None
         if sol.ok:
             qdd, tau, status = sol.qdd, sol.tau, "solved"
-            for i, name in enumerate(self.contacts):
-                if name in sol.forces:
-                    F[3 * i:3 * i + 3] = sol.forces[name]
+            F[np.repeat(stance, 3)] = sol.lam  # the stance feet's forces, in contact order
             sw = np.flatnonzero(~stance)
             if sw.size:
-                Jsw, target = self._swing_targets_of(plan, sw)
+                Jsw, target = self._swing_targets_of(plan, sw, terms)
                 swing_errors = np.zeros(len(self.contacts))
                 swing_errors[sw] = np.linalg.norm(Jsw @ qdd - target, axis=1)
         else:
-            qdd, F, tau, status = self._failed(sol.status, robot.h[6:])
+            qdd, F, tau, status = self._failed(sol.status, terms.nle[6:])
         parts = sol.timings
-        rows = parts.get("update", 0.0) + parts.get("rows", 0.0)
-        G = contact_wrench_map(robot, self.contacts, self._G, points)
+        rows = parts.get("rows", 0.0)
+        G = contact_wrench_map(terms, self.contacts, self._G, points)
         return self._report(sol.ok, qdd, F, tau, status, G @ F, W_d, stance, swing_errors,
                             {"assemble": t1 - t0 + rows, "solve": t2 - t1 - rows,
                              "prepare": t1 - t0, "update": parts.get("update", np.nan),

@@ -54,43 +54,57 @@ class PassiveStack:
                       for n in wbc.contacts]
         self.swing_level = 0 if wbc.swing_slack == "none" else 1
         self.stack = Stack([list(self.hard), list(self.objective)])
-        self._variables: dict[tuple, Variables] = {}
+        # the stance task anchors frame origins, the controller the sphere bottoms: the anchors
+        # are rows of one array (all contacts; the task reads its active ones), set every cycle
+        self._anchor_frames = np.zeros((len(wbc.contacts), 3))
+        self._radius_offset = np.zeros((len(wbc.contacts), 3))
+        self._radius_offset[:, 2] = wbc._radii
+        self.contact.anchors = dict(zip(wbc.contacts, self._anchor_frames))
+        self._stances: dict[tuple, tuple] = {}  # stance flags -> (levels, swing, variables)
         self._normals = None  # (stance, their normals) last set on the tasks
 
-    def update(self, plan, lean=None) -> tuple[Stack, Variables]:
+    def _stance(self, in_stance: tuple) -> tuple:
+        """(levels, swing feet as (task, leg), variables, the stance feet's legs, their names)
+        of a stance set (flags per contact), made on first use."""
+        wbc = self.wbc
+        stance = tuple(n for n, s in zip(wbc.contacts, in_stance) if s)
+        levels = [list(self.hard), list(self.objective)]
+        swing = [(task, wbc._leg[i]) for i, task in enumerate(self.swing) if not in_stance[i]]
+        levels[self.swing_level] += [task for task, _ in swing]
+        entry = (levels, swing, Variables(wbc.robot, stance),
+                 wbc._leg[np.flatnonzero(in_stance)], stance)
+        self._stances[in_stance] = entry
+        return entry
+
+    def update(self, plan, lean=None, q=None, v=None) -> tuple[Stack, Variables]:
         """The stack and variables of ``plan`` at the controller's state (its stance anchors of
-        the cycle; ``lean``: the desired net force of the cycle, for "force-parallel")."""
-        wbc, robot = self.wbc, self.wbc.robot
-        contacts, leg = wbc.contacts, wbc._leg
-        in_stance = plan.contact[leg].tolist()
-        stance = tuple(n for n, s in zip(contacts, in_stance) if s)
-        for i, n in enumerate(contacts):  # the task anchors frame origins, the controller the
-            if in_stance[i]:             # sphere bottoms
-                self.contact.anchors[n] = wbc._anchors[i] + [0.0, 0.0, wbc._radii[i]]
-        normals = plan.touchdown_normal[leg[np.asarray(in_stance)]]
-        if self._normals is None or not np.array_equal(normals, self._normals[1]) \
-                or self._normals[0] != stance:  # checked and set when they change only
-            self._normals = stance, normals.copy()
+        the cycle; ``lean``: the desired net force of the cycle, for "force-parallel"; the
+        posture regulariser's (q, v), default the robot's cached state)."""
+        wbc = self.wbc
+        in_stance = tuple(plan.contact[wbc._leg].tolist())
+        entry = self._stances.get(in_stance)
+        levels, swing, variables, legs, stance = entry or self._stance(in_stance)
+        np.add(wbc._anchors, self._radius_offset, out=self._anchor_frames)
+        normals = plan.touchdown_normal[legs]
+        last = self._normals
+        if last is None or last[0] != stance or not (normals == last[1]).all():
+            self._normals = stance, normals.copy()  # checked and set when they change only
             self.friction.normals = self.normal_bounds.normals = dict(zip(stance, normals))
             if self.tangential is not None:
                 self.tangential.normals = self.friction.normals
         self.wrench.reference = plan.trunk
-        self.posture.target = np.concatenate([np.zeros(6), wbc.posture_acceleration()])
+        # in place: the target was checked when set, a posture acceleration of a finite state
+        # is finite (a NaN would fail the cycle's row check)
+        self.posture.target[6:] = wbc.posture_acceleration(q, v)
         if self.tangential is not None:
             self.tangential.lean = lean if wbc.regularization == "force-parallel" else None
-        levels = [list(self.hard), list(self.objective)]
-        for i, task in enumerate(self.swing):
-            if in_stance[i]:
-                continue
-            foot = leg[i]
+        feedforward = wbc.swing.feedforward
+        for task, foot in swing:
             task.position = plan.foot_position[foot]
             task.velocity[:3] = plan.foot_velocity[foot]
-            task.acceleration[:3] = plan.foot_acceleration[foot] if wbc.swing.feedforward else 0.0
-            levels[self.swing_level].append(task)
-        self.stack.levels[:] = levels
-        variables = self._variables.get(stance)
-        if variables is None:
-            variables = self._variables[stance] = Variables(robot, stance)
+            task.acceleration[:3] = plan.foot_acceleration[foot] if feedforward else 0.0
+        if self.stack.levels is not levels:
+            self.stack.levels = levels
         return self.stack, variables
 
 

@@ -157,6 +157,37 @@ public:
       points_(i, 2) -= r;
     }
     updated_ = true;
+    if (state_.q)
+      write_state();
+  }
+
+  // Python-owned arrays that every update refreshes with the terms a controller reads besides
+  // the task rows (wholebody.cycle.HierarchyCycle.state): q, v, nle, h_G, com, vcom, the base's
+  // rotation (row-major), the locked centroidal inertia Ig, and per contact its point (the bottom
+  // of a foot sphere) and that point's velocity, its frame's origin, the origin's Jacobian
+  // (linear rows, nc x 3 x nv), classical acceleration drift and velocity; the robot's torque
+  // bounds tau_max(q) (TorqueProfile.upper, Robot.torque_limits).
+  void bind_state(const py::dict & b)
+  {
+    StateOut s;
+    s.q = buffer<double>(b, "q", nq_, s.keep);
+    s.v = buffer<double>(b, "v", nv_, s.keep);
+    s.nle = buffer<double>(b, "nle", nv_, s.keep);
+    s.h_G = buffer<double>(b, "h_G", 6, s.keep);
+    s.com = buffer<double>(b, "com", 3, s.keep);
+    s.vcom = buffer<double>(b, "vcom", 3, s.keep);
+    s.rotation = buffer<double>(b, "rotation", 9, s.keep);
+    s.Ig = buffer<double>(b, "Ig", 9, s.keep);
+    s.points = buffer<double>(b, "points", 3 * nc_, s.keep);
+    s.point_velocities = buffer<double>(b, "point_velocities", 3 * nc_, s.keep);
+    s.frame_positions = buffer<double>(b, "frame_positions", 3 * nc_, s.keep);
+    s.frame_jacobians = buffer<double>(b, "frame_jacobians", 3 * nc_ * nv_, s.keep);
+    s.frame_drifts = buffer<double>(b, "frame_drifts", 3 * nc_, s.keep);
+    s.frame_velocities = buffer<double>(b, "frame_velocities", 3 * nc_, s.keep);
+    s.tau_max = buffer<double>(b, "tau_max", na_, s.keep);
+    state_ = std::move(s);
+    if (updated_)
+      write_state();
   }
 
   // A program: the level layout of one stack and contact set (wholebody.cycle._Program). Each
@@ -304,6 +335,46 @@ public:
   Index na() const { return na_; }
 
 private:
+  // the arrays of bind_state (null: not bound)
+  struct StateOut
+  {
+    double *q = nullptr, *v = nullptr, *nle = nullptr, *h_G = nullptr, *com = nullptr,
+           *vcom = nullptr, *rotation = nullptr, *Ig = nullptr, *points = nullptr,
+           *point_velocities = nullptr, *frame_positions = nullptr, *frame_jacobians = nullptr,
+           *frame_drifts = nullptr, *frame_velocities = nullptr, *tau_max = nullptr;
+    std::vector<py::object> keep;
+  };
+
+  void write_state()
+  {
+    using Mat3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+    Map<VectorXd>(state_.q, nq_) = q_;
+    Map<VectorXd>(state_.v, nv_) = v_;
+    Map<VectorXd>(state_.nle, nv_) = data_.nle;
+    Map<Vector6d>(state_.h_G) = data_.hg.toVector();
+    Map<Vector3d>(state_.com) = data_.com[0];
+    Map<Vector3d>(state_.vcom) = data_.vcom[0];
+    Map<Mat3>(state_.rotation) = data_.oMi[1].rotation();
+    Map<Mat3>(state_.Ig) = data_.Ig.inertia().matrix();
+    Map<VectorXd> tau_max(state_.tau_max, na_);
+    torque_upper(tau_max);
+    for (Index i = 0; i < nc_; ++i)
+    {
+      const auto fid = frames_[contact_frames_[i]];
+      const Matrix6x & J6 = contact_J6_[i];
+      Map<Vector3d>(state_.points + 3 * i) = points_.row(i).transpose();
+      Map<Vector3d>(state_.point_velocities + 3 * i) = contact_J_[i].topRows(3) * v_;
+      Map<Vector3d>(state_.frame_positions + 3 * i) = data_.oMf[fid].translation();
+      RowMap(state_.frame_jacobians + 3 * nv_ * i, 3, nv_) = J6.topRows<3>();
+      Map<Vector3d>(state_.frame_velocities + 3 * i) = J6.topRows<3>() * v_;
+      Map<Vector3d>(state_.frame_drifts + 3 * i) =
+        pinocchio::getFrameClassicalAcceleration(model_, data_, fid, pinocchio::LOCAL_WORLD_ALIGNED)
+          .linear();
+    }
+  }
+
+  StateOut state_;
+
   Program & program(int id)
   {
     if (id < 0 || id >= int(programs_.size()))
@@ -920,6 +991,7 @@ PYBIND11_MODULE(_hierarchy_cycle, m)
     .def("compile", &HierarchyCycle::compile, py::arg("program"))
     .def("fill", &HierarchyCycle::fill, py::arg("program"))
     .def("recover", &HierarchyCycle::recover, py::arg("program"), py::arg("x"))
+    .def("bind_state", &HierarchyCycle::bind_state, py::arg("buffers"))
     .def("terms", &HierarchyCycle::terms)
     .def("frame_placement", &HierarchyCycle::frame_placement, py::arg("frame"))
     .def("add_frame", &HierarchyCycle::add_frame, py::arg("joint"), py::arg("placement"))

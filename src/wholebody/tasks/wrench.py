@@ -200,19 +200,26 @@ class TrunkImpedance:
 
     def wrench(self, robot, ref, out: np.ndarray | None = None) -> np.ndarray:
         """W_com,d (6,) = [force; moment about the CoM] for the robot's cached state."""
-        out = np.empty(6) if out is None else out
         R, omega = self.trunk_state(robot)
+        return self.wrench_at(R, omega, robot.com, robot.vcom, robot.mass, robot.data.Ig.inertia,
+                              ref, out)
+
+    def wrench_at(self, R, omega, com, vcom, mass: float, Ig, ref,
+                  out: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`wrench` for a given state: base rotation ``R``, world angular velocity
+        ``omega``, CoM position and velocity, ``mass`` and locked centroidal inertia ``Ig``."""
+        out = np.empty(6) if out is None else out
         e = self.last_errors
-        e[0:3] = ref.position - robot.com
+        e[0:3] = ref.position - com
         e[3:6] = pin.log3(ref.rotation @ R.T)
-        e[6:9] = ref.velocity - robot.vcom
+        e[6:9] = ref.velocity - vcom
         e[9:12] = ref.angular_velocity - omega
         out[0:3] = self.K_x * e[0:3] + self.D_x * e[6:9]
         out[3:6] = self.K_theta * e[3:6] + self.D_theta * e[9:12]
-        out[2] += robot.mass * GRAVITY  # ∇V_g: gravity compensation
+        out[2] += mass * GRAVITY  # ∇V_g: gravity compensation
         if self.feedforward:  # W_ff = M_com v̇_com,d with the locked centroidal inertia
-            out[0:3] += robot.mass * np.asarray(ref.acceleration)
-            out[3:6] += robot.data.Ig.inertia @ np.asarray(ref.angular_acceleration)
+            out[0:3] += mass * np.asarray(ref.acceleration)
+            out[3:6] += Ig @ np.asarray(ref.angular_acceleration)
         out -= self.external_wrench
         return out
 
