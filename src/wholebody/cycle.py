@@ -165,6 +165,8 @@ class _Program:
                         self.lower[s.start:s.stop], self.upper[s.start:s.stop],
                         self.weights[s.start:s.stop])
                        for s in self.slots if id(s.task) in python_rows]
+        self.rows_of = {id(s.task): (self.mat[s.start:s.stop], self.target[s.start:s.stop])
+                        for s in self.slots if s.eq}
         self.ineq_rows = np.zeros(rows, dtype=bool)
         self.levels, self.meta = [], []
         for rank, (first, last) in enumerate(self.level_bounds, start=1):
@@ -504,6 +506,11 @@ class HierarchyCycle:
                 program = self._programs[key] = _Program(self, variables, key, python_rows)
             self._program = program
         return program
+
+    def task_rows(self, task: Task) -> tuple[np.ndarray, np.ndarray]:
+        """(A, target) of an equality task's rows in the last cycle's level arrays (native
+        engine; views, valid until the next solve; A over the solver's scaled variables)."""
+        return self._program.rows_of[id(task)]
 
     @property
     def levels(self) -> list[Level]:

@@ -459,16 +459,18 @@ class PassiveWBC(PlannedController):
         sphere's lowest point moves as the foot rolls without slipping; anchoring it at
         touchdown would demand foot acceleration from rolling alone (Fahmi et al. 2019 make the
         task active only when the foot slips)."""
-        held = stance & self._was_stance
-        self._slip[held] += self.control_period * velocity[held]
-        self._slip[~held] = 0.0
-        norm = np.linalg.norm(self._slip, axis=1)
+        slip = self._slip
+        held = (stance & self._was_stance)[:, None]
+        moved = slip + self.control_period * velocity
+        slip.fill(0.0)
+        np.copyto(slip, moved, where=held)
+        norm = np.sqrt(np.einsum("ij,ij->i", slip, slip))
         over = norm > self._radii
         if over.any():  # one absurd velocity sample must not wind the anchor up for good
             scale = np.divide(self._radii, norm, out=np.zeros_like(norm), where=norm > 0.0)
-            self._slip[over] *= scale[over, None]
+            slip[over] *= scale[over, None]
         self._was_stance[:] = stance
-        np.subtract(points, self._slip, out=self._anchors)
+        np.subtract(points, slip, out=self._anchors)
 
     def _independent_stance_rows(self, J, target, pat: StancePattern) -> None:
         """Stance rows J_s q̈ = b_s that are linearly dependent (legs of fewer than three joints:
@@ -496,26 +498,20 @@ class PassiveWBC(PlannedController):
         self.qp.set_swing(Jsw.reshape(-1, nv), target.reshape(-1), pat, self.swing_slack,
                           self.slack_weight)
 
-    def _swing_targets_of(self, plan, sw, terms=None) -> tuple[np.ndarray, np.ndarray]:
+    def _swing_targets_of(self, plan, sw) -> tuple[np.ndarray, np.ndarray]:
         """(J_sw (k, 3, nv), v̇_d − J̇ v (k, 3)) of the swing feet ``sw`` (indices), kept in
-        ``_swing_targets``; at the robot's cached state, or at the compiled cycle's ``terms``
-        (:meth:`HierarchyCycle.terms_view <wholebody.cycle.HierarchyCycle.terms_view>`)."""
+        ``_swing_targets``."""
+        robot = self.robot
         idx = self._contact_order[sw]
         legs = self._leg[sw]
-        if terms is None:
-            robot = self.robot
-            Jsw = robot.contact_frame_jacobians[idx, :3]  # (k, 3, nv), frame origins
-            pos = robot.contact_points[idx]               # (sphere centres)
-            pos[:, 2] += self._radii[sw]
-            velocity, drift = Jsw @ robot.v, robot.contact_frame_drifts[idx, :3]
-        else:
-            Jsw, pos = terms.frame_jacobians[idx], terms.frame_positions[idx]
-            velocity, drift = terms.frame_velocities[idx], terms.frame_drifts[idx]
+        Jsw = robot.contact_frame_jacobians[idx, :3]  # (k, 3, nv), frame origins (sphere centres)
+        pos = robot.contact_points[idx]
+        pos[:, 2] += self._radii[sw]
         a_d = self.swing.K * (plan.foot_position[legs] - pos)
-        a_d += self.swing.D * (plan.foot_velocity[legs] - velocity)
+        a_d += self.swing.D * (plan.foot_velocity[legs] - Jsw @ robot.v)
         if self.swing.feedforward:
             a_d += plan.foot_acceleration[legs]
-        target = a_d - drift
+        target = a_d - robot.contact_frame_drifts[idx, :3]
         self._swing_targets[sw] = target
         return Jsw, target
 
@@ -831,11 +827,13 @@ class PassiveWBC(PlannedController):
         if sol.ok:
             qdd, tau, status = sol.qdd, sol.tau, "solved"
             F[np.repeat(stance, 3)] = sol.lam  # the stance feet's forces, in contact order
-            sw = np.flatnonzero(~stance)
-            if sw.size:
-                Jsw, target = self._swing_targets_of(plan, sw, terms)
+            if not stance.all():  # the swing tasks' residuals J_sw q̈ − (v̇_d − J̇ v), eq. 11
                 swing_errors = np.zeros(len(self.contacts))
-                swing_errors[sw] = np.linalg.norm(Jsw @ qdd - target, axis=1)
+                nv = self.robot.nv
+                for i in np.flatnonzero(~stance).tolist():
+                    A, target = self._stack_cycle.task_rows(self._stack.swing[i])
+                    residual = A[:, :nv] @ qdd - target
+                    swing_errors[i] = math.sqrt(residual @ residual)
         else:
             qdd, F, tau, status = self._failed(sol.status, terms.nle[6:])
         parts = sol.timings

@@ -114,9 +114,12 @@ class _PerContact(Task):
 
     def stacked_normals(self, layout, state=None) -> np.ndarray:
         """The normals of the layout's contacts, stacked (the compiled kernels' parameter)."""
-        if not self.normals:
+        normals = self.normals
+        if not normals:
             return _world_up(len(layout.contacts))
-        return np.concatenate([self.normal(n) for n in layout.contacts]) if layout.contacts else ()
+        # the stored normals are float arrays (normal_map); one read each, no conversion
+        return (np.concatenate([normals.get(n, WORLD_UP) for n in layout.contacts])
+                if layout.contacts else ())
 
     def _lambda_rows(self, variables, blocks: dict[str, np.ndarray]) -> np.ndarray:
         """Stack per-contact (rows x dim) blocks into (rows x n_lambda)."""

@@ -105,8 +105,12 @@ class Param:
         (a matrix for a ``diagonal`` gain among them: it cannot broadcast into the entries)."""
         name, get, form = self.name, self.get, self.form
         if form == "flag":
-            def write():
-                view[0] = bool(self.value(task, layout, state))
+            if get is None:
+                def write():
+                    view[0] = bool(getattr(task, name))
+            else:
+                def write():
+                    view[0] = bool(get(task, layout, state))
             return write
 
         def refuse(value):
