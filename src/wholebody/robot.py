@@ -260,6 +260,9 @@ class Robot:
         self._lower_flat = np.ravel_multi_index(lower, (self.nv, self.nv))
         self._upper_flat = np.ravel_multi_index(lower[::-1], (self.nv, self.nv))
         self._frame_cache: dict[tuple, np.ndarray] = {}
+        # quantities derived from the description by iterative searches (a leg's reach, ...),
+        # kept by the modules that compute them under a key naming all they depend on
+        self.derived: dict[tuple, object] = {}
         self._a0 = np.zeros(self.nv)
         self.q = self.q_ref.copy()
         self.v = np.zeros(self.nv)

@@ -790,3 +790,37 @@ def test_from_robot_validation(talos14, kwargs, match):
 def test_clamp_step_validation():
     with pytest.raises(ValueError, match="stance_side"):
         clamp_step((np.zeros(3), 0.0), 0, np.zeros(2), 0.0, LIMITS)
+
+
+def test_reach_search_is_kept_per_posture_and_joint_limits():
+    """StepLimits.from_robot keeps its reach search on the robot (``robot.derived``): asked again
+    it gives what a fresh copy of the robot computes; with the legs' joint ranges narrowed on the
+    same robot it searches again (a fresh copy with those ranges gives the same, shorter, limits);
+    a height at which a sole cannot stand flat raises the same error every time."""
+    robot = wb.load_robot("talos14")
+    first = StepLimits.from_robot(robot)
+    assert robot.derived
+    fresh = copy.deepcopy(robot)
+    fresh.derived.clear()
+    assert StepLimits.from_robot(fresh) == StepLimits.from_robot(robot) == first
+    model = robot.model
+    for sole in biped_soles(robot):
+        for name in leg_joints(robot, sole):
+            joint = model.joints[model.getJointId(name)]
+            i = joint.idx_q
+            lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+            mid = robot.q_ref[i]
+            model.lowerPositionLimit[i] = mid - 0.5 * (mid - lo)
+            model.upperPositionLimit[i] = mid + 0.5 * (hi - mid)
+    narrowed = StepLimits.from_robot(robot)
+    assert narrowed.forward < first.forward - 0.01
+    fresh = copy.deepcopy(robot)
+    fresh.derived.clear()
+    assert StepLimits.from_robot(fresh) == narrowed
+    too_low = 0.9 * robot.q_ref[2]
+    messages = []
+    for _ in range(2):
+        with pytest.raises(ValueError, match="cannot stand flat") as error:
+            StepLimits.from_robot(robot, com_height_drop=too_low)
+        messages.append(str(error.value))
+    assert messages[0] == messages[1]

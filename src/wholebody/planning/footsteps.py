@@ -329,24 +329,47 @@ class StepLimits:
         if not (math.isfinite(share) and 0.0 < share <= 1.0):
             raise ValueError(f"share: expected 0 < share <= 1, got {share!r}")
         left, right = biped_soles(robot)
-        q, bounds, soles = _stance_configuration(robot, com_height_drop, margin)
-        heading = _heading(robot, soles)
-        reach = [_reach(robot, c, q, bounds, heading) for c in (left, right)]
-        least = SoleReach(*np.min(np.array(reach), axis=0))
-        y = heading[1]
-        nominal = abs(float(y @ (soles[left].translation - soles[right].translation)[:2]))
+        least, nominal, (out, inn) = _stance_reach(robot, com_height_drop, margin)
         half_widths = [robot.contact(c).spec.half_size[1] for c in (left, right)]
         # the sole frames are the soles' centres: their edges touch at the sum of half widths
         apart = sum(half_widths) + SOLE_GAP * 2.0 * max(half_widths)
         width_min = min(max(nominal - share * least.inward, apart), nominal)
         forward = share * min(least.backward, 2.0 * least.forward)
         backward = share * min(least.forward, 2.0 * least.backward)
-        out, inn = _hip_yaw_ranges(robot, q, bounds)
         yaw_out = min(YAW_CAP, share * 2.0 * out)
         limits = dict(forward=forward, backward=backward, width_min=width_min,
                       width_max=nominal + share * least.outward, nominal_width=nominal,
                       yaw_out=yaw_out, yaw_in=min(YAW_IN_SHARE * yaw_out, share * 2.0 * inn))
         return cls(**{name: float(value) for name, value in limits.items()})
+
+
+def _stance_reach(robot, com_height_drop: float, margin: float
+                  ) -> tuple[SoleReach, float, tuple[float, float]]:
+    """(the smaller of the two legs' :func:`sole_reach`, the soles' lateral distance standing in
+    the posture, :func:`_hip_yaw_ranges`) at ``com_height_drop``, each joint ``margin`` inside its
+    limits: what :meth:`StepLimits.from_robot` derives its limits from. Iterative (a linear
+    program per Newton step and direction), so kept in ``robot.derived`` under the drop, the
+    margin, the posture and the joint limits it was computed from (a ValueError too: a sole that
+    cannot stand flat at that height)."""
+    model = robot.model
+    key = ("stance reach", float(com_height_drop), float(margin), robot.q_ref.tobytes(),
+           model.lowerPositionLimit.tobytes(), model.upperPositionLimit.tobytes())
+    if key not in robot.derived:
+        try:
+            left, right = biped_soles(robot)
+            q, bounds, soles = _stance_configuration(robot, com_height_drop, margin)
+            heading = _heading(robot, soles)
+            reach = [_reach(robot, c, q, bounds, heading) for c in (left, right)]
+            least = SoleReach(*(float(r) for r in np.min(np.array(reach), axis=0)))
+            y = heading[1]
+            nominal = abs(float(y @ (soles[left].translation - soles[right].translation)[:2]))
+            robot.derived[key] = (least, nominal, _hip_yaw_ranges(robot, q, bounds))
+        except ValueError as error:
+            robot.derived[key] = error
+    value = robot.derived[key]
+    if isinstance(value, ValueError):
+        raise ValueError(*value.args)
+    return value
 
 
 def clamp_step(stance, stance_side: int, target_xy, target_yaw: float, limits: StepLimits
