@@ -289,6 +289,8 @@ class HierarchyCycle:
                                  "one uses NewtonEuler (tau is eliminated by eq. 14)")
         self._programs: dict = {}
         self._program: _Program | None = None
+        self._qv = None  # the state of the last update (native engine)
+        self._terms = None  # terms_view's arrays, bound on first use
         self.engine = None
         if engine == "native":
             self._frames: dict[int, int] = {}  # model frame id -> the compiled cycle's frame index
@@ -353,7 +355,8 @@ class HierarchyCycle:
         ``frame_jacobians`` (linear rows, (nc, 3, nv)), ``frame_drifts`` (classical
         accelerations) and ``frame_velocities``; ``tau_max`` the robot's torque bounds
         τ_max(q) (``robot.torque_limits.upper``)."""
-        if getattr(self, "_terms", None) is None:
+        self._require_native("terms_view")
+        if self._terms is None:
             robot, nc = self.robot, len(self.robot.contacts)
             arrays = {"q": (robot.nq,), "v": (robot.nv,), "nle": (robot.nv,), "h_G": (6,),
                       "com": (3,), "vcom": (3,), "rotation": (3, 3), "Ig": (3, 3),
@@ -428,10 +431,16 @@ class HierarchyCycle:
         self.update(q, v)
         return self.solve_updated(variables, diagnostics)
 
+    def _require_native(self, what: str) -> None:
+        if self.engine is None:
+            raise RuntimeError(f"{what}: the native engine only (this cycle runs "
+                               f"engine='{self.engine_name}'); call solve(q, v)")
+
     def update(self, q, v) -> None:
         """The native engine's rigid-body terms at (q, v), for :meth:`solve_updated` (what
         :meth:`solve` does first; a controller reads the terms in between, :meth:`terms_view`).
         Bad q/v (size, NaN) raise ValueError naming the field."""
+        self._require_native("update")
         t0 = time.perf_counter()
         self.engine.update(q, v)
         self._q, self._qv = q, (q, v)
@@ -440,6 +449,9 @@ class HierarchyCycle:
     def solve_updated(self, variables: Variables | None = None,
                       diagnostics: bool = False) -> Solution:
         """:meth:`solve` at the state of the last :meth:`update` (native engine)."""
+        self._require_native("solve_updated")
+        if self._qv is None:
+            raise RuntimeError("solve_updated: call update(q, v) first (or solve(q, v))")
         robot = self.robot
         variables = variables or self._default_variables()
         q, v = self._qv

@@ -316,6 +316,77 @@ def test_terms_equal_robot_update(robots, name, rng):
         assert all(c.dim == 3 and c.spec.radius > 0 for c in robot.contacts)
 
 
+@native
+@pytest.mark.parametrize("name", ["talos14", "hyq"])
+def test_terms_view_equals_pinocchio(robots, name, rng):
+    """The arrays of terms_view, rewritten by every update, equal Pinocchio's own functions at
+    that state (a separate Data: frame placements, LOCAL_WORLD_ALIGNED frame Jacobians and
+    classical accelerations, centerOfMass, computeCentroidalMomentum, ccrba's locked inertia)
+    and the robot's torque bounds; solve_updated after update gives solve's torques."""
+    import pinocchio as pin
+
+    robot = robots[name]
+    stack = Stack([[NewtonEuler(), TorqueLimits()], [AccelerationRegularizer()]])
+    cycle = HierarchyCycle(robot, stack, engine="native")
+    other = HierarchyCycle(robot, stack, engine="native")
+    view = cycle.terms_view()
+    model, data = robot.model, robot.model.createData()
+    LWA = pin.LOCAL_WORLD_ALIGNED
+    for _ in range(4):
+        q, v = robot.random_state(rng)
+        cycle.update(q, v)
+        assert cycle.terms_view() is view  # the same arrays, rewritten
+        pin.forwardKinematics(model, data, q, v, np.zeros(robot.nv))
+        pin.updateFramePlacements(model, data)
+        pin.computeJointJacobians(model, data, q)
+        np.testing.assert_array_equal(view.q, q)
+        np.testing.assert_array_equal(view.v, v)
+        np.testing.assert_allclose(view.nle, pin.nonLinearEffects(model, model.createData(), q, v),
+                                   atol=1e-9)
+        np.testing.assert_allclose(view.com, pin.centerOfMass(model, model.createData(), q),
+                                   atol=1e-12)
+        centroidal = model.createData()
+        pin.computeCentroidalMomentum(model, centroidal, q, v)
+        np.testing.assert_allclose(view.h_G, centroidal.hg.vector, atol=1e-9)
+        np.testing.assert_allclose(view.vcom, centroidal.hg.linear / robot.mass, atol=1e-12)
+        pin.ccrba(model, centroidal, q, v)
+        np.testing.assert_allclose(view.Ig, centroidal.Ig.inertia, atol=1e-9)
+        np.testing.assert_allclose(view.rotation, data.oMi[1].rotation, atol=1e-12)
+        for i, c in enumerate(robot.contacts):
+            origin = data.oMf[c.frame_id].translation
+            J = pin.getFrameJacobian(model, data, c.frame_id, LWA)[:3]
+            np.testing.assert_allclose(view.frame_positions[i], origin, atol=1e-12)
+            np.testing.assert_allclose(view.frame_jacobians[i], J, atol=1e-12)
+            np.testing.assert_allclose(view.frame_velocities[i], J @ v, atol=1e-9)
+            np.testing.assert_allclose(
+                view.frame_drifts[i],
+                pin.getFrameClassicalAcceleration(model, data, c.frame_id, LWA).linear,
+                atol=1e-9)
+            drop = c.spec.radius if c.dim == 3 else 0.0
+            np.testing.assert_allclose(view.points[i], origin - [0.0, 0.0, drop], atol=1e-12)
+        np.testing.assert_allclose(view.tau_max, robot.torque_limits.upper(q[7:]), atol=1e-9)
+        np.testing.assert_array_equal(cycle.solve_updated().tau, other.solve(q, v).tau)
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_update_misuse_is_named(robots, engine):
+    """solve_updated before any update, and update on the Python engine, are errors that say
+    what to call instead."""
+    if engine == "native" and not native_available():
+        pytest.skip("the compiled extension is not built")
+    robot = robots["talos14"]
+    cycle = HierarchyCycle(robot, Stack([[NewtonEuler()], [AccelerationRegularizer()]]),
+                           engine=engine)
+    if engine == "python":
+        for call in (lambda: cycle.update(robot.q_ref, np.zeros(robot.nv)), cycle.terms_view,
+                     cycle.solve_updated):
+            with pytest.raises(RuntimeError, match="native engine.*solve"):
+                call()
+    else:
+        with pytest.raises(RuntimeError, match="update"):
+            cycle.solve_updated()
+
+
 # ---------------------------------------------------------------------------- 2. Tables 1, 2, 4
 @native
 @pytest.mark.parametrize("full", [False, True], ids=["reduced", "full"])
