@@ -226,3 +226,49 @@ def test_push_survived_under_real_conditions(talos14, level):
     assert result.realism == level
     assert result.success, result.metrics
     assert result.metrics["failed_cycles"] == 0
+
+
+
+def test_balance_measures_are_the_twins_not_the_estimates(talos14):
+    """Under 'sensors' the controller's robot holds the estimate; the measures read the twin: a
+    push trial's CoG error and momentum are Pinocchio's CoM and centroidal momentum of the
+    simulator's own logged state, cycle by cycle, against one reference (the estimate's CoM
+    differs from the twin's by more than the tolerance), and the balance monitor's CoG is the
+    twin's while the robot holds another state."""
+    from types import SimpleNamespace
+
+    import pinocchio as pin
+
+    from wholebody.scenarios.measures import BalanceMonitor
+    from wholebody.scenarios.push import with_peak_force
+    from wholebody.scenarios.pushes import push_trial
+
+    params = with_peak_force(talos14, SCENARIOS["push"].validate(
+        talos14, {"duration": "0.35", "start": "0.05", "push_duration": "0.05"}))
+    conditions = RobotConditions(talos14, "sensors", seed=2)
+    estimates = []
+    trial = push_trial(talos14, "pd", params, observers=[conditions])
+    log = trial.log.arrays()
+    data = talos14.model.createData()
+    references = []
+    for k in range(len(trial.cog_error)):
+        pin.computeCentroidalMomentum(talos14.model, data, log["q"][k], log["v"][k])
+        references.append(data.com[0] - trial.cog_error[k])
+        np.testing.assert_allclose(trial.momentum[k], data.hg.vector, atol=1e-12)
+    np.testing.assert_allclose(references, np.tile(references[0], (len(references), 1)),
+                               atol=1e-12)
+    # the robot's cache is the last estimate the controller read: not the twin's last state
+    estimates = talos14.com - (references[0] + trial.cog_error[-1])
+    assert np.abs(estimates).max() > 1e-6
+    # the balance monitor on a robot whose cache holds another state
+    sim = Simulator(talos14)
+    ctrl = SimpleNamespace(cop_margin=0.1, com_ref=np.zeros(3), h_ref=np.zeros(6))
+    monitor = BalanceMonitor(talos14, sim, ctrl)
+    q, v = sim.state()
+    elsewhere = q.copy()
+    elsewhere[0] += 0.05
+    talos14.update(elsewhere, v)
+    monitor(0.0, SimpleNamespace(forces={}, qdd=np.zeros(talos14.nv)))
+    expected = pin.centerOfMass(talos14.model, talos14.model.createData(), q)
+    np.testing.assert_allclose(monitor.arrays()["com"][0], expected, atol=1e-12)
+    assert abs(talos14.com[0] - expected[0] - 0.05) < 1e-9  # the robot still holds its state

@@ -503,10 +503,13 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         q, v = sim.state()
         update_to_state(robot, q, v)  # (an estimate, or a controller keeping its own terms)
         pin.framesForwardKinematics(robot.model, pin_data, q)
-        imp = ctrl.impedance
+        # the twin's trunk errors (eq. 4's, against the plan's trunk reference): under real-robot
+        # conditions the controller's own (impedance.last_errors) are the estimate's
+        com_error, orientation_error = TrunkImpedance.pose_errors(robot.data.oMi[1].rotation,
+                                                                  robot.com, plan.trunk)
         lo, hi = ctrl.torque_limits.bounds(robot)
         log.append(
-            t=t, com_error=imp.last_errors[0:3], orientation_error=imp.last_errors[3:6],
+            t=t, com_error=com_error, orientation_error=orientation_error,
             com=robot.com, com_ref=plan.trunk.position,
             feet=[pin_data.oMf[f].translation for f in frame_ids], stance=plan.contact,
             tau=result.tau, tau_min=lo, tau_max=hi, ok=result.ok,

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
+import pinocchio as pin
 
 from ..robots import reference
 
@@ -88,6 +89,22 @@ class Thresholds:
         the record."""
         recovery, last = cog_recovery(t, err, end, None, self.cog_tolerance)
         return bool(last is None or last < min(end + window, t[-1] - RECORD_TAIL_S)), recovery
+
+
+class TwinCentroidal:
+    """The twin's CoM, its velocity and centroidal momentum [linear; angular] at a simulator state
+    (q, v), through the robot's model on a Pinocchio Data of its own: the robot's own cycle is
+    left as the controller made it (under real-robot conditions, at the estimate the controller
+    read; the measures are the twin's). :meth:`at` returns arrays of its own (copies)."""
+
+    def __init__(self, robot):
+        self.model, self.data = robot.model, robot.model.createData()
+
+    def at(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(com, vcom, h_G) at (q, v)."""
+        data = self.data
+        pin.computeCentroidalMomentum(self.model, data, q, v)
+        return data.com[0].copy(), data.vcom[0].copy(), data.hg.vector.copy()
 
 
 def update_to_state(robot, q: np.ndarray, v: np.ndarray) -> None:
@@ -194,9 +211,14 @@ class BalanceMonitor:
         self.rows: dict[str, list] = {k: [] for k in (
             "t", "com", "com_ref", "cog_error", "dh", "tilt", "slip", "cop_pred", "cop_meas",
             "fz_meas", "active", "support_p", "support_R", "joints", "qdd")}
+        self.twin = TwinCentroidal(robot)
+        #: the twin's (com, vcom, h_G) of the last call
+        self.last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def __call__(self, t: float, sol) -> None:
         robot, sim, r = self.robot, self.sim, self.rows
+        q, v = sim.state()
+        com, vcom, h_G = self.last = self.twin.at(q, v)
         p_s, R_s = sim.support_pose()
         poses = sim.contact_frame_poses()
         wrenches = sim.contact_wrenches()
@@ -214,10 +236,10 @@ class BalanceMonitor:
             if np.all(np.isfinite(cp)) and np.any(np.abs(cp) >= self.bound[n] - COP_ACTIVE_TOL):
                 active = True
         r["t"].append(t)
-        r["com"].append(robot.com.copy())
+        r["com"].append(com)
         r["com_ref"].append(self.ctrl.com_ref.copy())
-        r["cog_error"].append(robot.com - self.ctrl.com_ref)
-        r["dh"].append(robot.h_G - self.ctrl.h_ref)
+        r["cog_error"].append(com - self.ctrl.com_ref)
+        r["dh"].append(h_G - self.ctrl.h_ref)
         r["tilt"].append(tilt)
         r["slip"].append(slip)
         r["cop_pred"].append(pred)
@@ -226,7 +248,7 @@ class BalanceMonitor:
         r["active"].append(active)
         r["support_p"].append(p_s)
         r["support_R"].append(R_s)
-        r["joints"].append(robot.joint_error(robot.q_ref, robot.q))
+        r["joints"].append(robot.joint_error(robot.q_ref, q))
         r["qdd"].append(np.asarray(sol.qdd)[6:])
 
     def arrays(self) -> dict[str, np.ndarray]:

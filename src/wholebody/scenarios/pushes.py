@@ -24,7 +24,7 @@ from .base import (COP_MARGIN, ENGINE, INTEGRAL_LIMIT, PD_PARAMETERS, POSTURE_PA
                    Q_INTEGRAL, Parameter,
                    RobotRelative, check_engine, momentum_gains, parse_list, task_gains)
 from .loop import run_closed_loop
-from .measures import Thresholds, rotation_angle_deg, sole_slip, tilt_deg, update_to_state
+from .measures import Thresholds, TwinCentroidal, rotation_angle_deg, sole_slip, tilt_deg
 
 # location -> (the robot's frame, ``trunk_frame`` or ``base_frame``, direction of the force, point
 # of application in that frame, in m on talos14: scaled by the robot's standing height,
@@ -318,13 +318,14 @@ def push_trial(robot, controller: str, params: dict, progress: bool = False,
     start_feet = sim.contact_frame_poses()
     com, momentum, feet_tilt, feet_slip, trunk = [], [], [], [], []
     base_quat0 = robot.q_ref[3:7]
+    twin = TwinCentroidal(robot)
 
     def observe(t, result):
         q, v = sim.state()
-        update_to_state(robot, q, v)  # (an estimate, or a controller keeping its own terms)
+        twin_com, _, h_G = twin.at(q, v)
         trunk.append(rotation_angle_deg(q[3:7], base_quat0))
-        com.append(robot.com - ctrl.com_ref)
-        momentum.append(robot.h_G.copy())
+        com.append(twin_com - ctrl.com_ref)
+        momentum.append(h_G)
         poses = sim.contact_frame_poses()
         feet_tilt.append(max(tilt_deg(R) for _, R in poses.values()))
         feet_slip.append(max(sole_slip(poses[n][0], start_feet[n][0]) for n in poses))

@@ -35,8 +35,8 @@ from .base import (COP_MARGIN, PD_PARAMETERS, POSTURE_PARAMETERS, Q_ANGULAR,
                    SWING_FOOT_PARAMETERS, TIME_SPAN, Parameter, Scenario, ScenarioResult,
                    duration_parameter, momentum_gains, paper_q_notes, task_gains)
 from .loop import run_closed_loop
-from .measures import (RECOVERY_WINDOW_S, Thresholds, cog_recovery, cop_in_sole, sole_slip,
-                       tilt_deg)
+from .measures import (RECOVERY_WINDOW_S, Thresholds, TwinCentroidal, cog_recovery, cop_in_sole,
+                       sole_slip, tilt_deg)
 from .pushes import LOCATIONS, HumanoidScaled, location_of, make_push
 
 log = logging.getLogger(__name__)
@@ -221,11 +221,14 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
     com_err, swing_z, tilt, slip, tau, cop, h, jerr = [], [], [], [], [], [], [], []
     half_size = np.asarray(robot.contact(stance).spec.half_size)
     k_stance = robot.contact_names.index(stance)
+    twin = TwinCentroidal(robot)
 
     def observe(t, sol):
         # the simulator's state through the (exact) model: the twin's CoG
-        com_err.append(robot.com - ctrl.com_ref(t))
-        h.append(robot.h_G.copy())
+        q, v = sim.state()
+        com, _, h_G = twin.at(q, v)
+        com_err.append(com - ctrl.com_ref(t))
+        h.append(h_G)
         poses = sim.contact_frame_poses()
         swing_z.append(poses[ctrl.swing_contact][0][2])
         p, R = poses[stance]
@@ -236,8 +239,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
         if ctrl.sine_q0 is not None:
             qd, vd, _ = ctrl.joint_reference(t)
             j = np.array([robot.joint_names.index(n) for n in ctrl.joints])
-            jerr.append(np.concatenate([robot.q[FREE_FLYER_NQ + j] - qd,
-                                        robot.v[FREE_FLYER_NV + j] - vd]))
+            jerr.append(np.concatenate([q[FREE_FLYER_NQ + j] - qd, v[FREE_FLYER_NV + j] - vd]))
         else:
             jerr.append(np.full(4, np.nan))
 

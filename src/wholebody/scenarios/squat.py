@@ -173,7 +173,7 @@ def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bo
 
     def observe(t, sol):
         monitor(t, sol)
-        vel.append((robot.vcom.copy(), reference.terms(t)[1]))
+        vel.append((monitor.last[1], reference.terms(t)[1]))  # the twin's CoM velocity
 
     duration = params["ramp"] + params["periods"] / f
     failures = run_closed_loop(sim, ctrl, duration, progress=progress, on_result=observe)

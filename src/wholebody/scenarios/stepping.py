@@ -29,7 +29,7 @@ from ..sim.simulator import Simulator
 from .base import (COM_PARAMETERS, COP_MARGIN, ENGINE, POSTURE_PARAMETERS, SWING_FOOT_PARAMETERS,
                    TIME_SPAN, Parameter, Scenario, ScenarioResult, check_engine, task_gains)
 from .loop import run_closed_loop
-from .measures import Thresholds, sole_slip, tilt_deg
+from .measures import Thresholds, TwinCentroidal, sole_slip, tilt_deg
 from .pushes import HumanoidScaled
 
 log = logging.getLogger(__name__)
@@ -106,6 +106,7 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False,
     tilt = {n: [] for n in names}
     slip = {n: [] for n in names}
     base_z, com = [], []
+    twin = TwinCentroidal(robot)
 
     def observe(t, sol):
         poses = sim.contact_frame_poses()
@@ -114,11 +115,9 @@ def run_once(robot, params: dict, reduced: bool, progress: bool = False,
             swing_z[n].append(pos[2] - start_poses[n][0][2])
             tilt[n].append(tilt_deg(R))
             slip[n].append(sole_slip(pos, start_poses[n][0]))
-        q, v = sim.state()  # the state the controller just saw
-        if ctrl.cycles is not None:  # the native controller left robot's terms stale
-            robot.update(q, v)
+        q, v = sim.state()
         base_z.append(q[2])
-        com.append(robot.com.copy())
+        com.append(twin.at(q, v)[0])
 
     failures = run_closed_loop(sim, ctrl, duration, progress=progress, on_result=observe)
     t = sim.log.arrays()["t"]

@@ -198,6 +198,13 @@ class TrunkImpedance:
         R = robot.data.oMi[1].rotation  # the free-flyer joint, placed by Robot.update's kinematics
         return R, R @ robot.v[3:6]
 
+    @staticmethod
+    def pose_errors(R, com, ref) -> tuple[np.ndarray, np.ndarray]:
+        """(e_x, e_θ) of eq. 4 for base rotation ``R`` and CoM ``com`` against the trunk reference
+        ``ref``: ``ref.position - com`` and ``log3(ref.rotation R^T)`` (what :meth:`wrench_at`
+        writes into ``last_errors[0:6]``), for a measure of the twin's own state."""
+        return np.asarray(ref.position) - com, pin.log3(np.asarray(ref.rotation) @ R.T)
+
     def wrench(self, robot, ref, out: np.ndarray | None = None) -> np.ndarray:
         """W_com,d (6,) = [force; moment about the CoM] for the robot's cached state."""
         R, omega = self.trunk_state(robot)
