@@ -217,8 +217,10 @@ class MomentumBalance:
     ask exceed what the soles' CoP allows (docs/results.md measures both).
     ``engine``: ``"auto"`` (default: native when built), ``"native"`` — the stack solved by a
     :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and rows, the same
-    solution; ``robot.update`` still runs every cycle for the references and the LQR) — or
-    ``"python"`` (``Formulation.solve``, the reference).
+    solution; ``robot.update`` runs only where something reads the robot's cache: a
+    ``reference``, the LQR, the Python engine — so after a PD cycle without a reference the
+    robot's cache is not the state the controller read; :attr:`com` is) — or ``"python"``
+    (``Formulation.solve``, the reference).
 
     ``contacts``: None (default) = all the robot's contacts; an empty list is a ValueError
     (balance needs a support; the LQR model has no input without contacts). Checked at
@@ -320,10 +322,16 @@ class MomentumBalance:
         R_ref = pin.Quaternion(q_ref[3:7]).toRotationMatrix()
         return pin.log3(R @ R_ref.T)
 
+    @property
+    def com(self) -> np.ndarray:
+        """The CoM of the state the last :meth:`compute` read, through the controller's model."""
+        return self.robot.com.copy() if self.cycle is None else self.cycle.com
+
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) in Pinocchio convention."""
         robot = self.robot
-        robot.update(q, v)
+        if self.cycle is None or self.reference is not None or self.lqr is not None:
+            robot.update(q, v)  # what reads the robot's cache (the compiled cycle has its own)
         if self.reference is not None:
             ref = self.reference(t, robot)
             self.com_ref = np.asarray(ref.com, dtype=float)

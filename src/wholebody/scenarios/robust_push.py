@@ -166,7 +166,7 @@ def one_run(robot, controller: str, location: str, force: float, mismatch: Misma
     def observe(time, result):
         t.append(time)
         com.append(true_com())
-        model_com.append(robot.com.copy())  # the controller's estimate (nominal model)
+        model_com.append(ctrl.com)  # the controller's estimate (nominal model)
         poses = sim.contact_frame_poses()
         tilt.append(max(tilt_deg(R) for _, R in poses.values()))
         if time < push.start:  # feet "in place" is judged from where they are when pushed
