@@ -13,11 +13,12 @@ def run(robot, controller, steps, push=None):
     if push is not None:
         sim.add_push(push)
     com_error, failures = [], 0
+    twin = TwinCentroidal(robot)
     for _ in range(steps):
         q, v = sim.state()
         sol = controller.compute(q, v, sim.t)
         failures += not sol.ok
-        com_error.append(robot.com - controller.com_ref)
+        com_error.append(twin.at(q, v)[0] - controller.com_ref)  # the twin's CoG
         sim.step(sol.tau)
     return np.array(com_error), failures
 
