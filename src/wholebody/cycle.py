@@ -38,7 +38,7 @@ from .solvers.compiled_cascade import BoundCascade, BoundWeighted
 from .solvers.settings import settings_or_default
 from .tasks import FullDynamics
 from .tasks.base import Task, contact_subset
-from .tasks.schema import LayoutContext, plain_scalar, scalars_writer
+from .tasks.schema import LayoutContext, Param, Size
 from .variables import Variables
 
 try:
@@ -125,9 +125,8 @@ class _Program:
                 for order, task, layout, m in level[eq]:
                     slot = _Slot(rank, order, task, eq, start, start + m, layout)
                     if id(task) not in python_rows:
-                        params = {}  # the plain scalars first, adjacent: packed in one block
-                        ordered = sorted(task.params, key=lambda p: not plain_scalar(p))
-                        for param in ordered:
+                        params = {}
+                        for param in task.params:
                             size = param.size.resolve(layout)
                             params[param.name] = [n_params, size]
                             slot.params.append((param, n_params, size))
@@ -156,11 +155,10 @@ class _Program:
                         "lam": self.lam, "tau": self.tau, "tau_lo": self.tau_lo,
                         "tau_hi": self.tau_hi}}
         self.id = cycle.engine.compile(self.description)  # what was sent (tests re-send it)
-        # the packers' views (made once), the Python tasks' row views, the solver's levels
-        self.packs = [(s.task, self.weights[s.start:s.stop], self._writers(s, cycle))
-                      for s in self.slots if id(s.task) not in python_rows]
-        self.weight_views = [(task, weights) for task, weights, _ in self.packs]
-        self.writers = [write for _, _, writers in self.packs for write in writers]
+        # every compiled task's parameters and weight as the packer's sources (views made once)
+        self.sources = [source for s in self.slots if id(s.task) not in python_rows
+                        for source in self._sources(s, cycle)]
+        self.packer = _hierarchy_cycle.ParameterPacker(self.sources)
         self.python = [(s.task, s.eq, self.mat[s.start:s.stop], self.target[s.start:s.stop],
                         self.lower[s.start:s.stop], self.upper[s.start:s.stop],
                         self.weights[s.start:s.stop])
@@ -186,16 +184,12 @@ class _Program:
         self._bound: BoundCascade | BoundWeighted | None = None  # compiled, on self.levels
         self._bound_key = None
 
-    def _writers(self, slot: _Slot, cycle: "HierarchyCycle") -> list:
-        """The functions that pack a task's parameters (its plain scalars in one)."""
-        scalars = [(p, a, n) for p, a, n in slot.params if plain_scalar(p)]
-        writers = [param.writer(slot.task, self.params[a:a + size], slot.layout, cycle)
-                   for param, a, size in slot.params if not plain_scalar(param)]
-        if scalars:
-            a = scalars[0][1]
-            writers.append(scalars_writer(slot.task, [p for p, _, _ in scalars],
-                                          self.params[a:a + len(scalars)], slot.layout, cycle))
-        return writers
+    def _sources(self, slot: _Slot, cycle: "HierarchyCycle") -> list[tuple]:
+        """The packer's sources of a compiled task: its schema's parameters, then its weight."""
+        weight = Param("weight", Size(1, "rows"))  # a number or one per row
+        return [param.source(slot.task, self.params[a:a + size], slot.layout, cycle)
+                for param, a, size in slot.params] + \
+            [weight.source(slot.task, self.weights[slot.start:slot.stop], slot.layout, cycle)]
 
     def bound(self, cycle: "HierarchyCycle") -> BoundCascade | BoundWeighted | None:
         """The compiled cascade or weighted QP bound to these levels for the cycle's current
@@ -213,13 +207,11 @@ class _Program:
                 self._bound = BoundWeighted(self.levels, _without_fallback(key))
         return self._bound
 
-    def pack(self, cycle: "HierarchyCycle") -> None:
+    def pack(self) -> None:
         """Every compiled task's current parameters (by its schema) and weights into the arrays
-        (Python, every cycle)."""
-        for task, weights in self.weight_views:
-            weights[:] = task.weight
-        for write in self.writers:
-            write()
+        (compiled: ``ParameterPacker``; a value of an uncommon kind through its Python
+        ``assign``)."""
+        self.packer.pack()
 
     def write_python_rows(self, cycle: "HierarchyCycle", python_rows: dict) -> None:
         """The rows of the tasks without a kernel (unscaled, as Formulation places them; the
@@ -466,7 +458,7 @@ class HierarchyCycle:
             self.engine.update(q, v)
             self._q = q
         t1 = time.perf_counter()
-        program.pack(self)
+        program.pack()
         program.write_python_rows(self, python_rows)
         if not (self.engine.fill(program.id) and math.isfinite(program.weights.sum())
                 and (program.weights >= program.w_min).all()):

@@ -8,9 +8,10 @@
 // ``kernel``) with the parameters it reads by name, in the order of its task's schema
 // (wholebody.tasks.schema); a program's slots are checked against it at compile. The Python tasks
 // are the reference, row for row; tests/parity/test_cycle.py checks the level arrays of both on
-// random states. Task parameters live in Python-owned arrays that Python refills every cycle from
-// the task objects, so a controller changes them on the tasks as before.
+// random states. Task parameters live in Python-owned arrays refilled every cycle from the task
+// objects (ParameterPacker, packer.hpp), so a controller changes them on the tasks as before.
 #include "native_common.hpp"
+#include "packer.hpp"
 
 #include <pinocchio/algorithm/centroidal.hpp>
 #include <pinocchio/algorithm/compute-all-terms.hpp>
@@ -1001,4 +1002,8 @@ PYBIND11_MODULE(_hierarchy_cycle, m)
     .def_property_readonly("h_G", &HierarchyCycle::h_G)
     .def_property_readonly("nv", &HierarchyCycle::nv)
     .def_property_readonly("na", &HierarchyCycle::na);
+  py::class_<ParameterPacker>(m, "ParameterPacker")
+    .def(py::init<const py::list &>(), py::arg("sources"))
+    .def("pack", &ParameterPacker::pack)
+    .def("__len__", &ParameterPacker::size);
 }

@@ -19,7 +19,6 @@ attribute of the same name): a controller keeps changing them on the task as bef
 
 from __future__ import annotations
 
-import operator
 from dataclasses import dataclass
 from typing import Any, Callable, Protocol, Sequence
 
@@ -97,71 +96,48 @@ class Param:
     def value(self, task, layout: LayoutContext, state: CycleState):
         return getattr(task, self.name) if self.get is None else self.get(task, layout, state)
 
-    def writer(self, task, view: np.ndarray, layout: LayoutContext,
-               state: CycleState) -> Callable[[], None]:
-        """A function that writes the task's current value into ``view`` (this parameter's
-        entries), made once per program so that a cycle pays one call per parameter. A value of
-        another shape is a ValueError naming the task's field and the forms the kernel takes
+    def assigner(self, task, view: np.ndarray) -> Callable[[Any], None]:
+        """A function that writes a value of this parameter into ``view`` (its entries). A value
+        of another shape is a ValueError naming the task's field and the forms the kernel takes
         (a matrix for a ``diagonal`` gain among them: it cannot broadcast into the entries)."""
-        name, get, form = self.name, self.get, self.form
+        name, form = self.name, self.form
         if form == "flag":
-            if get is None:
-                def write():
-                    view[0] = bool(getattr(task, name))
-            else:
-                def write():
-                    view[0] = bool(get(task, layout, state))
-            return write
+            def assign(value):
+                view[0] = bool(value)
+            return assign
 
         def refuse(value):
             raise ValueError(f"task '{task.name}': field '{name}' has shape {np.shape(value)}; "
                              f"the native cycle takes {'a scalar or ' if form != 'matrix' else ''}"
                              f"{view.shape[0]} values (use engine='python' for other forms)")
-        # one closure per case, without further calls in the common one (a cycle packs every
-        # parameter of every task)
         if form == "matrix":
-            def write():
-                value = self.value(task, layout, state)
+            def assign(value):
                 try:
                     view[:] = np.ravel(value)
                 except (ValueError, TypeError):
                     refuse(value)
-        elif get is None:
-            def write():
-                try:
-                    view[:] = getattr(task, name)
-                except (ValueError, TypeError):
-                    refuse(getattr(task, name))
         else:
-            def write():
-                value = get(task, layout, state)
+            def assign(value):
                 try:
                     view[:] = value
                 except (ValueError, TypeError):
                     refuse(value)
-        return write
+        return assign
 
+    def writer(self, task, view: np.ndarray, layout: LayoutContext,
+               state: CycleState) -> Callable[[], None]:
+        """A function that writes the task's current value into ``view`` (:meth:`assigner`)."""
+        assign, name, get = self.assigner(task, view), self.name, self.get
+        if get is None:
+            return lambda: assign(getattr(task, name))
+        return lambda: assign(get(task, layout, state))
 
-def plain_scalar(param: Param) -> bool:
-    """A one-entry vector read straight from the task's attribute (packed in one block)."""
-    return param.form == "vector" and param.get is None and param.size == Size(1)
-
-
-def scalars_writer(task, params: Sequence[Param], view: np.ndarray, layout: LayoutContext,
-                   state: CycleState) -> Callable[[], None]:
-    """One writer for a task's :func:`plain_scalar` parameters, adjacent in ``view`` in this
-    order (one call a cycle for all of them; a bad value is named by its own writer)."""
-    read = operator.attrgetter(*(p.name for p in params))
-    one = len(params) == 1
-
-    def write():
-        try:
-            view[:] = read(task)
-        except (ValueError, TypeError):
-            for i, param in enumerate(params):
-                param.writer(task, view[i:i + 1], layout, state)()
-            raise
-    return write if not one else params[0].writer(task, view, layout, state)
+    def source(self, task, view: np.ndarray, layout: LayoutContext, state: CycleState) -> tuple:
+        """This parameter of ``task`` as a source of the compiled packer
+        (``wholebody._hierarchy_cycle.ParameterPacker``, which writes the common values itself and
+        hands the others to :meth:`assigner`'s function)."""
+        return (task, self.name if self.get is None else None, self.get, layout, state, view,
+                self.form, self.assigner(task, view))
 
 
 def scalar(name: str, get=None) -> Param:

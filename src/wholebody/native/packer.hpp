@@ -1,0 +1,146 @@
+// The per-cycle copy of task parameters into a program's arrays (wholebody.cycle), compiled.
+//
+// A source is one parameter (or a task's weight) as wholebody.tasks.schema declares it: where its
+// value comes from (the task's attribute, or a ``get(task, layout, state)`` function), the view
+// of the program array it goes to, its form, and ``assign(value)``: the Python function that
+// writes a value of any other kind (and names the task's field when it cannot). The common values
+// — a Python or numpy float or int, a float64 array of exactly the view's entries (for a matrix:
+// C-contiguous, any shape), or of one entry — are written here; everything else goes through
+// ``assign``, so the Python writers stay the reference for what a value means.
+#pragma once
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <algorithm>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace wholebody_native
+{
+  namespace py = pybind11;
+
+  class ParameterPacker
+  {
+  public:
+    enum class Form { Vector, Diagonal, Matrix, Flag };
+
+    explicit ParameterPacker(const py::list & sources)
+    {
+      for (const py::handle item : sources)
+      {
+        auto t = py::reinterpret_borrow<py::tuple>(item);
+        if (t.size() != 8)
+          throw std::invalid_argument("ParameterPacker: a source is (task, name, get, layout, "
+                                      "state, view, form, assign)");
+        Source s;
+        s.task = t[0];
+        s.name = t[1];
+        s.get = t[2];
+        s.layout = t[3];
+        s.state = t[4];
+        s.assign = t[7];
+        py::object view = t[5];
+        if (!py::isinstance<py::array_t<double>>(view))
+          throw std::invalid_argument("ParameterPacker: a view must be a float64 array");
+        auto arr = py::reinterpret_borrow<py::array_t<double>>(view);
+        if (arr.ndim() != 1 || !(arr.flags() & py::array::c_style) || !arr.writeable())
+          throw std::invalid_argument("ParameterPacker: a view must be a writable contiguous vector");
+        s.view = view;
+        s.data = arr.mutable_data();
+        s.size = arr.size();
+        const std::string form = t[6].cast<std::string>();
+        if (form == "vector")
+          s.form = Form::Vector;
+        else if (form == "diagonal")
+          s.form = Form::Diagonal;
+        else if (form == "matrix")
+          s.form = Form::Matrix;
+        else if (form == "flag")
+          s.form = Form::Flag;
+        else
+          throw std::invalid_argument("ParameterPacker: unknown form '" + form + "'");
+        if (s.get.is_none() == s.name.is_none())
+          throw std::invalid_argument("ParameterPacker: a source has a name or a get, not both");
+        sources_.push_back(std::move(s));
+      }
+    }
+
+    // Every source's current value into its view (Python errors, e.g. assign's, propagate).
+    void pack()
+    {
+      for (Source & s : sources_)
+      {
+        PyObject * value = s.get.is_none()
+                             ? PyObject_GetAttr(s.task.ptr(), s.name.ptr())
+                             : call_get(s);
+        if (value == nullptr)
+          throw py::error_already_set();
+        py::object owned = py::reinterpret_steal<py::object>(value);
+        if (!write(s, value))
+          s.assign(owned);
+      }
+    }
+
+    py::ssize_t size() const { return static_cast<py::ssize_t>(sources_.size()); }
+
+  private:
+    struct Source
+    {
+      py::object task, name, get, layout, state, view, assign;
+      double * data = nullptr;
+      py::ssize_t size = 0;
+      Form form = Form::Vector;
+    };
+
+    static PyObject * call_get(const Source & s)
+    {
+      PyObject * args[] = {s.task.ptr(), s.layout.ptr(), s.state.ptr()};
+      return PyObject_Vectorcall(s.get.ptr(), args, 3, nullptr);
+    }
+
+    // The value written here (true), or left to ``assign`` (false): anything but the common kinds.
+    static bool write(Source & s, PyObject * value)
+    {
+      if (s.form == Form::Flag)
+      {
+        if (value != Py_True && value != Py_False)
+          return false;
+        s.data[0] = value == Py_True ? 1.0 : 0.0;
+        return true;
+      }
+      if (PyFloat_Check(value) || (PyLong_Check(value) && !PyBool_Check(value)))
+      {
+        const double d = PyFloat_AsDouble(value);
+        if (d == -1.0 && PyErr_Occurred())
+        {
+          PyErr_Clear(); // e.g. an int too large: assign says what numpy says
+          return false;
+        }
+        std::fill(s.data, s.data + s.size, d);
+        return true;
+      }
+      if (!py::array_t<double>::check_(value))
+        return false;
+      auto arr = py::reinterpret_borrow<py::array_t<double>>(value);
+      if (!(arr.flags() & py::array::c_style))
+        return false;
+      const py::ssize_t n = arr.size();
+      // a vector or a gain takes a vector of its entries (a matrix is assign's to refuse); a
+      // matrix takes its entries in C order, whatever the shape
+      if (s.form != Form::Matrix && arr.ndim() != 1)
+        return false;
+      if (n == s.size)
+        std::memcpy(s.data, arr.data(), sizeof(double) * static_cast<std::size_t>(n));
+      else if (n == 1)
+        std::fill(s.data, s.data + s.size, *arr.data());
+      else
+        return false;
+      return true;
+    }
+
+    std::vector<Source> sources_;
+  };
+} // namespace wholebody_native

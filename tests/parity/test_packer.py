@@ -1,0 +1,99 @@
+"""The compiled parameter packer (``wholebody._hierarchy_cycle.ParameterPacker``) against the Python
+writers it replaces in the cycle (:meth:`wholebody.tasks.schema.Param.writer`, the reference):
+for every form and every kind of value a controller may put on a task — Python and numpy
+scalars, lists, tuples, float and int arrays, arrays of one entry, 0-d, strided and Fortran-order
+arrays, wrong sizes, strings, None, flags — both write the same entries, or both raise the same
+error with the same message; neither writes outside its view."""
+
+import numpy as np
+import pytest
+
+from wholebody.cycle import native_available
+from wholebody.tasks.schema import Param, Size
+
+pytestmark = pytest.mark.skipif(not native_available(),
+                                reason="wholebody._hierarchy_cycle not built (no C++ compiler)")
+
+
+class Holder:
+    """A task's stand-in: a name and the attribute ``value``."""
+
+    name = "holder"
+
+    def __init__(self, value):
+        self.value = value
+
+
+def by_attribute(form, n):
+    return Param("value", Size(n), form)
+
+
+def by_get(form, n):
+    return Param("value", Size(n), form, get=lambda task, layout, state: task.value)
+
+
+VALUES = [2.5, 3, -0, True, False, np.float64(1.5), np.float32(0.25), np.int64(4), np.bool_(True),
+          [1.0, 2.0, 3.0], (1.0, 2.0, 3.0), [1, 2, 3], np.array([1.0, 2.0, 3.0]),
+          np.array([1, 2, 3]), np.array([7.0]), np.array(5.0), np.arange(6.0)[::2],
+          np.ones((1, 3)), np.eye(3), np.asfortranarray(np.arange(9.0).reshape(3, 3)),
+          np.arange(9.0).reshape(3, 3).T, np.arange(9.0), np.ones(4), np.array([np.nan, 1.0, np.inf]),
+          np.array([True, False, True]), "abc", None, 2 ** 2000, np.zeros((3, 1)), [[1.0, 2.0, 3.0]]]
+
+
+def outcome(write, buffer):
+    """What a write leaves: the buffer, or the error's type and message."""
+    try:
+        write()
+    except Exception as exc:  # noqa: BLE001 - the comparison is of the error itself
+        return type(exc), str(exc)
+    return buffer.copy()
+
+
+def same(a, b):
+    if isinstance(a, tuple) or isinstance(b, tuple):
+        return a == b
+    return np.array_equal(a, b, equal_nan=True)
+
+
+@pytest.mark.parametrize("make", [by_attribute, by_get])
+@pytest.mark.parametrize("form,n", [("vector", 3), ("vector", 1), ("diagonal", 3), ("matrix", 9),
+                                    ("matrix", 3), ("flag", 1)])
+def test_packer_writes_what_the_python_writer_writes(make, form, n):
+    from wholebody._hierarchy_cycle import ParameterPacker
+
+    param = make(form, n)
+    for value in VALUES:
+        task = Holder(value)
+        # the parameter's view in the middle of a larger array, sentinels either side
+        python_buffer, packed_buffer = np.full(n + 4, -7.0), np.full(n + 4, -7.0)
+        write = param.writer(task, python_buffer[2:2 + n], None, None)
+        packer = ParameterPacker([param.source(task, packed_buffer[2:2 + n], None, None)])
+        expected, got = outcome(write, python_buffer), outcome(packer.pack, packed_buffer)
+        assert same(expected, got), f"{form}[{n}] {type(value).__name__} {value!r}: " \
+                                    f"Python {expected}, packer {got}"
+
+
+def test_packer_reads_the_current_value_every_pack():
+    """A source holds the task, not its value: a reassigned or mutated attribute is packed."""
+    from wholebody._hierarchy_cycle import ParameterPacker
+
+    task = Holder(np.array([1.0, 2.0, 3.0]))
+    buffer = np.zeros(3)
+    packer = ParameterPacker([by_attribute("vector", 3).source(task, buffer, None, None)])
+    packer.pack()
+    task.value[1] = 5.0
+    packer.pack()
+    assert buffer.tolist() == [1.0, 5.0, 3.0]
+    task.value = 0.5
+    packer.pack()
+    assert buffer.tolist() == [0.5, 0.5, 0.5]
+
+
+def test_packer_refuses_a_view_it_cannot_write():
+    from wholebody._hierarchy_cycle import ParameterPacker
+
+    param = by_attribute("vector", 3)
+    for view, why in [(np.zeros(6)[::2], "contiguous"), (np.zeros(3, dtype=np.float32), "float64"),
+                      (np.zeros((1, 3)), "vector")]:
+        with pytest.raises(ValueError, match=why):
+            ParameterPacker([param.source(Holder(1.0), view, None, None)])
