@@ -32,13 +32,14 @@ import numpy as np
 from .formulation import (Formulation, Solution, Stack, _without_fallback, eq14_blocks,
                           make_solution, overflow_status, place_rows, solve_levels,
                           unsolved_solution)
+from .guard import Outcome
 from .robot import Robot
 from .solvers import Level, SolverSettings
 from .solvers.compiled_cascade import BoundCascade, BoundWeighted
 from .solvers.settings import settings_or_default
 from .tasks import FullDynamics
 from .tasks.base import Task, contact_subset
-from .tasks.schema import LayoutContext, Param, Size
+from .tasks.schema import KernelTask, LayoutContext, Param, Size
 from .variables import Variables
 
 try:
@@ -197,7 +198,7 @@ class _Program:
         without the fallback backend, as :func:`solve_levels` solves it), None where it does not
         apply (method "daqp", not built)."""
         key = cycle.settings  # (with the cycle's stack, it decides cycle.analytic too)
-        if key != self._bound_key:
+        if key is not self._bound_key and key != self._bound_key:  # (frozen: the same is equal)
             self._bound_key, self._bound = key, None
             if key.method == "cascade" and BoundCascade.available:
                 self._bound = BoundCascade(
@@ -281,6 +282,7 @@ class HierarchyCycle:
                                  "one uses NewtonEuler (tau is eliminated by eq. 14)")
         self._programs: dict = {}
         self._program: _Program | None = None
+        self._python_key = None  # the stack's task ids when _python and _layout_keys were made
         self._qv = None  # the state of the last update (native engine)
         self._terms = None  # terms_view's arrays, bound on first use
         self.engine = None
@@ -469,19 +471,27 @@ class HierarchyCycle:
             program.raise_invalid()
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
         t_rows = time.perf_counter()
-        result, outcome, status = solve_levels(program.levels, self.analytic, self.settings,
-                                               program.bound(self))
+        bound = program.bound(self)
+        quick = bound.solve_quick() if bound is not None else None
+        if quick is not None:  # the common case: every QP solved in C++, no warning
+            x, costs, qp_time, qps = quick
+            outcome, status = Outcome.SOLVED, "optimal"
+        else:
+            result, outcome, status = solve_levels(program.levels, self.analytic, self.settings,
+                                                   bound)
+            x, costs = result.x, result.costs
+            qp_time, qps = result.timings.get("qp", np.nan), result.timings.get("qps", 0)
         t_solve = time.perf_counter()
-        self.engine.recover(program.id, result.x)
+        self.engine.recover(program.id, x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),
-                                 (program.tau_lo, program.tau_hi), outcome, status, result.costs,
+                                 (program.tau_lo, program.tau_hi), outcome, status, costs,
                                  variables)
         if diagnostics:
-            solution.tasks = Formulation.task_reports(result.x, program.meta)
-        solution.timings = {"update": self._update_time + t1 - t0, "rows": t_rows - t1, "solve": t_solve - t_rows,
+            solution.tasks = Formulation.task_reports(x, program.meta)
+        solution.timings = {"update": self._update_time + t1 - t0, "rows": t_rows - t1,
+                            "solve": t_solve - t_rows,
                             "total": self._update_time + time.perf_counter() - t0,
-                            "qp": result.timings.get("qp", np.nan),
-                            "qps": result.timings.get("qps", 0)}
+                            "qp": qp_time, "qps": qps}
         return solution
 
     def _default_variables(self) -> Variables:
@@ -490,17 +500,20 @@ class HierarchyCycle:
         return self._all_contacts
 
     def _python_tasks(self, tasks: list[Task]) -> list[Task]:
-        """The tasks without a kernel (recomputed when the stack's tasks change)."""
+        """The tasks without a kernel (recomputed when the stack's tasks change, with the
+        layout keys of the tasks whose layout has one)."""
         ids = tuple(map(id, tasks))
-        if getattr(self, "_python_key", None) != ids:
+        if self._python_key != ids:
             self._python_key, self._python = ids, python_tasks(self.stack)
+            self._layout_keys = [t.layout_key for t in tasks
+                                 if type(t).layout_key is not KernelTask.layout_key]
         return self._python
 
     def _program_for(self, variables: Variables, tasks: list[Task], python_rows: dict) -> _Program:
         """The program of the stack as it is now (its levels and tasks, their layouts, the
         Python tasks' row signatures) and the active contacts; built on first use."""
         key = (variables.contacts, self._python_key, tuple(map(len, self.stack.levels)),
-               tuple([t.layout_key() for t in tasks]),
+               tuple([layout_key() for layout_key in self._layout_keys]),
                tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
                       for i, r in python_rows.items()]))
         program = self._program

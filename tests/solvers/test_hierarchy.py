@@ -1086,12 +1086,14 @@ def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
     (contents of other random hierarchies of the same shapes) returns exactly what a fresh
     solve_hierarchy returns on those contents: reset() leaves nothing of the previous solve, and
     a returned solution keeps its values when the next solve runs (its x once was a view of the
-    run's buffer and changed under its holder)."""
+    run's buffer and changed under its holder). Its quick path (``solve_quick``) gives the same
+    x and costs where it gives any, and only for an optimum without warnings."""
     from conftest import native_cycle_or_skip
     from wholebody.solvers.hierarchy import BoundCascade
     native_cycle_or_skip("_cascade")
     rng = np.random.default_rng(17)
     fields = ("B", "b", "w", "C", "lower", "upper", "v")
+    quick_hits = 0
     for trial in range(40):
         shape_seed = int(rng.integers(1 << 30))
         make = lambda seed: random_hierarchy(np.random.default_rng(seed))  # noqa: E731
@@ -1107,6 +1109,12 @@ def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
                     noise = rng.normal(scale=0.3, size=a.shape) if f in ("B", "C", "b") else 0.0
                     a[...] = b + noise
             got, want = bound.solve(), solve_hierarchy(levels, **kw)
+            quick = bound.solve_quick()
+            if quick is not None:
+                quick_hits += 1
+                assert got.ok and got.status == "optimal" and not got.warnings
+                np.testing.assert_array_equal(quick[0], want.x)
+                np.testing.assert_array_equal(quick[1], want.costs)
             assert (got.ok, got.status, got.levels_solved) == (want.ok, want.status, want.levels_solved)
             np.testing.assert_array_equal(got.x, want.x, err_msg=f"trial {trial}")
             np.testing.assert_array_equal(got.costs, want.costs)
@@ -1116,6 +1124,7 @@ def test_bound_cascade_resolves_in_place_changes_as_solve_hierarchy():
                 np.testing.assert_array_equal(previous[0].x, previous[1])
                 np.testing.assert_array_equal(previous[0].costs, previous[2])
             previous = (got, got.x.copy(), got.costs.copy())
+    assert quick_hits >= 40  # the quick path is the common case
 
 
 def test_bound_cascade_refuses_arrays_it_would_have_to_copy():

@@ -114,11 +114,12 @@ def test_hard_infeasible_falls_back_to_the_cascade():
         assert sol.warnings == python.warnings
         np.testing.assert_allclose(sol.x, python.x, atol=1e-9)
         assert sol.costs[0] == pytest.approx(0.5, rel=1e-3)  # the hard level's compromise x0 = 0.5
+    assert BoundWeighted([hard, obj], settings).solve_quick() is None  # no weighted optimum
 
 
 def test_bound_weighted_follows_its_arrays():
-    """BoundWeighted holds the level arrays: after their contents change in place, solve()
-    gives what solve_hierarchy gives on copies of the new contents; it refuses another method,
+    """BoundWeighted holds the level arrays: after their contents change in place, solve() (and
+    its quick path) gives what solve_hierarchy gives on copies of the new contents; it refuses another method,
     more than two levels and arrays it cannot hold."""
     native_cycle_or_skip("_cascade")
     from wholebody.solvers.hierarchy import BoundWeighted
@@ -135,6 +136,10 @@ def test_bound_weighted_follows_its_arrays():
         a, b = bound.solve(), solve_hierarchy(copies, settings=settings)
         assert (a.ok, a.method, a.status) == (b.ok, b.method, b.status)
         np.testing.assert_array_equal(a.x, b.x)
+        x, costs, _, qps = bound.solve_quick()  # the quick path: the same optimum
+        np.testing.assert_array_equal(x, b.x)
+        np.testing.assert_array_equal(costs, b.costs)
+        assert qps == 1
     with pytest.raises(ValueError, match="BoundWeighted runs method 'weighted'"):
         BoundWeighted(levels, cfg(method="cascade"))
     with pytest.raises(ValueError, match="'weighted' takes"):

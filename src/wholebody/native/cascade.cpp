@@ -585,21 +585,36 @@ public:
   {
     VectorXd costs = VectorXd::Zero(Index(nl_));
     py::list res, vio;
+    VectorXd e, s;
     for (std::size_t r = 0; r < nl_; ++r)
     {
-      const ConstRowMap B = matrix(Bs_, r), C = matrix(Cs_, r);
-      const VectorXd e = vec(ws_, r).cwiseProduct(B * x - vec(bs_, r));
-      const VectorXd cx = C * x;
-      const VectorXd s = vec(Vs_, r).cwiseProduct(
-        (vec(lowers_, r) - cx).cwiseMax(cx - vec(uppers_, r)).cwiseMax(0.0));
-      costs[Index(r)] = e.squaredNorm() + s.squaredNorm();
+      costs[Index(r)] = level_cost(r, x, e, s);
       res.append(e);
       vio.append(s);
     }
     return py::make_tuple(costs, res, vio);
   }
 
+  // The per-level costs alone (evaluate's first entry).
+  VectorXd costs(const VectorXd & x) const
+  {
+    VectorXd costs = VectorXd::Zero(Index(nl_)), e, s;
+    for (std::size_t r = 0; r < nl_; ++r)
+      costs[Index(r)] = level_cost(r, x, e, s);
+    return costs;
+  }
+
 protected:
+  // Level r's cost at x, its weighted residuals ``e`` and violations ``s``.
+  double level_cost(std::size_t r, const VectorXd & x, VectorXd & e, VectorXd & s) const
+  {
+    const ConstRowMap B = matrix(Bs_, r), C = matrix(Cs_, r);
+    e = vec(ws_, r).cwiseProduct(B * x - vec(bs_, r));
+    const VectorXd cx = C * x;
+    s = vec(Vs_, r).cwiseProduct((vec(lowers_, r) - cx).cwiseMax(cx - vec(uppers_, r)).cwiseMax(0.0));
+    return e.squaredNorm() + s.squaredNorm();
+  }
+
   LevelArrays(const char * who, std::vector<DoubleArray> Bs, std::vector<DoubleArray> bs,
               std::vector<DoubleArray> ws, std::vector<DoubleArray> Cs,
               std::vector<DoubleArray> lowers, std::vector<DoubleArray> uppers,
@@ -801,6 +816,21 @@ public:
     std::copy(dims.begin(), dims.end(), dims_out.mutable_data());
     return py::make_tuple(VectorXd(x_), ev[0], ev[1], ev[2], level_times, qp, qp_count_, dims_out,
                           py::tuple(py::cast(warns_)), r_, status_);
+  }
+
+  // A finished run without warnings, in one call: (x, level costs, seconds in the QPs solved
+  // here, their count); None for any other (then result() has what a HierarchySolution needs).
+  py::object quick() const
+  {
+    if (!finished_ || failed_ || !warns_.empty())
+      return py::none();
+    VectorXd costs = this->costs(x_);
+    if (!std::isfinite(costs.sum()))
+      return py::none();
+    double qp = 0.0;
+    for (double t : qp_times_)
+      qp += t;
+    return py::make_tuple(VectorXd(x_), costs, qp, qp_count_);
   }
 
   std::vector<Index> nullspace_dims() const
@@ -1299,6 +1329,16 @@ public:
 
   const std::string & status() const { return status_; }
 
+  // After solve_daqp or give returned "done": (x, level costs, seconds in DAQP here, 1); None
+  // where the costs are not finite (then result() has what a HierarchySolution needs).
+  py::object quick() const
+  {
+    VectorXd costs = this->costs(x_);
+    if (!std::isfinite(costs.sum()))
+      return py::none();
+    return py::make_tuple(VectorXd(x_), costs, qp_time_, 1);
+  }
+
 private:
   // Row ``rows_`` of the QP: scale · a on x, ``slack_sign`` in column ``slack`` (none if < 0).
   template <typename Row>
@@ -1430,6 +1470,7 @@ PYBIND11_MODULE(_cascade, m)
     .def("qp_violation", &CascadeRun::qp_violation, py::arg("y"))
     .def("give_qp", &CascadeRun::give_qp, py::arg("y"), py::arg("status"))
     .def("result", &CascadeRun::result)
+    .def("quick", &CascadeRun::quick)
     .def_property_readonly("level", &CascadeRun::level)
     .def_property_readonly("daqp_status", &CascadeRun::daqp_status);
   py::class_<WeightedRun>(m, "WeightedRun")
@@ -1442,5 +1483,6 @@ PYBIND11_MODULE(_cascade, m)
     .def("solve_daqp", &WeightedRun::solve_daqp, py::arg("daqp"))
     .def("give", &WeightedRun::give, py::arg("y"))
     .def("result", &WeightedRun::result)
+    .def("quick", &WeightedRun::quick)
     .def_property_readonly("status", &WeightedRun::status);
 }

@@ -141,6 +141,18 @@ class BoundCascade:
         self._run.reset()
         return _run_compiled(self._run, self.levels, self.settings, t0, self._daqp)
 
+    def solve_quick(self) -> tuple | None:
+        """The common case in fewer calls than :meth:`solve`: (x, level costs, seconds in the QPs,
+        their count) when the run solves every level QP itself (DAQP in C++) and ends without a
+        warning, its costs finite — the x and costs :meth:`solve` returns then, status
+        "optimal". None otherwise: call :meth:`solve`."""
+        if self._daqp is None or BACKENDS.get(self.settings.backend) is not solve_daqp:
+            return None
+        self._run.reset()
+        if self._run.advance_daqp(self._daqp) != "done":
+            return None
+        return self._run.quick()
+
 
 def _bound_arguments(who, method, built, levels, settings, first_level_solution):
     """A bound run's arguments checked → (levels, n, first_level_solution, settings):
@@ -234,6 +246,17 @@ class BoundWeighted:
         if sol is None:
             sol = _cascade_instead(self.levels, self.n, self.settings, self._tols, t0)
         return sol
+
+    def solve_quick(self) -> tuple | None:
+        """As :meth:`BoundCascade.solve_quick`: (x, level costs, seconds in DAQP, 1) when DAQP
+        (in C++) solves the weighted QP and the hard level holds, its costs finite; None
+        otherwise: call :meth:`solve`."""
+        if (self._run is None or self._daqp is None
+                or BACKENDS.get(self.settings.backend) is not solve_daqp):
+            return None
+        if self._run.solve_daqp(self._daqp) != "done":
+            return None
+        return self._run.quick()
 
 
 def _daqp_on_run(run, opts):
