@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import math
 import time
 from types import SimpleNamespace
 from typing import Sequence
@@ -147,14 +146,18 @@ class _Program:
         self.qdd, self.lam = np.zeros(robot.nv), np.zeros(variables.n_lambda)
         self.tau, self.tau_lo, self.tau_hi = (np.zeros(robot.na) for _ in range(3))
         self.scales = cycle.formulation.scales(variables).copy()
+        # a weight's least value: 0 on equality rows, above 0 on inequality rows (the fill checks)
+        w_min = np.zeros(rows)
+        for s in self.slots:
+            w_min[s.start:s.stop] = 0.0 if s.eq else np.nextafter(0.0, 1.0)
         self.description = {
             "contacts": [contact_index[c] for c in variables.contacts],
             "reduced": cycle.formulation.reduced, "rows": rows, "nparams": self.params.shape[0],
-            "scales": self.scales, "slots": compiled,
+            "scales": self.scales, "slots": compiled, "w_min": w_min,
             "buffers": {"mat": self.mat, "target": self.target, "lower": self.lower,
-                        "upper": self.upper, "params": self.params, "qdd": self.qdd,
-                        "lam": self.lam, "tau": self.tau, "tau_lo": self.tau_lo,
-                        "tau_hi": self.tau_hi}}
+                        "upper": self.upper, "weights": self.weights, "params": self.params,
+                        "qdd": self.qdd, "lam": self.lam, "tau": self.tau,
+                        "tau_lo": self.tau_lo, "tau_hi": self.tau_hi}}
         self.id = cycle.engine.compile(self.description)  # what was sent (tests re-send it)
         # every compiled task's parameters and weight as the packer's sources (views made once)
         self.sources = [source for s in self.slots if id(s.task) not in python_rows
@@ -166,13 +169,11 @@ class _Program:
                        for s in self.slots if id(s.task) in python_rows]
         self.rows_of = {id(s.task): (self.mat[s.start:s.stop], self.target[s.start:s.stop])
                         for s in self.slots if s.eq}
-        self.ineq_rows = np.zeros(rows, dtype=bool)
         self.levels, self.meta = [], []
         for rank, (first, last) in enumerate(self.level_bounds, start=1):
             entries = sorted((s for s in self.slots if s.rank == rank), key=lambda s: s.order)
             k = sum(s.stop - s.start for s in entries if s.eq)
             eq_rows, in_rows = slice(first, first + k), slice(first + k, last)
-            self.ineq_rows[in_rows] = True
             self.levels.append(Level.trusted(
                 self.mat[eq_rows], self.target[eq_rows], self.weights[eq_rows], self.mat[in_rows],
                 self.lower[in_rows], self.upper[in_rows], self.weights[in_rows], name=f"level {rank}"))
@@ -181,7 +182,6 @@ class _Program:
                               if s.eq else
                               (s.task, "ineq", self.mat[s.start:s.stop], self.lower[s.start:s.stop],
                                self.upper[s.start:s.stop]) for s in entries])
-        self.w_min = np.where(self.ineq_rows, np.nextafter(0.0, 1.0), 0.0)
         self._bound: BoundCascade | BoundWeighted | None = None  # compiled, on self.levels
         self._bound_key = None
 
@@ -462,8 +462,7 @@ class HierarchyCycle:
         t1 = time.perf_counter()
         program.pack()
         program.write_python_rows(self, python_rows)
-        if not (self.engine.fill(program.id) and math.isfinite(program.weights.sum())
-                and (program.weights >= program.w_min).all()):
+        if not self.engine.fill(program.id):  # (rows, bounds and weights checked)
             if not all(np.isfinite(term).all() for term in self.engine.terms().values()):
                 return unsolved_solution(robot.nv, variables,
                                          robot.torque_bounds(np.asarray(q, float)),
@@ -482,10 +481,10 @@ class HierarchyCycle:
             x, costs = result.x, result.costs
             qp_time, qps = result.timings.get("qp", np.nan), result.timings.get("qps", 0)
         t_solve = time.perf_counter()
-        self.engine.recover(program.id, x)
+        excess = self.engine.recover(program.id, x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),
                                  (program.tau_lo, program.tau_hi), outcome, status, costs,
-                                 variables)
+                                 variables, excess)
         if diagnostics:
             solution.tasks = Formulation.task_reports(x, program.meta)
         solution.timings = {"update": self._update_time + t1 - t0, "rows": t_rows - t1,

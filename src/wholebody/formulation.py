@@ -354,10 +354,10 @@ def _fallback_cascade(settings: SolverSettings) -> SolverSettings:
 
 def make_solution(qdd: np.ndarray, lam: np.ndarray, tau: np.ndarray,
                   bounds: tuple[np.ndarray, np.ndarray], outcome: Outcome, status: str, costs,
-                  variables: Variables) -> Solution:
+                  variables: Variables, excess: float | None = None) -> Solution:
     """A :class:`Solution` whose torque went through :func:`~wholebody.guard.guard_torque` with
-    ``bounds`` = (tau_min, tau_max)."""
-    tau, outcome, status = guard_torque(tau, bounds[0], bounds[1], outcome, status)
+    ``bounds`` = (tau_min, tau_max) (and ``excess``, if known)."""
+    tau, outcome, status = guard_torque(tau, bounds[0], bounds[1], outcome, status, excess)
     forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
     return Solution(qdd, lam, tau, forces, outcome, status, np.asarray(costs),
                     contacts=variables.contacts)

@@ -41,7 +41,7 @@ class Outcome(enum.Enum):
 
 
 def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome: Outcome,
-                 reason: str) -> tuple[np.ndarray, Outcome, str]:
+                 reason: str, excess: float | None = None) -> tuple[np.ndarray, Outcome, str]:
     """(τ, outcome, reason) with τ finite and inside [lower, upper].
 
     A torque of a successful cycle is clipped to the limits; if it left them by more than
@@ -49,9 +49,11 @@ def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome:
     becomes ``CLIPPED``; the torque of a failed cycle (``HELD``) is clipped as well. A
     torque with a non-finite entry is no torque at all: replaced by zero (clipped), ``HELD``.
     Limits with a NaN (a bug upstream: robot files and constructors validate them) give zero
-    torque, ``HELD``."""
+    torque, ``HELD``. ``excess``: max(τ − upper, lower − τ), NaN if anything is not finite,
+    where the caller computed it already (the compiled cycle does)."""
     if outcome.ok:  # the common case first: one pass, NaN anywhere makes ``excess`` NaN
-        excess = _max(_larger(np.subtract(tau, upper), np.subtract(lower, tau)))
+        if excess is None:
+            excess = _max(_larger(np.subtract(tau, upper), np.subtract(lower, tau)))
         if excess <= 0.0:
             return tau, outcome, reason
         if excess <= LIMIT_TOLERANCE or _within_tolerance(tau, lower, upper):

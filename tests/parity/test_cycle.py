@@ -1162,3 +1162,49 @@ def test_unaligned_joints_equal_python():
         eom = pin.rnea(model, data, q, v, b.qdd) - J.T @ b.lam
         np.testing.assert_allclose(eom[:6], 0.0, atol=1e-6 * robot.mass)
         np.testing.assert_allclose(eom[6:], b.tau, atol=1e-6 * robot.mass)
+
+
+# ---------------------------------------------------------------------------- 9. checks in C++
+@native
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -1.0])
+def test_a_weight_mutated_in_place_names_the_task(robots, bad):
+    """Weights are checked when assigned; one changed inside its array afterwards (NaN, inf,
+    negative) is caught by the compiled fill's check and named, as the Python engine names it;
+    a zero weight on an inequality task likewise (its slack would be free)."""
+    robot = robots["talos14"]
+    for name, zero_ok in (("com", True), ("friction", False)):
+        stack = table1_stack(robot, robot.contact_names)
+        task = stack.find(name)
+        cycle = HierarchyCycle(robot, stack, engine="native")
+        q, v = moving_states(robot, 1)[0]
+        cycle.solve(q, v)
+        slot = next(s for s in cycle._program.slots if s.task is task)
+        m = slot.stop - slot.start
+        task.weight = np.ones(m)
+        cycle.solve(q, v)
+        task.weight[1] = bad
+        with pytest.raises(ValueError, match=f"task '{name}'"):
+            cycle.solve(q, v)
+        task.weight[1] = 0.0
+        if zero_ok:
+            assert cycle.solve(q, v).ok
+        else:
+            with pytest.raises(ValueError, match=f"task '{name}'"):
+                cycle.solve(q, v)
+
+
+@native
+def test_recover_reports_how_far_the_torque_is_outside_its_limits(robots):
+    """The compiled recover returns max(τ − τ_max, τ_min − τ) for the guard: equal to numpy's on
+    solved states and on solutions scaled far outside the limits; NaN for a NaN solution."""
+    robot = robots["talos14"]
+    cycle = HierarchyCycle(robot, table2_stack(robot), engine="native")
+    for q, v in moving_states(robot, 3):
+        cycle.solve(q, v)
+        program = cycle._program
+        x = np.linalg.lstsq(program.levels[0].B, program.levels[0].b, rcond=None)[0]
+        for scale in (1.0, 50.0):
+            excess = cycle.engine.recover(program.id, scale * x)
+            tau, lo, hi = program.tau, program.tau_lo, program.tau_hi
+            assert excess == np.max(np.maximum(tau - hi, lo - tau))
+        assert np.isnan(cycle.engine.recover(program.id, np.full_like(x, np.nan)))

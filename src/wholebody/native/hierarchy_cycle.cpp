@@ -73,6 +73,8 @@ namespace
     double *mat = nullptr, *target = nullptr, *lower = nullptr, *upper = nullptr;
     const double * params = nullptr;
     double *qdd = nullptr, *lam = nullptr, *tau = nullptr, *tau_lo = nullptr, *tau_hi = nullptr;
+    const double * weights = nullptr; // the rows' weights (packed before fill)
+    VectorXd w_min;                    // their least values: 0 on equality rows, > 0 on inequality rows
     MatrixXd Jc;   // stacked contact Jacobians (nl x nv)
     VectorXd drift; // stacked contact drifts
     std::vector<py::object> keep;
@@ -221,6 +223,8 @@ public:
     prog.tau = buffer<double>(b, "tau", na_, prog.keep);
     prog.tau_lo = buffer<double>(b, "tau_lo", na_, prog.keep);
     prog.tau_hi = buffer<double>(b, "tau_hi", na_, prog.keep);
+    prog.weights = buffer<double>(b, "weights", prog.rows, prog.keep);
+    prog.w_min = get_vector(p, "w_min", prog.rows);
     prog.Jc.setZero(prog.nl, nv_);
     prog.drift.setZero(prog.nl);
     for (const py::handle & item : get<py::list>(p, "slots"))
@@ -239,8 +243,9 @@ public:
   }
 
   // Fills a program's level arrays from this cycle's terms and its parameters (Formulation.levels
-  // without the weights, which Python writes, and without the rows of tasks that have no kernel,
-  // which Python writes before this call). False if some entry is NaN/inf or lower > upper.
+  // without the weights, which are packed before, and without the rows of tasks that have no
+  // kernel, which Python writes before this call). False if some entry is NaN/inf, lower > upper,
+  // or a weight is not finite or below its least value (w_min).
   bool fill(int id)
   {
     Program & P = program(id);
@@ -262,13 +267,17 @@ public:
     }
     if (P.n > nv_)
       A.rightCols(P.n - nv_).array().rowwise() *= P.scales.tail(P.n - nv_).transpose().array();
+    const Map<const VectorXd> w(P.weights, P.rows);
     return A.allFinite() && e.allFinite() && !(lo.array() > up.array()).any()
-           && !lo.array().isNaN().any() && !up.array().isNaN().any();
+           && !lo.array().isNaN().any() && !up.array().isNaN().any() && std::isfinite(w.sum())
+           && (w.array() >= P.w_min.array()).all();
   }
 
   // qdd, lambda and tau of a solution x (scaled, as the solver sees it; Formulation._recover),
-  // and the robot's torque bounds at this state, into the program's output arrays.
-  void recover(int id, const DoubleArray & x_in)
+  // and the robot's torque bounds at this state, into the program's output arrays. Returns how
+  // far tau is outside them, max(tau - tau_hi, tau_lo - tau) (NaN if anything is not finite), for
+  // wholebody.guard.guard_torque.
+  double recover(int id, const DoubleArray & x_in)
   {
     Program & P = program(id);
     const double * xp = input(x_in, P.n, "x", false);
@@ -284,6 +293,9 @@ public:
     Map<VectorXd> hi(P.tau_hi, na_), lo(P.tau_lo, na_);
     torque_upper(hi);
     lo = -hi;
+    if (!tau.allFinite() || hi.hasNaN())
+      return std::numeric_limits<double>::quiet_NaN();
+    return na_ ? (tau - hi).cwiseMax(lo - tau).maxCoeff() : -kInf;
   }
 
   // Copies of the rigid-body terms of the last update (tests compare them with Robot.update).
