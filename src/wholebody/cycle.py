@@ -6,9 +6,10 @@ the rigid-body terms and the task rows in compiled code (Herzog et al. 2016, Sec
 compares the level arrays and the torques): the compiled part (``wholebody._hierarchy_cycle``,
 src/wholebody/native/hierarchy_cycle.cpp) computes Pinocchio's terms and every task's rows into
 the level arrays, the cascade solves them (compiled as well, its level QPs by DAQP/quadprog), and
-the compiled part returns tau of eq. 14. Python only copies each task's current parameters (gains,
-references, weights) into a flat array every cycle, so a controller keeps changing them on the
-task objects as before.
+the compiled part returns tau of eq. 14. Each task's current parameters (gains, references,
+weights) are read from the task objects every cycle (``ParameterPacker``), so a controller keeps
+changing them on the tasks as before; in the common case one compiled call packs them, fills the
+rows, runs the bound cascade or weighted QP (DAQP in C++) and recovers tau.
 
 A task with a compiled kernel (``Task.kernel``; every task of Tables 1, 2 and 4) has its rows
 written in C++ from the parameters its schema declares (:mod:`wholebody.tasks.schema`); a task
@@ -207,12 +208,6 @@ class _Program:
             elif key.method == "weighted" and BoundWeighted.available:
                 self._bound = BoundWeighted(self.levels, _without_fallback(key))
         return self._bound
-
-    def pack(self) -> None:
-        """Every compiled task's current parameters (by its schema) and weights into the arrays
-        (compiled: ``ParameterPacker``; a value of an uncommon kind through its Python
-        ``assign``)."""
-        self.packer.pack()
 
     def write_python_rows(self, cycle: "HierarchyCycle", python_rows: dict) -> None:
         """The rows of the tasks without a kernel (unscaled, as Formulation places them; the
@@ -460,28 +455,29 @@ class HierarchyCycle:
             self.engine.update(q, v)
             self._q = q
         t1 = time.perf_counter()
-        program.pack()
         program.write_python_rows(self, python_rows)
-        if not self.engine.fill(program.id):  # (rows, bounds and weights checked)
+        bound = program.bound(self)
+        # packing, rows and, in the common case, the compiled run's QPs and tau in one call
+        filled, rows_time, quick = self.engine.cycle(
+            program.id, program.packer, bound.quick_calls() if bound is not None else None)
+        if not filled:  # (rows, bounds and weights checked)
             if not all(np.isfinite(term).all() for term in self.engine.terms().values()):
                 return unsolved_solution(robot.nv, variables,
                                          robot.torque_bounds(np.asarray(q, float)),
                                          len(self.stack.levels), overflow_status(v))
             program.raise_invalid()
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
-        t_rows = time.perf_counter()
-        bound = program.bound(self)
-        quick = bound.solve_quick() if bound is not None else None
-        if quick is not None:  # the common case: every QP solved in C++, no warning
-            x, costs, qp_time, qps = quick
+        t_rows = t1 + rows_time
+        if quick is not None:  # every QP solved in C++ without a warning, tau recovered
+            x, costs, qp_time, qps, excess = quick
             outcome, status = Outcome.SOLVED, "optimal"
         else:
             result, outcome, status = solve_levels(program.levels, self.analytic, self.settings,
                                                    bound)
             x, costs = result.x, result.costs
             qp_time, qps = result.timings.get("qp", np.nan), result.timings.get("qps", 0)
+            excess = self.engine.recover(program.id, x)
         t_solve = time.perf_counter()
-        excess = self.engine.recover(program.id, x)
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),
                                  (program.tau_lo, program.tau_hi), outcome, status, costs,
                                  variables, excess)

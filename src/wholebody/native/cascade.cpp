@@ -761,6 +761,14 @@ public:
     return kind;
   }
 
+  // reset() then advance_daqp(): the whole run from its first level, as WeightedRun.solve_daqp
+  // solves its QP (the compiled cycle calls either alike).
+  std::string solve_daqp(DaqpSolver & daqp)
+  {
+    reset();
+    return advance_daqp(daqp);
+  }
+
   // The QP of the pending level (cascade._level_qp): Hessian I (not returned), gradient g,
   // rows lower ≤ A [w; s] ≤ upper.
   py::tuple qp() const
@@ -1465,6 +1473,7 @@ PYBIND11_MODULE(_cascade, m)
     .def("reset", &CascadeRun::reset)
     .def("advance", &CascadeRun::advance)
     .def("advance_daqp", &CascadeRun::advance_daqp, py::arg("daqp"))
+    .def("solve_daqp", &CascadeRun::solve_daqp, py::arg("daqp"))
     .def("qp", &CascadeRun::qp)
     .def("daqp_qp", &CascadeRun::daqp_qp)
     .def("qp_violation", &CascadeRun::qp_violation, py::arg("y"))

@@ -22,6 +22,7 @@
 
 #include <pybind11/eigen.h>
 
+#include <chrono>
 #include <map>
 
 namespace py = pybind11;
@@ -271,6 +272,31 @@ public:
     return A.allFinite() && e.allFinite() && !(lo.array() > up.array()).any()
            && !lo.array().isNaN().any() && !up.array().isNaN().any() && std::isfinite(w.sum())
            && (w.array() >= P.w_min.array()).all();
+  }
+
+  // The cycle after update(): the tasks' parameters packed, fill(); then, with ``quick`` —
+  // (solve, daqp, result) of a bound compiled run (BoundCascade/BoundWeighted.quick_calls) —
+  // that run's common case, solve(daqp) == "done" and result() not None, and recover() →
+  // (filled, seconds packing and filling, (x, level costs, QP seconds, QP count, the torque's
+  // excess over its limits) or None where the caller solves the levels itself).
+  py::tuple cycle(int id, ParameterPacker & packer, const py::object & quick)
+  {
+    const auto t0 = std::chrono::steady_clock::now();
+    packer.pack();
+    const bool filled = fill(id);
+    const double rows_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (!filled || quick.is_none())
+      return py::make_tuple(filled, rows_seconds, py::none());
+    const py::tuple calls = quick.cast<py::tuple>();
+    if (calls[0](calls[1]).cast<std::string>() != "done")
+      return py::make_tuple(true, rows_seconds, py::none());
+    py::object result = calls[2]();
+    if (result.is_none())
+      return py::make_tuple(true, rows_seconds, py::none());
+    const py::tuple r = result.cast<py::tuple>();
+    const double excess = recover(id, r[0].cast<DoubleArray>());
+    return py::make_tuple(true, rows_seconds, py::make_tuple(r[0], r[1], r[2], r[3], excess));
   }
 
   // qdd, lambda and tau of a solution x (scaled, as the solver sees it; Formulation._recover),
@@ -1003,6 +1029,7 @@ PYBIND11_MODULE(_hierarchy_cycle, m)
     .def("update", &HierarchyCycle::update, py::arg("q"), py::arg("v"))
     .def("compile", &HierarchyCycle::compile, py::arg("program"))
     .def("fill", &HierarchyCycle::fill, py::arg("program"))
+    .def("cycle", &HierarchyCycle::cycle, py::arg("program"), py::arg("packer"), py::arg("quick"))
     .def("recover", &HierarchyCycle::recover, py::arg("program"), py::arg("x"))
     .def("bind_state", &HierarchyCycle::bind_state, py::arg("buffers"))
     .def("terms", &HierarchyCycle::terms)

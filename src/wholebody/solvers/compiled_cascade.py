@@ -146,12 +146,16 @@ class BoundCascade:
         their count) when the run solves every level QP itself (DAQP in C++) and ends without a
         warning, its costs finite — the x and costs :meth:`solve` returns then, status
         "optimal". None otherwise: call :meth:`solve`."""
+        return _solve_quick(self.quick_calls())
+
+    def quick_calls(self) -> tuple | None:
+        """(solve, daqp, result) that :meth:`solve_quick` makes — ``solve(daqp)`` is "done", then
+        ``result()`` is its tuple or None — for a caller that makes them itself (the compiled
+        cycle); None where the run cannot solve its QPs itself (another backend, DAQP's C
+        interface not usable)."""
         if self._daqp is None or BACKENDS.get(self.settings.backend) is not solve_daqp:
             return None
-        self._run.reset()
-        if self._run.advance_daqp(self._daqp) != "done":
-            return None
-        return self._run.quick()
+        return self._run.solve_daqp, self._daqp, self._run.quick
 
 
 def _bound_arguments(who, method, built, levels, settings, first_level_solution):
@@ -251,12 +255,22 @@ class BoundWeighted:
         """As :meth:`BoundCascade.solve_quick`: (x, level costs, seconds in DAQP, 1) when DAQP
         (in C++) solves the weighted QP and the hard level holds, its costs finite; None
         otherwise: call :meth:`solve`."""
+        return _solve_quick(self.quick_calls())
+
+    def quick_calls(self) -> tuple | None:
+        """As :meth:`BoundCascade.quick_calls` (None also without variables)."""
         if (self._run is None or self._daqp is None
                 or BACKENDS.get(self.settings.backend) is not solve_daqp):
             return None
-        if self._run.solve_daqp(self._daqp) != "done":
-            return None
-        return self._run.quick()
+        return self._run.solve_daqp, self._daqp, self._run.quick
+
+
+def _solve_quick(calls) -> tuple | None:
+    """What a bound run's ``solve_quick`` returns, from its ``quick_calls()``."""
+    if calls is None:
+        return None
+    solve, daqp, result = calls
+    return result() if solve(daqp) == "done" else None
 
 
 def _daqp_on_run(run, opts):
