@@ -277,7 +277,7 @@ class HierarchyCycle:
                                  "one uses NewtonEuler (tau is eliminated by eq. 14)")
         self._programs: dict = {}
         self._program: _Program | None = None
-        self._python_key = None  # the stack's task ids when _python and _layout_keys were made
+        self._levels_seen = None  # the stack's levels when _structure, _python, _layout_keys were taken
         self._qv = None  # the state of the last update (native engine)
         self._terms = None  # terms_view's arrays, bound on first use
         self.engine = None
@@ -446,11 +446,12 @@ class HierarchyCycle:
         q, v = self._qv
         t0 = time.perf_counter()
         python_rows = {}
-        tasks = self.stack.tasks()
-        if self._python_tasks(tasks):  # tasks without a kernel read the Python robot's cache
+        if self._levels_seen is None or self.stack.levels != self._levels_seen:
+            self._take_stack()
+        if self._python:  # tasks without a kernel read the Python robot's cache
             robot.update(q, v)
             python_rows = {id(t): t.rows(robot, variables) for t in self._python}
-        program = self._program_for(variables, tasks, python_rows)
+        program = self._program_for(variables, python_rows)
         if self._q is None:  # a frame was added to the compiled model: update it again
             self.engine.update(q, v)
             self._q = q
@@ -494,20 +495,25 @@ class HierarchyCycle:
             self._all_contacts = Variables(self.robot)
         return self._all_contacts
 
-    def _python_tasks(self, tasks: list[Task]) -> list[Task]:
-        """The tasks without a kernel (recomputed when the stack's tasks change, with the
-        layout keys of the tasks whose layout has one)."""
-        ids = tuple(map(id, tasks))
-        if self._python_key != ids:
-            self._python_key, self._python = ids, python_tasks(self.stack)
-            self._layout_keys = [t.layout_key for t in tasks
-                                 if type(t).layout_key is not KernelTask.layout_key]
-        return self._python
+    def _take_stack(self) -> None:
+        """What the program lookup keeps of the stack's structure, taken again when it changes:
+        its task ids and level lengths, the tasks without a kernel, the layout keys of the tasks
+        whose layout has one, and a copy of its levels that tells a change (compared by task
+        identity: where a task class defines its own ``==``, no copy, and all is taken again
+        every cycle)."""
+        stack = self.stack
+        tasks = stack.tasks()
+        self._structure = (tuple(map(id, tasks)), tuple(map(len, stack.levels)))
+        self._python = python_tasks(stack)
+        self._layout_keys = [t.layout_key for t in tasks
+                             if type(t).layout_key is not KernelTask.layout_key]
+        by_identity = all(type(t).__eq__ is object.__eq__ for t in tasks)
+        self._levels_seen = [list(level) for level in stack.levels] if by_identity else None
 
-    def _program_for(self, variables: Variables, tasks: list[Task], python_rows: dict) -> _Program:
+    def _program_for(self, variables: Variables, python_rows: dict) -> _Program:
         """The program of the stack as it is now (its levels and tasks, their layouts, the
         Python tasks' row signatures) and the active contacts; built on first use."""
-        key = (variables.contacts, self._python_key, tuple(map(len, self.stack.levels)),
+        key = (variables.contacts, self._structure,
                tuple([layout_key() for layout_key in self._layout_keys]),
                tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
                       for i, r in python_rows.items()]))

@@ -863,6 +863,45 @@ def test_stack_edited_after_the_first_solve(robots):
                       where="removed")
 
 
+class PostureAlike(SubclassedPosture):
+    """A user's task class whose == compares by kind, not identity: any two are equal."""
+
+    def __eq__(self, other):
+        return isinstance(other, PostureAlike)
+
+    __hash__ = Task.__hash__
+
+
+@native
+def test_tasks_swapped_in_the_level_lists(robots):
+    """Edits straight on the levels' lists after the first solve, not through Stack's methods: a
+    task put in another's place with the same layout and other gains, a task of a class whose ==
+    calls any two of its tasks equal swapped for another of them, a level list replaced by an
+    equal one. Every cycle's level arrays equal the Python reference's for the stack as it is
+    then (the program follows the tasks, not what they compare equal to)."""
+    robot = robots["talos14"]
+    stacks = table2_stack(robot), table2_stack(robot)
+    cycle = HierarchyCycle(robot, stacks[0], engine="native", settings=QUADPROG)
+    states = iter(moving_states(robot, 6))
+
+    def compare(where):
+        compare_on_states(robot, stacks[0], stacks[1], Variables(robot), [next(states)],
+                          cycle=cycle, where=where)
+
+    compare("before")
+    i, j = stacks[0].locate("posture")
+    for stack in stacks:
+        stack.levels[i][j] = PostureTask(kp=5.0, kd=1.0, name="posture", weight=0.3)
+    compare("same layout, other gains")
+    for kp in (7.0, 20.0):
+        for stack in stacks:
+            stack.levels[i][j] = PostureAlike(kp=kp, kd=2.0, name="posture", weight=0.3)
+        compare(f"equal by its ==, kp {kp}")
+    for stack in stacks:
+        stack.levels[i] = list(stack.levels[i])
+    compare("level list replaced")
+
+
 def random_task(robot, rng, contacts):
     """One library task with a kernel and random (valid) parameters, or a Python-only one."""
     names = list(contacts)

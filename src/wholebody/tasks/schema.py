@@ -13,8 +13,10 @@ layout (the active contacts it applies to, the CoM axes or frame rows it keeps, 
 a flag such as the posture's base rows), from :meth:`KernelTask.selection`. The number of rows is
 :meth:`KernelTask.row_count` (the kernel counts them too; the compiled program checks they agree).
 
-The values come from the task object every cycle, through :meth:`Param.value` (by default the
-attribute of the same name): a controller keeps changing them on the task as before.
+The values come from the task object every cycle (the attribute of the same name, or ``get``):
+a controller keeps changing them on the task as before. The native cycle copies them with its
+compiled packer (:meth:`Param.source`); :meth:`Param.assigner` is the reference for what a value
+means and writes the values the packer leaves to it.
 """
 
 from __future__ import annotations
@@ -92,9 +94,6 @@ class Param:
     def __post_init__(self):
         if self.form not in FORMS:
             raise ValueError(f"Param.form: expected one of {FORMS}, got {self.form!r}")
-
-    def value(self, task, layout: LayoutContext, state: CycleState):
-        return getattr(task, self.name) if self.get is None else self.get(task, layout, state)
 
     def assigner(self, task, view: np.ndarray) -> Callable[[Any], None]:
         """A function that writes a value of this parameter into ``view`` (its entries). A value
