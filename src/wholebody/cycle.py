@@ -396,7 +396,7 @@ class HierarchyCycle:
 
     def joint_positions(self, joints: Sequence[str]) -> np.ndarray:
         idx = [self.robot.joint_names.index(j) for j in joints]
-        return self.robot.joint_angles(self._q)[idx]
+        return self.robot.joint_angles(self.engine.q if self.native else self.robot.q)[idx]
 
     # ------------------------------------------------------------------ solve
     def solve(self, q, v, variables: Variables | None = None, diagnostics: bool = False) -> Solution:
@@ -417,8 +417,7 @@ class HierarchyCycle:
             sol.timings["update"] = t1 - t0
             sol.timings["total"] = time.perf_counter() - t0
             return sol
-        self.update(q, v)
-        return self.solve_updated(variables, diagnostics)
+        return self._solve_native(variables, diagnostics, (q, v))
 
     def _require_native(self, what: str) -> None:
         if self.engine is None:
@@ -426,9 +425,9 @@ class HierarchyCycle:
                                f"engine='{self.engine_name}'); call solve(q, v)")
 
     def update(self, q, v) -> None:
-        """The native engine's rigid-body terms at (q, v), for :meth:`solve_updated` (what
-        :meth:`solve` does first; a controller reads the terms in between, :meth:`terms_view`).
-        Bad q/v (size, NaN) raise ValueError naming the field."""
+        """The native engine's rigid-body terms at (q, v), for :meth:`solve_updated` (which
+        :meth:`solve` makes in its one compiled call; a controller reads the terms in between,
+        :meth:`terms_view`). Bad q/v (size, NaN) raise ValueError naming the field."""
         self._require_native("update")
         t0 = time.perf_counter()
         self.engine.update(q, v)
@@ -441,9 +440,13 @@ class HierarchyCycle:
         self._require_native("solve_updated")
         if self._qv is None:
             raise RuntimeError("solve_updated: call update(q, v) first (or solve(q, v))")
+        return self._solve_native(variables or self._default_variables(), diagnostics, None)
+
+    def _solve_native(self, variables: Variables, diagnostics: bool, state) -> Solution:
+        """The native cycle at ``state`` = (q, v), updated in the same compiled call as the rows
+        and the solve, or (``state`` None) at the state of the last :meth:`update`."""
         robot = self.robot
-        variables = variables or self._default_variables()
-        q, v = self._qv
+        q, v = state if state is not None else self._qv
         t0 = time.perf_counter()
         python_rows = {}
         if self._levels_seen is None or self.stack.levels != self._levels_seen:
@@ -452,15 +455,19 @@ class HierarchyCycle:
             robot.update(q, v)
             python_rows = {id(t): t.rows(robot, variables) for t in self._python}
         program = self._program_for(variables, python_rows)
-        if self._q is None:  # a frame was added to the compiled model: update it again
+        if state is None and self._q is None:  # a frame was added since the last update
             self.engine.update(q, v)
             self._q = q
         t1 = time.perf_counter()
         program.write_python_rows(self, python_rows)
         bound = program.bound(self)
-        # packing, rows and, in the common case, the compiled run's QPs and tau in one call
-        filled, rows_time, quick = self.engine.cycle(
-            program.id, program.packer, bound.quick_calls() if bound is not None else None)
+        # update, packing, rows and, in the common case, the compiled run's QPs and tau in one call
+        filled, update_time, rows_time, quick = self.engine.cycle(
+            program.id, program.packer, bound.quick_calls() if bound is not None else None,
+            *(state or (None, None)))
+        earlier_update = self._update_time if state is None else 0.0
+        if state is not None:
+            self._q, self._qv, self._update_time = q, state, update_time
         if not filled:  # (rows, bounds and weights checked)
             if not all(np.isfinite(term).all() for term in self.engine.terms().values()):
                 return unsolved_solution(robot.nv, variables,
@@ -468,7 +475,7 @@ class HierarchyCycle:
                                          len(self.stack.levels), overflow_status(v))
             program.raise_invalid()
             raise ValueError("task rows: NaN/inf or crossed bounds (no task named; report this)")
-        t_rows = t1 + rows_time
+        t_rows = t1 + update_time + rows_time if state is not None else t1 + rows_time
         if quick is not None:  # every QP solved in C++ without a warning, tau recovered
             x, costs, qp_time, qps, excess = quick
             outcome, status = Outcome.SOLVED, "optimal"
@@ -484,9 +491,9 @@ class HierarchyCycle:
                                  variables, excess)
         if diagnostics:
             solution.tasks = Formulation.task_reports(x, program.meta)
-        solution.timings = {"update": self._update_time + t1 - t0, "rows": t_rows - t1,
+        solution.timings = {"update": self._update_time + t1 - t0, "rows": rows_time,
                             "solve": t_solve - t_rows,
-                            "total": self._update_time + time.perf_counter() - t0,
+                            "total": earlier_update + time.perf_counter() - t0,
                             "qp": qp_time, "qps": qps}
         return solution
 

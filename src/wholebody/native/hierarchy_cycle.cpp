@@ -274,29 +274,36 @@ public:
            && (w.array() >= P.w_min.array()).all();
   }
 
-  // The cycle after update(): the tasks' parameters packed, fill(); then, with ``quick`` —
-  // (solve, daqp, result) of a bound compiled run (BoundCascade/BoundWeighted.quick_calls) —
-  // that run's common case, solve(daqp) == "done" and result() not None, and recover() →
-  // (filled, seconds packing and filling, (x, level costs, QP seconds, QP count, the torque's
-  // excess over its limits) or None where the caller solves the levels itself).
-  py::tuple cycle(int id, ParameterPacker & packer, const py::object & quick)
+  // One cycle: update(q, v) unless q is None (the state of the last update), the tasks'
+  // parameters packed, fill(); then, with ``quick`` — (solve, daqp, result) of a bound compiled
+  // run (BoundCascade/BoundWeighted.quick_calls) — that run's common case, solve(daqp) == "done"
+  // and result() not None, and recover() → (filled, seconds updating, seconds packing and
+  // filling, (x, level costs, QP seconds, QP count, the torque's excess over its limits) or None
+  // where the caller solves the levels itself).
+  py::tuple cycle(int id, ParameterPacker & packer, const py::object & quick, const py::object & q,
+                  const py::object & v)
   {
-    const auto t0 = std::chrono::steady_clock::now();
+    using Clock = std::chrono::steady_clock;
+    const auto t0 = Clock::now();
+    if (!q.is_none())
+      update(q.cast<DoubleArray>(), v.cast<DoubleArray>());
+    const auto t1 = Clock::now();
     packer.pack();
     const bool filled = fill(id);
-    const double rows_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double update_seconds = std::chrono::duration<double>(t1 - t0).count();
+    const double rows_seconds = std::chrono::duration<double>(Clock::now() - t1).count();
     if (!filled || quick.is_none())
-      return py::make_tuple(filled, rows_seconds, py::none());
+      return py::make_tuple(filled, update_seconds, rows_seconds, py::none());
     const py::tuple calls = quick.cast<py::tuple>();
     if (calls[0](calls[1]).cast<std::string>() != "done")
-      return py::make_tuple(true, rows_seconds, py::none());
+      return py::make_tuple(true, update_seconds, rows_seconds, py::none());
     py::object result = calls[2]();
     if (result.is_none())
-      return py::make_tuple(true, rows_seconds, py::none());
+      return py::make_tuple(true, update_seconds, rows_seconds, py::none());
     const py::tuple r = result.cast<py::tuple>();
     const double excess = recover(id, r[0].cast<DoubleArray>());
-    return py::make_tuple(true, rows_seconds, py::make_tuple(r[0], r[1], r[2], r[3], excess));
+    return py::make_tuple(true, update_seconds, rows_seconds,
+                          py::make_tuple(r[0], r[1], r[2], r[3], excess));
   }
 
   // qdd, lambda and tau of a solution x (scaled, as the solver sees it; Formulation._recover),
@@ -342,6 +349,7 @@ public:
     return d;
   }
 
+  VectorXd q() const { return q_; } // the configuration of the last update
   Vector3d com() const { return data_.com[0]; }
   Vector3d vcom() const { return data_.vcom[0]; }
   Vector6d h_G() const { return data_.hg.toVector(); }
@@ -1029,13 +1037,15 @@ PYBIND11_MODULE(_hierarchy_cycle, m)
     .def("update", &HierarchyCycle::update, py::arg("q"), py::arg("v"))
     .def("compile", &HierarchyCycle::compile, py::arg("program"))
     .def("fill", &HierarchyCycle::fill, py::arg("program"))
-    .def("cycle", &HierarchyCycle::cycle, py::arg("program"), py::arg("packer"), py::arg("quick"))
+    .def("cycle", &HierarchyCycle::cycle, py::arg("program"), py::arg("packer"), py::arg("quick"),
+         py::arg("q") = py::none(), py::arg("v") = py::none())
     .def("recover", &HierarchyCycle::recover, py::arg("program"), py::arg("x"))
     .def("bind_state", &HierarchyCycle::bind_state, py::arg("buffers"))
     .def("terms", &HierarchyCycle::terms)
     .def("frame_placement", &HierarchyCycle::frame_placement, py::arg("frame"))
     .def("add_frame", &HierarchyCycle::add_frame, py::arg("joint"), py::arg("placement"))
     .def_static("kernels", &HierarchyCycle::kernel_names)
+    .def_property_readonly("q", &HierarchyCycle::q)
     .def_property_readonly("com", &HierarchyCycle::com)
     .def_property_readonly("vcom", &HierarchyCycle::vcom)
     .def_property_readonly("h_G", &HierarchyCycle::h_G)
