@@ -772,6 +772,85 @@ def test_compiled_cascade_matches_python_on_equality_levels():
         np.testing.assert_array_equal(compiled.nullspace_dims, python.nullspace_dims)
 
 
+def _kahan(n: int, c: float = 0.285) -> np.ndarray:
+    """Kahan's upper-triangular matrix, its columns shrunk by (1 − 100 ε)^j so that column
+    pivoting keeps their order: a QR whose last |R_nn| overstates σ_min by orders of magnitude."""
+    s_ = np.sqrt(1.0 - c * c)
+    K = np.diag(s_ ** np.arange(n)) @ (np.eye(n) - c * np.triu(np.ones((n, n)), 1))
+    return K * (1.0 - 100 * np.finfo(float).eps) ** np.arange(n)
+
+
+def _kernel_cases(rng):
+    """(kind, RZ, tol): matrices with singular values placed around the lock threshold ``tol`` (well
+    above, within three decades either side — never within a factor 2 of it, where the count
+    itself is rounding —, far below), rows weighted over eight decades as Table 2's level 3,
+    and transposed Kahan matrices whose QR pivots lie just above the threshold."""
+    for _ in range(150):
+        k, z = int(rng.integers(2, 40)), int(rng.integers(2, 30))
+        p = min(k, z)
+        tol = 10.0 ** rng.uniform(-10, -6)
+        exponents = rng.choice([rng.uniform(3.5, 8), rng.uniform(0.3, 3), rng.uniform(-3, -0.3),
+                                rng.uniform(-12, -4)], size=p)
+        U, _ = np.linalg.qr(rng.standard_normal((k, k)))
+        V, _ = np.linalg.qr(rng.standard_normal((z, z)))
+        yield "spectrum", U[:, :p] @ np.diag(tol * 10.0 ** exponents) @ V[:, :p].T, tol
+    for _ in range(60):
+        k, z = int(rng.integers(10, 40)), int(rng.integers(5, 25))
+        A = 10.0 ** rng.uniform(-4, 4, size=(k, 1)) * rng.standard_normal((k, z))
+        s = np.linalg.svd(A, compute_uv=False)
+        yield "weighted", A, float(s.max() * 10.0 ** rng.uniform(-9, -5))
+    for n in (20, 30, 40):
+        K = _kahan(n)
+        s = np.linalg.svd(K, compute_uv=False)
+        r = np.abs(np.diag(K))
+        if s[-1] < r[-1] / 20:  # σ_min hidden by the pivot: tol between them
+            yield "kahan", K.T, float(np.sqrt(s[-1] * r[-1]))
+
+
+def test_lock_kernel_has_the_svds_rank_near_the_threshold(monkeypatch):
+    """The null-space basis of a lock (cascade._kernel and its compiled mirror) keeps the
+    directions whose singular values are at most the threshold — the count of an SVD (numpy's,
+    the oracle) — also where QR pivots lie within three decades of it; its columns are
+    orthonormal and RZ N ≤ the threshold. The SVD is skipped there when the QR's rank is
+    certified (Table 2-like weights every time), never on a Kahan matrix, whose last pivot
+    overstates σ_min."""
+    from wholebody.solvers.cascade import _kernel
+    svd_calls = []
+    real_svd = np.linalg.svd
+    monkeypatch.setattr(np.linalg, "svd", lambda *a, **k: svd_calls.append(1) or real_svd(*a, **k))
+    try:
+        from wholebody._cascade import kernel_basis
+    except ImportError:
+        kernel_basis = None
+    rng = np.random.default_rng(11)
+    near = kahan = 0
+    certified = {"python": 0, "compiled": 0}
+    for kind, RZ, tol in _kernel_cases(rng):
+        s = real_svd(RZ, compute_uv=False)
+        expected = RZ.shape[1] - int(np.count_nonzero(s > tol))
+        d = np.abs(np.diag(qr(RZ.T, pivoting=True, mode="r")[0]))
+        in_window = bool(((d > 1e-3 * tol) & (d < 1e3 * tol)).any())
+        calls = len(svd_calls)
+        bases = [("python", _kernel(RZ, tol), len(svd_calls) > calls)]
+        if kernel_basis is not None:
+            N, by_svd = kernel_basis(RZ, tol)
+            bases.append(("compiled", N, by_svd))
+        for who, N, by_svd in bases:
+            assert N.shape == (RZ.shape[1], expected), (who, N.shape, expected)
+            np.testing.assert_allclose(N.T @ N, np.eye(expected), atol=1e-10, err_msg=who)
+            assert np.linalg.norm(RZ @ N, 2) <= tol + 1e-13 * s.max(), who
+            if kind == "kahan":
+                assert in_window and by_svd, who
+            elif kind == "weighted" and in_window:
+                certified[who] += not by_svd
+        near += in_window
+        kahan += kind == "kahan"
+    assert near > 100 and kahan >= 2
+    # the certificate does its work (28 of the 31 weighted cases with pivots in the window)
+    assert certified["python"] >= 20
+    assert kernel_basis is None or certified["compiled"] >= 20
+
+
 @pytest.mark.parametrize("backend", ["quadprog", "daqp"])
 def test_compiled_cascade_matches_python_on_random_hierarchies(monkeypatch, backend):
     """The random hierarchies of the oracle tests (inequalities at every level, conflicts,

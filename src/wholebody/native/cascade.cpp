@@ -116,14 +116,31 @@ namespace
     }
   };
 
-  // _kernel, applied: Z ← Z N with N an orthonormal basis of ker(RZ) (have_Z false: Z is the
-  // identity), from the QR with column pivoting of RZᵀ = Q R P: N spans Q[:, rank:], so Z N is
-  // Z Q[:, rank:], with Q[:, rank:] formed from the first ``rank`` reflectors only (the later ones
-  // map its span onto itself). An SVD decides when some |R_ii| is within three decades of the
-  // threshold. ``HZ`` (rows already multiplied by Z, or null) gets the same N (cheaper than
-  // multiplying by the new Z afresh: z ≤ n). Returns false if nothing is locked.
-  bool restrict_to_kernel(MatrixXd & Z, bool have_Z, Index n, const MatrixXd & RZ, double tol,
-                          MatrixXd * HZ)
+  // _rank_certified: the rank ``rank`` of a QR with column pivoting (``qr``: its packed factor,
+  // R on and above the diagonal) is the SVD's count of singular values above ``tol``, proved by
+  // σ_rank ≥ σ_min(R11) ≥ 1 / ‖R11⁻¹‖_F > tol (R11 is a leading block of R: interlacing) and
+  // σ_rank+1 ≤ ‖R22‖_2 ≤ ‖R22‖_F ≤ tol (R minus its trailing block has rank ``rank``: Weyl).
+  bool rank_certified(const MatrixXd & qr, Index rank, double tol)
+  {
+    const Index p = std::min(qr.rows(), qr.cols());
+    if (rank > 0)
+    {
+      const MatrixXd inverse = qr.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solve(
+          MatrixXd::Identity(rank, rank));
+      if (!(inverse.norm() * tol < 1.0)) // (NaN: not certified)
+        return false;
+    }
+    double trailing = 0.0;
+    for (Index i = rank; i < p; ++i)
+      trailing += qr.row(i).tail(qr.cols() - i).squaredNorm();
+    return std::sqrt(trailing) <= tol;
+  }
+
+  // _kernel: an orthonormal basis N of ker(RZ) (z × (z − rank)) from the QR with column pivoting
+  // of RZᵀ = Q R P: N spans Q[:, rank:], formed from the first ``rank`` reflectors only (the
+  // later ones map its span onto itself). When some |R_ii| is within three decades of the
+  // threshold and the rank is not certified (rank_certified), an SVD decides (``by_svd``).
+  MatrixXd kernel_basis(const MatrixXd & RZ, double tol, bool & by_svd)
   {
     const Index k = RZ.rows(), z = RZ.cols(), p = std::min(k, z);
     const MatrixXd At = RZ.transpose();
@@ -136,27 +153,17 @@ namespace
       rank += d[i] > tol;
       ambiguous = ambiguous || (d[i] > 1e-3 * tol && d[i] < 1e3 * tol);
     }
-    if (ambiguous)
+    by_svd = ambiguous && !rank_certified(qr.matrixQR(), rank, tol);
+    if (by_svd)
     {
       Eigen::JacobiSVD<MatrixXd> svd(At, Eigen::ComputeFullU);
       const Index r = (svd.singularValues().array() > tol).count();
-      if (r == 0)
-        return false;
-      const MatrixXd N = svd.matrixU().rightCols(z - r);
-      Z = have_Z ? MatrixXd(Z * N) : N;
-      if (HZ)
-        *HZ = *HZ * N;
-      return true;
+      return svd.matrixU().rightCols(z - r);
     }
     if (rank == 0)
-      return false;
+      return MatrixXd::Identity(z, z);
     if (rank >= z)
-    {
-      Z.resize(have_Z ? Z.rows() : n, 0);
-      if (HZ)
-        HZ->resize(HZ->rows(), 0);
-      return true;
-    }
+      return MatrixXd(z, 0);
     // N = Q[:, rank:] formed (reflectors on a z × (z − rank) block), then products with N: at
     // these sizes a matrix product is several times faster per flop than applying reflectors
     // to Z and HZ one by one
@@ -164,6 +171,26 @@ namespace
     Q.setLength(rank);
     MatrixXd N = MatrixXd::Identity(z, z).rightCols(z - rank);
     N.applyOnTheLeft(Q);
+    return N;
+  }
+
+  // _kernel, applied: Z ← Z N with N = kernel_basis(RZ) (have_Z false: Z is the identity).
+  // ``HZ`` (rows already multiplied by Z, or null) gets the same N (cheaper than multiplying by
+  // the new Z afresh: z ≤ n). Returns false if nothing is locked.
+  bool restrict_to_kernel(MatrixXd & Z, bool have_Z, Index n, const MatrixXd & RZ, double tol,
+                          MatrixXd * HZ)
+  {
+    bool by_svd = false;
+    const MatrixXd N = kernel_basis(RZ, tol, by_svd);
+    if (N.cols() == RZ.cols())
+      return false;
+    if (N.cols() == 0)
+    {
+      Z.resize(have_Z ? Z.rows() : n, 0);
+      if (HZ)
+        HZ->resize(HZ->rows(), 0);
+      return true;
+    }
     Z = have_Z ? MatrixXd(Z * N) : N;
     if (HZ)
       *HZ = *HZ * N;
@@ -1450,6 +1477,12 @@ PYBIND11_MODULE(_cascade, m)
 {
   m.doc() = "The cascade and the weighted QP of wholebody.solvers.hierarchy, compiled.";
   m.def("daqp_rows", &daqp_rows, py::arg("A"), py::arg("lower"), py::arg("upper"));
+  m.def("kernel_basis", [](const MatrixXd & RZ, double tol) {
+          bool by_svd = false;
+          MatrixXd N = kernel_basis(RZ, tol, by_svd);
+          return py::make_tuple(N, by_svd);
+        }, py::arg("RZ"), py::arg("tol"),
+        "(N, by_svd): the orthonormal kernel basis of the cascade's locks (cascade._kernel)");
   m.def("row_violation", &row_violation, py::arg("A"), py::arg("x"), py::arg("lower"),
         py::arg("upper"));
   m.attr("DAQP_C_VERSION") = daqp_c::kVersion;

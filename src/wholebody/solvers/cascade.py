@@ -47,8 +47,11 @@ Nullspace by QR with column pivoting, not SVD: the kernel basis comes from LAPAC
 numerically a combination of already locked rows locks nothing). At these sizes QRCP is
 cheaper than a full SVD, which matters at 1 kHz. Its rank decision is reliable except on
 adversarial (Kahan-like) matrices; as a guard, whenever some ``|R_ii|`` falls within three
-decades of the threshold the kernel is recomputed with an SVD (the paper's choice), whose
-singular values are the exact measure.
+decades of the threshold the rank is either certified from the factor itself (``1/‖R11⁻¹‖_F``
+above and ``‖R22‖_F`` below the threshold bound the singular values on either side of it:
+a level whose row weights span many decades, as Table 2's, has pivots there every cycle) or
+the kernel is recomputed with an SVD (the paper's choice), whose singular values are the exact
+measure.
 
 ε (``regularization``). The ε‖x‖² of eq. 5 makes every QP strictly convex (Goldfarb–Idnani
 needs a positive definite Hessian); reported costs exclude it, but x is the solution of the
@@ -237,15 +240,33 @@ def _outside(A, a0, lower, upper, u):
     return (v < lower) | (v > upper)
 
 
+def _rank_certified(qr: np.ndarray, rank: int, tol: float) -> bool:
+    """Whether ``rank``, the count of |R_ii| > ``tol`` of a QR with column pivoting (``qr``: the
+    packed factor, R on and above the diagonal), is the SVD's count of singular values above
+    ``tol``: σ_rank ≥ σ_min(R11) ≥ 1 / ‖R11⁻¹‖_F > tol (R11 a leading block of R: interlacing)
+    and σ_rank+1 ≤ ‖R22‖_2 ≤ ‖R22‖_F ≤ tol (R without its trailing block has rank ``rank``:
+    Weyl). Cheap next to an SVD: one triangular inverse of the kept block."""
+    p = min(qr.shape)
+    if rank:
+        inverse = solve_triangular(np.triu(qr[:rank, :rank]), np.eye(rank), lower=False,
+                                   check_finite=False)
+        if not np.linalg.norm(inverse) * tol < 1.0:  # (NaN: not certified)
+            return False
+    return bool(np.linalg.norm(np.triu(qr[rank:p, rank:])) <= tol)
+
+
 def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
-    """Orthonormal basis of ker(RZ) (k×z): QR with column pivoting of RZᵀ, SVD if ambiguous."""
+    """Orthonormal basis of ker(RZ) (k×z): QR with column pivoting of RZᵀ; an SVD decides when
+    some |R_ii| is within three decades of ``tol`` and the QR's rank is not certified
+    (:func:`_rank_certified`)."""
     k, z = RZ.shape
     qr, _, tau, _, info = lapack.dgeqp3(np.array(RZ.T, order="F"))
     p = min(k, z)
     d = np.abs(qr.diagonal()[:p])
     rank = int(np.count_nonzero(d > tol))
-    if info != 0 or ((d > 1e-3 * tol) & (d < 1e3 * tol)).any():
-        # |R_ii| near the threshold: let the singular values decide (exact rank measure)
+    if info != 0 or (((d > 1e-3 * tol) & (d < 1e3 * tol)).any()
+                     and not _rank_certified(qr, rank, tol)):
+        # the rank is in doubt: let the singular values decide (exact rank measure)
         U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
         return U[:, int(np.count_nonzero(s > tol)):]
     if rank == 0:
