@@ -240,6 +240,39 @@ def test_swing_with_a_floor_is_over_its_target_when_it_meets_the_floor(p0, dxy, 
         SwingTrajectory(p0, p1, T, h, floor=floor + h + 1.0)
 
 
+@FAST
+@given(p0=vec3, dxy=st.tuples(st.floats(-0.6, 0.6), st.floats(-0.3, 0.3)),
+       xy=st.tuples(st.floats(-0.6, 0.6), st.floats(-0.3, 0.3)), T=st.floats(0.2, 1.5),
+       h=st.floats(0.01, 0.2), depth=st.floats(0.0, 0.02), with_floor=st.booleans())
+def test_swing_landing_moved_is_the_swing_built_for_it(p0, dxy, xy, T, h, depth, with_floor):
+    """A swing's landing moved to another (x, y) (a step adjustment) is, bit for bit, the swing
+    the constructor builds for that landing (same start, duration, heights, floor), and leaves
+    the original swing as it was."""
+    floor = float(p0[2]) if with_floor else None
+    p1 = np.array([p0[0] + dxy[0], p0[1] + dxy[1], float(p0[2]) - depth])
+    sw = SwingTrajectory(p0, p1, T, h, 0.3, floor=floor)
+    before = [a.copy() for a in sw.evaluate(np.linspace(0.0, 1.0, 7) * T + 0.3)]
+    target = np.array([p0[0] + xy[0], p0[1] + xy[1]])
+    moved = sw.with_landing_xy(target)
+    built = SwingTrajectory(p0, [*target, p1[2]], T, h, 0.3, floor=floor)
+    ts = np.linspace(-0.1, 1.1, 37) * T + 0.3
+    for a, b in zip(moved.evaluate(ts), built.evaluate(ts)):
+        np.testing.assert_array_equal(a, b)
+    buf, ref = [np.zeros(3) for _ in range(3)], [np.zeros(3) for _ in range(3)]
+    for t in ts:
+        moved.evaluate_into(t, *buf)
+        built.evaluate_into(t, *ref)
+        for a, b in zip(buf, ref):
+            np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(moved.p1, built.p1)
+    assert (moved.t1, moved.floor_share, moved.apex_height) == (built.t1, built.floor_share,
+                                                                built.apex_height)
+    for a, b in zip(sw.evaluate(np.linspace(0.0, 1.0, 7) * T + 0.3), before):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="xy"):
+        sw.with_landing_xy([np.nan, 0.0])
+
+
 def test_swing_holds_outside_and_functional_form():
     p0, p1 = np.array([0.0, 0.0, 0.02]), np.array([0.2, 0.05, 0.12])
     pos, vel, acc = swing_trajectory(p0, p1, 0.4, np.array([-0.1, 0.5]))

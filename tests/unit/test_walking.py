@@ -39,6 +39,28 @@ def test_support_polygon_projection_is_the_nearest_point_of_the_hull():
         assert poly.contains(poly.project(p) + 1e-9 * (expected - p)) or poly.contains(expected)
 
 
+def test_support_polygon_contains_what_a_triangulation_of_the_hull_contains():
+    """contains() against scipy's Delaunay triangulation of the corners (an independent test of
+    the convex hull) for points off the boundary; points on an edge are in, points 1e-6 outside
+    an edge (along its outward normal) are not."""
+    from scipy.spatial import Delaunay
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        corners = rng.uniform(-0.3, 0.3, size=(int(rng.integers(3, 9)), 2))
+        poly, hull = SupportPolygon(corners), Delaunay(corners)
+        for p in rng.uniform(-0.5, 0.5, size=(200, 2)):
+            d = p - poly.vertices
+            cross = poly.edges[:, 0] * d[:, 1] - poly.edges[:, 1] * d[:, 0]
+            edge = np.abs(cross) / np.linalg.norm(poly.edges, axis=1)  # distance to each line
+            if edge.min() > 1e-9:
+                assert poly.contains(p) == (hull.find_simplex(p) >= 0)
+        for k in range(len(poly.vertices)):
+            on = poly.vertices[k] + rng.uniform(0.0, 1.0) * poly.edges[k]
+            assert poly.contains(on)
+            normal = poly.normals[k] / np.linalg.norm(poly.normals[k])
+            assert not poly.contains(on + 1e-6 * normal)
+
+
 def test_feedback_is_the_dcm_law_inside_the_support(walking):
     """Inside the support, c'' makes xi' = xi_ref' - k (xi - xi_ref) with xi = c + c'/omega."""
     w, k = walking.omega, walking.config.dcm_gain * walking.omega

@@ -31,6 +31,7 @@ caller's to check that it lies in the support.
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -64,6 +65,11 @@ def predicted_dcm(dcm, zmp, omega, horizon) -> np.ndarray:
     p = np.asarray(zmp, dtype=float)[..., :2]
     xi = np.asarray(dcm, dtype=float)[..., :2]
     return p + math.exp(omega * horizon) * (xi - p)
+
+
+def _is_scalar(t) -> bool:
+    """``t`` is one time (a Python or numpy number, a 0-d array), not an array of them."""
+    return type(t) is float or np.ndim(t) == 0
 
 
 class DCMPlan:
@@ -146,6 +152,8 @@ class DCMPlan:
         self.end_time = float(times[K])
         self._start = times
         self._stop = np.append(times[1:], np.inf)
+        # the same as Python floats, for the one-time lookups of the control loop (_scalar)
+        self._start_list, self._stop_list = self._start.tolist(), self._stop.tolist()
         self._slope = slope
         self._gain = gain
         self._offset = offset
@@ -159,11 +167,12 @@ class DCMPlan:
     def _scalar(self, t: float):
         """Segment index, ZMP, exp(ω (t - t_{i+1})) and exp(-ω (t - t_i)) at one time (the
         control loop's case: no array machinery)."""
-        t = max(float(t), float(self._start[0]))
-        i = int(np.searchsorted(self._start, t, side="right")) - 1
-        start = float(self._start[i])
+        starts = self._start_list
+        t = max(float(t), starts[0])
+        i = bisect.bisect_right(starts, t) - 1  # (numpy's searchsorted, side="right")
+        start = starts[i]
         p = self.zmp_knots[i] + self._slope[i] * (t - start)
-        stop = float(self._stop[i])
+        stop = self._stop_list[i]
         rise = math.exp(self.omega * (t - stop)) if stop != math.inf else 0.0
         fall = math.exp(-self.omega * (t - start))
         return i, p, rise, fall
@@ -186,14 +195,14 @@ class DCMPlan:
 
     def dcm(self, t) -> tuple[np.ndarray, np.ndarray]:
         """(ξ, ξ̇) at time ``t``: ξ = p + s_i / ω + E_i exp(ω (t - t_{i+1})), ξ̇ = ω (ξ - p)."""
-        i, p, rise, _ = self._scalar(t) if np.ndim(t) == 0 else self._locate(t)
+        i, p, rise, _ = self._scalar(t) if _is_scalar(t) else self._locate(t)
         away = self._dcm_shift[i] + self._gain[i] * rise
         return p + away, self.omega * away
 
     def com(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(c, ċ, c̈) at time ``t``: c = p + (E_i / 2) exp(ω (t - t_{i+1})) + D_i exp(-ω (t - t_i)),
         c̈ = ω² (c - p)."""
-        i, p, rise, fall = self._scalar(t) if np.ndim(t) == 0 else self._locate(t)
+        i, p, rise, fall = self._scalar(t) if _is_scalar(t) else self._locate(t)
         half, off = 0.5 * self._gain[i] * rise, self._offset[i] * fall
         w = self.omega
         return p + half + off, self._slope[i] + w * (half - off), w * w * (half + off)

@@ -58,13 +58,31 @@ class SwingTrajectory:
         self._fall = self.p1[2] - self.apex_height
         #: share of the swing at which the foot passes ``floor`` (1 without one)
         self.floor_share = 1.0
+        self._stretch = None  # the horizontal blend's value at floor_share, with a floor
         if floor is not None:
             if not (np.isfinite(floor) and self.p1[2] <= floor < self.apex_height):
                 raise ValueError(f"floor: expected a height in [{self.p1[2]:.4g}, "
                                  f"{self.apex_height:.4g}) (touchdown to apex), got {floor!r}")
             self.floor_share = 0.5 * (1.0 + _descent_share(
                 (self.apex_height - floor) / (self.apex_height - self.p1[2])))
-            self._dxy = self._dxy / quintic_blend(self.floor_share)[0]
+            self._stretch = quintic_blend(self.floor_share)[0]
+            self._dxy = self._dxy / self._stretch
+
+    def with_landing_xy(self, xy) -> "SwingTrajectory":
+        """The same swing (start, duration, heights, floor) landing at ``xy`` (x, y) instead:
+        what the constructor gives for that target, without solving for the floor's share again
+        (a step adjusted every control cycle)."""
+        xy = np.asarray(xy, dtype=float).reshape(2)
+        if not np.all(np.isfinite(xy)):
+            raise ValueError(f"xy: the landing position must be finite, got {xy!r}")
+        moved = object.__new__(SwingTrajectory)
+        moved.__dict__.update(self.__dict__)
+        moved.p1 = self.p1.copy()
+        moved.p1[:2] = xy
+        moved._dxy = moved.p1[:2] - moved.p0[:2]
+        if self._stretch is not None:
+            moved._dxy = moved._dxy / self._stretch
+        return moved
 
     @property
     def t1(self) -> float:
