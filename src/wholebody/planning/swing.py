@@ -77,7 +77,7 @@ class SwingTrajectory:
             raise ValueError(f"xy: the landing position must be finite, got {xy!r}")
         moved = object.__new__(SwingTrajectory)
         moved.__dict__.update(self.__dict__)
-        moved.p1 = self.p1.copy()
+        moved.p0, moved.p1 = self.p0.copy(), self.p1.copy()
         moved.p1[:2] = xy
         moved._dxy = moved.p1[:2] - moved.p0[:2]
         if self._stretch is not None:
