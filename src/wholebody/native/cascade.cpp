@@ -143,6 +143,9 @@ namespace
   MatrixXd kernel_basis(const MatrixXd & RZ, double tol, bool & by_svd)
   {
     const Index k = RZ.rows(), z = RZ.cols(), p = std::min(k, z);
+    by_svd = false;
+    if (p == 0) // no rows, or no freedom: nothing to lock
+      return MatrixXd::Identity(z, z);
     const MatrixXd At = RZ.transpose();
     Eigen::ColPivHouseholderQR<MatrixXd> qr(At);
     const VectorXd d = qr.matrixQR().diagonal().head(p).cwiseAbs();
