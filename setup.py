@@ -6,7 +6,9 @@ metadata is in pyproject.toml):
 - ``wholebody._cascade``: the cascade of QPs and the single weighted QP, which solve DAQP's QPs
   themselves and hand the other backends' QPs to Python;
 - ``wholebody._estimator``: the state estimator's per-cycle numerics
-  (``KinematicInertialEKF(engine="native")``).
+  (``KinematicInertialEKF(engine="native")``);
+- ``wholebody._sim_reads``: what the simulator reads from MuJoCo every step (the contact
+  wrenches).
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
 and ``cmeel-eigen``; the cascade and the estimator need Eigen only), so the extensions link no
@@ -77,6 +79,12 @@ def extensions() -> list[Extension]:
             sources=["src/wholebody/native/estimator.cpp"],
             include_dirs=eigen, define_macros=[("NDEBUG", None)],
             extra_compile_args=flags, language="c++", optional=True),
+        Extension(  # the simulator's reads: pybind11 only, no fused multiply-adds (its sums are
+            # those of the Python reference, bit for bit)
+            "wholebody._sim_reads",
+            sources=["src/wholebody/native/sim_reads.cpp"],
+            include_dirs=[pybind11.get_include()], define_macros=[("NDEBUG", None)],
+            extra_compile_args=flags + ["-ffp-contract=off"], language="c++", optional=True),
     ]
 
 

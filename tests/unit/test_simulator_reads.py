@@ -68,6 +68,30 @@ def test_contact_wrenches_sum_mujoco_contact_forces(robots, rng, name, cone, con
     assert dims == {condim}
 
 
+@pytest.mark.parametrize("name", ["talos14", "hyq"])
+@pytest.mark.parametrize("condim", [1, 3, 4, 6])
+def test_compiled_contact_wrenches_are_the_python_sums_bit_for_bit(robots, rng, name, condim):
+    """The compiled sums (``wholebody._sim_reads``, what the simulator reads where it was built)
+    are those of the Python reference, every entry to the bit, on states where contacts load,
+    unload and slide; malformed arrays are refused naming the field."""
+    from conftest import native_cycle_or_skip
+    native_cycle_or_skip("_sim_reads")
+    from wholebody import _sim_reads
+    sim = Simulator(robots[name], record=False)
+    sim.model.geom_condim[:] = condim
+    sim.reset()
+    seen = 0
+    for _ in shaken(sim, rng, 120):
+        np.testing.assert_array_equal(sim._contact_wrenches(), sim._contact_wrenches_reference())
+        seen += sim.data.ncon
+    assert seen > 120
+    con, d = sim.data.contact, sim.data
+    with pytest.raises(ValueError, match="frame"):
+        _sim_reads.contact_wrenches(con.geom, con.efc_address, con.dim, con.frame[:, :3],
+                                    con.pos, d.efc_force, d.site_xpos, sim._geom_contact,
+                                    sim._contact_site)
+
+
 def test_contact_wrenches_follow_each_step_and_reset(robots, rng):
     """Two reads in a step give the same numbers, each an array of its own; a step or a reset
     gives the wrenches of the new state."""

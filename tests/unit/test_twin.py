@@ -61,6 +61,25 @@ def test_state_conversion_round_trip(robots, rng):
         np.testing.assert_allclose(v2, v, atol=1e-13)
 
 
+def test_state_conversion_is_pinocchios_rotation(rng):
+    """MuJoCo's (w, x, y, z) quaternion, not normalised, and world linear velocity -> the unit
+    (x, y, z, w) quaternion and the base-frame velocity Rᵀ v, R from Pinocchio's quaternion
+    (an independent rotation); the joints' entries copied."""
+    import pinocchio as pin
+    for scale in (1e-3, 1.0, 1e3):
+        for _ in range(50):
+            qpos, qvel = rng.normal(size=19), scale * rng.normal(size=18)
+            q, v = convert.mj_to_pin(qpos, qvel)
+            quat = pin.Quaternion(*qpos[3:7])  # (w, x, y, z)
+            quat.normalize()
+            np.testing.assert_allclose(q[3:7], quat.coeffs(), rtol=0, atol=1e-15)
+            np.testing.assert_allclose(v[:3], quat.toRotationMatrix().T @ qvel[:3], rtol=0,
+                                       atol=1e-14 * scale)
+            np.testing.assert_array_equal(q[[0, 1, 2, *range(7, 19)]],
+                                          qpos[[0, 1, 2, *range(7, 19)]])
+            np.testing.assert_array_equal(v[3:], qvel[3:])
+
+
 def test_free_fall_and_push_obey_newton(robots):
     """Without floor or torques, the change of linear momentum equals m g T + the push impulse."""
     robot = robots["hyq"]

@@ -44,14 +44,23 @@ def pin_to_mj(q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def mj_to_pin(qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(qpos, qvel) of the robot's MuJoCo joints -> (q, v) in Pinocchio convention."""
+    """(qpos, qvel) of the robot's MuJoCo joints -> (q, v) in Pinocchio convention: the
+    quaternion normalised (``sqrt(q . q)``), the linear velocity turned to the base frame by
+    ``R(q)ᵀ`` (:func:`quat_to_matrix` of the normalised quaternion, which normalises it once
+    more). In Python numbers, each sum left to right: once per simulator step, where numpy's
+    per-call overhead is most of the cost."""
     q = np.array(qpos, dtype=float)
-    quat = q[3:7]
-    quat[:3] = qpos[4:7]
-    quat[3] = qpos[3]
-    quat /= math.sqrt(quat.dot(quat))  # np.linalg.norm's sqrt(q . q)
+    w, x, y, z = q[3:7].tolist()
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    q[3], q[4], q[5], q[6] = x, y, z, w
+    norm = math.sqrt(x * x + y * y + z * z + w * w)  # (quat_to_matrix's own normalisation)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
     v = np.array(qvel, dtype=float)
-    v[:3] = quat_to_matrix(quat).T @ qvel[:3]
+    a, b, c = v[:3].tolist()
+    v[0] = (1 - 2 * (y * y + z * z)) * a + 2 * (x * y + z * w) * b + 2 * (x * z - y * w) * c
+    v[1] = 2 * (x * y - z * w) * a + (1 - 2 * (x * x + z * z)) * b + 2 * (y * z + x * w) * c
+    v[2] = 2 * (x * z + y * w) * a + 2 * (y * z - x * w) * b + (1 - 2 * (x * x + y * y)) * c
     return q, v
 
 

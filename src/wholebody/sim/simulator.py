@@ -22,6 +22,11 @@ from .mismatch import Mismatch
 from .series import SeriesLog
 from .twin import SimOptions, Twin, build_twin
 
+try:
+    from .. import _sim_reads
+except ImportError:  # built without the compiled parts (see setup.py): the Python reference
+    _sim_reads = None
+
 log = logging.getLogger(__name__)
 
 #: MuJoCo's warnings for a state it cannot integrate; on any of them it resets the simulation
@@ -391,9 +396,22 @@ class Simulator:
         return self._wrenches
 
     def _contact_wrenches(self) -> np.ndarray:
-        """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts, in plain floats: with
-        the few contacts of a robot's feet a loop over Python numbers costs less than numpy's
-        per-call overhead (the same products and sums as ``frame.T @ f`` and ``np.cross``)."""
+        """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts: compiled
+        (``wholebody._sim_reads``, the same products and sums bit for bit) where it was built,
+        else :meth:`_contact_wrenches_reference`."""
+        d = self.data
+        if d.ncon == 0 or _sim_reads is None or self._options.cone == _PYRAMIDAL:
+            return self._contact_wrenches_reference()
+        con = d.contact
+        return _sim_reads.contact_wrenches(con.geom, con.efc_address, con.dim, con.frame, con.pos,
+                                           d.efc_force, d.site_xpos, self._geom_contact,
+                                           self._contact_site)
+
+    def _contact_wrenches_reference(self) -> np.ndarray:
+        """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts in plain floats (the
+        reference of the compiled sums): with the few contacts of a robot's feet a loop over
+        Python numbers costs less than numpy's per-call overhead (the same products and sums as
+        ``frame.T @ f`` and ``np.cross``)."""
         d = self.data
         out = [[0.0] * 6 for _ in self.robot.contact_names]
         n = d.ncon
