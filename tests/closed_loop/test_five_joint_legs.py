@@ -10,6 +10,7 @@ import pytest
 import wholebody as wb
 from wholebody.control.balance import MomentumBalance
 from wholebody.scenarios import get_scenario
+from wholebody.scenarios.measures import MAX_TILT_DEG
 from wholebody.scenarios.push import with_peak_force
 from wholebody.scenarios.pushes import controller_options, push_trial
 
@@ -33,4 +34,7 @@ def test_five_joint_legs_on_narrow_soles_recover_a_push(tmp_path, controller):
     undamped = MomentumBalance(robot, gains=controller, **controller_options(controller, params))
     undamped.stack.find("contacts").kd = 0.0  # eq. 2 as the paper writes it
     trial = push_trial(robot, controller, params, balance=undamped)
-    assert not trial.success and trial.metrics["max_foot_tilt_deg"] > 10.0, trial.metrics
+    # how far the rocking has grown by the end is chaotic (a push 1e-9 stronger or weaker ends
+    # with the feet tilted anywhere from 9 to 180 degrees): what holds for every such push is
+    # that the soles rock beyond flat
+    assert not trial.success and trial.metrics["max_foot_tilt_deg"] > MAX_TILT_DEG, trial.metrics

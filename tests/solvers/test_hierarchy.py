@@ -799,6 +799,12 @@ def _kernel_cases(rng):
         A = 10.0 ** rng.uniform(-4, 4, size=(k, 1)) * rng.standard_normal((k, z))
         s = np.linalg.svd(A, compute_uv=False)
         yield "weighted", A, float(s.max() * 10.0 ** rng.uniform(-9, -5))
+    for _ in range(60):  # more rows than freedom, all of it taken (Table 2's level 3 as walking has it)
+        z = int(rng.integers(5, 25))
+        k = z + int(rng.integers(5, 20))
+        A = 10.0 ** rng.uniform(-4, 4, size=(k, 1)) * rng.standard_normal((k, z))
+        s = np.linalg.svd(A, compute_uv=False)
+        yield "taken", A, float(s[-1] * 10.0 ** rng.uniform(-2.5, -0.5) / np.sqrt(z))
     for n in (20, 30, 40):
         K = _kahan(n)
         s = np.linalg.svd(K, compute_uv=False)
@@ -809,11 +815,11 @@ def _kernel_cases(rng):
 
 def test_lock_kernel_has_the_svds_rank_near_the_threshold(monkeypatch):
     """The null-space basis of a lock (cascade._kernel and its compiled mirror) keeps the
-    directions whose singular values are at most the threshold — the count of an SVD (numpy's,
-    the oracle) — also where QR pivots lie within three decades of it; its columns are
-    orthonormal and RZ N ≤ the threshold. The SVD is skipped there when the QR's rank is
-    certified (Table 2-like weights every time), never on a Kahan matrix, whose last pivot
-    overstates σ_min."""
+    directions whose singular values are at most the threshold — the count and the kernel of an
+    SVD (numpy's, the oracle; within 1e-5 of its angle) — also where QR pivots lie within three
+    decades of it; its columns are orthonormal and RZ N ≤ the threshold. The SVD is skipped
+    there when the QR's kernel is certified (Table 2-like weights every time), never on a Kahan
+    matrix, whose last pivot overstates σ_min."""
     from wholebody.solvers.cascade import _kernel
     svd_calls = []
     real_svd = np.linalg.svd
@@ -823,7 +829,7 @@ def test_lock_kernel_has_the_svds_rank_near_the_threshold(monkeypatch):
     except ImportError:
         kernel_basis = None
     rng = np.random.default_rng(11)
-    near = kahan = 0
+    near = kahan = taken = 0
     certified = {"python": 0, "compiled": 0}
     for kind, RZ, tol in _kernel_cases(rng):
         s = real_svd(RZ, compute_uv=False)
@@ -835,24 +841,27 @@ def test_lock_kernel_has_the_svds_rank_near_the_threshold(monkeypatch):
         if kernel_basis is not None:
             N, by_svd = kernel_basis(RZ, tol)
             bases.append(("compiled", N, by_svd))
+        U = real_svd(RZ.T, full_matrices=True)[0][:, RZ.shape[1] - expected:]
         for who, N, by_svd in bases:
             assert N.shape == (RZ.shape[1], expected), (who, N.shape, expected)
             np.testing.assert_allclose(N.T @ N, np.eye(expected), atol=1e-10, err_msg=who)
             assert np.linalg.norm(RZ @ N, 2) <= tol + 1e-13 * s.max(), who
+            # the SVD's kernel (sin of the largest angle between the two)
+            assert np.linalg.norm(N @ N.T - U @ U.T, 2) <= 1e-5, (who, kind, by_svd)
             if kind == "kahan":
                 assert in_window and by_svd, who
-            elif kind == "weighted" and in_window:
+            elif kind == "taken" and in_window:  # full rank by a margin: proven every time
                 certified[who] += not by_svd
         near += in_window
         kahan += kind == "kahan"
+        taken += kind == "taken" and in_window
     assert near > 100 and kahan >= 2
     if kernel_basis is not None:  # no rows or no freedom: nothing locked
         for shape in ((0, 5), (3, 0), (0, 0)):
             N, by_svd = kernel_basis(np.zeros(shape), 1e-9)
             assert N.shape == (shape[1], shape[1]) and not by_svd
-    # the certificate does its work (28 of the 31 weighted cases with pivots in the window)
-    assert certified["python"] >= 20
-    assert kernel_basis is None or certified["compiled"] >= 20
+    assert taken >= 30 and certified["python"] == taken
+    assert kernel_basis is None or certified["compiled"] == taken
 
 
 @pytest.mark.parametrize("backend", ["quadprog", "daqp"])

@@ -116,30 +116,34 @@ namespace
     }
   };
 
-  // _rank_certified: the rank ``rank`` of a QR with column pivoting (``qr``: its packed factor,
-  // R on and above the diagonal) is the SVD's count of singular values above ``tol``, proved by
-  // σ_rank ≥ σ_min(R11) ≥ 1 / ‖R11⁻¹‖_F > tol (R11 is a leading block of R: interlacing) and
-  // σ_rank+1 ≤ ‖R22‖_2 ≤ ‖R22‖_F ≤ tol (R minus its trailing block has rank ``rank``: Weyl).
+  constexpr double kSubspaceTol = 1e-6; // cascade._SUBSPACE_TOL
+
+  // _rank_certified: the QR with column pivoting (``qr``: its packed factor, R on and above the
+  // diagonal) gives the SVD's kernel: its rank ``rank`` is the SVD's count of singular values
+  // above ``tol`` — σ_rank ≥ σ_min(R11) ≥ s = 1 / ‖R11⁻¹‖_F > tol (interlacing) and σ_rank+1 ≤
+  // ‖R22‖_2 ≤ t = ‖R22‖_F ≤ tol (Weyl) — and its kernel is the SVD's within kSubspaceTol: sin θ
+  // ≤ t / (s − t) (Wedin).
   bool rank_certified(const MatrixXd & qr, Index rank, double tol)
   {
     const Index p = std::min(qr.rows(), qr.cols());
-    if (rank > 0)
-    {
-      const MatrixXd inverse = qr.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solve(
-          MatrixXd::Identity(rank, rank));
-      if (!(inverse.norm() * tol < 1.0)) // (NaN: not certified)
-        return false;
-    }
     double trailing = 0.0;
     for (Index i = rank; i < p; ++i)
       trailing += qr.row(i).tail(qr.cols() - i).squaredNorm();
-    return std::sqrt(trailing) <= tol;
+    trailing = std::sqrt(trailing);
+    if (!(trailing <= tol))
+      return false;
+    if (rank == 0)
+      return true;
+    const MatrixXd inverse = qr.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solve(
+        MatrixXd::Identity(rank, rank));
+    const double lower = 1.0 / inverse.norm(); // (0 for an inf or NaN inverse)
+    return lower > tol && trailing <= kSubspaceTol * (lower - trailing);
   }
 
   // _kernel: an orthonormal basis N of ker(RZ) (z × (z − rank)) from the QR with column pivoting
   // of RZᵀ = Q R P: N spans Q[:, rank:], formed from the first ``rank`` reflectors only (the
   // later ones map its span onto itself). When some |R_ii| is within three decades of the
-  // threshold and the rank is not certified (rank_certified), an SVD decides (``by_svd``).
+  // threshold and the kernel is not certified (rank_certified), an SVD decides (``by_svd``).
   MatrixXd kernel_basis(const MatrixXd & RZ, double tol, bool & by_svd)
   {
     const Index k = RZ.rows(), z = RZ.cols(), p = std::min(k, z);

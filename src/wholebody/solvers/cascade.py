@@ -47,11 +47,11 @@ Nullspace by QR with column pivoting, not SVD: the kernel basis comes from LAPAC
 numerically a combination of already locked rows locks nothing). At these sizes QRCP is
 cheaper than a full SVD, which matters at 1 kHz. Its rank decision is reliable except on
 adversarial (Kahan-like) matrices; as a guard, whenever some ``|R_ii|`` falls within three
-decades of the threshold the rank is either certified from the factor itself (``1/‖R11⁻¹‖_F``
-above and ``‖R22‖_F`` below the threshold bound the singular values on either side of it:
-a level whose row weights span many decades, as Table 2's, has pivots there every cycle) or
-the kernel is recomputed with an SVD (the paper's choice), whose singular values are the exact
-measure.
+decades of the threshold the QR's kernel is either certified from the factor itself
+(``1/‖R11⁻¹‖_F`` above and ``‖R22‖_F`` below the threshold bound the singular values on either
+side of it, and their gap bounds the angle to the SVD's kernel: a level whose row weights span
+many decades, as Table 2's, has pivots there every cycle) or recomputed with an SVD (the
+paper's choice), whose singular values are the exact measure.
 
 ε (``regularization``). The ε‖x‖² of eq. 5 makes every QP strictly convex (Goldfarb–Idnani
 needs a positive definite Hessian); reported costs exclude it, but x is the solution of the
@@ -240,19 +240,29 @@ def _outside(A, a0, lower, upper, u):
     return (v < lower) | (v > upper)
 
 
+#: the kernel of a certified QR (``_rank_certified``) is within this angle (sin) of the SVD's
+_SUBSPACE_TOL = 1e-6
+
+
 def _rank_certified(qr: np.ndarray, rank: int, tol: float) -> bool:
-    """Whether ``rank``, the count of |R_ii| > ``tol`` of a QR with column pivoting (``qr``: the
-    packed factor, R on and above the diagonal), is the SVD's count of singular values above
-    ``tol``: σ_rank ≥ σ_min(R11) ≥ 1 / ‖R11⁻¹‖_F > tol (R11 a leading block of R: interlacing)
-    and σ_rank+1 ≤ ‖R22‖_2 ≤ ‖R22‖_F ≤ tol (R without its trailing block has rank ``rank``:
-    Weyl). Cheap next to an SVD: one triangular inverse of the kept block."""
+    """Whether the QR with column pivoting (``qr``: the packed factor, R on and above the
+    diagonal) gives the SVD's kernel: its rank ``rank`` (the |R_ii| > ``tol``) is the SVD's count
+    of singular values above ``tol`` — σ_rank ≥ σ_min(R11) ≥ s = 1 / ‖R11⁻¹‖_F > tol (R11 a
+    leading block of R: interlacing) and σ_rank+1 ≤ ‖R22‖_2 ≤ t = ‖R22‖_F ≤ tol (R without its
+    trailing block has rank ``rank``: Weyl) — and its kernel is the SVD's within
+    ``_SUBSPACE_TOL``: sin θ ≤ t / (s − t) (Wedin), the accuracy the QR has outside the
+    ambiguous window (pivots three decades either side of ``tol``). Cheap next to an SVD: one
+    triangular inverse of the kept block."""
     p = min(qr.shape)
-    if rank:
-        inverse = solve_triangular(np.triu(qr[:rank, :rank]), np.eye(rank), lower=False,
-                                   check_finite=False)
-        if not np.linalg.norm(inverse) * tol < 1.0:  # (NaN: not certified)
-            return False
-    return bool(np.linalg.norm(np.triu(qr[rank:p, rank:])) <= tol)
+    trailing = float(np.linalg.norm(np.triu(qr[rank:p, rank:])))
+    if not trailing <= tol:
+        return False
+    if not rank:
+        return True
+    inverse = solve_triangular(np.triu(qr[:rank, :rank]), np.eye(rank), lower=False,
+                               check_finite=False)
+    lower = 1.0 / float(np.linalg.norm(inverse))  # (0 for an inf or NaN inverse)
+    return lower > tol and trailing <= _SUBSPACE_TOL * (lower - trailing)
 
 
 def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
