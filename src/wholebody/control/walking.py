@@ -865,8 +865,7 @@ class Walking:
         side = 1 if ph.stance == self.left else -1
         limits = self.recovery_limits if self.recovering else self.limits
         xy, yaw = clamp_step(self.feet[ph.stance], side, target, planned.yaw, limits)
-        new = np.array([xy[0], xy[1], self.swing.p1[2]])
-        if np.linalg.norm(new[:2] - self.swing.p1[:2]) > 1e-4:  # (the swing's heights, floor kept)
+        if np.linalg.norm(xy - self.swing.p1[:2]) > 1e-4:  # (the swing's heights, floor kept)
             self.swing = self.swing.with_landing_xy(xy)
             self.steps[-1].target = np.array([xy[0], xy[1], planned.position[2]])
 

@@ -144,12 +144,13 @@ namespace
   // of RZᵀ = Q R P: N spans Q[:, rank:], formed from the first ``rank`` reflectors only (the
   // later ones map its span onto itself). When some |R_ii| is within three decades of the
   // threshold and the kernel is not certified (rank_certified), an SVD decides (``by_svd``).
-  MatrixXd kernel_basis(const MatrixXd & RZ, double tol, bool & by_svd)
+  // False, and N untouched, when the kernel is all of it (nothing to lock).
+  bool kernel_basis(const MatrixXd & RZ, double tol, MatrixXd & N, bool & by_svd)
   {
     const Index k = RZ.rows(), z = RZ.cols(), p = std::min(k, z);
     by_svd = false;
-    if (p == 0) // no rows, or no freedom: nothing to lock
-      return MatrixXd::Identity(z, z);
+    if (p == 0) // no rows, or no freedom
+      return false;
     const MatrixXd At = RZ.transpose();
     Eigen::ColPivHouseholderQR<MatrixXd> qr(At);
     const VectorXd d = qr.matrixQR().diagonal().head(p).cwiseAbs();
@@ -164,21 +165,26 @@ namespace
     if (by_svd)
     {
       Eigen::JacobiSVD<MatrixXd> svd(At, Eigen::ComputeFullU);
-      const Index r = (svd.singularValues().array() > tol).count();
-      return svd.matrixU().rightCols(z - r);
+      rank = (svd.singularValues().array() > tol).count();
+      if (rank > 0)
+        N = svd.matrixU().rightCols(z - rank);
+      return rank > 0;
     }
     if (rank == 0)
-      return MatrixXd::Identity(z, z);
+      return false;
     if (rank >= z)
-      return MatrixXd(z, 0);
+    {
+      N.resize(z, 0);
+      return true;
+    }
     // N = Q[:, rank:] formed (reflectors on a z × (z − rank) block), then products with N: at
     // these sizes a matrix product is several times faster per flop than applying reflectors
     // to Z and HZ one by one
     auto Q = qr.householderQ();
     Q.setLength(rank);
-    MatrixXd N = MatrixXd::Identity(z, z).rightCols(z - rank);
+    N = MatrixXd::Identity(z, z).rightCols(z - rank);
     N.applyOnTheLeft(Q);
-    return N;
+    return true;
   }
 
   // _kernel, applied: Z ← Z N with N = kernel_basis(RZ) (have_Z false: Z is the identity).
@@ -188,8 +194,8 @@ namespace
                           MatrixXd * HZ)
   {
     bool by_svd = false;
-    const MatrixXd N = kernel_basis(RZ, tol, by_svd);
-    if (N.cols() == RZ.cols())
+    MatrixXd N;
+    if (!kernel_basis(RZ, tol, N, by_svd))
       return false;
     if (N.cols() == 0)
     {
@@ -1486,7 +1492,9 @@ PYBIND11_MODULE(_cascade, m)
   m.def("daqp_rows", &daqp_rows, py::arg("A"), py::arg("lower"), py::arg("upper"));
   m.def("kernel_basis", [](const MatrixXd & RZ, double tol) {
           bool by_svd = false;
-          MatrixXd N = kernel_basis(RZ, tol, by_svd);
+          MatrixXd N;
+          if (!kernel_basis(RZ, tol, N, by_svd))
+            N = MatrixXd::Identity(RZ.cols(), RZ.cols()); // nothing locked: all of it
           return py::make_tuple(N, by_svd);
         }, py::arg("RZ"), py::arg("tol"),
         "(N, by_svd): the orthonormal kernel basis of the cascade's locks (cascade._kernel)");

@@ -267,7 +267,7 @@ def _rank_certified(qr: np.ndarray, rank: int, tol: float) -> bool:
 
 def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
     """Orthonormal basis of ker(RZ) (k×z): QR with column pivoting of RZᵀ; an SVD decides when
-    some |R_ii| is within three decades of ``tol`` and the QR's rank is not certified
+    some |R_ii| is within three decades of ``tol`` and the QR's kernel is not certified
     (:func:`_rank_certified`)."""
     k, z = RZ.shape
     qr, _, tau, _, info = lapack.dgeqp3(np.array(RZ.T, order="F"))
@@ -276,7 +276,7 @@ def _kernel(RZ: np.ndarray, tol: float) -> np.ndarray:
     rank = int(np.count_nonzero(d > tol))
     if info != 0 or (((d > 1e-3 * tol) & (d < 1e3 * tol)).any()
                      and not _rank_certified(qr, rank, tol)):
-        # the rank is in doubt: let the singular values decide (exact rank measure)
+        # the kernel is in doubt: let the singular values decide (exact rank measure)
         U, s, _ = np.linalg.svd(RZ.T, full_matrices=True)
         return U[:, int(np.count_nonzero(s > tol)):]
     if rank == 0:
