@@ -229,6 +229,43 @@ def test_stack_tasks_and_programs_kept_across_cycles(robots, request, gait):
     assert len(wbc._stack_cycle._programs) == len(stance_sets)
 
 
+@pytest.mark.parametrize("gait,posture", [("trot", False), ("crawl", False), ("trot", True)])
+def test_stack_references_compiled_equal_python(robots, request, gait, posture):
+    """The stack engine's per-cycle references computed in compiled code (τ bounds, stance
+    anchors with their slip history, W_d and its errors, the posture target, the commanded
+    wrench) equal those computed in Python from the same terms (the engine without
+    ``wholebody._passive_cycle``), cycle after cycle; so do the torques. ``posture``: the
+    posture regulariser on every joint (on HyQ's legs of three joints it acts on none)."""
+    robot = robots["hyq"]
+    compiled = PassiveWBC(robot, planner=planner(robot), engine="stack")
+    python = PassiveWBC(robot, planner=planner(robot), engine="stack")
+    python._references = None
+    assert compiled._references is not None
+    if posture:
+        for wbc in (compiled, python):
+            wbc.posture_mask[:] = 1.0
+            wbc.configure()
+        python._references = None
+    for q, v, plan in request.getfixturevalue(f"{gait}_states"):
+        a, b = python.cycle(q, v, plan), compiled.cycle(q, v, plan)
+        assert_same_solution(a, b)
+        np.testing.assert_allclose(b.tau, a.tau, atol=1e-8, rtol=0)
+        for x, y in zip(compiled._tau_bounds, python._tau_bounds):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_allclose(compiled._anchors, python._anchors, atol=1e-14, rtol=0)
+        np.testing.assert_allclose(compiled._stack.anchor_frames, python._stack.anchor_frames,
+                                   atol=1e-14, rtol=0)
+        np.testing.assert_allclose(compiled._stack.posture.target,
+                                   python._stack.posture.target, atol=1e-10, rtol=1e-12)
+        np.testing.assert_allclose(compiled.last_desired_wrench, python.last_desired_wrench,
+                                   atol=1e-9, rtol=1e-12)
+        np.testing.assert_allclose(compiled.impedance.last_errors, python.impedance.last_errors,
+                                   atol=1e-12, rtol=0)
+        np.testing.assert_allclose(compiled._commanded_wrench, python._commanded_wrench,
+                                   atol=1e-7, rtol=1e-9)
+    assert (np.abs(python._stack.posture.target).max() > 1e-3) == posture
+
+
 @pytest.mark.parametrize("field,args", [
     ("q", lambda r: (np.full(r.nq, np.nan), np.zeros(r.nv))),
     ("q", lambda r: (np.zeros(r.nq - 1), np.zeros(r.nv))),

@@ -718,6 +718,37 @@ class PassiveWBC(PlannedController):
         self._terms = self._stack_cycle.terms_view()
         #: per leg of the planner, its contact (the planner's feet are in leg order)
         self._leg_contact = self._contact_order[np.argsort(self._leg)]
+        self._references = self._compiled_references()
+
+    def _compiled_references(self):
+        """The stack engine's state-dependent references (τ bounds, stance anchors, W_d, the
+        posture target) computed by the compiled ``PassiveCycle.stack_references`` from the
+        hierarchy cycle's terms, written into the stack's task parameters (made once; on
+        :meth:`configure` given the new settings and arrays, its stance history kept); None
+        where ``wholebody._passive_cycle`` is not built (they are then computed in Python)."""
+        try:
+            from .. import _passive_cycle
+        except ImportError:
+            return None
+        robot, terms, spec = self.robot, self._terms, self._native_spec()
+        references = getattr(self, "_references", None)
+        if references is None:
+            references = _passive_cycle.PassiveCycle(spec)
+        else:  # configure(): the settings anew, the stance history (slip) kept
+            references.configure(spec)
+        self._W_d = np.zeros(6)
+        self._lean = self._W_d[:3]  # (one view: the tangential task keeps it, see PassiveStack)
+        self._commanded = np.zeros(6)
+        self._tau_lo, self._tau_hi = np.zeros(robot.na), np.zeros(robot.na)
+        references.bind_stack({
+            "q": terms.q, "v": terms.v, "points": terms.points,
+            "point_velocities": terms.point_velocities, "com": terms.com, "vcom": terms.vcom,
+            "rotation": terms.rotation, "Ig": terms.Ig, "tau_max": terms.tau_max,
+            "anchors": self._anchors, "anchor_frames": self._stack.anchor_frames,
+            "posture_target": self._stack.posture.target, "tau_lo": self._tau_lo,
+            "tau_hi": self._tau_hi, "wrench_d": self._W_d,
+            "errors": self.impedance.last_errors, "commanded": self._commanded})
+        return references
 
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) at time ``t`` (see PlannedController.compute)."""
@@ -797,26 +828,42 @@ class PassiveWBC(PlannedController):
         t0 = time.perf_counter()
         self.last_plan = plan
         terms = self._terms
-        bad = nonfinite_plan_field(plan)
-        if bad is not None:
-            return self._bad_plan(plan, bad, terms.q, terms.nle[6:], t0)
+        references, observer = self._references, self.observer
+        if references is None or observer is not None:  # (the plan checked before the observer)
+            bad = nonfinite_plan_field(plan)
+            if bad is not None:
+                return self._bad_plan(plan, bad, terms.q, terms.nle[6:], t0)
         stance = plan.contact[self._leg]
-        self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
-        points = terms.points[self._contact_order]
-        self._stance_anchors(stance, points, terms.point_velocities[self._contact_order])
-        if self.observer is not None and self._commanded_wrench is not None:
-            self.impedance.external_wrench = self.observer.update(
+        if observer is not None and self._commanded_wrench is not None:
+            self.impedance.external_wrench = observer.update(
                 terms.h_G, self._commanded_wrench, terms.mass, self.control_period)
-        R = terms.rotation
-        W_d = self.impedance.wrench_at(R, R @ terms.v[3:6], terms.com, terms.vcom, terms.mass,
-                                       terms.Ig, plan.trunk)
+        if references is not None:  # the plan checked first, then every reference
+            trunk = plan.trunk
+            code = references.stack_references(
+                plan.contact, plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
+                plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
+                trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration,
+                self.impedance.external_wrench)
+            if 0 <= code < len(PLAN_ARRAYS):
+                return self._bad_plan(plan, PLAN_ARRAYS[code], terms.q, terms.nle[6:], t0)
+            self._tau_bounds = self._tau_lo, self._tau_hi
+            W_d, lean, finite = self._W_d.copy(), self._lean, code < 0
+        else:
+            self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
+            self._stance_anchors(stance, terms.points[self._contact_order],
+                                 terms.point_velocities[self._contact_order])
+            R = terms.rotation
+            W_d = self.impedance.wrench_at(R, R @ terms.v[3:6], terms.com, terms.vcom,
+                                           terms.mass, terms.Ig, plan.trunk)
+            lean, finite = W_d[:3], math.isfinite(W_d.sum())
         t1 = time.perf_counter()
         # failed cycles are values, as in the Python engine: a W_d that is not finite (e.g. the
         # external wrench), NaN/inf task rows (the state was checked by the update)
         sol = SimpleNamespace(ok=False, status="the desired trunk wrench W_d is not finite",
                               timings={})
-        if math.isfinite(W_d.sum()):
-            _, variables = self._stack.update(plan, W_d[:3], terms.q, terms.v)
+        if finite:
+            _, variables = self._stack.update(plan, lean, terms.q, terms.v,
+                                              state_references=references is None)
             t1 = time.perf_counter()
             try:
                 sol = self._stack_cycle.solve_updated(variables)
@@ -826,7 +873,7 @@ class PassiveWBC(PlannedController):
         F, swing_errors = np.zeros(self.nf), None
         if sol.ok:
             qdd, tau, status = sol.qdd, sol.tau, "solved"
-            F[np.repeat(stance, 3)] = sol.lam  # the stance feet's forces, in contact order
+            F[self._stack.force_index] = sol.lam  # the stance feet's forces, contact order
             if not stance.all():  # the swing tasks' residuals J_sw q̈ − (v̇_d − J̇ v), eq. 11
                 swing_errors = np.zeros(len(self.contacts))
                 nv = self.robot.nv
@@ -838,8 +885,13 @@ class PassiveWBC(PlannedController):
             qdd, F, tau, status = self._failed(sol.status, terms.nle[6:])
         parts = sol.timings
         rows = parts.get("rows", 0.0)
-        G = contact_wrench_map(terms, self.contacts, self._G, points)
-        return self._report(sol.ok, qdd, F, tau, status, G @ F, W_d, stance, swing_errors,
+        if references is not None:
+            references.stack_commanded(F)
+            commanded = self._commanded.copy()
+        else:
+            commanded = contact_wrench_map(terms, self.contacts, self._G,
+                                           terms.points[self._contact_order]) @ F
+        return self._report(sol.ok, qdd, F, tau, status, commanded, W_d, stance, swing_errors,
                             {"assemble": t1 - t0 + rows, "solve": t2 - t1 - rows,
                              "prepare": t1 - t0, "update": parts.get("update", np.nan),
                              "rows": parts.get("rows", np.nan),

@@ -56,48 +56,61 @@ class PassiveStack:
         self.stack = Stack([list(self.hard), list(self.objective)])
         # the stance task anchors frame origins, the controller the sphere bottoms: the anchors
         # are rows of one array (all contacts; the task reads its active ones), set every cycle
-        self._anchor_frames = np.zeros((len(wbc.contacts), 3))
+        #: the stance anchors as the contact frames' origins (rows: contacts)
+        self.anchor_frames = np.zeros((len(wbc.contacts), 3))
         self._radius_offset = np.zeros((len(wbc.contacts), 3))
         self._radius_offset[:, 2] = wbc._radii
-        self.contact.anchors = dict(zip(wbc.contacts, self._anchor_frames))
+        self.contact.anchors = dict(zip(wbc.contacts, self.anchor_frames))
         self._stances: dict[tuple, tuple] = {}  # stance flags -> (levels, swing, variables)
-        self._normals = None  # (stance, their normals) last set on the tasks
+        self._normals = None  # (stance, the plan's normals' bytes) last set on the tasks
+        #: where the stance feet's forces go among all contacts' (3 per contact), see update
+        self.force_index = np.zeros(0, dtype=int)
 
     def _stance(self, in_stance: tuple) -> tuple:
-        """(levels, swing feet as (task, leg), variables, the stance feet's legs, their names)
-        of a stance set (flags per contact), made on first use."""
+        """(levels, swing feet as (task, leg), variables, the stance feet's legs, their names,
+        where their forces go among all contacts' 3 per contact) of a stance set (flags per
+        contact), made on first use."""
         wbc = self.wbc
         stance = tuple(n for n, s in zip(wbc.contacts, in_stance) if s)
         levels = [list(self.hard), list(self.objective)]
         swing = [(task, wbc._leg[i]) for i, task in enumerate(self.swing) if not in_stance[i]]
         levels[self.swing_level] += [task for task, _ in swing]
         entry = (levels, swing, Variables(wbc.robot, stance),
-                 wbc._leg[np.flatnonzero(in_stance)], stance)
+                 wbc._leg[np.flatnonzero(in_stance)], stance,
+                 np.flatnonzero(np.repeat(in_stance, 3)))
         self._stances[in_stance] = entry
         return entry
 
-    def update(self, plan, lean=None, q=None, v=None) -> tuple[Stack, Variables]:
+    def update(self, plan, lean=None, q=None, v=None, state_references: bool = True
+               ) -> tuple[Stack, Variables]:
         """The stack and variables of ``plan`` at the controller's state (its stance anchors of
         the cycle; ``lean``: the desired net force of the cycle, for "force-parallel"; the
-        posture regulariser's (q, v), default the robot's cached state)."""
+        posture regulariser's (q, v), default the robot's cached state). ``state_references``
+        False: the stance anchors (:attr:`anchor_frames`) and the posture target
+        (``posture.target``) were written already (the compiled references of
+        :meth:`PassiveWBC._solve_stack <wholebody.control.passive.PassiveWBC._solve_stack>`)."""
         wbc = self.wbc
         in_stance = tuple(plan.contact[wbc._leg].tolist())
         entry = self._stances.get(in_stance)
-        levels, swing, variables, legs, stance = entry or self._stance(in_stance)
-        np.add(wbc._anchors, self._radius_offset, out=self._anchor_frames)
-        normals = plan.touchdown_normal[legs]
-        last = self._normals
-        if last is None or last[0] != stance or not (normals == last[1]).all():
-            self._normals = stance, normals.copy()  # checked and set when they change only
+        levels, swing, variables, legs, stance, self.force_index = (entry
+                                                                    or self._stance(in_stance))
+        if state_references:
+            np.add(wbc._anchors, self._radius_offset, out=self.anchor_frames)
+            # in place: the target was checked when set, a posture acceleration of a finite
+            # state is finite (a NaN would fail the cycle's row check)
+            self.posture.target[6:] = wbc.posture_acceleration(q, v)
+        key = (stance, plan.touchdown_normal.tobytes())
+        if key != self._normals:  # checked and set when they change only
+            self._normals = key
+            normals = plan.touchdown_normal[legs]
             self.friction.normals = self.normal_bounds.normals = dict(zip(stance, normals))
             if self.tangential is not None:
                 self.tangential.normals = self.friction.normals
         self.wrench.reference = plan.trunk
-        # in place: the target was checked when set, a posture acceleration of a finite state
-        # is finite (a NaN would fail the cycle's row check)
-        self.posture.target[6:] = wbc.posture_acceleration(q, v)
         if self.tangential is not None:
-            self.tangential.lean = lean if wbc.regularization == "force-parallel" else None
+            lean = lean if wbc.regularization == "force-parallel" else None
+            if lean is not self.tangential.lean:  # (a view the task keeps is checked once)
+                self.tangential.lean = lean
         feedforward = wbc.swing.feedforward
         for task, foot in swing:
             task.position = plan.foot_position[foot]

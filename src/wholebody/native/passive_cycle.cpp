@@ -184,19 +184,7 @@ public:
     // (PassiveWBC._stance_anchors)
     contact_velocity_.noalias() = J_ * v_;
     for (Index i = 0; i < nc_; ++i)
-    {
-      if (stance_[i] && was_stance_[i])
-      {
-        slip_.row(i) += control_period_ * contact_velocity_.segment<3>(3 * i).transpose();
-        const double norm = slip_.row(i).norm();  // at most the foot's radius (a rolling foot)
-        if (norm > radii_[i])
-          slip_.row(i) *= norm > 0.0 ? radii_[i] / norm : 0.0;
-      }
-      else
-        slip_.row(i).setZero();
-      was_stance_[i] = stance_[i];
-      anchors_.row(i) = points_.row(i) - slip_.row(i);
-    }
+      stance_anchor(i, points_.row(i), contact_velocity_.segment<3>(3 * i).transpose());
     A.block(rf, 0, 3 * nc_, nv) = J_;
     VectorXd & target = feet_target_;
     target = -drift_;
@@ -263,7 +251,9 @@ public:
       input(trunk_acceleration, 3, "trunk.acceleration"), rotation,
       input(trunk_angular_velocity, 3, "trunk.angular_velocity"),
       input(trunk_angular_acceleration, 3, "trunk.angular_acceleration"),
-      input(external_wrench, 6, "external_wrench"));
+      input(external_wrench, 6, "external_wrench"), data_.oMi[1].rotation(),
+      data_.oMi[1].rotation() * v_.segment<3>(3), data_.com[0], data_.vcom[0],
+      data_.Ig.inertia().matrix());
     const Map<const Eigen::Matrix<double, 6, 1>> W_d(wrench_d_);
     GQ_.noalias() = G_.transpose() * heading_weights(rotation);
     HF_.noalias() = GQ_ * G_;
@@ -394,6 +384,122 @@ public:
     }
   }
 
+  // The stack engine (PassiveWBC engine "stack"): the arrays of the compiled HierarchyCycle's
+  // terms (HierarchyCycle.terms_view, rewritten by its every update) and those the references
+  // go to (Python-owned: the PassiveStack tasks' parameters, the controller's W_d and bounds).
+  void bind_stack(const py::dict & b)
+  {
+    std::vector<py::object> keep;
+    terms_q_ = buffer<double>(b, "q", nq_, keep);
+    terms_v_ = buffer<double>(b, "v", nv_, keep);
+    terms_points_ = buffer<double>(b, "points", 3 * nc_, keep);
+    terms_point_velocities_ = buffer<double>(b, "point_velocities", 3 * nc_, keep);
+    terms_com_ = buffer<double>(b, "com", 3, keep);
+    terms_vcom_ = buffer<double>(b, "vcom", 3, keep);
+    terms_rotation_ = buffer<double>(b, "rotation", 9, keep);
+    terms_Ig_ = buffer<double>(b, "Ig", 9, keep);
+    terms_tau_max_ = buffer<double>(b, "tau_max", na_, keep);
+    anchors_out_ = buffer<double>(b, "anchors", 3 * nc_, keep);
+    anchor_frames_ = buffer<double>(b, "anchor_frames", 3 * nc_, keep);
+    posture_target_ = buffer<double>(b, "posture_target", nv_, keep);
+    tau_lo_ = buffer<double>(b, "tau_lo", na_, keep);
+    tau_hi_ = buffer<double>(b, "tau_hi", na_, keep);
+    wrench_d_ = buffer<double>(b, "wrench_d", 6, keep);
+    errors_ = buffer<double>(b, "errors", 12, keep);
+    commanded_ = buffer<double>(b, "commanded", 6, keep);
+    stack_keep_ = std::move(keep);
+    stack_bound_ = true;
+  }
+
+  // PassiveWBC._solve_stack's references of one cycle from the bound terms, for a plan given as
+  // its arrays (planner's leg order): first the plan is checked (nothing else is done if an
+  // array has a NaN/inf entry), then the τ bounds (eq. 15), the stance anchors (eq. 32; also as
+  // the contact frames' origins, the anchor plus the radius along z, what the stance task
+  // anchors), W_d (eq. 4) with its errors and the posture regulariser's target accelerations.
+  // Returns -1, or the index of the first non-finite array in the order of the arguments
+  // (wholebody.control.passive.PLAN_ARRAYS), or 10 if W_d is not finite.
+  int stack_references(
+    const py::array_t<bool, py::array::c_style | py::array::forcecast> & stance_in,
+    const DoubleArray & normals, const DoubleArray & foot_position,
+    const DoubleArray & foot_velocity, const DoubleArray & foot_acceleration,
+    const DoubleArray & trunk_position, const DoubleArray & trunk_velocity,
+    const DoubleArray & trunk_acceleration, const DoubleArray & trunk_rotation,
+    const DoubleArray & trunk_angular_velocity, const DoubleArray & trunk_angular_acceleration,
+    const DoubleArray & external_wrench)
+  {
+    if (!stack_bound_)
+      throw std::runtime_error("stack_references: call bind_stack(arrays) first");
+    if (stance_in.size() != n_legs_)
+      throw std::invalid_argument("contact: expected " + std::to_string(n_legs_) + " flags");
+    const py::ssize_t feet = 3 * n_legs_;
+    const std::pair<const DoubleArray *, py::ssize_t> plan[] = {
+      {&normals, feet}, {&foot_position, feet}, {&foot_velocity, feet},
+      {&foot_acceleration, feet}, {&trunk_position, 3}, {&trunk_velocity, 3},
+      {&trunk_acceleration, 3}, {&trunk_rotation, 9}, {&trunk_angular_velocity, 3},
+      {&trunk_angular_acceleration, 3}};
+    const char * names[] = {"touchdown_normal", "foot_position", "foot_velocity",
+                            "foot_acceleration", "trunk.position", "trunk.velocity",
+                            "trunk.acceleration", "trunk.rotation", "trunk.angular_velocity",
+                            "trunk.angular_acceleration"};
+    const double * p[10];
+    for (int k = 0; k < 10; ++k)
+    {
+      p[k] = input(*plan[k].first, plan[k].second, names[k], false);
+      for (py::ssize_t i = 0; i < plan[k].second; ++i)
+        if (!std::isfinite(p[k][i]))
+          return k;
+    }
+    const bool * stance_legs = stance_in.data();
+    for (Index i = 0; i < nc_; ++i)
+      stance_[i] = stance_legs[leg_[i]];
+    torque_bounds(terms_tau_max_);
+    using Rows3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+    const Map<const Rows3> points(terms_points_, nc_, 3), velocities(terms_point_velocities_, nc_, 3);
+    Map<Rows3> anchors(anchors_out_, nc_, 3), frames(anchor_frames_, nc_, 3);
+    for (Index i = 0; i < nc_; ++i)
+    {
+      stance_anchor(i, points.row(i), velocities.row(i));
+      anchors.row(i) = anchors_.row(i);
+      frames.row(i) = anchors_.row(i);
+      frames(i, 2) += radii_[i];
+    }
+    const Map<const VectorXd> v(terms_v_, nv_);
+    const Matrix3d R = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(terms_rotation_);
+    trunk_wrench(p[4], p[5], p[6], p[7], p[8], p[9],
+      input(external_wrench, 6, "external_wrench", false), R, R * v.segment<3>(3),
+      Map<const Vector3d>(terms_com_), Map<const Vector3d>(terms_vcom_),
+      Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(terms_Ig_));
+    Map<VectorXd> target(posture_target_, nv_);
+    if (posture_on_) // PassiveWBC.posture_acceleration
+    {
+      pinocchio::difference(model_, Map<const VectorXd>(terms_q_, nq_), posture_, posture_error_);
+      target.tail(na_) = posture_mask_.cwiseProduct(posture_K_ * posture_error_.tail(na_)
+                                                    - posture_D_ * v.tail(na_));
+    }
+    else
+      target.tail(na_).setZero();
+    return Map<const Eigen::Matrix<double, 6, 1>>(wrench_d_).allFinite() ? -1 : 10;
+  }
+
+  // The contact wrench about the CoM of the forces ``forces`` (3 per contact, contact order) at
+  // the bound terms' contact points: Σ [f_i; (p_i − c) × f_i] (eq. 2, the trunk wrench task's
+  // G F), written into the bound ``commanded``.
+  void stack_commanded(const DoubleArray & forces)
+  {
+    if (!stack_bound_)
+      throw std::runtime_error("stack_commanded: call bind_stack(arrays) first");
+    const double * f = input(forces, 3 * nc_, "forces", false);
+    const Map<const Vector3d> com(terms_com_);
+    Map<Eigen::Matrix<double, 6, 1>> out(commanded_);
+    out.setZero();
+    for (Index i = 0; i < nc_; ++i)
+    {
+      const Map<const Vector3d> fi(f + 3 * i);
+      out.head<3>() += fi;
+      out.tail<3>() += (Map<const Vector3d>(terms_points_ + 3 * i) - com).cross(fi);
+    }
+  }
+
   // Copies of the rigid-body terms of the last update (for tests against Robot.update).
   py::dict terms() const
   {
@@ -485,10 +591,13 @@ private:
 
   // τ_min(q), τ_max(q) of eq. 15: the robot's linkage profile (wholebody.robots.torque_limits),
   // scaled, capped by the weak-joint overrides.
-  void torque_bounds()
+  void torque_bounds(const double * robot_upper = nullptr)
   {
     Map<VectorXd> hi(tau_hi_, na_), lo(tau_lo_, na_);
-    torque_.upper(angles_, hi);
+    if (robot_upper)
+      hi = Map<const VectorXd>(robot_upper, na_);
+    else
+      torque_.upper(angles_, hi);
     hi *= torque_scale_;
     hi = hi.cwiseMin(torque_cap_);
     lo = -hi;
@@ -530,19 +639,19 @@ private:
     return W;
   }
 
-  // W_com,d of eq. 4 (wholebody.tasks.wrench.TrunkImpedance.wrench).
+  // W_com,d of eq. 4 (wholebody.tasks.wrench.TrunkImpedance.wrench_at) for base rotation R,
+  // world angular velocity omega, CoM position and velocity and locked centroidal inertia Ig.
   void trunk_wrench(
     const double * position, const double * velocity, const double * acceleration,
     const double * rotation, const double * angular_velocity, const double * angular_acceleration,
-    const double * external)
+    const double * external, const Matrix3d & R, const Vector3d & omega, const Vector3d & com,
+    const Vector3d & vcom, const Matrix3d & Ig)
   {
-    const Matrix3d R = data_.oMi[1].rotation();
-    const Vector3d omega = R * v_.segment<3>(3);
     const Matrix3d R_d = Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(rotation);
     Map<Eigen::Matrix<double, 12, 1>> e(errors_);
-    e.segment<3>(0) = Map<const Vector3d>(position) - data_.com[0];
+    e.segment<3>(0) = Map<const Vector3d>(position) - com;
     e.segment<3>(3) = pinocchio::log3(Matrix3d(R_d * R.transpose()));
-    e.segment<3>(6) = Map<const Vector3d>(velocity) - data_.vcom[0];
+    e.segment<3>(6) = Map<const Vector3d>(velocity) - vcom;
     e.segment<3>(9) = Map<const Vector3d>(angular_velocity) - omega;
     Map<Eigen::Matrix<double, 6, 1>> out(wrench_d_);
     out.head<3>() = K_x_.cwiseProduct(e.segment<3>(0)) + D_x_.cwiseProduct(e.segment<3>(6));
@@ -551,9 +660,28 @@ private:
     if (trunk_feedforward_)
     {
       out.head<3>() += mass_ * Map<const Vector3d>(acceleration);
-      out.tail<3>() += data_.Ig.inertia().matrix() * Map<const Vector3d>(angular_acceleration);
+      out.tail<3>() += Ig * Map<const Vector3d>(angular_acceleration);
     }
     out -= Map<const Eigen::Matrix<double, 6, 1>>(external);
+  }
+
+  // x̂_st of eq. 32 (PassiveWBC._stance_anchors) for contact i at ``point`` moving with
+  // ``velocity``: the point minus the slip, J v integrated since touchdown and at most the foot's
+  // radius (a rolling foot).
+  void stance_anchor(Index i, const Eigen::Ref<const Eigen::RowVector3d> & point,
+                     const Eigen::Ref<const Eigen::RowVector3d> & velocity)
+  {
+    if (stance_[i] && was_stance_[i])
+    {
+      slip_.row(i) += control_period_ * velocity;
+      const double norm = slip_.row(i).norm(); // at most the foot's radius (a rolling foot)
+      if (norm > radii_[i])
+        slip_.row(i) *= norm > 0.0 ? radii_[i] / norm : 0.0;
+    }
+    else
+      slip_.row(i).setZero();
+    was_stance_[i] = stance_[i];
+    anchors_.row(i) = point - slip_.row(i);
   }
 
   wholebody::LeggedModel model_;
@@ -587,14 +715,19 @@ private:
   std::vector<Index> kept_vars_, kept_rows_;
   VectorXd drift_, feet_target_, contact_velocity_;
   std::vector<bool> stance_, was_stance_;
-  bool bound_ = false, updated_ = false, assembled_ = false;
+  bool bound_ = false, updated_ = false, assembled_ = false, stack_bound_ = false;
   // Python-owned buffers
-  std::vector<py::object> keep_;
+  std::vector<py::object> keep_, stack_keep_;
   double *H_ = nullptr, *g_ = nullptr, *A_ = nullptr, *upper_ = nullptr, *lower_ = nullptr;
   int32_t * sense_ = nullptr;
   double *feet_ = nullptr, *tau_ = nullptr, *tau_lo_ = nullptr, *tau_hi_ = nullptr, *h_out_ = nullptr;
   double *hg_out_ = nullptr, *wrench_d_ = nullptr, *commanded_ = nullptr, *errors_ = nullptr;
   double *swing_residual_ = nullptr, *qdd_ = nullptr, *forces_ = nullptr;
+  // the stack engine's (bind_stack)
+  double *terms_q_ = nullptr, *terms_v_ = nullptr, *terms_points_ = nullptr,
+         *terms_point_velocities_ = nullptr, *terms_com_ = nullptr, *terms_vcom_ = nullptr,
+         *terms_rotation_ = nullptr, *terms_Ig_ = nullptr, *terms_tau_max_ = nullptr;
+  double *anchors_out_ = nullptr, *anchor_frames_ = nullptr, *posture_target_ = nullptr;
 };
 
 PYBIND11_MODULE(_passive_cycle, m)
@@ -607,6 +740,9 @@ PYBIND11_MODULE(_passive_cycle, m)
     .def("update", &PassiveCycle::update, py::arg("q"), py::arg("v"))
     .def("assemble", &PassiveCycle::assemble)
     .def("finish", &PassiveCycle::finish, py::arg("x"))
+    .def("bind_stack", &PassiveCycle::bind_stack, py::arg("arrays"))
+    .def("stack_references", &PassiveCycle::stack_references)
+    .def("stack_commanded", &PassiveCycle::stack_commanded, py::arg("forces"))
     .def("terms", &PassiveCycle::terms)
     .def_property_readonly("nv", &PassiveCycle::nv)
     .def_property_readonly("n", &PassiveCycle::n)

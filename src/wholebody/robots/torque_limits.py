@@ -13,6 +13,7 @@ to weaken one joint, Fahmi et al. 2019 §V-C). Bounds are symmetric: tau_min = -
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -70,7 +71,12 @@ class TorqueProfile:
         with np.errstate(all="ignore"):
             self._ab, self._a2b2, self._force_ab = a * b, a * a + b * b, force * a * b
         self._angle_offset = np.pi / 2 - q_peak
-        self._last_upper: tuple[bytes, np.ndarray] | None = None  # see upper()
+        # the same constants as Python numbers, per profiled joint, for upper()
+        self._linkage_index = self._linkage_rows.tolist()
+        self._linkage_terms = list(zip(self._force_ab.tolist(), self._a2b2.tolist(),
+                                       self._ab.tolist(), self._angle_offset.tolist()))
+        self._constant_list = constant.tolist()
+        self._last_upper: tuple[tuple, np.ndarray] | None = None  # see upper()
         self._check_derived(where)
 
     def _check_derived(self, where: str) -> None:
@@ -101,19 +107,42 @@ class TorqueProfile:
     def upper(self, q_joints: np.ndarray) -> np.ndarray:
         """tau_max(q) for the actuated joint positions ``q_joints`` (a new array). With a
         linkage profile the last answer is kept with the profiled joints' angles it came from:
-        a control cycle and the simulator's step ask for the same state several times."""
+        a control cycle and the simulator's step ask for the same state several times. The
+        profile is evaluated in Python numbers, joint by joint (the simulator asks every step,
+        where numpy's per-call overhead is most of the cost): the same operations in the same
+        order as the array expression of :meth:`_upper_array`, which takes what they cannot
+        (a square root of a negative number, a division by zero)."""
         if not self.has_profile:
             hi = self.constant.copy()
             return self.scale * hi if self.scale != 1.0 else hi
-        angles = np.asarray(q_joints)[self._linkage_rows]
-        key = angles.dtype.str.encode() + angles.tobytes()
-        if self._last_upper is None or self._last_upper[0] != key:
-            hi = self.constant.copy()
-            t = angles + self._angle_offset
+        q = q_joints.tolist() if type(q_joints) is np.ndarray else list(q_joints)
+        key = tuple([q[i] for i in self._linkage_index])
+        last = self._last_upper
+        if last is not None and last[0] == key:
+            return last[1].copy()
+        out = self._constant_list.copy()
+        try:
+            for i, a, (force_ab, a2b2, ab, offset) in zip(self._linkage_index, key,
+                                                           self._linkage_terms):
+                t = a + offset
+                out[i] = force_ab * abs(math.sin(t)) / math.sqrt(a2b2 - 2.0 * ab * math.cos(t))
+            hi = np.array(out)
+        except (ValueError, ZeroDivisionError, TypeError, OverflowError):
+            hi = self._upper_array(np.asarray(q_joints))
+        hi = self.scale * hi if self.scale != 1.0 else hi
+        # (a NaN angle never equals itself: such a key is never found again)
+        self._last_upper = (key, hi)
+        return hi.copy()
+
+    def _upper_array(self, q_joints: np.ndarray) -> np.ndarray:
+        """The unscaled tau_max(q) of the linkage profile as one numpy expression (warnings
+        off: a degenerate triangle gives NaN or inf, which the caller reports)."""
+        hi = self.constant.copy()
+        t = q_joints[self._linkage_rows] + self._angle_offset
+        with np.errstate(all="ignore"):
             hi[self._linkage_rows] = (self._force_ab * np.abs(np.sin(t))
                                       / np.sqrt(self._a2b2 - 2.0 * self._ab * np.cos(t)))
-            self._last_upper = (key, self.scale * hi if self.scale != 1.0 else hi)
-        return self._last_upper[1].copy()
+        return hi
 
     def bounds(self, q_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(tau_min(q), tau_max(q))."""
