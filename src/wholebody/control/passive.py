@@ -874,13 +874,14 @@ class PassiveWBC(PlannedController):
         if sol.ok:
             qdd, tau, status = sol.qdd, sol.tau, "solved"
             F[self._stack.force_index] = sol.lam  # the stance feet's forces, contact order
-            if not stance.all():  # the swing tasks' residuals J_sw q̈ − (v̇_d − J̇ v), eq. 11
+            if self._stack.swinging:  # the swing tasks' residuals J_sw q̈ − (v̇_d − J̇ v), eq. 11
                 swing_errors = np.zeros(len(self.contacts))
                 nv = self.robot.nv
-                for i in np.flatnonzero(~stance).tolist():
-                    A, target = self._stack_cycle.task_rows(self._stack.swing[i])
-                    residual = A[:, :nv] @ qdd - target
-                    swing_errors[i] = math.sqrt(residual @ residual)
+                for i, task in enumerate(self._stack.swing):
+                    if not stance[i]:
+                        A, target = self._stack_cycle.task_rows(task)
+                        residual = A[:, :nv] @ qdd - target
+                        swing_errors[i] = math.sqrt(residual @ residual)
         else:
             qdd, F, tau, status = self._failed(sol.status, terms.nle[6:])
         parts = sol.timings

@@ -63,8 +63,10 @@ class PassiveStack:
         self.contact.anchors = dict(zip(wbc.contacts, self.anchor_frames))
         self._stances: dict[tuple, tuple] = {}  # stance flags -> (levels, swing, variables)
         self._normals = None  # (stance, the plan's normals' bytes) last set on the tasks
-        #: where the stance feet's forces go among all contacts' (3 per contact), see update
+        #: where the stance feet's forces go among all contacts' (3 per contact), and the swing
+        #: feet as (task, leg), of the stance set of the last update
         self.force_index = np.zeros(0, dtype=int)
+        self.swinging: list[tuple] = []
 
     def _stance(self, in_stance: tuple) -> tuple:
         """(levels, swing feet as (task, leg), variables, the stance feet's legs, their names,
@@ -94,6 +96,7 @@ class PassiveStack:
         entry = self._stances.get(in_stance)
         levels, swing, variables, legs, stance, self.force_index = (entry
                                                                     or self._stance(in_stance))
+        self.swinging = swing
         if state_references:
             np.add(wbc._anchors, self._radius_offset, out=self.anchor_frames)
             # in place: the target was checked when set, a posture acceleration of a finite

@@ -77,6 +77,7 @@ class QuasiStaticController(PlannedController):
         self.planner = planner if planner is not None else default_planner(robot)
         self._leg = [tuple(self.planner.legs).index(n) for n in self.contacts]
         self.mu = robot.friction if mu is None else float(mu)
+        self._friction_cache: dict[tuple, tuple] = {}  # see _friction_rows
         self.f_min, self.f_max = f_min, force_bound(robot) if f_max is None else f_max
         self.impedance = impedance or TrunkImpedance.for_robot(robot)
         self.Q = np.broadcast_to(np.asarray(trunk_weights(robot) if Q is None else Q,
@@ -106,6 +107,20 @@ class QuasiStaticController(PlannedController):
             for i, name in enumerate(self.contacts) if len(leg_joints(robot, name)) > 3]
         self.last_tau: np.ndarray | None = None
         self.last_plan = None
+
+    def _friction_rows(self, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(pyramid faces (4, 3), unit normal, t1 t1ᵀ + t2 t2ᵀ) of a terrain ``normal`` at the
+        friction coefficient ``mu`` (eq. 13 and the tangential regulariser), kept for the last
+        normals met: the terrain's normals change at touchdowns only."""
+        key = (normal.dtype.str, normal.tobytes(), self.mu)
+        rows = self._friction_cache.get(key)
+        if rows is None:
+            if len(self._friction_cache) >= len(self.contacts) * 4:
+                self._friction_cache.clear()
+            t1, t2, nn = tangent_basis(normal)
+            rows = (friction_faces(normal, self.mu), nn, np.outer(t1, t1) + np.outer(t2, t2))
+            self._friction_cache[key] = rows
+        return rows
 
     def _hold_leg_null_space(self, J, tau) -> None:
         """Legs of more than three joints: add N M_ll (K (q_ref − q) − D q̇) to their torques, N
@@ -166,15 +181,13 @@ class QuasiStaticController(PlannedController):
         for i in range(len(self.contacts)):
             leg, fi, rr = self._leg[i], 3 * i, 5 * i
             if stance[i]:
-                normal = plan.touchdown_normal[leg]
-                t1, t2, nn = tangent_basis(normal)
-                self.A[rr:rr + 4, fi:fi + 3] = friction_faces(normal, self.mu)
+                faces, nn, tangential = self._friction_rows(plan.touchdown_normal[leg])
+                self.A[rr:rr + 4, fi:fi + 3] = faces
                 self.A[rr + 4, fi:fi + 3] = nn
                 up[n + rr:n + rr + 4], lo[n + rr:n + rr + 4] = 0.0, -np.inf
                 up[n + rr + 4], lo[n + rr + 4] = self.f_max, self.f_min
                 up[fi:fi + 3], lo[fi:fi + 3] = np.inf, -np.inf
                 sense[fi:fi + 3] = FREE
-                tangential = np.outer(t1, t1) + np.outer(t2, t2)
                 H[fi:fi + 3, fi:fi + 3] += self.tangential_weight * tangential
             else:
                 up[n + rr:n + rr + 5], lo[n + rr:n + rr + 5] = np.inf, -np.inf
