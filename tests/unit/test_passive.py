@@ -530,3 +530,28 @@ def test_nonfinite_external_wrench_is_a_held_cycle(robots, engine):
     np.testing.assert_allclose(held.tau, first.tau, atol=1e-12)
     wbc.impedance.external_wrench = np.zeros(6)
     assert wbc.compute(q, v, 0.008).ok
+
+
+def test_quasi_static_pyramid_follows_the_normals_and_mu_of_each_cycle(robots, rng, plan_for):
+    """The baseline keeps the friction rows of the terrain normals it met; a new normal or a new
+    friction coefficient between cycles gives the new pyramid (eq. 13): each stance foot's rows
+    are the faces written from the normal and ``mu`` of that cycle, and its force lies inside
+    them, on a ramp after flat ground and after ``mu`` changes."""
+    from wholebody.control.quasi_static import QuasiStaticController
+    robot = robots["hyq"]
+    robot.update(*standing_state(robot, rng, noise=0.02))
+    ctrl = QuasiStaticController(robot, SimpleNamespace(legs=robot.contact_names))
+    ramp = (0.0, -np.sin(0.2), np.cos(0.2))
+    for normal, mu in [((0.0, 0.0, 1.0), ctrl.mu), (ramp, ctrl.mu), (ramp, 0.3),
+                       ((0.0, 0.0, 1.0), 0.3)]:
+        ctrl.mu = mu
+        plan = plan_for(robot, rng, (True,) * 4, normal=normal)
+        sol = ctrl.solve(plan)
+        assert sol.ok, sol.status
+        unit = np.asarray(normal) / np.linalg.norm(normal)
+        for i in range(4):
+            faces = friction_faces(unit, mu)
+            np.testing.assert_allclose(ctrl.A[5 * i:5 * i + 4, 3 * i:3 * i + 3], faces,
+                                       atol=1e-12)
+            np.testing.assert_allclose(ctrl.A[5 * i + 4, 3 * i:3 * i + 3], unit, atol=1e-12)
+            assert np.all(faces @ sol.lam[3 * i:3 * i + 3] <= 1e-7)

@@ -60,8 +60,9 @@ class TorqueLimits(Task):
         return layout.robot.na
 
     def bounds(self, robot) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = robot.torque_bounds()
-        lo, hi = lo * self.scale, hi * self.scale
+        lo, hi = robot.torque_bounds()  # (new arrays)
+        if self.scale != 1.0:  # (x * 1.0 is x: the common case skips two products)
+            lo, hi = lo * self.scale, hi * self.scale
         for joint, value in self.upper_override.items():
             if joint not in robot.joint_names:
                 raise ValueError(f"upper_override: unknown joint '{joint}'")
