@@ -838,12 +838,12 @@ class PassiveWBC(PlannedController):
             self.impedance.external_wrench = observer.update(
                 terms.h_G, self._commanded_wrench, terms.mass, self.control_period)
         if references is not None:  # the plan checked first, then every reference
-            trunk = plan.trunk
+            trunk, imp = plan.trunk, self.impedance
             code = references.stack_references(
                 plan.contact, plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
                 plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
                 trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration,
-                self.impedance.external_wrench)
+                imp.external_wrench, imp.K_x, imp.D_x, imp.K_theta, imp.D_theta, imp.feedforward)
             if 0 <= code < len(PLAN_ARRAYS):
                 return self._bad_plan(plan, PLAN_ARRAYS[code], terms.q, terms.nle[6:], t0)
             self._tau_bounds = self._tau_lo, self._tau_hi

@@ -415,8 +415,8 @@ public:
   // its arrays (planner's leg order): first the plan is checked (nothing else is done if an
   // array has a NaN/inf entry), then the τ bounds (eq. 15), the stance anchors (eq. 32; also as
   // the contact frames' origins, the anchor plus the radius along z, what the stance task
-  // anchors), W_d (eq. 4) with its errors and the posture regulariser's target accelerations.
-  // Returns -1, or the index of the first non-finite array in the order of the arguments
+  // anchors), W_d (eq. 4, with the impedance's gains given) with its errors and the posture
+  // regulariser's target accelerations. Returns -1, or the index of the first non-finite array in the order of the arguments
   // (wholebody.control.passive.PLAN_ARRAYS), or 10 if W_d is not finite.
   int stack_references(
     const py::array_t<bool, py::array::c_style | py::array::forcecast> & stance_in,
@@ -425,7 +425,8 @@ public:
     const DoubleArray & trunk_position, const DoubleArray & trunk_velocity,
     const DoubleArray & trunk_acceleration, const DoubleArray & trunk_rotation,
     const DoubleArray & trunk_angular_velocity, const DoubleArray & trunk_angular_acceleration,
-    const DoubleArray & external_wrench)
+    const DoubleArray & external_wrench, const DoubleArray & K_x, const DoubleArray & D_x,
+    const DoubleArray & K_theta, const DoubleArray & D_theta, bool trunk_feedforward)
   {
     if (!stack_bound_)
       throw std::runtime_error("stack_references: call bind_stack(arrays) first");
@@ -449,6 +450,12 @@ public:
         if (!std::isfinite(p[k][i]))
           return k;
     }
+    // the impedance's gains as they are now (the trunk wrench task reads them every cycle too)
+    K_x_ = Map<const Vector3d>(input(K_x, 3, "K_x"));
+    D_x_ = Map<const Vector3d>(input(D_x, 3, "D_x"));
+    K_theta_ = Map<const Vector3d>(input(K_theta, 3, "K_theta"));
+    D_theta_ = Map<const Vector3d>(input(D_theta, 3, "D_theta"));
+    trunk_feedforward_ = trunk_feedforward;
     const bool * stance_legs = stance_in.data();
     for (Index i = 0; i < nc_; ++i)
       stance_[i] = stance_legs[leg_[i]];
