@@ -230,14 +230,17 @@ def test_stack_tasks_and_programs_kept_across_cycles(robots, request, gait):
 
 
 @pytest.mark.parametrize("gait,posture", [("trot", False), ("crawl", False), ("trot", True)])
-def test_stack_references_compiled_equal_python(robots, request, gait, posture):
+def test_stack_references_compiled_equal_python(robots, request, gait, posture, monkeypatch):
     """The stack engine's per-cycle references computed in compiled code (τ bounds, stance
     anchors with their slip history, W_d and its errors, the posture target, the commanded
     wrench) equal those computed in Python from the same terms (the engine without
-    ``wholebody._passive_cycle``), cycle after cycle, also after the impedance's gains change;
-    so do the torques. ``posture``: the
-    posture regulariser on every joint (on HyQ's legs of three joints it acts on none)."""
+    ``wholebody._passive_cycle``), cycle after cycle, also after the impedance's gains, the
+    torque limits' scale and caps, the posture gains and the control period change between
+    cycles (read as they are, as the tasks' rows read theirs); so do the torques, on a robot
+    whose own torque profile is scaled. ``posture``: the posture regulariser on every joint (on
+    HyQ's legs of three joints it acts on none)."""
     robot = robots["hyq"]
+    monkeypatch.setattr(robot.torque_limits, "scale", 0.9)  # the robot's own profile scaled
     compiled = PassiveWBC(robot, planner=planner(robot), engine="stack")
     python = PassiveWBC(robot, planner=planner(robot), engine="stack")
     python._references = None
@@ -253,6 +256,10 @@ def test_stack_references_compiled_equal_python(robots, request, gait, posture):
             for wbc in (compiled, python):
                 wbc.impedance.K_x = 1.5 * wbc.impedance.K_x
                 wbc.impedance.D_theta = 0.5 * wbc.impedance.D_theta
+                wbc.torque_limits.scale = 0.8
+                wbc.torque_limits.upper_override = {robot.joint_names[2]: 30.0}
+                wbc.posture_K, wbc.posture_D = 2.0 * wbc.posture_K, 0.5 * wbc.posture_D
+                wbc.control_period = 0.005
         a, b = python.cycle(q, v, plan), compiled.cycle(q, v, plan)
         assert_same_solution(a, b)
         np.testing.assert_allclose(b.tau, a.tau, atol=1e-8, rtol=0)

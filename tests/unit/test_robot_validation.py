@@ -192,6 +192,24 @@ def test_torque_profile_checks_its_config():
         TorqueProfile(names, np.array([10.0, 10.0]), {"overrides": {"j2": -1.0}})
 
 
+
+def test_torque_profile_linkage_bounds_follow_the_formula_and_the_scale():
+    """A linkage profile's bound (Fahmi et al. 2019, eq. 15): force · a · b · |sin t| /
+    sqrt(a² + b² − 2ab cos t), t = π/2 + q − q_peak, written here with math's functions, times
+    ``scale``; the kept last answer is not reused when only the scale changes."""
+    names = ("hip", "knee")
+    link = {"a": 0.045, "b": 0.33, "force": 4000.0, "q_peak": 0.3}
+    profile = TorqueProfile(names, np.array([50.0, 0.0]), {"linkage": {"knee": link}})
+    for q in (-1.2, 0.0, 0.3, 0.9):
+        t = math.pi / 2 + q - link["q_peak"]
+        a, b = link["a"], link["b"]
+        expected = link["force"] * a * b * abs(math.sin(t)) / math.sqrt(
+            a * a + b * b - 2 * a * b * math.cos(t))
+        for scale in (1.0, 0.5, 1.0):
+            profile.scale = scale
+            np.testing.assert_allclose(profile.upper(np.array([0.0, q])),
+                                       [50.0 * scale, expected * scale], rtol=1e-14)
+
 # --------------------------------------------------------------- names checked against the model
 MODEL_BAD = [  # (preset, path, value, needles): each needs the model (one URDF load)
     ("hyq", ("posture",), {"lf_kfe_jiont": -1.5}, ("posture", "'lf_kfe_jiont'")),

@@ -521,17 +521,25 @@ class PassiveWBC(PlannedController):
         self.last_x = result.x
         return result
 
-    def _torque_bounds(self, q=None, upper=None) -> tuple[np.ndarray, np.ndarray]:
-        """τ_min(q), τ_max(q) of eq. 15 with the weak-joint overrides (indices cached); ``q``
-        defaults to the robot's cached state, ``upper`` (the robot's τ_max(q), when known) to
-        ``robot.torque_limits.upper(q)``."""
+    def _overrides(self) -> None:
+        """The torque-limit task's weak-joint overrides as indices, values and a per-joint cap
+        (inf: none), taken again when they change."""
         limits, robot = self.torque_limits, self.robot
         key = tuple(limits.upper_override.items())
         if key != self._override_key:
             limits.bounds(robot)  # validates the joint names
             self._override_index = np.array([robot.joint_names.index(j) for j, _ in key], int)
             self._override_value = np.array([value for _, value in key], float)
+            self._override_cap = np.full(robot.na, np.inf)
+            np.minimum.at(self._override_cap, self._override_index, self._override_value)
             self._override_key = key
+
+    def _torque_bounds(self, q=None, upper=None) -> tuple[np.ndarray, np.ndarray]:
+        """τ_min(q), τ_max(q) of eq. 15 with the weak-joint overrides (indices cached); ``q``
+        defaults to the robot's cached state, ``upper`` (the robot's τ_max(q), when known) to
+        ``robot.torque_limits.upper(q)``."""
+        limits, robot = self.torque_limits, self.robot
+        self._overrides()
         if upper is None:
             upper = robot.torque_limits.upper((robot.q if q is None else q)[7:])
         hi = upper * limits.scale
@@ -838,6 +846,10 @@ class PassiveWBC(PlannedController):
             self.impedance.external_wrench = observer.update(
                 terms.h_G, self._commanded_wrench, terms.mass, self.control_period)
         if references is not None:  # the plan checked first, then every reference
+            self._overrides()
+            references.stack_settings(self.torque_limits.scale, self._override_cap,
+                                      self.posture_K, self.posture_D, self.posture_mask,
+                                      self.control_period)
             trunk, imp = plan.trunk, self.impedance
             code = references.stack_references(
                 plan.contact, plan.touchdown_normal, plan.foot_position, plan.foot_velocity,

@@ -411,6 +411,21 @@ public:
     stack_bound_ = true;
   }
 
+  // The controller's settings the stack engine's references read as they are each cycle, as
+  // its tasks do (PassiveWBC's attributes): the torque-limit task's scale and per-joint caps
+  // (inf: none), the posture regulariser's gains and joint mask, the control period.
+  void stack_settings(double torque_scale, const DoubleArray & torque_cap, double posture_K,
+                      double posture_D, const DoubleArray & posture_mask, double control_period)
+  {
+    stack_torque_scale_ = torque_scale;
+    torque_cap_ = Map<const VectorXd>(input(torque_cap, na_, "torque_cap", false), na_);
+    posture_K_ = posture_K;
+    posture_D_ = posture_D;
+    posture_mask_ = Map<const VectorXd>(input(posture_mask, na_, "posture_mask"), na_);
+    posture_on_ = (posture_K_ != 0.0 || posture_D_ != 0.0) && posture_mask_.any();
+    control_period_ = control_period;
+  }
+
   // PassiveWBC._solve_stack's references of one cycle from the bound terms, for a plan given as
   // its arrays (planner's leg order): first the plan is checked (nothing else is done if an
   // array has a NaN/inf entry), then the τ bounds (eq. 15), the stance anchors (eq. 32; also as
@@ -459,7 +474,12 @@ public:
     const bool * stance_legs = stance_in.data();
     for (Index i = 0; i < nc_; ++i)
       stance_[i] = stance_legs[leg_[i]];
-    torque_bounds(terms_tau_max_);
+    { // τ bounds: the robot's τ_max(q) of the terms times the torque-limit task's scale, capped
+      Map<VectorXd> hi(tau_hi_, na_), lo(tau_lo_, na_);
+      hi = Map<const VectorXd>(terms_tau_max_, na_) * stack_torque_scale_;
+      hi = hi.cwiseMin(torque_cap_);
+      lo = -hi;
+    }
     using Rows3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
     const Map<const Rows3> points(terms_points_, nc_, 3), velocities(terms_point_velocities_, nc_, 3);
     Map<Rows3> anchors(anchors_out_, nc_, 3), frames(anchor_frames_, nc_, 3);
@@ -598,13 +618,10 @@ private:
 
   // τ_min(q), τ_max(q) of eq. 15: the robot's linkage profile (wholebody.robots.torque_limits),
   // scaled, capped by the weak-joint overrides.
-  void torque_bounds(const double * robot_upper = nullptr)
+  void torque_bounds()
   {
     Map<VectorXd> hi(tau_hi_, na_), lo(tau_lo_, na_);
-    if (robot_upper)
-      hi = Map<const VectorXd>(robot_upper, na_);
-    else
-      torque_.upper(angles_, hi);
+    torque_.upper(angles_, hi);
     hi *= torque_scale_;
     hi = hi.cwiseMin(torque_cap_);
     lo = -hi;
@@ -705,7 +722,7 @@ private:
   bool trunk_feedforward_ = true, limits_tanh_ = false;
   double slack_weight_ = 0, K_st_ = 0, D_st_ = 0, control_period_ = 0, R_qdd_ = 0, R_force_ = 0, tangential_weight_ = 0;
   double mu_ = 0, f_min_ = 0, f_max_ = 0, swing_K_ = 0, swing_D_ = 0, mass_ = 0;
-  double horizon_ = 0, a_max_ = 0, steepness_ = 0, torque_scale_ = 1;
+  double horizon_ = 0, a_max_ = 0, steepness_ = 0, torque_scale_ = 1, stack_torque_scale_ = 1;
   VectorXd Q_, torque_weights_, K_x_, D_x_, K_theta_, D_theta_, torque_cap_;
   TorqueProfile torque_;
   // per-cycle state
@@ -750,6 +767,7 @@ PYBIND11_MODULE(_passive_cycle, m)
     .def("bind_stack", &PassiveCycle::bind_stack, py::arg("arrays"))
     .def("stack_references", &PassiveCycle::stack_references)
     .def("stack_commanded", &PassiveCycle::stack_commanded, py::arg("forces"))
+    .def("stack_settings", &PassiveCycle::stack_settings)
     .def("terms", &PassiveCycle::terms)
     .def_property_readonly("nv", &PassiveCycle::nv)
     .def_property_readonly("n", &PassiveCycle::n)

@@ -116,13 +116,13 @@ class TorqueProfile:
             hi = self.constant.copy()
             return self.scale * hi if self.scale != 1.0 else hi
         q = q_joints.tolist() if type(q_joints) is np.ndarray else list(q_joints)
-        key = tuple([q[i] for i in self._linkage_index])
+        key = (*[q[i] for i in self._linkage_index], self.scale)  # (the scale may change)
         last = self._last_upper
         if last is not None and last[0] == key:
             return last[1].copy()
         out = self._constant_list.copy()
         try:
-            for i, a, (force_ab, a2b2, ab, offset) in zip(self._linkage_index, key,
+            for i, a, (force_ab, a2b2, ab, offset) in zip(self._linkage_index, key[:-1],
                                                            self._linkage_terms):
                 t = a + offset
                 out[i] = force_ab * abs(math.sin(t)) / math.sqrt(a2b2 - 2.0 * ab * math.cos(t))
