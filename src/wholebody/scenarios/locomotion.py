@@ -495,14 +495,13 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     fell_at = None
     legs = planner.legs
     frame_ids = [robot.model.getFrameId(robot.contact(n).frame) for n in legs]
-    pin_data = robot.model.createData()
 
     def observe(t, result):
         nonlocal fell_at
         plan = ctrl.last_plan
         q, v = sim.state()
         update_to_state(robot, q, v)  # (an estimate, or a controller keeping its own terms)
-        pin.framesForwardKinematics(robot.model, pin_data, q)
+        placements = robot.data.oMf  # (the frames of that state: Robot.update places them)
         # the twin's trunk errors (eq. 4's, against the plan's trunk reference): under real-robot
         # conditions the controller's own (impedance.last_errors) are the estimate's
         com_error, orientation_error = TrunkImpedance.pose_errors(robot.data.oMi[1].rotation,
@@ -511,7 +510,7 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
         log.append(
             t=t, com_error=com_error, orientation_error=orientation_error,
             com=robot.com, com_ref=plan.trunk.position,
-            feet=[pin_data.oMf[f].translation for f in frame_ids], stance=plan.contact,
+            feet=[placements[f].translation for f in frame_ids], stance=plan.contact,
             tau=result.tau, tau_min=lo, tau_max=hi, ok=result.ok,
             swing_error=max((r.error for r in result.tasks if r.name.startswith("swing")),
                             default=0.0),
