@@ -16,7 +16,7 @@ import pytest
 from conftest import native_cycle_or_skip
 
 from wholebody.control.balance import MomentumBalance
-from wholebody.control.passive import PassiveWBC
+from wholebody.control.passive import PLAN_ARRAYS, PassiveWBC
 from wholebody.guard import Outcome
 
 native_cycle_or_skip("_passive_cycle")
@@ -87,7 +87,7 @@ def test_engines_agree_beyond_the_joint_limits(robots, robot_name, controller):
 
 
 # ------------------------------------------------------------------ PassiveWBC at t = 1e300
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_passive_plan_at_an_absurd_time_is_held(robots, engine):
     """t = 1e300 makes the planner's trunk reference NaN: both engines return the previous
     torque, HELD, naming the plan's field; the next cycle with a sane plan is solved (checked
@@ -114,12 +114,13 @@ def test_passive_engines_agree_at_an_absurd_time(robots):
     robot = robots["hyq"]
     q, v = robot.q_ref, np.zeros(robot.nv)
     out = []
-    for engine in ("python", "native"):
+    for engine in ("python", "native", "stack"):
         ctrl = PassiveWBC(robot, engine=engine)
         ctrl.compute(q, v, 0.0)
         out.append(ctrl.compute(q, v, 1e300))
-    assert out[0].status == out[1].status
-    np.testing.assert_allclose(out[0].tau, out[1].tau, atol=1e-9)
+    for other in out[1:]:
+        assert other.status == out[0].status
+        np.testing.assert_allclose(other.tau, out[0].tau, atol=1e-9)
 
 
 # ------------------------------------------------------------------ |v|² overflows
@@ -144,7 +145,7 @@ def test_overflowing_velocity_is_a_flagged_value_naming_v(robots, engine, gains,
     assert max(dyn.residuals(q, v, again)) < 1e-6 * dyn.weight
 
 
-@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("engine", ["python", "native", "stack"])
 def test_passive_overflowing_velocity_names_v(robots, engine):
     robot = robots["hyq"]
     ctrl = PassiveWBC(robot, engine=engine)
@@ -251,3 +252,23 @@ def test_other_hierarchy_controllers_count_failed_cycles(robots, kind):
     dyn = fuzz.DynamicsCheck(robot)
     assert max(dyn.residuals(q, v, sol)) < 1e-6 * dyn.weight
     assert ctrl.compute(q, bad, 0.010).status.endswith("(1 failed cycle(s) in a row)")
+
+
+@pytest.mark.parametrize("field", PLAN_ARRAYS)
+def test_passive_nonfinite_plan_field_is_named_alike_by_every_engine(robots, field):
+    """One NaN in one plan array: every engine holds the previous torque and names that field
+    (the stack engine's compiled references check the arrays themselves)."""
+    robot = robots["hyq"]
+    q, v = robot.q_ref, np.zeros(robot.nv)
+    statuses = set()
+    for engine in ("python", "native", "stack"):
+        ctrl = PassiveWBC(robot, engine=engine)
+        assert ctrl.compute(q, v, 0.0).ok
+        plan = copy.deepcopy(ctrl.last_plan)
+        owner, name = (plan.trunk, field[6:]) if field.startswith("trunk.") else (plan, field)
+        getattr(owner, name).flat[-1] = np.nan
+        held = ctrl.cycle(q, v, plan)
+        assert held.outcome is Outcome.HELD
+        assert f"plan: {field} is not finite" in held.status
+        statuses.add(held.status)
+    assert len(statuses) == 1

@@ -845,29 +845,9 @@ class PassiveWBC(PlannedController):
         if observer is not None and self._commanded_wrench is not None:
             self.impedance.external_wrench = observer.update(
                 terms.h_G, self._commanded_wrench, terms.mass, self.control_period)
-        if references is not None:  # the plan checked first, then every reference
-            self._overrides()
-            references.stack_settings(self.torque_limits.scale, self._override_cap,
-                                      self.posture_K, self.posture_D, self.posture_mask,
-                                      self.control_period)
-            trunk, imp = plan.trunk, self.impedance
-            code = references.stack_references(
-                plan.contact, plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
-                plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
-                trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration,
-                imp.external_wrench, imp.K_x, imp.D_x, imp.K_theta, imp.D_theta, imp.feedforward)
-            if 0 <= code < len(PLAN_ARRAYS):
-                return self._bad_plan(plan, PLAN_ARRAYS[code], terms.q, terms.nle[6:], t0)
-            self._tau_bounds = self._tau_lo, self._tau_hi
-            W_d, lean, finite = self._W_d.copy(), self._lean, code < 0
-        else:
-            self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
-            self._stance_anchors(stance, terms.points[self._contact_order],
-                                 terms.point_velocities[self._contact_order])
-            R = terms.rotation
-            W_d = self.impedance.wrench_at(R, R @ terms.v[3:6], terms.com, terms.vcom,
-                                           terms.mass, terms.Ig, plan.trunk)
-            lean, finite = W_d[:3], math.isfinite(W_d.sum())
+        bad, W_d, lean, finite = self._state_references(plan, stance)
+        if bad is not None:
+            return self._bad_plan(plan, bad, terms.q, terms.nle[6:], t0)
         t1 = time.perf_counter()
         # failed cycles are values, as in the Python engine: a W_d that is not finite (e.g. the
         # external wrench), NaN/inf task rows (the state was checked by the update)
@@ -909,6 +889,34 @@ class PassiveWBC(PlannedController):
                              "prepare": t1 - t0, "update": parts.get("update", np.nan),
                              "rows": parts.get("rows", np.nan),
                              "qp": parts.get("solve", np.nan)})
+
+    def _state_references(self, plan, stance) -> tuple[str | None, np.ndarray, np.ndarray, bool]:
+        """The stack engine's references of the cycle from the hierarchy cycle's terms: τ
+        bounds, stance anchors, W_d (and, compiled, the posture target, written into its task);
+        (the plan's first non-finite field or None, W_d, the lean force, whether W_d is
+        finite). Compiled (``PassiveCycle.stack_references``, the plan checked first) where
+        built, else in Python."""
+        terms, references = self._terms, self._references
+        if references is None:
+            self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
+            self._stance_anchors(stance, terms.points[self._contact_order],
+                                 terms.point_velocities[self._contact_order])
+            R = terms.rotation
+            W_d = self.impedance.wrench_at(R, R @ terms.v[3:6], terms.com, terms.vcom,
+                                           terms.mass, terms.Ig, plan.trunk)
+            return None, W_d, W_d[:3], math.isfinite(W_d.sum())
+        self._overrides()  # the settings as they are now, as the tasks read theirs
+        references.stack_settings(self.torque_limits.scale, self._override_cap, self.posture_K,
+                                  self.posture_D, self.posture_mask, self.control_period)
+        trunk, imp = plan.trunk, self.impedance
+        code = references.stack_references(
+            plan.contact, plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
+            plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
+            trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration,
+            imp.external_wrench, imp.K_x, imp.D_x, imp.K_theta, imp.D_theta, imp.feedforward)
+        bad = PLAN_ARRAYS[code] if 0 <= code < len(PLAN_ARRAYS) else None
+        self._tau_bounds = self._tau_lo, self._tau_hi
+        return bad, self._W_d.copy(), self._lean, code < 0
 
     # ------------------------------------------------------------------ the same problem as a stack
     def as_stack(self, plan):
