@@ -854,8 +854,7 @@ class PassiveWBC(PlannedController):
         sol = SimpleNamespace(ok=False, status="the desired trunk wrench W_d is not finite",
                               timings={})
         if finite:
-            _, variables = self._stack.update(plan, lean, terms.q, terms.v,
-                                              state_references=references is None)
+            _, variables = self._stack.update(plan, lean)
             t1 = time.perf_counter()
             try:
                 sol = self._stack_cycle.solve_updated(variables)
@@ -901,6 +900,7 @@ class PassiveWBC(PlannedController):
             self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
             self._stance_anchors(stance, terms.points[self._contact_order],
                                  terms.point_velocities[self._contact_order])
+            self._stack.set_state_references(terms.q, terms.v)
             R = terms.rotation
             W_d = self.impedance.wrench_at(R, R @ terms.v[3:6], terms.com, terms.vcom,
                                            terms.mass, terms.Ig, plan.trunk)

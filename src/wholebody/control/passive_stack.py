@@ -19,8 +19,9 @@ from ..variables import Variables
 
 class PassiveStack:
     """The tasks of a :class:`~wholebody.control.passive.PassiveWBC`'s QP, built once; each
-    :meth:`update` sets their references (stance anchors and normals, trunk reference, posture
-    and lean, swing references) for a plan and puts the swing feet's tasks on their level, so
+    :meth:`update` sets their plan's references (stance normals, trunk reference, lean, swing
+    references) and puts the swing feet's tasks on their level, after
+    :meth:`set_state_references` (stance anchors, posture target), so
     that a compiled cycle keeps one program per stance set. The weights and gains are the
     controller's when built. The per-contact tasks apply to all active contacts: the stance
     feet of :meth:`update`'s variables. The single-slack mode has no stack form (its cost is an
@@ -83,25 +84,28 @@ class PassiveStack:
         self._stances[in_stance] = entry
         return entry
 
-    def update(self, plan, lean=None, q=None, v=None, state_references: bool = True
-               ) -> tuple[Stack, Variables]:
-        """The stack and variables of ``plan`` at the controller's state (its stance anchors of
-        the cycle; ``lean``: the desired net force of the cycle, for "force-parallel"; the
-        posture regulariser's (q, v), default the robot's cached state). ``state_references``
-        False: the stance anchors (:attr:`anchor_frames`) and the posture target
-        (``posture.target``) were written already (the compiled references of
-        :meth:`PassiveWBC._solve_stack <wholebody.control.passive.PassiveWBC._solve_stack>`)."""
+    def set_state_references(self, q=None, v=None) -> None:
+        """The references that follow the controller's state, computed in Python: the stance
+        anchors (the controller's, as the contact frames' origins) and the posture target at
+        (q, v), default the robot's cached state. (The stack engine's compiled references,
+        ``PassiveCycle.stack_references``, write the same arrays.)"""
+        wbc = self.wbc
+        np.add(wbc._anchors, self._radius_offset, out=self.anchor_frames)
+        # in place: the target was checked when set, a posture acceleration of a finite state
+        # is finite (a NaN would fail the cycle's row check)
+        self.posture.target[6:] = wbc.posture_acceleration(q, v)
+
+    def update(self, plan, lean=None) -> tuple[Stack, Variables]:
+        """The stack and variables of ``plan``: the tasks' plan references (stance set and
+        normals, trunk reference, swing references; ``lean``: the desired net force of the
+        cycle, for "force-parallel"), the state references being set already
+        (:meth:`set_state_references` or the compiled ones)."""
         wbc = self.wbc
         in_stance = tuple(plan.contact[wbc._leg].tolist())
         entry = self._stances.get(in_stance)
         levels, swing, variables, legs, stance, self.force_index = (entry
                                                                     or self._stance(in_stance))
         self.swinging = swing
-        if state_references:
-            np.add(wbc._anchors, self._radius_offset, out=self.anchor_frames)
-            # in place: the target was checked when set, a posture acceleration of a finite
-            # state is finite (a NaN would fail the cycle's row check)
-            self.posture.target[6:] = wbc.posture_acceleration(q, v)
         key = (stance, plan.touchdown_normal.tobytes())
         if key != self._normals:  # checked and set when they change only
             self._normals = key
@@ -129,4 +133,6 @@ def passive_stack(wbc, plan):
     (stack, variables), new tasks. Needs a prior ``wbc.solve`` on the same plan (stance anchors,
     the desired wrench)."""
     lean = None if wbc.last_desired_wrench is None else wbc.last_desired_wrench[:3]
-    return PassiveStack(wbc).update(plan, lean)
+    stack = PassiveStack(wbc)
+    stack.set_state_references()
+    return stack.update(plan, lean)
