@@ -208,7 +208,9 @@ def hyq_stack(robot, full=False):
          FrameTask("lf_foot", kp=200.0, kd=30.0, name="lf position", mask="position"),
          FrameTask("trunk_imu", kp=30.0, kd=np.full(6, 7.0), name="imu orientation",
                    mask="orientation"),
-         momentum],
+         momentum,
+         ContactConstraint(name="contacts as an independent set", kp=20.0, kd=2.0,
+                           rank_tolerance=1e-3, contacts=("rh_foot", "lf_foot"), weight=0.5)],
         [PostureTask(kp=np.linspace(20.0, 80.0, na), kd=np.linspace(5.0, 15.0, na), name="posture base",
                      weight=0.1, q_ref=q_ref, base_kp=30.0, base_kd=8.0),
          PostureTask(kp=np.linspace(60.0, 10.0, na), kd=6.0, name="posture joints", weight=0.05),
@@ -480,6 +482,37 @@ def test_every_kind_levels_equal_formulation(robots, name, full):
     anchors = s_native.find("contacts").anchors
     assert set(anchors) == set(robot.contact_names)
     assert assert_same_refs(s_native, s_python, name) == n_first_use_refs(s_native) >= 2
+
+
+@native
+def test_dependent_contact_rows_equal_formulation(rng):
+    """ODRI's 8-DoF Solo (two joints per leg, point feet): its contacts' rows are linearly
+    dependent. With ``rank_tolerance`` the contact task's rows are an independent set, the rest
+    zero: the native level arrays equal the Python Formulation's (some rows zero in both), and
+    the torques of the two engines agree."""
+    from conftest import solo8_description
+
+    import wholebody as wb
+    solo = wb.load_robot(solo8_description())
+
+    def build():
+        return Stack([[NewtonEuler(name="newton-euler"),
+                       ContactConstraint(name="contacts", kp=50.0, kd=5.0, rank_tolerance=1e-4),
+                       TorqueLimits(name="torque limits")],
+                      [PostureTask(name="posture", kp=10.0, kd=2.0)]])
+    variables = Variables(solo, solo.contact_names)
+    s_native, s_python = build(), build()
+    states = moving_states(solo, 4) + random_states(solo, rng, 3)
+    cycle, got, ref = compare_on_states(solo, s_native, s_python, variables, states,
+                                        where="solo8")
+    J = solo.stacked_contact_jacobian()  # of the last state
+    zero = ~ref[0]["B"].any(axis=1)
+    assert 0 < zero.sum() == J.shape[0] - np.linalg.matrix_rank(J, tol=1e-4 * np.linalg.norm(J, 2))
+    python = HierarchyCycle(solo, build(), engine="python")
+    for q, v in states:
+        a, b = cycle.solve(q, v, variables), python.solve(q, v, variables)
+        assert a.ok and b.ok, (a.status, b.status)
+        np.testing.assert_allclose(a.tau, b.tau, atol=1e-6, rtol=0)
 
 
 @native
@@ -927,6 +960,9 @@ def random_task(robot, rng, contacts):
         lambda: CenterOfPressure(margin=float(rng.uniform(0, 0.3)), contacts=subset, weight=w),
         lambda: TangentialForceRegularizer(weight=w * 1e-4, contacts=subset),
         lambda: SubclassedPosture(kp=20.0, kd=5.0, weight=w),
+        lambda: ContactConstraint(kp=float(rng.uniform(0, 100)), kd=float(rng.uniform(0, 20)),
+                                  contacts=subset, weight=w,
+                                  rank_tolerance=float(rng.choice([0.0, 1e-4]))),
     ]
     return make[rng.integers(len(make))]()
 

@@ -1,5 +1,6 @@
 """PassiveWBC's compiled engines against the Python engine — the hand-assembled QP, their tested
-reference — on closed-loop HyQ trot and crawl states: engine="native", the compiled cycle
+reference — on closed-loop HyQ trot and crawl states (and an 8-DoF Solo's crawl, whose stance
+rows are dependent): engine="native", the compiled cycle
 (src/wholebody/native/passive_cycle.cpp), also against Robot.update's Pinocchio terms (it
 rebuilds the model from arrays) and in closed loop in the twin; engine="stack", the same QP as a
 stack of library tasks (control/passive_stack.py) through the compiled hierarchy program
@@ -135,6 +136,27 @@ def test_matches_python_engine(robots, request, gait, name, ramp, engine):
                                    atol=1e-12)
         swinging += not plan.contact.all()
     assert swinging > len(states) // 4  # the states exercise the swing rows
+
+
+def test_stack_matches_python_engine_on_dependent_stance_rows():
+    """ODRI's 8-DoF Solo (legs of two joints): the stack engine, whose stance task takes an
+    independent set of its rows (what engine "auto" picks for it), gives the Python engine's
+    torques, forces and task reports cycle by cycle on the states of a closed-loop crawl."""
+    from conftest import solo8_description
+
+    import wholebody as wb
+    solo = wb.load_robot(solo8_description())
+    states = gait_states(solo, "crawl", 2.0)
+    python = PassiveWBC(solo, planner=planner(solo), engine="python")
+    stack = PassiveWBC(solo, planner=planner(solo), engine="stack")
+    assert python.dependent_stance and PassiveWBC(solo, planner=planner(solo)).engine == "stack"
+    swinging = 0
+    for k, (q, v, plan) in enumerate(states):
+        a, b = python.cycle(q, v, plan), stack.cycle(q, v, plan)
+        assert a.ok, a.status
+        assert_same_solution(a, b, f"solo8 cycle {k}")
+        swinging += not plan.contact.all()
+    assert swinging > len(states) // 4
 
 
 @pytest.mark.parametrize("engine", ENGINES)

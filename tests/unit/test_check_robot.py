@@ -211,7 +211,8 @@ def test_two_joint_legs_are_a_warning():
     from wholebody.scenarios import crawl
     with pytest.raises(ValueError, match="--set engine: 'native' needs linearly independent"):
         crawl.validate(robot, {"gait": "crawl", "engine": "native", "duration": 12.0})
-    crawl.validate(robot, {"gait": "crawl", "engine": "auto", "duration": 12.0})
+    for engine in ("auto", "stack", "python"):
+        crawl.validate(robot, {"gait": "crawl", "engine": engine, "duration": 12.0})
 
 
 def test_joints_with_equal_limits_do_not_count_as_leg_joints():

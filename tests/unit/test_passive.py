@@ -325,27 +325,36 @@ def test_force_parallel_regularization_spreads_friction_evenly(robots, plan_for)
     assert ratios["force-parallel"].max() < ratios["force-normal"].max() - 0.02
 
 
-def test_dependent_stance_rows_are_met_in_the_least_squares_sense(rng, plan_for):
+@pytest.mark.parametrize("engine", ["python", "stack"])
+def test_dependent_stance_rows_are_met_in_the_least_squares_sense(rng, plan_for, engine):
     """ODRI's 8-DoF Solo (two joints per leg): its stance rows are linearly dependent, so the
     stance task's targets are generally inconsistent. The controller still solves: the dynamics
     hold (RNEA), and the stance feet's accelerations are the least-squares part of the target
-    (J_s J_s⁺ b_s, by numpy's lstsq on the rows the test builds); the native engine refuses it."""
+    (J_s J_s⁺ b_s, by numpy's lstsq on the rows the test builds), with the hand-assembled QP
+    (engine "python") and with the stack of tasks, whose stance task takes an independent set of
+    its rows (engine "stack", what "auto" picks); the native engine refuses it."""
     from conftest import solo8_description
 
     import wholebody as wb
+    from wholebody.cycle import native_available
     solo = wb.load_robot(solo8_description())
     planner = SimpleNamespace(legs=solo.contact_names)
     with pytest.raises(ValueError, match="engine: 'native' needs linearly independent"):
         PassiveWBC(solo, planner=planner, engine="native")
-    wbc = PassiveWBC(solo, planner=planner, engine="python")
+    if engine == "stack" and not native_available():
+        pytest.skip("the stack engine needs the compiled wholebody._hierarchy_cycle")
+    if native_available():
+        assert PassiveWBC(solo, planner=planner).engine == "stack"
+    wbc = PassiveWBC(solo, planner=planner, engine=engine)
     assert wbc.dependent_stance
     solved = 0
     for stance in [(True,) * 4, (False, True, True, True)]:
         for _ in range(3):
-            solo.update(*standing_state(solo, rng, noise=0.05))
-            sol = wbc.solve(plan_for(solo, rng, stance, swing_noise=(0.005, 0.05, 0.2)))
+            q, v = standing_state(solo, rng, noise=0.05)
+            sol = wbc.cycle(q, v, plan_for(solo, rng, stance, swing_noise=(0.005, 0.05, 0.2)))
             assert sol.ok, sol.status
             solved += 1
+            solo.update(q, v)
             J = solo.stacked_contact_jacobian()
             rnea = pin.rnea(solo.model, solo.model.createData(), solo.q, solo.v, sol.qdd)
             np.testing.assert_allclose(rnea, np.concatenate([np.zeros(6), sol.tau]) + J.T @ sol.lam,

@@ -56,6 +56,7 @@ from ..robots.reference import froude_ratio
 from ..robots.roles import leg_joints
 from ..solvers import SolverSettings
 from ..solvers.backends import DaqpResult, solve_daqp_qp
+from ..tasks.contact import independent_rows
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import (F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound,
                             heading_weights, trunk_weights)
@@ -164,9 +165,10 @@ class PassiveConfig:
     instead of 0, which holds them near the standing posture;
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
-    ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, else Python with
-    one logged warning; "stack": the same QP as a two-level stack of library tasks solved by
-    the compiled :class:`~wholebody.cycle.HierarchyCycle`, :class:`PassiveStack`).
+    ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, "stack" where
+    the stance rows are dependent (legs of two joints), else Python with one logged warning;
+    "stack": the same QP as a two-level stack of library tasks solved by the compiled
+    :class:`~wholebody.cycle.HierarchyCycle`, :class:`PassiveStack`).
     """
 
     mu: float | None = None
@@ -365,6 +367,8 @@ class PassiveWBC(PlannedController):
         #: the stance feet's rows are linearly dependent in the standing posture (legs of fewer
         #: than three joints): each cycle they are replaced by an independent set
         self.dependent_stance = stance_rank(robot, self.contacts) < 3 * c
+        #: the stance task's rank tolerance on engine "stack" (0: its rows as they are)
+        self.stance_rank_tolerance = STANCE_RANK_TOLERANCE if self.dependent_stance else 0.0
         self.engine = self._resolve_engine(config, self.dependent_stance)
         self._native = self._stack = None
         if self.engine == "native":
@@ -474,17 +478,16 @@ class PassiveWBC(PlannedController):
 
     def _independent_stance_rows(self, J, target, pat: StancePattern) -> None:
         """Stance rows J_s q̈ = b_s that are linearly dependent (legs of fewer than three joints:
-        a foot cannot move sideways without the body) replaced by U_rᵀ J_s q̈ = U_rᵀ b_s, J_s = U Σ
-        Vᵀ, over the singular values above ``STANCE_RANK_TOLERANCE`` σ_max; the other rows are
-        freed. The least-squares part of b_s is kept; what no q̈ can meet is dropped instead of
-        making the equalities inconsistent."""
+        a foot cannot move sideways without the body) replaced by an independent set
+        (:func:`~wholebody.tasks.contact.independent_rows`, as the stance task of engine "stack"
+        with ``rank_tolerance``); the other rows are freed. The least-squares part of b_s is
+        kept; what no q̈ can meet is dropped instead of making the equalities inconsistent."""
         qp = self.qp
         rows = np.flatnonzero(pat.s3)
-        U, singular, _ = np.linalg.svd(J[rows], full_matrices=True)
-        rank = independent_rank(singular=singular)
+        A, b, rank = independent_rows(J[rows], target[rows], STANCE_RANK_TOLERANCE)
         at = qp.n + qp.r_feet + rows
-        qp.A[qp.r_feet + rows, :self.robot.nv] = U.T @ J[rows]
-        qp.upper[at] = qp.lower[at] = U.T @ target[rows]
+        qp.A[qp.r_feet + rows, :self.robot.nv] = A
+        qp.upper[at] = qp.lower[at] = b
         qp.sense[at[rank:]] = FREE
         qp.upper[at[rank:]], qp.lower[at[rank:]] = np.inf, -np.inf
         if qp.dual is not None:  # the rows changed: their old multipliers mean nothing
@@ -623,16 +626,12 @@ class PassiveWBC(PlannedController):
     @staticmethod
     def _resolve_engine(config: PassiveConfig, dependent_stance: bool = False) -> str:
         """``config.engine``, with "auto" resolved: native when built and the slack and the
-        stance rows supported."""
-        if dependent_stance:
-            if config.engine in ("native", "stack"):
-                raise ValueError(f"engine: '{config.engine}' needs linearly independent stance "
-                                 "rows (legs of three joints or more); this robot's are "
-                                 "dependent, use engine='python' or 'auto'")
-            if config.engine == "auto":
-                warn_python_fallback("PassiveWBC", "the stance feet's rows are linearly "
-                                                   "dependent (legs of fewer than three joints)")
-                return "python"
+        stance rows supported; dependent stance rows (legs of two joints) on the stack engine,
+        whose stance task takes an independent set of them."""
+        if dependent_stance and config.engine == "native":
+            raise ValueError("engine: 'native' needs linearly independent stance rows (legs of "
+                             "three joints or more); this robot's are dependent, use "
+                             "engine='stack', 'python' or 'auto'")
         if config.engine == "stack" and not native_available():
             raise ValueError("engine: 'stack' needs the compiled extension "
                              "wholebody._hierarchy_cycle (install with a C++ compiler)")
@@ -640,6 +639,12 @@ class PassiveWBC(PlannedController):
             return config.engine
         if config.swing_slack == "single":
             warn_python_fallback("PassiveWBC", "the native engine has no 'single' swing slack")
+            return "python"
+        if dependent_stance:  # the stack's stance task takes an independent set of its rows
+            if native_available():
+                return "stack"
+            warn_python_fallback("PassiveWBC", "the compiled wholebody._hierarchy_cycle is not "
+                                               "built")
             return "python"
         try:
             from .. import _passive_cycle  # noqa: F401

@@ -24,15 +24,18 @@ class PassiveStack:
     :meth:`set_state_references` (stance anchors, posture target), so
     that a compiled cycle keeps one program per stance set. The weights and gains are the
     controller's when built. The per-contact tasks apply to all active contacts: the stance
-    feet of :meth:`update`'s variables. The single-slack mode has no stack form (its cost is an
-    ∞-norm, not a weighted task)."""
+    feet of :meth:`update`'s variables; where their rows are linearly dependent (legs of two
+    joints) the stance task takes an independent set of them (``rank_tolerance``), as the Python
+    engine does. The single-slack mode has no stack form (its cost is an ∞-norm, not a weighted
+    task)."""
 
     def __init__(self, wbc):
         if wbc.swing_slack == "single":
             raise ValueError("swing_slack: 'single' has no two-level stack form")
         self.wbc = wbc
         robot = wbc.robot
-        self.contact = ContactConstraint(kp=wbc.K_st, kd=wbc.D_st)
+        self.contact = ContactConstraint(kp=wbc.K_st, kd=wbc.D_st,
+                                         rank_tolerance=wbc.stance_rank_tolerance)
         self.friction = FrictionCone(wbc.mu)
         self.normal_bounds = NormalForceBounds(wbc.f_min, wbc.f_max)
         self.hard = [NewtonEuler(), self.contact, self.friction, self.normal_bounds,

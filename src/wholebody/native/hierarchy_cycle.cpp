@@ -20,6 +20,8 @@
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/spatial.hpp>
 
+#include <Eigen/SVD>
+
 #include <pybind11/eigen.h>
 
 #include <chrono>
@@ -457,8 +459,8 @@ private:
        {false, {{"tanh"}, {"horizon"}, {"a_max"}, {"steepness"}}, {}, &C::rows_na,
         &C::fill_joint_acceleration_limits}},
       {"contact_constraint",
-       {true, {{"kp"}, {"kd"}, {"anchors", 3, Unit::Contact}}, {}, &C::rows_contact_dims,
-        &C::fill_contact_constraint}},
+       {true, {{"kp"}, {"kd"}, {"anchors", 3, Unit::Contact}, {"rank_tolerance"}}, {},
+        &C::rows_contact_dims, &C::fill_contact_constraint}},
       {"center_of_pressure", {false, {{"margin"}}, {}, &C::rows_cop, &C::fill_center_of_pressure}},
       {"friction_cone",
        {false, {{"mu"}, {"normals", 3, Unit::Contact}}, {{"torsion", 2}}, &C::rows_friction, &C::fill_friction_cone}},
@@ -717,6 +719,35 @@ private:
       }
       r += d;
     }
+    const double tolerance = *s.p(3);
+    if (tolerance > 0.0 && r > 0)
+      independent_rows(A.topLeftCorner(r, nv_), e.head(r), tolerance);
+  }
+
+  // tasks.contact.independent_rows, in place: rows J x = target replaced by U_rᵀ J x = U_rᵀ
+  // target over the singular values above tolerance σ_max (each column of U_r signed so that its
+  // entry of largest magnitude is positive), the remaining rows zero.
+  static void independent_rows(Eigen::Ref<RowMatrix> J, Segment target, double tolerance)
+  {
+    const Eigen::JacobiSVD<MatrixXd> svd(MatrixXd(J), Eigen::ComputeFullU);
+    const VectorXd & singular = svd.singularValues();
+    Index rank = 0;
+    while (rank < singular.size() && singular[rank] > tolerance * singular[0])
+      ++rank;
+    MatrixXd U = svd.matrixU().leftCols(rank);
+    for (Index j = 0; j < rank; ++j)
+    {
+      Index largest = 0;
+      U.col(j).cwiseAbs().maxCoeff(&largest);
+      if (U(largest, j) < 0.0)
+        U.col(j) = -U.col(j);
+    }
+    const MatrixXd rows = U.transpose() * J;
+    const VectorXd targets = U.transpose() * target;
+    J.setZero();
+    target.setZero();
+    J.topRows(rank) = rows;
+    target.head(rank) = targets;
   }
 
   // the CoP inside each (margin-shrunk) sole: 4 rows per rectangle contact

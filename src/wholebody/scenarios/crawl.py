@@ -88,11 +88,11 @@ def validate(robot, params: dict) -> None:
     check_quadruped(robot, "the crawl scenario", params["gait"])
     if params["engine"] not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
-    if params["engine"] in ("native", "stack") and stance_rank(
+    if params["engine"] == "native" and stance_rank(
             robot, robot.contact_names) < 3 * len(robot.contact_names):
-        raise ValueError(f"--set engine: '{params['engine']}' needs linearly independent stance "
-                         f"rows (legs of three joints or more); {robot.name}'s are dependent: use "
-                         "auto or python")
+        raise ValueError(f"--set engine: 'native' needs linearly independent stance rows (legs "
+                         f"of three joints or more); {robot.name}'s are dependent: use auto, "
+                         "stack or python")
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,

@@ -133,6 +133,23 @@ class _PerContact(Task):
         return out
 
 
+def independent_rows(J: np.ndarray, target: np.ndarray, tolerance: float
+                     ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Equality rows J x = target whose rows may be linearly dependent, replaced by an
+    independent set: U_rᵀ J x = U_rᵀ target (J = U Σ Vᵀ, U_r the left singular vectors of the
+    singular values above ``tolerance`` σ_max, each signed so that its entry of largest magnitude
+    is positive), the remaining rows zero. The least-squares part of ``target`` is kept, the part
+    no x can meet dropped, so that the rows stay consistent. → (rows, targets, rank), new
+    arrays."""
+    U, singular, _ = np.linalg.svd(J)
+    rank = int((singular > tolerance * singular[0]).sum()) if singular.size else 0
+    U = U[:, :rank]
+    U = U * np.sign(U[np.abs(U).argmax(axis=0), np.arange(rank)])
+    rows, targets = np.zeros_like(J), np.zeros_like(target)
+    rows[:rank], targets[:rank] = U.T @ J, U.T @ target
+    return rows, targets, rank
+
+
 class ContactConstraint(_PerContact):
     """Active contacts do not move: J_c qdd + Jdot_c v = 0 (Herzog et al. 2016, eq. 2).
 
@@ -140,19 +157,31 @@ class ContactConstraint(_PerContact):
     acceleration tracks kp (x_anchor - x) - kd v, holding each foot at its touchdown position
     ``anchors[name]`` (set on first use) so that slipping feet are pulled back. ``kp``, ``kd``:
     finite numbers >= 0 (one gain for all contacts), checked on assignment.
+
+    ``rank_tolerance`` > 0 (default 0: the rows as they are) replaces the rows by an independent
+    set every cycle (:func:`independent_rows`, singular values below ``rank_tolerance`` σ_max
+    count as zero): for contacts whose rows are linearly dependent, such as the point feet of legs
+    of two joints, whose targets are then generally inconsistent as hard equalities; the contacts
+    then meet the least-squares part of their targets.
     """
 
     kp = checked_attribute(gain_rule(scalar_only=True), "Anchor stiffness (1/s^2), >= 0.")
     kd = checked_attribute(gain_rule(scalar_only=True), "Contact-velocity damping (1/s), >= 0.")
+    rank_tolerance = checked_attribute(scalar_rule(low=0.0, high=1.0),
+                                       "Singular values below this share of the largest count as "
+                                       "zero (0: the rows as they are).")
 
     kernel = "contact_constraint"
     params = (schema.scalar("kp"), schema.scalar("kd"),
               schema.vector("anchors", 3, "contact",
-                            get=lambda t, layout, state: t.stacked_anchors(layout, state)))
+                            get=lambda t, layout, state: t.stacked_anchors(layout, state)),
+              schema.scalar("rank_tolerance"))
 
-    def __init__(self, name=None, weight=1.0, contacts=None, kp: float = 0.0, kd: float = 0.0):
+    def __init__(self, name=None, weight=1.0, contacts=None, kp: float = 0.0, kd: float = 0.0,
+                 rank_tolerance: float = 0.0):
         super().__init__(name, weight, contacts)
         self.kp, self.kd = kp, kd
+        self.rank_tolerance = rank_tolerance
         self.anchors: dict[str, np.ndarray] = {}
 
     def row_count(self, layout):
@@ -183,6 +212,8 @@ class ContactConstraint(_PerContact):
                 if c.dim == 6:
                     target[r + 3:r + 6] -= self.kd * vel[3:]
                 r += c.dim
+        if self.rank_tolerance:
+            J, target, _ = independent_rows(J, target, self.rank_tolerance)
         return TaskRows(qdd=J, lam=None, tau=None, target=target)
 
 

@@ -71,6 +71,38 @@ def test_contact_constraint_pulls_feet_back_to_their_anchors(robots, name):
     np.testing.assert_allclose(rows.target, expected, rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("rank", (3, 6))
+def test_independent_rows_keep_the_least_squares_solutions(rank):
+    """independent_rows on J (6 x 9, of rank ``rank``) and a target no x meets exactly (rank 3):
+    the returned rows are ``rank`` independent rows and zeros, and their solutions are exactly
+    the least-squares solutions of J x ≈ target — the same null space as J (scipy), and
+    numpy's lstsq solution meets them; at full rank they are J's own solutions."""
+    from scipy.linalg import null_space
+
+    from wholebody.tasks.contact import independent_rows
+    rng = np.random.default_rng(rank)
+    J = rng.normal(size=(6, rank)) @ rng.normal(size=(rank, 9))
+    target = rng.normal(size=6)
+    rows, targets, found = independent_rows(J, target, 1e-9)
+    assert found == rank
+    assert not rows[rank:].any() and not targets[rank:].any()
+    assert np.linalg.matrix_rank(rows[:rank]) == rank
+    N, M = null_space(J), null_space(rows)
+    np.testing.assert_allclose(M @ M.T, N @ N.T, atol=1e-10)
+    x = np.linalg.lstsq(J, target, rcond=None)[0]
+    np.testing.assert_allclose(rows @ x, targets, atol=1e-10)
+    if rank < 6:
+        assert np.linalg.norm(J @ x - target) > 0.1  # no exact solution
+    else:
+        y = np.linalg.lstsq(rows, targets, rcond=None)[0]
+        np.testing.assert_allclose(J @ y, target, atol=1e-10)
+    # the rows do not depend on the row order of J (each singular vector's sign is fixed)
+    order = rng.permutation(6)
+    again, again_targets, _ = independent_rows(J[order], target[order], 1e-9)
+    np.testing.assert_allclose(again, rows, atol=1e-10)
+    np.testing.assert_allclose(again_targets, targets, atol=1e-10)
+
+
 def test_tangent_basis_is_right_handed_and_orthonormal():
     for normal in (np.array([0, 0, 2.0]), TILTED, np.array([1.0, 0, 0]), np.array([0, -1.0, 0.1])):
         t1, t2, n = tangent_basis(normal)
