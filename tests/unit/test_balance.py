@@ -100,7 +100,7 @@ def test_integral_action_is_accumulated_clamped_on_by_default_and_off_at_zero(ro
     assert np.all(ctrl.cog_integral == 0.0)
     k0 = ctrl.momentum.k.copy()
     ctrl.compute(q, v, 0.5)
-    err = robot.com - ctrl.com_ref
+    err = ctrl.com - ctrl.com_ref  # the CoM of the state the controller read
     assert err[2] == pytest.approx(0.004, abs=1e-6)
     np.testing.assert_allclose(ctrl.cog_integral, 0.5 * err, atol=1e-12)
     Ki = ctrl.lqr.gains(robot).K_integral

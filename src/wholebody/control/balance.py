@@ -218,8 +218,9 @@ class MomentumBalance:
     ``engine``: ``"auto"`` (default: native when built), ``"native"`` — the stack solved by a
     :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms and rows, the same
     solution; ``robot.update`` runs only where something reads the robot's cache: a
-    ``reference``, the LQR, the Python engine — so after a PD cycle without a reference the
-    robot's cache is not the state the controller read; :attr:`com` is) — or ``"python"``
+    ``reference``, the Python engine — the LQR reads the compiled cycle's own terms, so after a
+    cycle without a reference the robot's cache is not the state the controller read;
+    :attr:`com` is) — or ``"python"``
     (``Formulation.solve``, the reference).
 
     ``contacts``: None (default) = all the robot's contacts; an empty list is a ValueError
@@ -297,6 +298,7 @@ class MomentumBalance:
                     if gains == "lqr" else None)
         self.cog_integral = np.zeros(3)
         self._t_last: float | None = None
+        self._cycle_view = None  # (the compiled cycle's terms, the contacts' points in them)
         self.failures = FailureStreak("MomentumBalance")
         if self.lqr is not None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
@@ -314,11 +316,12 @@ class MomentumBalance:
         self.cog_integral = np.zeros(3)
         self._t_last = None
 
-    def base_orientation_error(self) -> np.ndarray:
-        """``log3(R_base R_ref^T)``: the floating base's rotation from the posture task's base
-        reference, world axes (the orientation state of the LQR extension)."""
+    def base_orientation_error(self, q=None) -> np.ndarray:
+        """``log3(R_base R_ref^T)``: the floating base's rotation at ``q`` (default: the robot's
+        cached state) from the posture task's base reference, world axes (the orientation state
+        of the LQR extension)."""
         q_ref = self.robot.q_ref if self.posture.q_ref is None else self.posture.q_ref
-        R = pin.Quaternion(self.robot.q[3:7]).toRotationMatrix()
+        R = pin.Quaternion((self.robot.q if q is None else q)[3:7]).toRotationMatrix()
         R_ref = pin.Quaternion(q_ref[3:7]).toRotationMatrix()
         return pin.log3(R @ R_ref.T)
 
@@ -329,9 +332,14 @@ class MomentumBalance:
 
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) in Pinocchio convention."""
-        robot = self.robot
-        if self.cycle is None or self.reference is not None or self.lqr is not None:
-            robot.update(q, v)  # what reads the robot's cache (the compiled cycle has its own)
+        robot, cycle = self.robot, self.cycle
+        # the robot's cache is updated only where something reads it (a reference, the Python
+        # engine); on the compiled cycle the LQR reads the cycle's own terms (one rigid-body pass)
+        on_cycle = cycle is not None and self.reference is None
+        if not on_cycle:
+            robot.update(q, v)
+        elif self.lqr is not None:
+            cycle.update(q, v)
         if self.reference is not None:
             ref = self.reference(t, robot)
             self.com_ref = np.asarray(ref.com, dtype=float)
@@ -343,20 +351,28 @@ class MomentumBalance:
                 self.posture.q_ref = q_ref
         integral = None
         if self.lqr is not None:
+            if on_cycle:
+                terms, positions = self._cycle_terms()
+                com, q_read = terms.com, terms.q
+            else:
+                com, q_read, positions = robot.com, robot.q, None
             hdot = self.hdot_ref if np.any(self.hdot_ref) else None
             if self.lqr.integral:
-                integral = self._integral_step(t)
+                integral = self._integral_step(t, com)
             self._t_last = float(t)
-            theta = self.base_orientation_error() if self.lqr.orientation else None
+            theta = self.base_orientation_error(q_read) if self.lqr.orientation else None
             K, k = self.lqr.feedback(robot, self.com_ref, self.h_ref, contacts=self.contacts,
-                                     hdot_ref=hdot, integral=integral, orientation=theta)
+                                     hdot_ref=hdot, integral=integral, orientation=theta,
+                                     positions=positions)
             self.momentum.K, self.momentum.k = K, k
         else:
             self.momentum.com_ref = self.com_ref
             self.momentum.h_ref = self.h_ref
             self.momentum.hdot_ref = self.hdot_ref
-        if self.cycle is not None:
-            sol = self.cycle.solve(q, v, self.variables)
+        if on_cycle and self.lqr is not None:
+            sol = cycle.solve_updated(self.variables)
+        elif cycle is not None:
+            sol = cycle.solve(q, v, self.variables)
         else:
             sol = self.formulation.solve(self.stack, self.variables, self.settings,
                                          diagnostics=False)
@@ -364,13 +380,23 @@ class MomentumBalance:
             self.cog_integral = integral  # a held cycle's error is not integrated (anti-windup)
         return self.failures.note(sol)
 
-    def _integral_step(self, t: float) -> np.ndarray:
+    def _cycle_terms(self):
+        """The compiled cycle's terms (:meth:`HierarchyCycle.terms_view
+        <wholebody.cycle.HierarchyCycle.terms_view>`) and the LQR's contacts' points in them
+        (name -> a row the cycle's update rewrites), bound on first use."""
+        if self._cycle_view is None:
+            terms = self.cycle.terms_view()
+            index = {n: i for i, n in enumerate(self.robot.contact_names)}
+            self._cycle_view = terms, {n: terms.points[index[n]] for n in self.contacts}
+        return self._cycle_view
+
+    def _integral_step(self, t: float, com: np.ndarray) -> np.ndarray:
         """The CoG-error integral advanced by ``dt`` (the time since the previous call) for this
-        cycle's feedback, clamped to ``+-integral_limit``; :meth:`compute` keeps it only when the
-        cycle is not ``HELD``. A non-finite step (an absurd ``t``: dt = inf times a zero error)
-        leaves it as it was."""
+        cycle's feedback at the CoM ``com``, clamped to ``+-integral_limit``; :meth:`compute`
+        keeps it only when the cycle is not ``HELD``. A non-finite step (an absurd ``t``: dt = inf
+        times a zero error) leaves it as it was."""
         dt = 0.0 if self._t_last is None else max(float(t) - self._t_last, 0.0)
-        step = dt * (self.robot.com - self.com_ref)
+        step = dt * (com - self.com_ref)
         if not np.isfinite(step).all():
             return self.cog_integral.copy()
         return self.lqr.clamp_integral(self.cog_integral + step)

@@ -515,19 +515,23 @@ class MomentumLQR:
         self._cache[names] = g
         return g
 
-    def feedforward(self, robot, gains: ContactGains, com_ref, hdot_ref=None) -> np.ndarray:
+    def feedforward(self, robot, gains: ContactGains, com_ref, hdot_ref=None,
+                    positions=None) -> np.ndarray:
         """The nominal forces of ``gains`` re-balanced at the reference CoM.
 
         For a plain configuration: ``argmin lambda^T R lambda`` s.t. ``G(com_ref) lambda + [m g; 0]
-        = hdot_ref`` with the robot's current contact positions; for a blend, the same weighted
-        sum of its components' re-balanced forces (a leaving contact keeps its fading share).
+        = hdot_ref`` with the robot's current contact positions (``positions``: contact name ->
+        world point, where the state was read elsewhere, e.g. from a compiled cycle's terms;
+        default ``robot.contact_point``); for a blend, the same weighted sum of its components'
+        re-balanced forces (a leaving contact keeps its fading share).
         """
         com_ref = vector(com_ref, 3, "com_ref")
         hdot_ref = np.zeros(6) if hdot_ref is None else vector(hdot_ref, 6, "hdot_ref")
         parts = gains.components or ((1.0, gains),)
         lam = np.zeros(gains.n_lambda)
         for w, g in parts:
-            X = np.array([robot.contact_point(n) for n in g.contacts])
+            X = np.array([robot.contact_point(n) if positions is None else positions[n]
+                          for n in g.contacts])
             weight = g.weight if g.weight is not None else contact_cost(g.dims, self.R)
             if np.isfinite(X).all():
                 lam_g = balancing_forces_factored(X, com_ref, robot.mass, g.dims, self.gravity,
@@ -552,16 +556,17 @@ class MomentumLQR:
 
     def feedback(self, robot, com_ref, h_ref=None, *, contacts: Sequence[str] | None = None,
                  gains: ContactGains | None = None, hdot_ref=None, rebalance: bool = True,
-                 integral=None, orientation=None) -> tuple[np.ndarray, np.ndarray]:
+                 integral=None, orientation=None, positions=None) -> tuple[np.ndarray, np.ndarray]:
         """``(K, k)`` of the force law eq. 23, ``lambda = -K [x_cog; h] + k``, for eq. 24.
 
         ``k = lambda_ff + K [com_ref; h_ref]``, i.e. ``lambda = lambda_ff - K (s - s_ref)``.
         With ``rebalance=False``, ``lambda_ff`` is the cached ``lambda0`` (gravity balanced about
         the CoM at which the gains were computed), literally ``k = lambda0 + K s_ref``. By default
         (``rebalance=True``) ``lambda_ff`` balances gravity (plus ``hdot_ref``) about ``com_ref``
-        with the current contact positions (:meth:`feedforward`), so that ``s_ref`` is an
-        equilibrium of the nonlinear model (eq. 21) even when ``com_ref`` is away from the
-        linearisation CoM; both coincide when ``com_ref`` is that CoM and the feet have not moved.
+        with the current contact positions (:meth:`feedforward`, ``positions`` as there), so that
+        ``s_ref`` is an equilibrium of the nonlinear model (eq. 21) even when ``com_ref`` is away
+        from the linearisation CoM; both coincide when ``com_ref`` is that CoM and the feet have
+        not moved.
 
         ``gains`` (e.g. from :meth:`blend`) overrides ``contacts`` (default: the current
         configuration). Shapes ``(n_lambda, 9)`` and ``(n_lambda,)`` in the order of the gains'
@@ -578,7 +583,7 @@ class MomentumLQR:
         elif not isinstance(gains, ContactGains):
             raise ValueError("gains: expected a ContactGains (from MomentumLQR.gains or blend)")
         if rebalance:
-            lam_ff = self.feedforward(robot, gains, com_ref, hdot_ref)
+            lam_ff = self.feedforward(robot, gains, com_ref, hdot_ref, positions)
         else:
             if hdot_ref is not None:
                 raise ValueError("hdot_ref: only used with rebalance=True")
