@@ -113,6 +113,19 @@ def test_integral_action_is_accumulated_clamped_on_by_default_and_off_at_zero(ro
     assert np.abs(k0 - k_plain).max() > 1e-3  # the integral design also changes the state gains
 
 
+def test_references_are_checked_when_set(robots):
+    """The momentum law's references are checked on every assignment (a reference callable
+    sets them every cycle), each error naming the field; the control loop then computes on them
+    unchecked (MomentumLQR.force_law)."""
+    ctrl = MomentumBalance(robots["talos14"], gains="lqr")
+    for field, value in (("com_ref", [0.0, np.nan, 0.8]), ("h_ref", np.zeros(5)),
+                         ("hdot_ref", [np.inf] + [0.0] * 5)):
+        with pytest.raises(ValueError, match=f"^MomentumBalance.{field}:"):
+            setattr(ctrl, field, value)
+    ctrl.h_ref = [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    assert ctrl.h_ref.dtype == float and ctrl.h_ref[5] == 1.0
+
+
 @pytest.mark.slow  # closed loop in the twin
 @pytest.mark.parametrize("gains", ["pd", "lqr"])
 def test_native_engine_gives_the_python_engines_torques_through_a_push(robots, gains):

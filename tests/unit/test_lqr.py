@@ -331,6 +331,12 @@ def test_errors_name_the_argument(talos):
         (lambda: MomentumLQR(talos, TALOS_DS).feedback(talos, np.zeros(2)), "com_ref"),
         (lambda: MomentumLQR(talos, TALOS_DS).feedback(talos, np.zeros(3), np.zeros(9)),
          "h_ref"),
+        (lambda: MomentumLQR(talos, TALOS_DS).feedback(talos, np.zeros(3),
+                                                       hdot_ref=np.full(6, np.nan)), "hdot_ref"),
+        (lambda: MomentumLQR(talos, TALOS_DS).feedback(talos, np.zeros(3),
+                                                       integral=np.zeros(3)), "integral"),
+        (lambda: MomentumLQR(talos, TALOS_DS, q_integral=1e4).feedback(
+            talos, np.zeros(3), integral=np.zeros(2)), "integral"),
         (lambda: lqr_gains((np.eye(9), np.zeros((8, 3)))), "model"),
         (lambda: lqr_gains(momentum_model(pos + [[0, 1, 0], [0, -1, 0]], [0, 0, 1], 1.0),
                            R=np.eye(3)), "R"),

@@ -32,7 +32,7 @@ from ..solvers import SolverSettings
 from ..solvers.settings import settings_or_default
 from ..variables import Variables
 from ..planning.blend import quintic_blend
-from ..tasks.base import contact_list
+from ..tasks.base import checked_attribute, contact_list, vector_rule
 from ..tasks.momentum import momentum_gain
 from ..validation import finite_array, nonnegative, number, positive
 from .base import FailureStreak
@@ -235,6 +235,12 @@ class MomentumBalance:
     ``Q``/``R``/``q_integral`` with "pd") are errors, not ignored.
     """
 
+    #: the references of the momentum law (a ``reference`` sets them every cycle), checked on
+    #: every assignment: finite vectors of 3, 6 and 6
+    com_ref = checked_attribute(vector_rule(3), "CoM reference x_ref (m), finite.")
+    h_ref = checked_attribute(vector_rule(6), "Momentum reference h_ref, finite.")
+    hdot_ref = checked_attribute(vector_rule(6), "Momentum rate feed-forward, finite.")
+
     def __init__(self, robot: Robot, gains: str = "lqr", contacts=None, com_ref=None,
                  P=None, D=None, Q=None, R=None, settings: SolverSettings | None = None,
                  reference: Callable[[float, Robot], BalanceReference] | None = None,
@@ -286,7 +292,7 @@ class MomentumBalance:
         if com_ref is None:
             robot.update(robot.q_ref, np.zeros(robot.nv))
             com_ref = robot.com.copy()
-        self.com_ref = finite_array(com_ref, "com_ref", shape=(3,))
+        self.com_ref = finite_array(com_ref, "com_ref", shape=(3,))  # (the argument named)
         self.h_ref = np.zeros(6)
         self.hdot_ref = np.zeros(6)
         self.reference = reference
@@ -342,9 +348,9 @@ class MomentumBalance:
             cycle.update(q, v)
         if self.reference is not None:
             ref = self.reference(t, robot)
-            self.com_ref = np.asarray(ref.com, dtype=float)
-            self.h_ref = np.zeros(6) if ref.h is None else np.asarray(ref.h, dtype=float)
-            self.hdot_ref = np.zeros(6) if ref.hdot is None else np.asarray(ref.hdot, dtype=float)
+            self.com_ref = ref.com
+            self.h_ref = np.zeros(6) if ref.h is None else ref.h
+            self.hdot_ref = np.zeros(6) if ref.hdot is None else ref.hdot
             if ref.base is not None:
                 q_ref = robot.q_ref.copy()
                 q_ref[:7] = ref.base
@@ -361,9 +367,10 @@ class MomentumBalance:
                 integral = self._integral_step(t, com)
             self._t_last = float(t)
             theta = self.base_orientation_error(q_read) if self.lqr.orientation else None
-            K, k = self.lqr.feedback(robot, self.com_ref, self.h_ref, contacts=self.contacts,
-                                     hdot_ref=hdot, integral=integral, orientation=theta,
-                                     positions=positions)
+            # the references were checked when set (checked attributes)
+            K, k = self.lqr.force_law(robot, self.lqr.gains(robot, self.contacts), self.com_ref,
+                                      self.h_ref, hdot, integral=integral, orientation=theta,
+                                      positions=positions)
             self.momentum.K, self.momentum.k = K, k
         else:
             self.momentum.com_ref = self.com_ref
@@ -399,4 +406,4 @@ class MomentumBalance:
         step = dt * (com - self.com_ref)
         if not np.isfinite(step).all():
             return self.cog_integral.copy()
-        return self.lqr.clamp_integral(self.cog_integral + step)
+        return self.lqr.clip_integral(self.cog_integral + step)

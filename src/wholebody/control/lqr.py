@@ -441,8 +441,12 @@ class MomentumLQR:
         """The CoG-error integral clamped elementwise to ``+-integral_limit`` (anti-windup): what
         np.clip selects, by np.maximum and np.minimum (called every cycle: without np.clip's
         Python wrapper)."""
+        return self.clip_integral(vector(z, 3, "integral"))
+
+    def clip_integral(self, z: np.ndarray) -> np.ndarray:
+        """:meth:`clamp_integral` of a float 3-vector already checked (a control loop's)."""
         limit = self.integral_limit
-        return np.minimum(np.maximum(vector(z, 3, "integral"), -limit), limit)
+        return np.minimum(np.maximum(z, -limit), limit)
 
     @staticmethod
     def _check_contacts(robot, contacts) -> tuple[str, ...]:
@@ -527,6 +531,11 @@ class MomentumLQR:
         """
         com_ref = vector(com_ref, 3, "com_ref")
         hdot_ref = np.zeros(6) if hdot_ref is None else vector(hdot_ref, 6, "hdot_ref")
+        return self._rebalanced(robot, gains, com_ref, hdot_ref, positions)
+
+    def _rebalanced(self, robot, gains: ContactGains, com_ref: np.ndarray, hdot_ref: np.ndarray,
+                    positions=None) -> np.ndarray:
+        """:meth:`feedforward` on checked arguments."""
         parts = gains.components or ((1.0, gains),)
         lam = np.zeros(gains.n_lambda)
         for w, g in parts:
@@ -582,22 +591,39 @@ class MomentumLQR:
             gains = self.gains(robot, contacts)
         elif not isinstance(gains, ContactGains):
             raise ValueError("gains: expected a ContactGains (from MomentumLQR.gains or blend)")
+        if not rebalance and hdot_ref is not None:
+            raise ValueError("hdot_ref: only used with rebalance=True")
+        if hdot_ref is not None:
+            hdot_ref = vector(hdot_ref, 6, "hdot_ref")
+        if integral is not None:
+            if gains.K_integral is None:
+                raise ValueError("integral: these gains have no integral action (q_integral)")
+            integral = vector(integral, 3, "integral")
+        if orientation is not None:
+            if gains.K_orientation is None:
+                raise ValueError("orientation: these gains have no orientation feedback "
+                                 "(q_orientation)")
+            orientation = vector(orientation, 3, "orientation")
+        return self.force_law(robot, gains, com_ref, h_ref, hdot_ref, rebalance=rebalance,
+                              integral=integral, orientation=orientation, positions=positions)
+
+    def force_law(self, robot, gains: ContactGains, com_ref: np.ndarray, h_ref: np.ndarray,
+                  hdot_ref: np.ndarray | None = None, *, rebalance: bool = True,
+                  integral: np.ndarray | None = None, orientation: np.ndarray | None = None,
+                  positions=None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`feedback` on arguments already checked — float vectors of their sizes, finite;
+        gains with the columns of the extensions given —: the same numbers without the checks,
+        for a control loop whose references were checked when set."""
         if rebalance:
-            lam_ff = self.feedforward(robot, gains, com_ref, hdot_ref, positions)
+            lam_ff = self._rebalanced(robot, gains, com_ref,
+                                      np.zeros(6) if hdot_ref is None else hdot_ref, positions)
         else:
-            if hdot_ref is not None:
-                raise ValueError("hdot_ref: only used with rebalance=True")
             lam_ff = gains.lambda0
         s_ref = np.concatenate([com_ref, h_ref])
         K = gains.K.copy()
         k = lam_ff + K @ s_ref
         if integral is not None:
-            if gains.K_integral is None:
-                raise ValueError("integral: these gains have no integral action (q_integral)")
-            k = k - gains.K_integral @ self.clamp_integral(integral)
+            k = k - gains.K_integral @ self.clip_integral(integral)
         if orientation is not None:
-            if gains.K_orientation is None:
-                raise ValueError("orientation: these gains have no orientation feedback "
-                                 "(q_orientation)")
-            k = k - gains.K_orientation @ vector(orientation, 3, "orientation")
+            k = k - gains.K_orientation @ orientation
         return K, k
