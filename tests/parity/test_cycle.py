@@ -1033,6 +1033,23 @@ def test_task_producing_nan_names_the_task(robots, engine):
                           where="after NaN")
 
 
+@pytest.mark.parametrize("engine", ENGINES)
+def test_independent_contact_rows_with_a_nan_name_the_task(robots, engine):
+    """A contact task taking an independent set of its rows (``rank_tolerance``) with a NaN
+    anchor: its rows stay NaN (no SVD hides them as dropped rows) and the cycle's check names
+    the task, in both engines."""
+    robot = robots["hyq"]
+    stack = Stack([[NewtonEuler(name="newton-euler"),
+                    ContactConstraint(name="contacts", kp=50.0, kd=5.0, rank_tolerance=1e-4)],
+                   [PostureTask(name="posture", kp=10.0, kd=2.0)]])
+    cycle = HierarchyCycle(robot, stack, engine=engine)
+    q, v = moving_states(robot, 1)[0]
+    assert cycle.solve(q, v).ok
+    stack.find("contacts").anchors["lf_foot"] = np.array([np.nan, 0.0, 0.0])
+    with pytest.raises(ValueError, match="task 'contacts'"):
+        cycle.solve(q, v)
+
+
 @native
 def test_matrix_gain_names_the_field(robots):
     """The native cycle takes scalar or per-joint gains: a matrix posture kp (which the Python

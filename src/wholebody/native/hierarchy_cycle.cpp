@@ -726,9 +726,12 @@ private:
 
   // tasks.contact.independent_rows, in place: rows J x = target replaced by U_rᵀ J x = U_rᵀ
   // target over the singular values above tolerance σ_max (each column of U_r signed so that its
-  // entry of largest magnitude is positive), the remaining rows zero.
+  // entry of largest magnitude is positive), the remaining rows zero; rows with a NaN or inf
+  // entry are left as they are (the fill's checks name the task).
   static void independent_rows(Eigen::Ref<RowMatrix> J, Segment target, double tolerance)
   {
+    if (!J.allFinite() || !target.allFinite())
+      return;
     const Eigen::JacobiSVD<MatrixXd> svd(MatrixXd(J), Eigen::ComputeFullU);
     const VectorXd & singular = svd.singularValues();
     Index rank = 0;

@@ -139,12 +139,16 @@ def independent_rows(J: np.ndarray, target: np.ndarray, tolerance: float
     independent set: U_rᵀ J x = U_rᵀ target (J = U Σ Vᵀ, U_r the left singular vectors of the
     singular values above ``tolerance`` σ_max, each signed so that its entry of largest magnitude
     is positive), the remaining rows zero. The least-squares part of ``target`` is kept, the part
-    no x can meet dropped, so that the rows stay consistent. → (rows, targets, rank), new
-    arrays."""
+    no x can meet dropped, so that the rows stay consistent. → (rows, targets, how many rows
+    are kept: the rank), new arrays; rows with a NaN or inf entry are returned as they are (all
+    kept), for the cycle's row checks to name the task."""
+    if not (np.isfinite(J).all() and np.isfinite(target).all()) or not J.size:
+        return J.copy(), target.copy(), J.shape[0]
     U, singular, _ = np.linalg.svd(J)
-    rank = int((singular > tolerance * singular[0]).sum()) if singular.size else 0
+    rank = int((singular > tolerance * singular[0]).sum())
     U = U[:, :rank]
-    U = U * np.sign(U[np.abs(U).argmax(axis=0), np.arange(rank)])
+    if rank:
+        U = U * np.sign(U[np.abs(U).argmax(axis=0), np.arange(rank)])
     rows, targets = np.zeros_like(J), np.zeros_like(target)
     rows[:rank], targets[:rank] = U.T @ J, U.T @ target
     return rows, targets, rank

@@ -101,6 +101,12 @@ def test_independent_rows_keep_the_least_squares_solutions(rank):
     again, again_targets, _ = independent_rows(J[order], target[order], 1e-9)
     np.testing.assert_allclose(again, rows, atol=1e-10)
     np.testing.assert_allclose(again_targets, targets, atol=1e-10)
+    # rows with a NaN are returned as they are (for the cycle's checks), no rows give no rows
+    J[1, 2] = np.nan
+    same, same_targets, kept = independent_rows(J, target, 1e-9)
+    assert kept == 6 and np.isnan(same[1, 2]) and np.array_equal(same_targets, target)
+    empty = independent_rows(np.zeros((0, 9)), np.zeros(0), 1e-9)
+    assert empty[0].shape == (0, 9) and empty[2] == 0
 
 
 def test_tangent_basis_is_right_handed_and_orthonormal():
