@@ -136,3 +136,38 @@ def test_leg_swinging_tracks_the_sines_while_pushed_at_the_hip(robots, tmp_path)
     assert np.all(w[t > 3.0, right, 2] == 0.0)
     assert m["max_stance_tilt_deg"] < 2.0
     assert (tmp_path / "joint_tracking.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("controller", ["pd", "lqr"])
+def test_native_engine_gives_the_python_engines_torques(robots, controller):
+    """ContactSwitch(engine="native") — its three stacks solved by HierarchyCycle's compiled
+    rigid-body terms, rows and cascade — drives the twin through the shift, the unloading, the
+    single support and the leg swinging (no pushes); a Python-engine controller fed the
+    same state every cycle (its phase state in step) gives the same torques."""
+    pytest.importorskip("wholebody._hierarchy_cycle")
+    from dataclasses import replace
+
+    from wholebody.control.contact_switch import ContactSwitch
+    from wholebody.scenarios import single_support
+    from wholebody.sim.simulator import Simulator
+
+    robot = robots["talos14"]
+    params = get_scenario("single-support").validate(robot, dict(NO_EXTRAS, sine_time="0.6"))
+    stance, _ = single_support.stance_and_swing(robot, params)
+    config = replace(single_support.config(robot, params), push_start=0.1, settle=0.0)
+    native, python = (ContactSwitch(robot, stance, config, gains=controller, engine=engine)
+                      for engine in ("native", "python"))
+    assert native.cycles is not None and python.cycles is None
+    tl = native.timeline
+    sim = Simulator(robot)
+    diffs, phases = [], set()
+    while sim.t < tl.end:
+        q, v = sim.state()
+        sol, ref = native.compute(q, v, sim.t), python.compute(q, v, sim.t)
+        assert sol.ok and ref.ok, (sim.t, sol.status, ref.status)
+        diffs.append(np.linalg.norm(sol.tau - ref.tau) / np.linalg.norm(ref.tau))
+        phases.add("single" if sim.t >= tl.switch else "double")
+        phases.add("swinging" if tl.sine_start is not None and sim.t >= tl.sine_start else "")
+        sim.step(sol.tau)
+    assert {"double", "single", "swinging"} <= phases
+    assert max(diffs) < 1e-6, max(diffs)

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..cycle import ENGINES, HierarchyCycle
 from ..formulation import Formulation
 from ..planning.blend import quintic_blend, smoothstep
 from ..planning.support_shift import automatic_swing_bend, shift_key_pose, swing_leg_drop
@@ -137,12 +138,20 @@ class ContactSwitch:
     ``compute(q, v, t)`` controller. ``gains`` is "pd" (eq. 22) or "lqr" (eqs. 23-24, one gain set
     per contact configuration, blended during the unloading as in the Remark of Sect. 3.2).
     ``torsion`` (default True): the soles' yaw-moment rows in the Table 2/4 stacks, and
-    ``cop_margin`` their CoP rows' margin (:func:`~wholebody.control.stacks.table2_stack`)."""
+    ``cop_margin`` their CoP rows' margin (:func:`~wholebody.control.stacks.table2_stack`).
+    ``engine``: "auto" (default: native when built), "native" — each stack solved by a
+    :class:`~wholebody.cycle.HierarchyCycle` (compiled rigid-body terms, rows and cascade, the
+    same solution) — or "python" (``Formulation.solve``, the reference). The controller reads
+    its robot every cycle (the LQR gains and feedforward, the swing foot's placement, the
+    joints), so ``robot.update`` runs every cycle on both."""
 
     def __init__(self, robot, stance: str, config: ContactSwitchConfig, gains: str = "pd",
-                 torsion: bool = TORSION, P=None, D=None, cop_margin: float = COP_MARGIN):
+                 torsion: bool = TORSION, P=None, D=None, cop_margin: float = COP_MARGIN,
+                 engine: str = "auto"):
         if gains not in GAINS:
             raise ValueError(f"gains: expected 'pd' or 'lqr', got '{gains}'")
+        if engine not in ENGINES:
+            raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
         if gains != "pd" and (P is not None or D is not None):
             raise ValueError(f"P, D: eq. 22's gains are only used with gains='pd', got "
                              f"gains='{gains}'")
@@ -186,6 +195,10 @@ class ContactSwitch:
                 momentum.P = P
             if D is not None:
                 momentum.D = D
+        self.cycles = None  # stack id -> its compiled cycle
+        if engine != "python":
+            self.cycles = {id(st): HierarchyCycle(robot, st, engine=engine)
+                           for st in (self.double, self.single, self.swinging)}
         self._sine_idx = FREE_FLYER_NQ + np.array([robot.joint_names.index(j) for j in self.joints])
         self._held_idx = FREE_FLYER_NQ + np.array([robot.joint_names.index(j)
                                                    for j in config.held_joints], dtype=int)
@@ -335,6 +348,10 @@ class ContactSwitch:
                 self.swing_posture.kp = self._posture_kp * (1.0 - (1.0 - e) * self._leg_mask)
                 stack = self.swinging
         self._set_momentum(stack, t, gains)
-        sol = self.failures.note(self.formulation.solve(stack, variables, diagnostics=False))
+        if self.cycles is None:
+            sol = self.formulation.solve(stack, variables, diagnostics=False)
+        else:
+            sol = self.cycles[id(stack)].solve(q, v, variables)
+        sol = self.failures.note(sol)
         self.last = sol
         return sol
