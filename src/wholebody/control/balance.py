@@ -362,14 +362,14 @@ class MomentumBalance:
                 com, q_read = terms.com, terms.q
             else:
                 com, q_read, positions = robot.com, robot.q, None
-            hdot = self.hdot_ref if np.any(self.hdot_ref) else None
             if self.lqr.integral:
                 integral = self._integral_step(t, com)
             self._t_last = float(t)
             theta = self.base_orientation_error(q_read) if self.lqr.orientation else None
             # the references were checked when set (checked attributes)
             K, k = self.lqr.force_law(robot, self.lqr.gains(robot, self.contacts), self.com_ref,
-                                      self.h_ref, hdot, integral=integral, orientation=theta,
+                                      self.h_ref, self.hdot_ref, integral=integral,
+                                      orientation=theta,
                                       positions=positions)
             self.momentum.K, self.momentum.k = K, k
         else:

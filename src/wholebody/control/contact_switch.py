@@ -293,7 +293,8 @@ class ContactSwitch:
         if self.lqr is None:
             task.com_ref, task.h_ref, task.hdot_ref = c, h_ref, hdot_ref
         else:
-            task.K, task.k = self.lqr.feedback(robot, c, h_ref, gains=gains, hdot_ref=hdot_ref)
+            # (the references are computed here: finite vectors of their sizes)
+            task.K, task.k = self.lqr.force_law(robot, gains, c, h_ref, hdot_ref)
 
     def compute(self, q, v, t: float):
         robot, c, tl = self.robot, self.config, self.timeline
