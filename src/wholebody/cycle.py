@@ -135,7 +135,7 @@ class _Program:
                         compiled.append({
                             "kernel": task.kernel, "start": start, "m": m, "eq": eq,
                             "contacts": [active[c] for c in layout.contacts], "params": params,
-                            "selection": cycle.selection_of(task)})
+                            "selection": cycle.selection_of(task, layout)})
                     self.slots.append(slot)
                     start += m
             self.level_bounds.append((first, start))
@@ -153,7 +153,8 @@ class _Program:
             w_min[s.start:s.stop] = 0.0 if s.eq else np.nextafter(0.0, 1.0)
         self.description = {
             "contacts": [contact_index[c] for c in variables.contacts],
-            "reduced": cycle.formulation.reduced, "rows": rows, "nparams": self.params.shape[0],
+            "reduced": cycle.formulation.reduced, "auxiliary": variables.n_aux, "rows": rows,
+            "nparams": self.params.shape[0],
             "scales": self.scales, "slots": compiled, "w_min": w_min,
             "buffers": {"mat": self.mat, "target": self.target, "lower": self.lower,
                         "upper": self.upper, "weights": self.weights, "params": self.params,
@@ -169,7 +170,9 @@ class _Program:
                         self.weights[s.start:s.stop])
                        for s in self.slots if id(s.task) in python_rows]
         self.rows_of = {id(s.task): (self.mat[s.start:s.stop], self.target[s.start:s.stop])
-                        for s in self.slots if s.eq}
+                        if s.eq else (self.mat[s.start:s.stop], self.lower[s.start:s.stop],
+                                      self.upper[s.start:s.stop])
+                        for s in self.slots}
         self.levels, self.meta = [], []
         for rank, (first, last) in enumerate(self.level_bounds, start=1):
             entries = sorted((s for s in self.slots if s.rank == rank), key=lambda s: s.order)
@@ -371,15 +374,23 @@ class HierarchyCycle:
         return self._frames[fid]
 
     def layout_of(self, task: Task, variables: Variables) -> LayoutContext:
-        """What the task's schema sizes resolve against: its active contacts, its rows."""
+        """What the task's schema sizes resolve against: its active contacts, its rows, the
+        auxiliary columns it uses."""
         contacts = contact_subset(variables, task.contacts) if task.per_contact else ()
-        return LayoutContext(self.robot, contacts, task.selection(self.robot).get("rows", ()))
+        auxiliary = task.auxiliary()
+        columns = (variables.auxiliary_columns(auxiliary, f"task '{task.name}'") if auxiliary
+                   else ())
+        return LayoutContext(self.robot, contacts, task.selection(self.robot).get("rows", ()),
+                             columns)
 
-    def selection_of(self, task: Task) -> dict[str, list[int]]:
-        """The task's selection for its kernel, a model frame id turned into the cycle's index."""
+    def selection_of(self, task: Task, layout: LayoutContext | None = None) -> dict[str, list[int]]:
+        """The task's selection for its kernel, a model frame id turned into the cycle's index;
+        a task that uses auxiliary variables also gets their columns ("auxiliary")."""
         selection = {k: [int(i) for i in v] for k, v in task.selection(self.robot).items()}
         if "frame" in selection:
             selection["frame"] = [self.frame_slot(fid) for fid in selection["frame"]]
+        if layout is not None and task.auxiliary():
+            selection["auxiliary"] = list(layout.auxiliary)
         return selection
 
     def frame_placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
@@ -488,7 +499,7 @@ class HierarchyCycle:
         t_solve = time.perf_counter()
         solution = make_solution(program.qdd.copy(), program.lam.copy(), program.tau.copy(),
                                  (program.tau_lo, program.tau_hi), outcome, status, costs,
-                                 variables, excess)
+                                 variables, excess, x)
         if diagnostics:
             solution.tasks = Formulation.task_reports(x, program.meta)
         solution.timings = {"update": self._update_time + t1 - t0, "rows": rows_time,
@@ -498,8 +509,10 @@ class HierarchyCycle:
         return solution
 
     def _default_variables(self) -> Variables:
-        if getattr(self, "_all_contacts", None) is None:
-            self._all_contacts = Variables(self.robot)
+        auxiliary = self.stack.auxiliary()
+        cached = getattr(self, "_all_contacts", None)
+        if cached is None or cached.auxiliary != tuple(auxiliary.items()):
+            self._all_contacts = Variables(self.robot, auxiliary=auxiliary)
         return self._all_contacts
 
     def _take_stack(self) -> None:
@@ -520,10 +533,10 @@ class HierarchyCycle:
     def _program_for(self, variables: Variables, python_rows: dict) -> _Program:
         """The program of the stack as it is now (its levels and tasks, their layouts, the
         Python tasks' row signatures) and the active contacts; built on first use."""
-        key = (variables.contacts, self._structure,
+        key = (variables.contacts, variables.auxiliary, self._structure,
                tuple([layout_key() for layout_key in self._layout_keys]),
-               tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None)
-                      for i, r in python_rows.items()]))
+               tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None,
+                       r.aux is None) for i, r in python_rows.items()]))
         program = self._program
         if program is None or program.key != key:
             program = self._programs.get(key)
@@ -533,8 +546,9 @@ class HierarchyCycle:
         return program
 
     def task_rows(self, task: Task) -> tuple[np.ndarray, np.ndarray]:
-        """(A, target) of an equality task's rows in the last cycle's level arrays (native
-        engine; views, valid until the next solve; A over the solver's scaled variables)."""
+        """(A, target) of an equality task's rows, (A, lower, upper) of an inequality task's, in
+        the last cycle's level arrays (native engine; views, valid until the next solve; A over
+        the solver's scaled variables)."""
         return self._program.rows_of[id(task)]
 
     @property

@@ -47,6 +47,24 @@ class Stack:
     def tasks(self) -> list[Task]:
         return [t for level in self.levels for t in level]
 
+    def auxiliary(self) -> dict[str, int]:
+        """The auxiliary variables its tasks use (name -> size, in task order): the
+        :class:`~wholebody.variables.Variables` a cycle solves for by default. A name whose size
+        no task declares, or declared with two sizes, is a ValueError."""
+        sizes: dict[str, int | None] = {}
+        for task in self.tasks():
+            for name, size in task.auxiliary().items():
+                known = sizes.get(name)
+                if known is not None and size is not None and size != known:
+                    raise ValueError(f"task '{task.name}': auxiliary variable {name!r} has size "
+                                     f"{size}, another task declares {known}")
+                if known is None:
+                    sizes[name] = size
+        undeclared = [n for n, size in sizes.items() if size is None]
+        if undeclared:
+            raise ValueError(f"auxiliary: no task declares the size of {undeclared}")
+        return sizes
+
     def find(self, name: str) -> Task:
         for t in self.tasks():
             if t.name == name:
@@ -139,6 +157,8 @@ class Solution:
     tasks: list[TaskReport] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     contacts: tuple[str, ...] = ()
+    #: the values of the auxiliary variables (e.g. slacks), by name
+    auxiliary: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -171,15 +191,17 @@ class Formulation:
         self._scales_key = None
 
     def size(self, variables: Variables) -> int:
-        return variables.nv + variables.n_lambda + (0 if self.reduced else variables.na)
+        return (variables.nv + variables.n_lambda + (0 if self.reduced else variables.na)
+                + variables.n_aux)
 
     def scales(self, variables: Variables) -> np.ndarray:
-        """s with x = s * x_scaled (see class docstring)."""
-        key = (variables.nv, variables.n_lambda)
+        """s with x = s * x_scaled (see class docstring; auxiliary variables unscaled)."""
+        key = (variables.nv, variables.n_lambda, variables.n_aux)
         if self._scales_key != key:
             parts = [np.ones(variables.nv), np.full(variables.n_lambda, self.robot.mass * GRAVITY)]
             if not self.reduced:
                 parts.append(self._tau_scale)
+            parts.append(np.ones(variables.n_aux))
             self._scales, self._scales_key = np.concatenate(parts), key
         return self._scales
 
@@ -192,7 +214,7 @@ class Formulation:
         """
         robot = self.robot
         key = (id(stack), tuple(id(t) for tasks in stack.levels for t in tasks), variables.contacts,
-               self.reduced)
+               variables.auxiliary, self.reduced)
         rows_now = [[task.rows(robot, variables) for task in tasks] for tasks in stack.levels]
         plan = self._plan
         if plan is not None and plan.key == key:
@@ -256,7 +278,7 @@ class Formulation:
         """
         settings = settings_or_default(settings)
         robot = self.robot
-        variables = variables or Variables(robot)
+        variables = variables or Variables(robot, auxiliary=stack.auxiliary())
         t0 = time.perf_counter()
         try:
             levels, meta = self.levels(stack, variables)
@@ -287,9 +309,9 @@ class Formulation:
             J_u = robot.stacked_contact_jacobian(variables.contacts)[:, FREE_FLYER_NV:]
             tau = robot.M[FREE_FLYER_NV:] @ qdd + robot.h[FREE_FLYER_NV:] - J_u.T @ lam  # eq. 14
         else:
-            tau = x[nv + nl:].copy()
+            tau = x[nv + nl:nv + nl + variables.na].copy()
         return make_solution(qdd, lam, tau, robot.torque_bounds(), outcome, status, costs,
-                             variables)
+                             variables, x=x)
 
     @staticmethod
     def task_reports(x, meta, active_tol: float = 1e-7) -> list[TaskReport]:
@@ -354,13 +376,18 @@ def _fallback_cascade(settings: SolverSettings) -> SolverSettings:
 
 def make_solution(qdd: np.ndarray, lam: np.ndarray, tau: np.ndarray,
                   bounds: tuple[np.ndarray, np.ndarray], outcome: Outcome, status: str, costs,
-                  variables: Variables, excess: float | None = None) -> Solution:
+                  variables: Variables, excess: float | None = None, x=None) -> Solution:
     """A :class:`Solution` whose torque went through :func:`~wholebody.guard.guard_torque` with
-    ``bounds`` = (tau_min, tau_max) (and ``excess``, if known)."""
+    ``bounds`` = (tau_min, tau_max) (and ``excess``, if known); ``x``: the solution vector whose
+    last entries are the auxiliary variables (unscaled), if there are any."""
     tau, outcome, status = guard_torque(tau, bounds[0], bounds[1], outcome, status, excess)
     forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
-    return Solution(qdd, lam, tau, forces, outcome, status, np.asarray(costs),
-                    contacts=variables.contacts)
+    solution = Solution(qdd, lam, tau, forces, outcome, status, np.asarray(costs),
+                        contacts=variables.contacts)
+    if variables.n_aux and x is not None:
+        tail = np.array(x[len(x) - variables.n_aux:])
+        solution.auxiliary = {n: tail[s] for n, s in variables.auxiliary_slices.items()}
+    return solution
 
 
 def overflow_status(v) -> str:
@@ -384,9 +411,7 @@ def unsolved_solution(nv: int, variables: Variables, bounds: tuple[np.ndarray, n
 
 def _signature(r: TaskRows) -> tuple:
     """What the preallocated layout depends on: row count, kind and which blocks are present."""
-    block = r.qdd if r.qdd is not None else r.lam if r.lam is not None else r.tau
-    return (0 if block is None else block.shape[0], r.target is not None,
-            r.qdd is None, r.lam is None, r.tau is None)
+    return (r.m, r.target is not None, r.qdd is None, r.lam is None, r.tau is None, r.aux is None)
 
 
 class _LevelPlan:
@@ -519,11 +544,11 @@ def _memo(make):
 
 def place_rows(r: TaskRows, A: np.ndarray, target, lower, upper, nv: int, nl: int,
                eq14=None) -> None:
-    """A task's rows into ``A`` (its rows over [qdd, lambda] or [qdd, lambda, tau], unscaled)
-    and into ``target`` (equalities) or ``lower``/``upper`` (inequalities). ``eq14``: None for the
-    full formulation (tau columns after lambda), else a callable giving :func:`eq14_blocks` (the
-    reduced one: a tau block is replaced by eq. 14, Herzog et al. 2016). ``A``'s columns without
-    a block are left as they are."""
+    """A task's rows into ``A`` (its rows over [qdd, lambda, aux] or [qdd, lambda, tau, aux],
+    unscaled; the auxiliary columns last) and into ``target`` (equalities) or ``lower``/``upper``
+    (inequalities). ``eq14``: None for the full formulation (tau columns after lambda), else a
+    callable giving :func:`eq14_blocks` (the reduced one: a tau block is replaced by eq. 14,
+    Herzog et al. 2016). ``A``'s columns without a block are left as they are."""
     lam_cols = slice(nv, nv + nl)
     if r.qdd is not None:
         A[:, :nv] = r.qdd
@@ -546,7 +571,9 @@ def place_rows(r: TaskRows, A: np.ndarray, target, lower, upper, nv: int, nl: in
             else:
                 A[:, lam_cols] += tau_lam
         else:
-            A[:, nv + nl:] = r.tau
+            A[:, nv + nl:nv + nl + r.tau.shape[1]] = r.tau
+    if r.aux is not None:
+        A[:, A.shape[1] - r.aux.shape[1]:] = r.aux
     if r.target is not None:
         if offset is None:
             target[:] = r.target

@@ -24,10 +24,11 @@ from wholebody.solvers import SolverSettings
 from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer,
                              FrameTask, FrictionCone, FullDynamics, JointAccelerationLimits,
                              JointTrajectoryTask, MomentumForce, MomentumPD, NewtonEuler,
-                             NormalForceBounds, PostureTask, TorqueLimits)
+                             NormalForceBounds, PostureTask, SlackedFrameTask, TorqueLimits)
 from wholebody.tasks.base import Task, TaskRows
 from wholebody.tasks.regularization import (AccelerationRegularizer, AccelerationTarget,
-                                             ContactTorqueRegularizer, TangentialForceRegularizer)
+                                             AuxiliaryRegularizer, ContactTorqueRegularizer,
+                                             TangentialForceRegularizer)
 from wholebody.tasks.wrench import TrunkWrenchTask
 from wholebody.variables import Variables
 
@@ -250,7 +251,8 @@ def passive_stack_kinds(robot, variant=0):
     parameters: a trunk wrench with a tilted, turned reference, an external wrench and per-row
     weights (variant 0: with the feed-forward, about the heading frame; 1: neither), the
     contact-force torques and the leaning tangential forces on contact subsets in non-model
-    order."""
+    order; a swing foot's and the trunk's frame tasks within slacks (auxiliary variables) costed
+    on the second level in the other order."""
     from wholebody.planning.trunk import TrunkState
     from wholebody.tasks.wrench import TrunkImpedance
     impedance = TrunkImpedance(K_x=[2000.0, 1800.0, 2500.0], D_x=400.0,
@@ -268,8 +270,14 @@ def passive_stack_kinds(robot, variant=0):
     lean = np.array([60.0, -40.0, 800.0]) if variant == 0 else None
     return Stack([
         [NewtonEuler(name="newton-euler"), ContactConstraint(name="contacts", kp=200.0, kd=30.0),
-         FrictionCone(0.7, name="friction"), TorqueLimits(name="torque limits")],
+         FrictionCone(0.7, name="friction"), TorqueLimits(name="torque limits"),
+         SlackedFrameTask("lf_foot", "slack a", kp=2000.0, kd=20.0, mask="position",
+                          name="swing within a slack"),
+         SlackedFrameTask("trunk", "slack b", kp=np.linspace(50.0, 100.0, 6), kd=10.0,
+                          name="trunk within a slack")],
         [wrench,
+         AuxiliaryRegularizer(["slack b", "slack a"], name="slack costs",
+                              weight=np.array([3.0, 100.0])),
          ContactTorqueRegularizer(name="contact torques", weight=np.linspace(0.01, 0.1, robot.na),
                                   contacts=("lh_foot", "rf_foot")),
          TangentialForceRegularizer(name="tangential", weight=0.03,
@@ -526,8 +534,9 @@ def test_passive_kinds_levels_equal_formulation(robots, variant, full):
     robot = robots["hyq"]
     rng = np.random.default_rng(400 + 2 * variant + full)
     for contacts in (robot.contact_names, ("lf_foot", "rh_foot", "lh_foot")):
-        variables = Variables(robot, contacts)
         s_native, s_python = (passive_stack_kinds(robot, variant) for _ in range(2))
+        variables = Variables(robot, contacts, s_native.auxiliary())
+        assert variables.auxiliary == (("slack a", 1), ("slack b", 1))
         if len(contacts) < len(robot.contact_names):  # the tasks on all active contacts
             for task in s_native.tasks() + s_python.tasks():
                 if task.per_contact:
@@ -826,6 +835,25 @@ class SubclassedPosture(PostureTask):
     """A subclass may change the rows: it has no compiled kernel."""
 
 
+class SlackedForceSum(Task):
+    """A user's own inequality task with an auxiliary variable: |Σ f_z − m g| ≤ ε."""
+
+    kind = "ineq"
+
+    def auxiliary(self):
+        return {"force slack": 1}
+
+    def rows(self, robot, variables):
+        A = np.zeros((2, variables.n_lambda))
+        for sl in variables.lambda_slices.values():
+            A[:, sl.start + 2] = 1.0
+        aux = np.zeros((2, variables.n_aux))
+        aux[:, variables.auxiliary_columns(["force slack"], self.name)[0]] = [-1.0, 1.0]
+        weight = robot.mass * 9.81
+        return TaskRows(qdd=None, lam=A, tau=None, aux=aux, lower=np.array([-np.inf, weight]),
+                        upper=np.array([weight, np.inf]))
+
+
 class ForceSum(Task):
     """A user's own task on the contact forces, without a kernel: their sum ≈ the weight."""
 
@@ -836,11 +864,12 @@ class ForceSum(Task):
         return TaskRows(qdd=None, lam=A, tau=None, target=np.array([0.0, 0.0, robot.mass * 9.81]))
 
 
-@pytest.mark.parametrize("extra", ["subclass", "own"])
+@pytest.mark.parametrize("extra", ["subclass", "own", "own with a slack"])
 def test_python_task_in_a_native_stack(robots, extra):
-    """A task without a compiled kernel (a subclass, a task only the Python engine has) writes
-    its rows from Python into the native program while every other task stays compiled: the
-    level arrays and torques equal the Python reference on moving states."""
+    """A task without a compiled kernel (a subclass, a task only the Python engine has, one with
+    an auxiliary variable that a compiled task costs) writes its rows from Python into the native
+    program while every other task stays compiled: the level arrays and torques equal the Python
+    reference on moving states."""
     robot = robots["talos14"]
 
     def build():
@@ -848,8 +877,11 @@ def test_python_task_in_a_native_stack(robots, extra):
         if extra == "subclass":
             stack.levels[2][1] = SubclassedPosture(name="odd posture", weight=0.1, base_kp=50.0,
                                                    base_kd=14.0)
-        else:
+        elif extra == "own":
             stack.levels[2].append(ForceSum(name="odd force sum", weight=1e-4))
+        else:
+            stack.levels[1].append(SlackedForceSum(name="odd force sum"))
+            stack.levels[2].append(AuxiliaryRegularizer(["force slack"], weight=1e-2))
         return stack
 
     stack = build()
@@ -860,12 +892,13 @@ def test_python_task_in_a_native_stack(robots, extra):
     cycle = HierarchyCycle(robot, stack, engine="auto", settings=QUADPROG)
     assert cycle.native
     reference = build()
-    compare_on_states(robot, stack, reference, Variables(robot), moving_states(robot, 4),
+    variables = Variables(robot, auxiliary=stack.auxiliary())
+    compare_on_states(robot, stack, reference, variables, moving_states(robot, 4),
                       cycle=cycle, where=extra)
     q, v = moving_states(robot, 5)[-1]
     sol = cycle.solve(q, v)
     robot.update(q, v)
-    ref = Formulation(robot).solve(reference, Variables(robot), settings=QUADPROG)
+    ref = Formulation(robot).solve(reference, settings=QUADPROG)
     assert sol.ok and ref.ok
     np.testing.assert_allclose(sol.tau, ref.tau, atol=1e-6, rtol=0)
 
@@ -963,6 +996,9 @@ def random_task(robot, rng, contacts):
         lambda: ContactConstraint(kp=float(rng.uniform(0, 100)), kd=float(rng.uniform(0, 20)),
                                   contacts=subset, weight=w,
                                   rank_tolerance=float(rng.choice([0.0, 1e-4]))),
+        lambda: SlackedFrameTask(frame, str(rng.choice(["slack 0", "slack 1"])),  # may share one
+                                 kp=float(rng.uniform(0, 100)), kd=5.0, weight=w,
+                                 mask=str(rng.choice(["6d", "position", "orientation"]))),
     ]
     return make[rng.integers(len(make))]()
 
@@ -995,8 +1031,8 @@ def test_random_stacks_equal_python(robots, seed, method):
             levels = [levels[0] + levels[1], [t for level in levels[2:] for t in level]]
         return Stack([level for level in levels if level])
 
-    variables = Variables(robot, contacts)
     stack, reference = build(seed), build(seed)
+    variables = Variables(robot, contacts, stack.auxiliary())
     kwargs = dict(settings=SolverSettings(method=method, fallback_backend=None,
                                           backend="daqp" if method == "daqp" else "quadprog"))
     cycle = HierarchyCycle(robot, stack, engine="native", **kwargs)

@@ -39,15 +39,16 @@ def test_passive_wbc_defaults_to_the_compiled_cycle(robots, rng, plan_for):
     np.testing.assert_allclose(a.tau, b.tau, atol=1e-6)
 
 
-def test_unsupported_slack_falls_back_with_one_warning(robots, caplog):
+def test_single_slack_runs_on_the_stack_engine(robots, caplog):
+    """The single swing slack (an auxiliary variable per swing foot) has no hand-written compiled
+    form: engine "auto" runs the stack of tasks on the compiled hierarchy cycle, no warning."""
+    native_cycle_or_skip("_hierarchy_cycle")
     robot = robots["hyq"]
     warn_python_fallback.cache_clear()
     with caplog.at_level(logging.WARNING, logger="wholebody.cycle"):
-        first = PassiveWBC(robot, planner=planner(robot), swing_slack="single")
-        second = PassiveWBC(robot, planner=planner(robot), swing_slack="single")
-    assert first.engine == second.engine == "python" and first._native is None
-    warnings = [r for r in caplog.records if "engine 'auto' runs the Python engine" in r.message]
-    assert len(warnings) == 1 and "single" in warnings[0].message
+        wbc = PassiveWBC(robot, planner=planner(robot), swing_slack="single")
+    assert wbc.engine == "stack" and wbc._native is None and wbc._stack_cycle.native
+    assert not [r for r in caplog.records if "runs the Python engine" in r.message]
 
 
 def test_explicit_native_refuses_what_it_cannot_run(robots):

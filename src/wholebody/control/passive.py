@@ -165,8 +165,9 @@ class PassiveConfig:
     instead of 0, which holds them near the standing posture;
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
-    ``ENGINES`` ("auto": native when it is built and supports ``swing_slack``, "stack" where
-    the stance rows are dependent (legs of two joints), else Python with one logged warning;
+    ``ENGINES`` ("auto": native when it is built, "stack" where the stance rows are dependent
+    (legs of two joints) or the swing slack is "single", Python with one logged warning where
+    the compiled extensions are not built;
     "stack": the same QP as a two-level stack of library tasks solved by the compiled
     :class:`~wholebody.cycle.HierarchyCycle`, :class:`PassiveStack`).
     """
@@ -199,9 +200,9 @@ class PassiveConfig:
                              f"got '{self.regularization}'")
         if self.engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got '{self.engine}'")
-        if self.engine in ("native", "stack") and self.swing_slack == "single":
-            raise ValueError(f"engine: '{self.engine}' supports swing_slack 'per-direction' and "
-                             "'none', not 'single'")
+        if self.engine == "native" and self.swing_slack == "single":
+            raise ValueError("engine: 'native' supports swing_slack 'per-direction' and 'none', "
+                             "not 'single' (engine 'stack' and 'auto' do)")
         if self.mu is not None:
             number(self.mu, "mu", low=0.0, low_open=True)
         number(self.f_min, "f_min", low=0.0)
@@ -566,8 +567,12 @@ class PassiveWBC(PlannedController):
         else:
             qdd, F, tau, status = self._failed(result.status, robot.h[6:])
         timings["iterations"] = result.iterations
+        slacks = None
+        if ok and self.swing_slack == "single":  # the swing feet's, as the stack engine names them
+            eps = x[nv + nf:]
+            slacks = {f"slack {self.contacts[i]}": eps[i:i + 1].copy() for i in pat.swing}
         return self._report(ok, qdd, F, tau, status, G @ F, W_d, pat.s3[::3], swing_errors,
-                            timings)
+                            timings, slacks)
 
     def _bad_plan(self, plan, field: str, q, gravity_torque, t0: float) -> Solution:
         """A plan with a NaN/inf entry (e.g. a planner evaluated at an absurd time): no QP, the
@@ -592,10 +597,11 @@ class PassiveWBC(PlannedController):
         return np.zeros(self.robot.nv), np.zeros(self.nf), tau, status
 
     def _report(self, ok, qdd, F, tau, status, commanded, W_d, stance, swing_errors,
-                timings) -> Solution:
-        """The Solution of one cycle (both engines; ``ok``: the QP was solved): the torque
+                timings, auxiliary=None) -> Solution:
+        """The Solution of one cycle (every engine; ``ok``: the QP was solved): the torque
         through the guard, failure streaks, the observer's input, task reports (trunk wrench; swing
-        feet when the solve succeeded)."""
+        feet when the solve succeeded), the single swing slacks as ``auxiliary`` ("slack
+        <contact>" of each swing foot)."""
         if not ok:  # the caller sees a streak in the status, not only in the log
             status = f"{status} ({self._failing + 1} failed cycle(s) in a row)"
         tau, outcome, status = guard_torque(tau, *self._tau_bounds,
@@ -620,7 +626,8 @@ class PassiveWBC(PlannedController):
         forces = {name: per_foot[i] for i, name in enumerate(self.contacts) if in_stance[i]}
         return Solution(qdd=qdd, lam=F, tau=tau, forces=forces, outcome=outcome, status=status,
                         level_costs=np.array([wrench_error @ (self.Q * wrench_error)]),
-                        tasks=reports, timings=timings, contacts=tuple(forces))
+                        tasks=reports, timings=timings, contacts=tuple(forces),
+                        auxiliary=auxiliary or {})
 
     # ------------------------------------------------------------------ native engine
     @staticmethod
@@ -637,10 +644,9 @@ class PassiveWBC(PlannedController):
                              "wholebody._hierarchy_cycle (install with a C++ compiler)")
         if config.engine != "auto":
             return config.engine
-        if config.swing_slack == "single":
-            warn_python_fallback("PassiveWBC", "the native engine has no 'single' swing slack")
-            return "python"
-        if dependent_stance:  # the stack's stance task takes an independent set of its rows
+        # the stack's stance task takes an independent set of dependent rows; its swing tasks
+        # have the single slack as an auxiliary variable
+        if dependent_stance or config.swing_slack == "single":
             if native_available():
                 return "stack"
             warn_python_fallback("PassiveWBC", "the compiled wholebody._hierarchy_cycle is not "
@@ -875,8 +881,10 @@ class PassiveWBC(PlannedController):
                 nv = self.robot.nv
                 for i, task in enumerate(self._stack.swing):
                     if not stance[i]:
-                        A, target = self._stack_cycle.task_rows(task)
-                        residual = A[:, :nv] @ qdd - target
+                        # (A, target), or (A, lower, upper) of |J q̈ − target| ≤ ε (its
+                        # first three upper bounds are the target)
+                        A, *bounds = self._stack_cycle.task_rows(task)
+                        residual = A[:3, :nv] @ qdd - bounds[-1][:3]
                         swing_errors[i] = math.sqrt(residual @ residual)
         else:
             qdd, F, tau, status = self._failed(sol.status, terms.nle[6:])
@@ -892,7 +900,8 @@ class PassiveWBC(PlannedController):
                             {"assemble": t1 - t0 + rows, "solve": t2 - t1 - rows,
                              "prepare": t1 - t0, "update": parts.get("update", np.nan),
                              "rows": parts.get("rows", np.nan),
-                             "qp": parts.get("solve", np.nan)})
+                             "qp": parts.get("solve", np.nan)},
+                            sol.auxiliary if sol.ok else None)
 
     def _state_references(self, plan, stance) -> tuple[str | None, np.ndarray, np.ndarray, bool]:
         """The stack engine's references of the cycle from the hierarchy cycle's terms: τ

@@ -11,8 +11,9 @@ import numpy as np
 from ..formulation import Stack
 from ..tasks import (ContactConstraint, ForceRegularizer, FrameTask, FrictionCone, NewtonEuler,
                      NormalForceBounds)
-from ..tasks.regularization import (AccelerationTarget, ContactTorqueRegularizer,
-                                    TangentialForceRegularizer)
+from ..tasks.motion import SlackedFrameTask
+from ..tasks.regularization import (AccelerationTarget, AuxiliaryRegularizer,
+                                    ContactTorqueRegularizer, TangentialForceRegularizer)
 from ..tasks.wrench import TrunkWrenchTask
 from ..variables import Variables
 
@@ -26,12 +27,12 @@ class PassiveStack:
     controller's when built. The per-contact tasks apply to all active contacts: the stance
     feet of :meth:`update`'s variables; where their rows are linearly dependent (legs of two
     joints) the stance task takes an independent set of them (``rank_tolerance``), as the Python
-    engine does. The single-slack mode has no stack form (its cost is an ∞-norm, not a weighted
-    task)."""
+    engine does. The swing feet's tasks: hard (swing slack "none"), weighted ("per-direction") or,
+    with one slack per foot ("single"), a :class:`~wholebody.tasks.motion.SlackedFrameTask` on the
+    hard level (its slack an auxiliary variable of the stance set's variables) with the slack's
+    cost α ε² on the objective level."""
 
     def __init__(self, wbc):
-        if wbc.swing_slack == "single":
-            raise ValueError("swing_slack: 'single' has no two-level stack form")
         self.wbc = wbc
         robot = wbc.robot
         self.contact = ContactConstraint(kp=wbc.K_st, kd=wbc.D_st,
@@ -51,12 +52,21 @@ class PassiveStack:
             self.tangential = TangentialForceRegularizer(
                 weight=np.sqrt(wbc.tangential_weight), mu=wbc.mu)
             self.objective.append(self.tangential)
-        self.swing = [FrameTask(robot.contact(n).frame, kp=wbc.swing.K, kd=wbc.swing.D,
-                                mask="position", name=f"swing {n}",
-                                weight=1.0 if wbc.swing_slack == "none"
-                                else np.sqrt(wbc.slack_weight))
-                      for n in wbc.contacts]
-        self.swing_level = 0 if wbc.swing_slack == "none" else 1
+        self.single = wbc.swing_slack == "single"
+        if self.single:  # per foot: |J q̈ − b| ≤ ε (hard level), α ε² (objective)
+            self.swing = [SlackedFrameTask(robot.contact(n).frame, f"slack {n}", kp=wbc.swing.K,
+                                           kd=wbc.swing.D, mask="position", name=f"swing {n}")
+                          for n in wbc.contacts]
+            self.slack_costs = [AuxiliaryRegularizer([task.slack], name=f"slack cost {n}",
+                                                     weight=np.sqrt(wbc.slack_weight))
+                                for n, task in zip(wbc.contacts, self.swing)]
+        else:
+            self.swing = [FrameTask(robot.contact(n).frame, kp=wbc.swing.K, kd=wbc.swing.D,
+                                    mask="position", name=f"swing {n}",
+                                    weight=1.0 if wbc.swing_slack == "none"
+                                    else np.sqrt(wbc.slack_weight))
+                          for n in wbc.contacts]
+        self.swing_level = 0 if wbc.swing_slack in ("none", "single") else 1
         self.stack = Stack([list(self.hard), list(self.objective)])
         # the stance task anchors frame origins, the controller the sphere bottoms: the anchors
         # are rows of one array (all contacts; the task reads its active ones), set every cycle
@@ -81,7 +91,11 @@ class PassiveStack:
         levels = [list(self.hard), list(self.objective)]
         swing = [(task, wbc._leg[i]) for i, task in enumerate(self.swing) if not in_stance[i]]
         levels[self.swing_level] += [task for task, _ in swing]
-        entry = (levels, swing, Variables(wbc.robot, stance),
+        auxiliary = {}
+        if self.single:
+            levels[1] += [cost for cost, s in zip(self.slack_costs, in_stance) if not s]
+            auxiliary = {task.slack: 1 for task, _ in swing}
+        entry = (levels, swing, Variables(wbc.robot, stance, auxiliary),
                  wbc._leg[np.flatnonzero(in_stance)], stance,
                  np.flatnonzero(np.repeat(in_stance, 3)))
         self._stances[in_stance] = entry

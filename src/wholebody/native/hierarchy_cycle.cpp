@@ -38,7 +38,7 @@ namespace
   using Segment = Eigen::Ref<VectorXd>;
 
   // what a kernel's parameter size counts (wholebody.tasks.schema.UNITS)
-  enum class Unit { Fixed, Nq, Na, Nv, Contact, ContactDim, Rows, Frames };
+  enum class Unit { Fixed, Nq, Na, Nv, Contact, ContactDim, Rows, Frames, Auxiliary };
 
   // a kernel's parameter: its name and k entries per unit (wholebody.tasks.schema.Param)
   struct ParamSpec
@@ -70,6 +70,7 @@ namespace
     std::vector<Index> contacts; // robot contact indices, in lambda order
     std::vector<Index> offsets;  // their first lambda column (relative to nv)
     Index nl = 0, n = 0, rows = 0, nparams = 0;
+    Index naux = 0;              // auxiliary variables: the last naux columns (wholebody.variables)
     bool reduced = true;
     VectorXd scales;
     std::vector<Slot> slots;
@@ -211,7 +212,10 @@ public:
       prog.nl += contact_dims_[c];
     }
     prog.reduced = get<bool>(p, "reduced");
-    prog.n = nv_ + prog.nl + (prog.reduced ? 0 : na_);
+    prog.naux = get<Index>(p, "auxiliary");
+    if (prog.naux < 0)
+      throw std::invalid_argument("compile: a negative number of auxiliary variables");
+    prog.n = nv_ + prog.nl + (prog.reduced ? 0 : na_) + prog.naux;
     prog.rows = get<Index>(p, "rows");
     prog.nparams = get<Index>(p, "nparams");
     prog.scales = get_vector(p, "scales", prog.n);
@@ -324,7 +328,7 @@ public:
       tau.noalias() = data_.M.bottomRows(na_) * qdd + data_.nle.tail(na_)
                       - P.Jc.rightCols(na_).transpose() * lam;
     else
-      tau = x.tail(na_);
+      tau = x.segment(nv_ + P.nl, na_);
     Map<VectorXd> hi(P.tau_hi, na_), lo(P.tau_lo, na_);
     torque_upper(hi);
     lo = -hi;
@@ -479,6 +483,12 @@ private:
       {"frame",
        {true, {{"position", 3}, {"rotation", 9}, {"velocity", 6}, {"acceleration", 6}, {"kp", 6}, {"kd", 6}},
         {{"rows", 6}, {"frame", 1, Unit::Frames}}, &C::rows_picked, &C::fill_frame}},
+      {"slacked_frame",
+       {false, {{"position", 3}, {"rotation", 9}, {"velocity", 6}, {"acceleration", 6}, {"kp", 6}, {"kd", 6}},
+        {{"rows", 6}, {"frame", 1, Unit::Frames}, {"auxiliary", 1, Unit::Auxiliary}}, &C::rows_picked_twice,
+        &C::fill_slacked_frame}},
+      {"auxiliary_regularizer",
+       {true, {}, {{"auxiliary", 1, Unit::Auxiliary}}, &C::rows_picked, &C::fill_auxiliary_regularizer}},
       {"posture",
        {true, {{"q_ref", 1, Unit::Nq}, {"kp", 1, Unit::Na}, {"kd", 1, Unit::Na}, {"base_kp", 6}, {"base_kd", 6}},
         {{"with_base", 2}}, &C::rows_posture, &C::fill_posture}},
@@ -604,6 +614,7 @@ private:
       case Unit::ContactDim: return contact_dims(s, P);
       case Unit::Rows: return Index(s.picks.empty() ? 0 : s.picks[0].size());
       case Unit::Frames: return Index(frames_.size());
+      case Unit::Auxiliary: return P.naux;
     }
     return -1;
   }
@@ -618,6 +629,7 @@ private:
   template<Index N>
   Index rows_per_contact(const Program &, const Slot & s) const { return N * Index(s.contacts.size()); }
   Index rows_picked(const Program &, const Slot & s) const { return Index(s.pick(0).size()); }
+  Index rows_picked_twice(const Program &, const Slot & s) const { return 2 * Index(s.pick(0).size()); }
   Index rows_posture(const Program &, const Slot & s) const { return s.flag(0) ? nv_ : na_; }
   Index soles(const Program & P, const Slot & s) const
   {
@@ -652,7 +664,7 @@ private:
   {
     A.leftCols(nv_) = data_.M;
     A.middleCols(nv_, P.nl) = -P.Jc.transpose();
-    A.bottomRightCorner(na_, na_) = -MatrixXd::Identity(na_, na_);
+    A.block(nv_ - na_, nv_ + P.nl, na_, na_) = -MatrixXd::Identity(na_, na_);
     e = -data_.nle;
   }
 
@@ -673,7 +685,7 @@ private:
       up -= data_.nle.tail(na_);
     }
     else
-      A.rightCols(na_).setIdentity();
+      A.middleCols(nv_ + P.nl, na_).setIdentity();
   }
 
   // Fahmi et al. 2019 eqs. 17-18 (braking) or Herzog et al. 2016 Sect. 2.1 (tanh)
@@ -904,6 +916,33 @@ private:
       A.row(Index(k)).head(nv_) = frame_J_.row(rows[k]);
       e[Index(k)] = a[rows[k]];
     }
+  }
+
+  // the frame task's k selected rows a_i within one shared slack eps (its auxiliary variable):
+  // J_i qdd - eps <= a_i (rows 0..k-1) and a_i <= J_i qdd + eps (rows k..2k-1), i.e.
+  // |J_i qdd - a_i| <= eps (Fahmi et al. 2019's single swing slack)
+  void fill_slacked_frame(const Program & P, const Slot & s, Rows A, Segment e, Segment lo, Segment up)
+  {
+    const Index k = Index(s.pick(0).size());
+    fill_frame(P, s, A.topRows(k), e.head(k), lo, up);
+    A.bottomRows(k).leftCols(nv_) = A.topRows(k).leftCols(nv_);
+    const Index column = P.n - P.naux + s.pick(2)[0];
+    A.col(column).head(k).setConstant(-1.0);
+    A.col(column).tail(k).setConstant(1.0);
+    lo.head(k).setConstant(-kInf);
+    up.head(k) = e.head(k);
+    lo.tail(k) = e.head(k);
+    up.tail(k).setConstant(kInf);
+    e.head(k).setZero();
+  }
+
+  // the selected auxiliary variables = 0 (weighted: a cost on them)
+  void fill_auxiliary_regularizer(const Program & P, const Slot & s, Rows A, Segment e, Segment, Segment)
+  {
+    const auto & columns = s.pick(0);
+    for (std::size_t k = 0; k < columns.size(); ++k)
+      A(Index(k), P.n - P.naux + columns[k]) = 1.0;
+    e.setZero();
   }
 
   // joint-space PD toward q_ref (pinocchio::difference: any joint type), with the base rows

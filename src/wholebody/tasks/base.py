@@ -1,9 +1,10 @@
-"""Tasks and constraints as affine rows over the full variables y = [qdd, lambda, tau].
+"""Tasks and constraints as affine rows over the full variables y = [qdd, lambda, tau, aux].
 
 Herzog et al. 2016, eqs. 3-4: every control objective and physical constraint of a cycle is an
 affine function of (qdd, lambda, tau). A task fills :class:`TaskRows` from the robot's cycle cache:
 an equality ``A y ≈ target`` (weighted least squares) or an inequality ``lower <= A y <= upper``,
-with ``A`` given as its three column blocks (any may be None = zero). Gains, references and weights
+with ``A`` given as its column blocks (any may be None = zero; ``aux`` only for a task that uses
+auxiliary variables, :meth:`~wholebody.tasks.schema.KernelTask.auxiliary`). Gains, references and weights
 are plain attributes: change them every cycle without rebuilding the stack.
 
 Validated attributes. The parameters whose bad value would silently change a task's meaning (a
@@ -37,7 +38,7 @@ from .schema import KernelTask
 
 @dataclass
 class TaskRows:
-    """Rows of one task over y = [qdd (nv), lambda (n_lambda), tau (na)]."""
+    """Rows of one task over y = [qdd (nv), lambda (n_lambda), tau (na), aux (n_aux)]."""
 
     qdd: np.ndarray | None
     lam: np.ndarray | None
@@ -46,10 +47,11 @@ class TaskRows:
     lower: np.ndarray | None = None  # inequality rows: lower <= A y <= upper
     upper: np.ndarray | None = None
     tau_identity: bool = False  # tau block is the identity (lets the formulation skip a product)
+    aux: np.ndarray | None = None  # over all n_aux auxiliary columns (Variables.auxiliary)
 
     @property
     def m(self) -> int:
-        for block in (self.qdd, self.lam, self.tau):
+        for block in (self.qdd, self.lam, self.tau, self.aux):
             if block is not None:
                 return block.shape[0]
         return 0

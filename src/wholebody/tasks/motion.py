@@ -124,6 +124,43 @@ class FrameTask(Task):
                         target=(a - robot.frame_drift(self.frame))[s])
 
 
+class SlackedFrameTask(FrameTask):
+    """A :class:`FrameTask` whose rows hold within one shared slack: |J_i q̈ − a_i| ≤ ε on every
+    selected row i (2 inequality rows each), ε ≥ 0 the auxiliary variable named ``slack`` (size
+    1) — Fahmi et al. 2019's swing task with one slack per foot (eq. 33 with a single ε: an
+    ∞-norm relaxation). Put a cost on ε on a lower level (:class:`~wholebody.tasks.regularization.
+    AuxiliaryRegularizer`), or it relaxes the rows for free."""
+
+    kind = "ineq"
+    kernel = "slacked_frame"
+
+    def __init__(self, frame: str, slack: str, kp=100.0, kd=20.0, name=None, weight=1.0,
+                 mask: str = "6d"):
+        if not isinstance(slack, str) or not slack:
+            raise ValueError(f"slack: expected the auxiliary variable's name, got {slack!r}")
+        super().__init__(frame, kp=kp, kd=kd, name=name, weight=weight, mask=mask)
+        self.slack = slack
+
+    def auxiliary(self):
+        return {self.slack: 1}
+
+    def layout_key(self):
+        return (self.frame, self.mask, self.slack)
+
+    def row_count(self, layout):
+        return 2 * super().row_count(layout)
+
+    def rows(self, robot, variables):
+        frame = super().rows(robot, variables)
+        k, a = frame.m, frame.target
+        aux = np.zeros((2 * k, variables.n_aux))
+        column = variables.auxiliary_columns((self.slack,), f"task '{self.name}'")[0]
+        aux[:k, column], aux[k:, column] = -1.0, 1.0
+        return TaskRows(qdd=np.vstack([frame.qdd, frame.qdd]), lam=None, tau=None, aux=aux,
+                        lower=np.concatenate([np.full(k, -np.inf), a]),
+                        upper=np.concatenate([a, np.full(k, np.inf)]))
+
+
 class PostureTask(Task):
     """Joint-space PD toward a reference posture; with ``base_kp`` > 0 also the floating base
     (position and orientation, LOCAL base frame as Pinocchio's v) — Table 2's "14 + 6 eq".

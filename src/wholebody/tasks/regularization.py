@@ -42,6 +42,35 @@ class AccelerationTarget(AccelerationRegularizer):
         return TaskRows(qdd=np.eye(robot.nv), lam=None, tau=None, target=self.target.copy())
 
 
+class AuxiliaryRegularizer(Task):
+    """Named auxiliary variables ≈ 0 (one row per entry): the cost α‖ε‖² (``weight`` √α) on
+    slacks another task declares, e.g. :class:`~wholebody.tasks.motion.SlackedFrameTask`'s."""
+
+    kernel = "auxiliary_regularizer"
+
+    def __init__(self, names, name=None, weight=1.0):
+        if isinstance(names, str) or not names or not all(isinstance(n, str) for n in names):
+            raise ValueError(f"names: expected a non-empty list of auxiliary variable names, "
+                             f"got {names!r}")
+        super().__init__(name or f"auxiliary {','.join(names)}", weight)
+        self.names = tuple(names)
+
+    def auxiliary(self):
+        return dict.fromkeys(self.names)  # sizes declared by the tasks that own them
+
+    def layout_key(self):
+        return self.names
+
+    def row_count(self, layout):
+        return layout.count("auxiliary")
+
+    def rows(self, robot, variables):
+        columns = variables.auxiliary_columns(self.names, f"task '{self.name}'")
+        aux = np.zeros((len(columns), variables.n_aux))
+        aux[np.arange(len(columns)), columns] = 1.0
+        return TaskRows(qdd=None, lam=None, tau=None, aux=aux, target=np.zeros(len(columns)))
+
+
 class TangentialForceRegularizer(_PerContact):
     """Tangential components of point-contact forces ≈ 0: forces near the cone normals (Sect. V-D,
     "robustness to uncertainties in the friction parameters"). 2 rows per contact. ``contacts``:

@@ -27,8 +27,9 @@ from typing import Any, Callable, Protocol, Sequence
 import numpy as np
 
 #: what a :class:`Size` may count: a fixed number, the robot's nq / na / nv, the task's contacts,
-#: the sum of their wrench dimensions, or the entries of its ``rows`` selection
-UNITS = ("", "nq", "na", "nv", "contact", "contact_dim", "rows")
+#: the sum of their wrench dimensions, the entries of its ``rows`` selection, or the entries of
+#: the auxiliary variables it uses (:meth:`KernelTask.auxiliary`)
+UNITS = ("", "nq", "na", "nv", "contact", "contact_dim", "rows", "auxiliary")
 #: how a value becomes the parameter's entries: ``vector`` as is (a scalar fills every entry),
 #: ``diagonal`` a gain given as a number or one value per entry (a matrix is refused),
 #: ``matrix`` a full matrix (row-major), ``flag`` a bool as 0/1
@@ -52,10 +53,13 @@ class Size:
 
 class LayoutContext:
     """What sizes and selections are resolved against: the robot, the active contacts a task
-    applies to (in lambda order) and the task's own ``rows`` selection."""
+    applies to (in lambda order), the task's own ``rows`` selection and the auxiliary columns of
+    the variables it uses."""
 
-    def __init__(self, robot, contacts: Sequence[str] = (), rows: Sequence[int] = ()):
+    def __init__(self, robot, contacts: Sequence[str] = (), rows: Sequence[int] = (),
+                 auxiliary: Sequence[int] = ()):
         self.robot, self.contacts, self.rows = robot, tuple(contacts), tuple(rows)
+        self.auxiliary = tuple(auxiliary)
         self._counts: dict[str, int] | None = None
 
     def count(self, unit: str) -> int:
@@ -65,6 +69,7 @@ class LayoutContext:
             robot = self.robot
             self._counts = {"": 1, "nq": robot.nq, "na": robot.na, "nv": robot.nv,
                             "contact": len(self.contacts), "rows": len(self.rows),
+                            "auxiliary": len(self.auxiliary),
                             "contact_dim": sum(robot.contact(n).dim for n in self.contacts)}
         return self._counts[unit]
 
@@ -178,6 +183,12 @@ class KernelTask:
     def selection(self, robot) -> dict[str, list[int]]:
         """Named integer lists fixed for a layout (CoM axes, frame rows, joint indices, flags);
         ``rows`` also sizes parameters counted per row."""
+        return {}
+
+    def auxiliary(self) -> dict[str, int | None]:
+        """The auxiliary variables the task's rows use, name -> size (None: declared by another
+        task of the stack, e.g. a cost on a slack another task owns); see
+        :class:`~wholebody.variables.Variables`."""
         return {}
 
     def layout_key(self) -> tuple:
