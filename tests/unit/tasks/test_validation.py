@@ -20,9 +20,10 @@ from wholebody.robot import FREE_FLYER_NQ, FREE_FLYER_NV
 from wholebody.tasks import (CenterOfPressure, CoMTask, ContactConstraint, ForceRegularizer,
                              FrameTask, FrictionCone, FullDynamics, JointAccelerationLimits,
                              JointTrajectoryTask, MomentumForce, MomentumPD, NewtonEuler,
-                             NormalForceBounds, PostureTask, Task, TorqueLimits)
+                             NormalForceBounds, PostureTask, SlackedFrameTask, Task, TorqueLimits)
 from wholebody.tasks.regularization import (AccelerationRegularizer, AccelerationTarget,
-                                            ContactTorqueRegularizer, TangentialForceRegularizer)
+                                            AuxiliaryRegularizer, ContactTorqueRegularizer,
+                                            TangentialForceRegularizer)
 from wholebody.tasks.wrench import TrunkImpedance, TrunkWrenchTask
 from wholebody.variables import Variables
 
@@ -39,6 +40,8 @@ TASKS = {
     AccelerationRegularizer: {}, TangentialForceRegularizer: {}, ContactTorqueRegularizer: {},
     AccelerationTarget: {"target": np.zeros(18)},
     TrunkWrenchTask: {},
+    SlackedFrameTask: {"frame": "left_sole_link", "slack": "slack"},
+    AuxiliaryRegularizer: {"names": ["slack"]},
 }
 
 
@@ -116,6 +119,7 @@ BAD = [
     (MomentumForce, "contacts", [3], "3"),
     (ContactTorqueRegularizer, "contacts", "right_sole", "'right_sole'"),
     (TrunkWrenchTask, "contacts", "lf_foot", "'lf_foot'"),
+    (SlackedFrameTask, "kd", -1.0, "-1.0"), (SlackedFrameTask, "mask", "xy", "'xy'"),
 ]
 
 
