@@ -509,10 +509,12 @@ class HierarchyCycle:
         return solution
 
     def _default_variables(self) -> Variables:
-        auxiliary = self.stack.auxiliary()
-        cached = getattr(self, "_all_contacts", None)
-        if cached is None or cached.auxiliary != tuple(auxiliary.items()):
-            self._all_contacts = Variables(self.robot, auxiliary=auxiliary)
+        """All contacts, the stack's auxiliary variables; made again when the levels change
+        (compared by task identity, as the program lookup does)."""
+        levels = self.stack.levels
+        if getattr(self, "_default_levels", None) != levels:
+            self._all_contacts = Variables(self.robot, auxiliary=self.stack.auxiliary())
+            self._default_levels = [list(level) for level in levels]
         return self._all_contacts
 
     def _take_stack(self) -> None:

@@ -139,7 +139,12 @@ class SlackedFrameTask(FrameTask):
         if not isinstance(slack, str) or not slack:
             raise ValueError(f"slack: expected the auxiliary variable's name, got {slack!r}")
         super().__init__(frame, kp=kp, kd=kd, name=name, weight=weight, mask=mask)
-        self.slack = slack
+        self._slack = slack
+
+    @property
+    def slack(self) -> str:
+        """The slack's name (fixed: the stack's variables are made from it)."""
+        return self._slack
 
     def auxiliary(self):
         return {self.slack: 1}
