@@ -547,7 +547,7 @@ class HierarchyCycle:
             self._program = program
         return program
 
-    def task_rows(self, task: Task) -> tuple[np.ndarray, np.ndarray]:
+    def task_rows(self, task: Task) -> tuple[np.ndarray, ...]:
         """(A, target) of an equality task's rows, (A, lower, upper) of an inequality task's, in
         the last cycle's level arrays (native engine; views, valid until the next solve; A over
         the solver's scaled variables)."""
