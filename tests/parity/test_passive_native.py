@@ -16,7 +16,9 @@ import pinocchio as pin
 import pytest
 
 from wholebody.control.observer import MomentumObserver
-from wholebody.control.passive import PassiveWBC
+from wholebody.control.passive import STACK_SETTINGS, PassiveWBC
+from wholebody.formulation import Formulation
+from wholebody.tasks import JointTrajectoryTask, Task, TaskRows
 
 from conftest import native_cycle_or_skip
 
@@ -362,3 +364,82 @@ def test_trot_in_the_twin(robots):
     rotation = pin.Quaternion(q_native[3:7]).toRotationMatrix().T @ pin.Quaternion(
         q_python[3:7]).toRotationMatrix()
     assert np.linalg.norm(pin.log3(rotation)) < 1e-3
+
+
+class ForceCap(Task):
+    """A user's own inequality (no compiled kernel): every stance foot's vertical force at most
+    ``cap`` N."""
+
+    kind = "ineq"
+
+    def __init__(self, cap, name="force cap"):
+        super().__init__(name)
+        self.cap = cap
+
+    def rows(self, robot, variables):
+        A = np.zeros((len(variables.contacts), variables.n_lambda))
+        for i, sl in enumerate(variables.lambda_slices.values()):
+            A[i, sl.start + 2] = 1.0
+        m = len(variables.contacts)
+        return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(m, -np.inf),
+                        upper=np.full(m, self.cap))
+
+
+def extra_tasks(robot):
+    """A hard force cap (a user's Python task) and a weighted hip posture (a library task)."""
+    joints = [j for j in robot.joint_names if j.endswith("haa_joint")]
+    hips = JointTrajectoryTask(joints, kp=60.0, kd=15.0, name="hips", weight=3.0)
+    hips.position = np.full(len(joints), 0.1)
+    return {"hard": [ForceCap(0.3 * robot.mass * 9.81)], "objective": [hips]}
+
+
+def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
+    """Tasks added to the passive controller's QP (a user's Python constraint in the hard
+    level, a library task in the objective) run on the stack engine, the Python one's rows
+    written into the compiled program: each cycle's torques equal the Python Formulation's on
+    the same stack, the user's cap holds on the solved forces (and binds: the controller
+    without it exceeds it), and the hips' task residual is never larger than with the cap alone
+    (a convex cost with one more term cannot increase that term at its optimum) and mostly
+    smaller (the stance feet leave the hips little freedom)."""
+    robot = robots["hyq"]
+    wbc = PassiveWBC(robot, planner=planner(robot), extra_tasks=extra_tasks(robot))
+    plain = PassiveWBC(robot, planner=planner(robot), engine="stack")
+    cap_only = PassiveWBC(robot, planner=planner(robot),
+                          extra_tasks={"hard": extra_tasks(robot)["hard"]})
+    assert wbc.engine == "stack" and wbc._stack_cycle.native
+    cap = 0.3 * robot.mass * 9.81
+    hips = [6 + robot.joint_names.index(j) for j in wbc.extra_tasks["objective"][0].joints]
+    capped = closer = 0
+    for k, (q, v, plan) in enumerate(crawl_states[::4]):
+        sol, other = wbc.cycle(q, v, plan), plain.cycle(q, v, plan)
+        without = cap_only.cycle(q, v, plan)
+        assert sol.ok, sol.status
+        _, variables = wbc._stack.update(plan, wbc.last_desired_wrench[:3])  # the same again
+        robot.update(q, v)
+        ref = Formulation(robot).solve(wbc._stack.stack, variables, STACK_SETTINGS)
+        np.testing.assert_allclose(sol.tau, ref.tau, atol=1e-6, err_msg=f"cycle {k}")
+        fz = np.array([f[2] for f in sol.forces.values()])
+        assert fz.max() <= cap + 1e-6
+        capped += max(f[2] for f in other.forces.values()) > cap
+        q_hip, v_hip = q[7 + np.array(hips) - 6], v[np.array(hips)]
+        desired = 60.0 * (0.1 - q_hip) - 15.0 * v_hip
+        residual = np.linalg.norm(sol.qdd[hips] - desired)
+        assert residual <= np.linalg.norm(without.qdd[hips] - desired) + 1e-9, f"cycle {k}"
+        closer += residual < np.linalg.norm(without.qdd[hips] - desired) - 1e-3
+    assert capped > 0 and closer > len(crawl_states[::4]) // 2
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"engine": "native"}, "extra_tasks: engine 'native' .* cannot take tasks"),
+    ({"engine": "python"}, "extra_tasks: engine 'python' .* cannot take tasks"),
+    ({"extra_tasks": {"soft": []}}, "extra_tasks: level 'soft' is not one of"),
+    ({"extra_tasks": {"hard": [1.0]}}, r"extra_tasks\['hard'\]: expected tasks"),
+    ({"extra_tasks": {"hard": [ForceCap(1.0)], "objective": [ForceCap(2.0)]}},
+     r"must be unique, got \['force cap'\]"),
+    ({"extra_tasks": {"hard": [ForceCap(1.0, name="swing lf_foot")]}},
+     r"the names \['swing lf_foot'\] are the controller's own")])
+def test_bad_extra_tasks_name_the_field(robots, kwargs, match):
+    robot = robots["hyq"]
+    kwargs = {"extra_tasks": {"hard": [ForceCap(1.0)]}, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        PassiveWBC(robot, planner=planner(robot), **kwargs)

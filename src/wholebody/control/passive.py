@@ -56,6 +56,7 @@ from ..robots.reference import froude_ratio
 from ..robots.roles import leg_joints
 from ..solvers import SolverSettings
 from ..solvers.backends import DaqpResult, solve_daqp_qp
+from ..tasks.base import Task
 from ..tasks.contact import independent_rows
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import (F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound,
@@ -132,6 +133,34 @@ def independent_rank(J: np.ndarray | None = None, singular: np.ndarray | None = 
 
 
 SLACKS = ("per-direction", "single", "none")
+#: the levels of PassiveWBC's QP that take extra tasks: the hard constraints, the weighted objective
+EXTRA_LEVELS = ("hard", "objective")
+
+
+def extra_task_levels(extra_tasks) -> dict[str, list]:
+    """``extra_tasks`` ({level: tasks}, None: none) checked: levels of EXTRA_LEVELS, tasks
+    (:class:`~wholebody.tasks.base.Task`) with unique names (:class:`PassiveStack` checks them
+    against the controller's own)."""
+    levels = {level: [] for level in EXTRA_LEVELS}
+    if extra_tasks is None:
+        return levels
+    if not isinstance(extra_tasks, dict):
+        raise ValueError(f"extra_tasks: expected {{level: [tasks]}} with levels {EXTRA_LEVELS}, "
+                         f"got {extra_tasks!r}")
+    for level, tasks in extra_tasks.items():
+        if level not in EXTRA_LEVELS:
+            raise ValueError(f"extra_tasks: level {level!r} is not one of {EXTRA_LEVELS}")
+        if isinstance(tasks, Task):
+            tasks = [tasks]
+        for task in tasks:
+            if not isinstance(task, Task):
+                raise ValueError(f"extra_tasks[{level!r}]: expected tasks, got {task!r}")
+            levels[level].append(task)
+    names = [t.name for tasks in levels.values() for t in tasks]
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise ValueError(f"extra_tasks: task names must be unique, got {duplicates} twice")
+    return levels
 ENGINES = ("auto", "native", "python", "stack")
 
 #: how engine "stack" solves its two levels: one weighted QP by DAQP (eq. 7), ε negligible next
@@ -294,11 +323,18 @@ class PassiveWBC(PlannedController):
     ``robot``'s Python cache (``robot.M``, ``robot.com``... stay those of the last
     ``robot.update``). Its weights, gains and limits are copied when it is built: after changing
     any of them call :meth:`configure`.
+
+    ``extra_tasks`` adds library or user tasks to the QP (``{"hard": [...], "objective":
+    [...]}``: constraints beside the dynamics, contacts, friction and limits, or weighted terms
+    beside the trunk wrench — a task's ``weight`` scales its rows, so a row costs weight² times
+    its squared residual, as the trunk wrench's √Q). The hand-assembled engines have no place for
+    them: the QP is then solved as a stack (engine "stack", which "auto" picks; "native" and
+    "python" refuse them); the tasks are live objects, read every cycle.
     """
 
     def __init__(self, robot: Robot, planner=None, config: PassiveConfig | None = None, *,
                  impedance: TrunkImpedance | None = None, swing: SwingGains | None = None,
-                 observer=None, **overrides):
+                 observer=None, extra_tasks: dict | None = None, **overrides):
         unknown = sorted(set(overrides) - _CONFIG_FIELDS)
         if unknown:
             raise TypeError(f"PassiveWBC: unknown option(s) {unknown}; expected PassiveConfig "
@@ -370,7 +406,10 @@ class PassiveWBC(PlannedController):
         self.dependent_stance = stance_rank(robot, self.contacts) < 3 * c
         #: the stance task's rank tolerance on engine "stack" (0: its rows as they are)
         self.stance_rank_tolerance = STANCE_RANK_TOLERANCE if self.dependent_stance else 0.0
-        self.engine = self._resolve_engine(config, self.dependent_stance)
+        #: the user's tasks of each level ("hard", "objective"), see the class docstring
+        self.extra_tasks = extra_task_levels(extra_tasks)
+        self.engine = self._resolve_engine(config, self.dependent_stance,
+                                           any(self.extra_tasks.values()))
         self._native = self._stack = None
         if self.engine == "native":
             self._native = self._build_native()
@@ -631,10 +670,18 @@ class PassiveWBC(PlannedController):
 
     # ------------------------------------------------------------------ native engine
     @staticmethod
-    def _resolve_engine(config: PassiveConfig, dependent_stance: bool = False) -> str:
+    def _resolve_engine(config: PassiveConfig, dependent_stance: bool = False,
+                        extra_tasks: bool = False) -> str:
         """``config.engine``, with "auto" resolved: native when built and the slack and the
-        stance rows supported; dependent stance rows (legs of two joints) on the stack engine,
-        whose stance task takes an independent set of them."""
+        stance rows supported; dependent stance rows (legs of two joints), the single slack and
+        extra tasks on the stack engine."""
+        if extra_tasks and config.engine in ("native", "python"):
+            raise ValueError(f"extra_tasks: engine '{config.engine}' (a hand-assembled QP) "
+                             "cannot take tasks; use engine='stack' or 'auto'")
+        if extra_tasks and not native_available():
+            raise ValueError("extra_tasks: they are solved by the stack engine, which needs the "
+                             "compiled extension wholebody._hierarchy_cycle (install with a C++ "
+                             "compiler)")
         if dependent_stance and config.engine == "native":
             raise ValueError("engine: 'native' needs linearly independent stance rows (legs of "
                              "three joints or more); this robot's are dependent, use "
@@ -646,7 +693,7 @@ class PassiveWBC(PlannedController):
             return config.engine
         # the stack's stance task takes an independent set of dependent rows; its swing tasks
         # have the single slack as an auxiliary variable
-        if dependent_stance or config.swing_slack == "single":
+        if dependent_stance or config.swing_slack == "single" or extra_tasks:
             if native_available():
                 return "stack"
             warn_python_fallback("PassiveWBC", "the compiled wholebody._hierarchy_cycle is not "

@@ -30,7 +30,7 @@ class PassiveStack:
     engine does. The swing feet's tasks: hard (swing slack "none"), weighted ("per-direction") or,
     with one slack per foot ("single"), a :class:`~wholebody.tasks.motion.SlackedFrameTask` on the
     hard level (its slack an auxiliary variable of the stance set's variables) with the slack's
-    cost α ε² on the objective level."""
+    cost α ε² on the objective level. The controller's ``extra_tasks`` join their levels."""
 
     def __init__(self, wbc):
         self.wbc = wbc
@@ -61,12 +61,21 @@ class PassiveStack:
                                                      weight=np.sqrt(wbc.slack_weight))
                                 for n, task in zip(wbc.contacts, self.swing)]
         else:
+            self.slack_costs = []
             self.swing = [FrameTask(robot.contact(n).frame, kp=wbc.swing.K, kd=wbc.swing.D,
                                     mask="position", name=f"swing {n}",
                                     weight=1.0 if wbc.swing_slack == "none"
                                     else np.sqrt(wbc.slack_weight))
                           for n in wbc.contacts]
         self.swing_level = 0 if wbc.swing_slack in ("none", "single") else 1
+        own = {t.name for t in self.hard + self.objective + self.swing
+               + self.slack_costs}
+        taken = sorted(own & {t.name for tasks in wbc.extra_tasks.values() for t in tasks})
+        if taken:
+            raise ValueError(f"extra_tasks: the names {taken} are the controller's own tasks'; "
+                             "name the tasks differently")
+        self.hard += wbc.extra_tasks["hard"]
+        self.objective += wbc.extra_tasks["objective"]
         self.stack = Stack([list(self.hard), list(self.objective)])
         # the stance task anchors frame origins, the controller the sphere bottoms: the anchors
         # are rows of one array (all contacts; the task reads its active ones), set every cycle
@@ -91,10 +100,9 @@ class PassiveStack:
         levels = [list(self.hard), list(self.objective)]
         swing = [(task, wbc._leg[i]) for i, task in enumerate(self.swing) if not in_stance[i]]
         levels[self.swing_level] += [task for task, _ in swing]
-        auxiliary = {}
-        if self.single:
-            levels[1] += [cost for cost, s in zip(self.slack_costs, in_stance) if not s]
-            auxiliary = {task.slack: 1 for task, _ in swing}
+        levels[1] += [cost for cost, s in zip(self.slack_costs, in_stance) if not s]
+        # the swing feet's slacks (single slack) and the extra tasks' auxiliary variables
+        auxiliary = Stack(levels).auxiliary()
         entry = (levels, swing, Variables(wbc.robot, stance, auxiliary),
                  wbc._leg[np.flatnonzero(in_stance)], stance,
                  np.flatnonzero(np.repeat(in_stance, 3)))
