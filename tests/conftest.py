@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import wholebody as wb
+from wholebody.tasks import Task, TaskRows
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import fuzz  # noqa: E402  (the fuzz harness's state and plan samplers)
@@ -159,6 +160,25 @@ def ray_height(sim, x: float, y: float, top: float = 3.0) -> float:
     d = mujoco.mj_ray(sim.model, sim.data, np.array([x, y, top]), np.array([0.0, 0.0, -1.0]),
                       None, 1, -1, geom)
     return top - d if d >= 0 else -np.inf
+
+
+class ForceCap(Task):
+    """A user's own inequality (no compiled kernel): every stance foot's vertical force at most
+    ``cap`` N."""
+
+    kind = "ineq"
+
+    def __init__(self, cap, name="force cap"):
+        super().__init__(name)
+        self.cap = cap
+
+    def rows(self, robot, variables):
+        A = np.zeros((len(variables.contacts), variables.n_lambda))
+        for i, sl in enumerate(variables.lambda_slices.values()):
+            A[i, sl.start + 2] = 1.0
+        m = len(variables.contacts)
+        return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(m, -np.inf),
+                        upper=np.full(m, self.cap))
 
 
 def native_cycle_or_skip(module: str = "_passive_cycle"):

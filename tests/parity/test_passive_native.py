@@ -18,9 +18,9 @@ import pytest
 from wholebody.control.observer import MomentumObserver
 from wholebody.control.passive import STACK_SETTINGS, PassiveWBC
 from wholebody.formulation import Formulation
-from wholebody.tasks import JointTrajectoryTask, Task, TaskRows
+from wholebody.tasks import JointTrajectoryTask
 
-from conftest import native_cycle_or_skip
+from conftest import ForceCap, native_cycle_or_skip
 
 native_cycle_or_skip()
 native_cycle_or_skip("_hierarchy_cycle")
@@ -364,25 +364,6 @@ def test_trot_in_the_twin(robots):
     rotation = pin.Quaternion(q_native[3:7]).toRotationMatrix().T @ pin.Quaternion(
         q_python[3:7]).toRotationMatrix()
     assert np.linalg.norm(pin.log3(rotation)) < 1e-3
-
-
-class ForceCap(Task):
-    """A user's own inequality (no compiled kernel): every stance foot's vertical force at most
-    ``cap`` N."""
-
-    kind = "ineq"
-
-    def __init__(self, cap, name="force cap"):
-        super().__init__(name)
-        self.cap = cap
-
-    def rows(self, robot, variables):
-        A = np.zeros((len(variables.contacts), variables.n_lambda))
-        for i, sl in enumerate(variables.lambda_slices.values()):
-            A[i, sl.start + 2] = 1.0
-        m = len(variables.contacts)
-        return TaskRows(qdd=None, lam=A, tau=None, lower=np.full(m, -np.inf),
-                        upper=np.full(m, self.cap))
 
 
 def extra_tasks(robot):
