@@ -411,14 +411,16 @@ class HierarchyCycle:
 
     # ------------------------------------------------------------------ solve
     def solve(self, q, v, variables: Variables | None = None, diagnostics: bool = False) -> Solution:
-        """The torques for state (q, v) with the active contacts of ``variables`` (default all).
+        """The torques for state (q, v) with the active contacts of ``variables`` (default all;
+        the auxiliary variables the stack's tasks use are added, :meth:`Formulation.variables_for
+        <wholebody.formulation.Formulation.variables_for>`).
 
         Never raises for numerical reasons (a failed solve is flagged, its torque finite and
         within limits, as :meth:`Formulation.solve`; so is a finite state whose rigid-body terms
         overflow, its status naming ``v``); bad input — q/v of the wrong size or with NaN, a
         task producing NaN rows — raises ValueError naming the field or task."""
         robot = self.robot
-        variables = variables or self._default_variables()
+        variables = self.formulation.variables_for(self.stack, variables)
         if not self.native:
             t0 = time.perf_counter()
             robot.update(q, v)
@@ -451,7 +453,8 @@ class HierarchyCycle:
         self._require_native("solve_updated")
         if self._qv is None:
             raise RuntimeError("solve_updated: call update(q, v) first (or solve(q, v))")
-        return self._solve_native(variables or self._default_variables(), diagnostics, None)
+        return self._solve_native(self.formulation.variables_for(self.stack, variables),
+                                  diagnostics, None)
 
     def _solve_native(self, variables: Variables, diagnostics: bool, state) -> Solution:
         """The native cycle at ``state`` = (q, v), updated in the same compiled call as the rows
@@ -507,15 +510,6 @@ class HierarchyCycle:
                             "total": earlier_update + time.perf_counter() - t0,
                             "qp": qp_time, "qps": qps}
         return solution
-
-    def _default_variables(self) -> Variables:
-        """All contacts, the stack's auxiliary variables; made again when the levels change
-        (compared by task identity, as the program lookup does)."""
-        levels = self.stack.levels
-        if getattr(self, "_default_levels", None) != levels:
-            self._all_contacts = Variables(self.robot, auxiliary=self.stack.auxiliary())
-            self._default_levels = [list(level) for level in levels]
-        return self._all_contacts
 
     def _take_stack(self) -> None:
         """What the program lookup keeps of the stack's structure, taken again when it changes:

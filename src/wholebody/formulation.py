@@ -189,6 +189,31 @@ class Formulation:
         self._tau_scale = np.abs(robot.torque_limits.upper(robot.q_ref[7:]))
         self._plan: _Plan | None = None
         self._scales_key = None
+        self._variables: dict[tuple, tuple] = {}  # see variables_for
+
+    def variables_for(self, stack: Stack, variables: Variables | None = None) -> Variables:
+        """``variables`` (None: all the robot's contacts) with the auxiliary variables the
+        stack's tasks use and ``variables`` lacks added after its own (a task inserted into a
+        controller's stack may bring a slack); made again only when the stack's levels change
+        (compared by task identity)."""
+        key = (id(stack), id(variables))
+        entry = self._variables.get(key)
+        levels = stack.levels
+        if entry is not None and entry[0] is variables and entry[1] == levels:
+            return entry[2]
+        base = Variables(self.robot) if variables is None else variables
+        own = dict(base.auxiliary)
+        needed = stack.auxiliary()
+        for name, size in needed.items():
+            if own.get(name, size) != size:
+                raise ValueError(f"variables: auxiliary variable {name!r} has size {own[name]}, "
+                                 f"the stack's tasks declare {size}")
+        missing = {n: size for n, size in needed.items() if n not in own}
+        result = Variables(self.robot, base.contacts, {**own, **missing}) if missing else base
+        if len(self._variables) > 64:  # (variables made anew every cycle: keep a few)
+            self._variables.clear()
+        self._variables[key] = (variables, [list(level) for level in levels], result)
+        return result
 
     def size(self, variables: Variables) -> int:
         return (variables.nv + variables.n_lambda + (0 if self.reduced else variables.na)
@@ -278,7 +303,7 @@ class Formulation:
         """
         settings = settings_or_default(settings)
         robot = self.robot
-        variables = variables or Variables(robot, auxiliary=stack.auxiliary())
+        variables = self.variables_for(stack, variables)
         t0 = time.perf_counter()
         try:
             levels, meta = self.levels(stack, variables)

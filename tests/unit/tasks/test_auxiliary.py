@@ -113,3 +113,34 @@ def test_reduced_and_full_formulations_agree(robots):
     assert reduced.ok and full.ok
     np.testing.assert_allclose(full.tau, reduced.tau, atol=1e-5)
     np.testing.assert_allclose(full.auxiliary["slack"], reduced.auxiliary["slack"], rtol=1e-6)
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_a_slacked_task_in_a_controllers_stack(robots, engine):
+    """A task with a slack inserted into a controller's stack (MomentumBalance's Table 2, whose
+    variables name no auxiliary variable): each engine adds the slack to the variables the
+    controller passes, the torques equal the Formulation's on the same stack with the slack
+    declared, and the slack's value is reported."""
+    from conftest import native_cycle_or_skip
+
+    from wholebody.control import MomentumBalance
+    if engine == "native":
+        native_cycle_or_skip("_hierarchy_cycle")
+    robot = robots["talos14"]
+    ctrl = MomentumBalance(robot, gains="pd", engine=engine)
+    lean = SlackedFrameTask("torso_2_link", "lean", kp=50.0, kd=10.0, mask="orientation",
+                            name="torso within a slack")
+    lean.rotation = np.eye(3)
+    ctrl.stack.insert(1, lean)
+    ctrl.stack.insert(2, AuxiliaryRegularizer(["lean"], weight=10.0))
+    assert ctrl.variables.auxiliary == ()
+    q, v = robot.q_ref.copy(), np.zeros(robot.nv)
+    q[7:] += 0.05
+    sol = ctrl.compute(q, v, 0.0)
+    assert sol.ok, sol.status
+    assert set(sol.auxiliary) == {"lean"} and sol.auxiliary["lean"][0] > 0.0
+    robot.update(q, v)
+    variables = Variables(robot, ctrl.variables.contacts, {"lean": 1})
+    ref = Formulation(robot).solve(ctrl.stack, variables, ctrl.settings)
+    np.testing.assert_allclose(sol.tau, ref.tau, atol=1e-6)
+    np.testing.assert_allclose(sol.auxiliary["lean"], ref.auxiliary["lean"], atol=1e-8)
