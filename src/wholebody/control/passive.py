@@ -33,7 +33,9 @@ from the previous cycle's multipliers (the layout never changes size).
 writing into the very arrays DAQP is called with; this Python assembly is its tested reference.
 ``engine="stack"`` solves the same QP as a stack of library tasks
 (:class:`~wholebody.control.passive_stack.PassiveStack`) through the compiled
-:class:`~wholebody.cycle.HierarchyCycle` (method "weighted").
+:class:`~wholebody.cycle.HierarchyCycle` (method "weighted"); it is what ``engine="auto"`` runs
+for the single slack (an auxiliary variable per swing foot), for dependent stance rows and for
+``extra_tasks``.
 """
 
 from __future__ import annotations
