@@ -37,8 +37,6 @@ class Variables:
             self.lambda_slices[n] = slice(start, start + dim)
             start += dim
         self.n_lambda = start
-        #: (name, size) of the auxiliary variables, in column order
-        self.auxiliary: tuple[tuple[str, int], ...] = ()
         #: each auxiliary variable's entries among the n_aux auxiliary columns
         self.auxiliary_slices: dict[str, slice] = {}
         start = 0
@@ -49,7 +47,9 @@ class Variables:
                 raise ValueError(f"auxiliary[{name!r}]: expected a size >= 1, got {size!r}")
             self.auxiliary_slices[name] = slice(start, start + size)
             start += size
-        self.auxiliary = tuple((n, s.stop - s.start) for n, s in self.auxiliary_slices.items())
+        #: (name, size) of the auxiliary variables, in column order
+        self.auxiliary: tuple[tuple[str, int], ...] = tuple(
+            (n, s.stop - s.start) for n, s in self.auxiliary_slices.items())
         self.n_aux = start
 
     def auxiliary_columns(self, names: Sequence[str], who: str) -> list[int]:

@@ -135,6 +135,13 @@ def independent_rank(J: np.ndarray | None = None, singular: np.ndarray | None = 
 
 
 SLACKS = ("per-direction", "single", "none")
+ENGINES = ("auto", "native", "python", "stack")
+
+#: how engine "stack" solves its two levels: one weighted QP by DAQP (eq. 7), ε negligible next
+#: to the R terms, no cascade fallback (a failed QP holds the previous torque, as the other engines)
+STACK_SETTINGS = SolverSettings(method="weighted", backend="daqp", regularization=1e-12,
+                                fallback_backend=None)
+REGULARIZATIONS = ("force-normal", "force-parallel", "torque")
 #: the levels of PassiveWBC's QP that take extra tasks: the hard constraints, the weighted objective
 EXTRA_LEVELS = ("hard", "objective")
 
@@ -163,13 +170,6 @@ def extra_task_levels(extra_tasks) -> dict[str, list]:
     if duplicates:
         raise ValueError(f"extra_tasks: task names must be unique, got {duplicates} twice")
     return levels
-ENGINES = ("auto", "native", "python", "stack")
-
-#: how engine "stack" solves its two levels: one weighted QP by DAQP (eq. 7), ε negligible next
-#: to the R terms, no cascade fallback (a failed QP holds the previous torque, as the other engines)
-STACK_SETTINGS = SolverSettings(method="weighted", backend="daqp", regularization=1e-12,
-                                fallback_backend=None)
-REGULARIZATIONS = ("force-normal", "force-parallel", "torque")
 
 
 @dataclass(frozen=True)

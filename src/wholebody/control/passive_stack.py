@@ -101,9 +101,9 @@ class PassiveStack:
         swing = [(task, wbc._leg[i]) for i, task in enumerate(self.swing) if not in_stance[i]]
         levels[self.swing_level] += [task for task, _ in swing]
         levels[1] += [cost for cost, s in zip(self.slack_costs, in_stance) if not s]
-        # the swing feet's slacks (single slack) and the extra tasks' auxiliary variables
-        auxiliary = Stack(levels).auxiliary()
-        entry = (levels, swing, Variables(wbc.robot, stance, auxiliary),
+        # (the swing feet's slacks and the extra tasks' auxiliary variables are added by the
+        # solver, Formulation.variables_for)
+        entry = (levels, swing, Variables(wbc.robot, stance),
                  wbc._leg[np.flatnonzero(in_stance)], stance,
                  np.flatnonzero(np.repeat(in_stance, 3)))
         self._stances[in_stance] = entry
