@@ -5,6 +5,7 @@ loop saw; and it reaches summary.json through Scenario.run."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from wholebody.guard import Outcome
 from wholebody.formulation import Solution
@@ -58,10 +59,18 @@ def _limit_incidents(log) -> dict[tuple[str, str], float]:
     return out
 
 
-def test_joint_limits_are_reported_when_the_logged_state_first_reaches_them(robots):
+@pytest.mark.parametrize("compiled", [True, False])
+def test_joint_limits_are_reported_when_the_logged_state_first_reaches_them(robots, monkeypatch,
+                                                                             compiled):
     """HyQ pushed by half its torque limits on every joint for 0.4 s: its joints run into their
     ranges. Every (joint, side) whose logged position reached the model's limit is reported, at
-    that step's time, and nothing else."""
+    that step's time, and nothing else; with the per-step test compiled and in Python."""
+    from wholebody.sim import incidents
+    if compiled:
+        from conftest import native_cycle_or_skip
+        native_cycle_or_skip("_sim_reads")
+    else:
+        monkeypatch.setattr(incidents, "_sim_reads", None)
     robot = robots["hyq"]
     log = IncidentLog()
     sim = Simulator(robot, observers=[log])

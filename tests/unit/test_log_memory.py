@@ -9,7 +9,7 @@ import pytest
 
 from wholebody.scenarios.locomotion import GaitLog
 from wholebody.sim.disturbance import Push
-from wholebody.sim.series import FIRST_CHUNK, MAX_CHUNK, Series, SeriesLog
+from wholebody.sim.series import FIRST_CHUNK, MAX_CHUNK, RowLog, Series, SeriesLog
 from wholebody.sim.simulator import SimLog, Simulator
 
 
@@ -96,6 +96,30 @@ def _falling_run(robot, steps: int, observers=()):
     return sim, np.asarray(taus)
 
 
+def test_row_log_fields_read_back_as_appended_across_chunks(rng):
+    """Fields stored side by side in one row read back, each in its own shape, as np.asarray of
+    the values appended (across chunks and between reads); a row missing a field or naming an
+    unknown one is refused, naming them."""
+    shapes = {"t": (), "q": (5,), "w": (2, 6), "f": (3,)}
+    log = RowLog(shapes)
+    assert log.q.shape == (0, 5) and log.w.shape == (0, 2, 6) and len(log) == 0
+    rows = [{name: rng.normal(size=shape) if shape else float(rng.normal())
+             for name, shape in shapes.items()} for _ in range(2 * FIRST_CHUNK + 9)]
+    for k, row in enumerate(rows):
+        log.append(**row)
+        if k in (0, FIRST_CHUNK, 2 * FIRST_CHUNK + 8):
+            for name in shapes:
+                np.testing.assert_array_equal(getattr(log, name),
+                                              np.asarray([r[name] for r in rows[:k + 1]]))
+    arrays = log.arrays()
+    assert set(arrays) == set(shapes) and len(log) == len(rows)
+    assert arrays["w"].shape == (len(rows), 2, 6) and arrays["t"].shape == (len(rows),)
+    with pytest.raises(ValueError, match=r"missing \['f'\], unknown \['g'\]"):
+        log.append(t=0.0, q=np.zeros(5), w=np.zeros((2, 6)), g=np.zeros(3))
+    with pytest.raises(AttributeError):
+        log.nothing
+
+
 def test_sim_log_equals_a_naive_recording(robots):
     """Every series of the log, bit for bit, against per-step lists of the same quantities."""
     robot = robots["hyq"]
@@ -116,7 +140,7 @@ def test_sim_log_equals_a_naive_recording(robots):
     assert np.any(log["tau_applied"] != log["tau_command"])
     assert list(log["contact_names"]) == list(robot.contact_names)
     sim.reset()
-    assert len(sim.log) == 0 and sim.log.q.shape == (0,)
+    assert len(sim.log) == 0 and sim.log.q.shape == (0, robot.nq)
 
 
 def test_sim_log_memory_is_its_numbers(robots):
@@ -142,8 +166,8 @@ def test_sim_log_memory_is_its_numbers(robots):
 
 
 def test_sim_log_growth_is_bounded_by_the_chunk():
-    """Past MAX_CHUNK rows, the storage exceeds the numbers by at most one chunk per series."""
-    log = SimLog(("a",))
+    """Past MAX_CHUNK rows, the storage exceeds the numbers by at most one chunk of rows."""
+    log = SimLog(("a",), 7, 6, 0)
     row = dict(t=0.0, q=np.zeros(7), v=np.zeros(6), tau_command=np.zeros(0),
                tau_applied=np.zeros(0), contact_wrenches=np.zeros((1, 6)), push_force=np.zeros(3))
     steps = 2 * MAX_CHUNK + 5

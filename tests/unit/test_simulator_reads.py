@@ -131,3 +131,48 @@ def test_state_is_mujocos_of_the_moment(robots, rng):
     q, v = sim.state()
     np.testing.assert_array_equal(q, converted()[0])
     np.testing.assert_array_equal(v, converted()[1])
+
+
+def test_compiled_state_conversion_is_the_python_reference_bit_for_bit(robots, rng):
+    """The compiled (qpos, qvel) -> (q, v) (what the simulator converts with where it was built)
+    is :func:`wholebody.sim.convert.mj_to_pin` to the bit: random states over six decades,
+    quaternions far from unit norm, strided views of MuJoCo's arrays; its arrays are new; a
+    vector too short for a free base is refused naming the field."""
+    from conftest import native_cycle_or_skip
+    native_cycle_or_skip("_sim_reads")
+    from wholebody import _sim_reads
+    for _ in range(2000):
+        scale = 10.0 ** rng.integers(-3, 4)
+        qpos, qvel = scale * rng.normal(size=19), scale * rng.normal(size=18)
+        for q, v in ((qpos, qvel), (np.repeat(qpos, 2)[::2], np.repeat(qvel, 3)[1::3])):
+            expected, got = convert.mj_to_pin(q, v), _sim_reads.mj_to_pin(q, v)
+            assert got[0].tobytes() == expected[0].tobytes()
+            assert got[1].tobytes() == expected[1].tobytes()
+            assert not np.shares_memory(got[0], q) and not np.shares_memory(got[1], v)
+    sim = Simulator(robots["hyq"], record=False)
+    for _ in shaken(sim, rng, 50):
+        qpos, qvel = sim.data.qpos, sim.data.qvel
+        for a, b in zip(_sim_reads.mj_to_pin(qpos, qvel), convert.mj_to_pin(qpos, qvel)):
+            assert a.tobytes() == b.tobytes()
+    with pytest.raises(ValueError, match="qvel"):
+        _sim_reads.mj_to_pin(np.zeros(7), np.zeros(5))
+
+
+def test_a_held_torque_is_read_anew_when_its_numbers_change(robots):
+    """The simulator checks a torque once while the same array holds the same numbers (a
+    controller's torque held over steps): numbers written into that array in place are applied
+    at the next step, and a NaN written there is refused naming the field."""
+    robot = robots["hyq"]
+    sim = Simulator(robot)
+    _, hi = robot.torque_bounds(robot.q_ref)
+    tau = 0.1 * hi
+    sim.step(tau)
+    sim.step(tau)
+    tau *= -2.0
+    sim.step(tau)
+    np.testing.assert_array_equal(sim.log.tau_command, [0.1 * hi, 0.1 * hi, -0.2 * hi])
+    tau[3] = np.nan
+    with pytest.raises(ValueError, match="tau"):
+        sim.step(tau)
+    sim.step(list(0.05 * hi))
+    np.testing.assert_array_equal(sim.log.tau_command[-1], 0.05 * hi)

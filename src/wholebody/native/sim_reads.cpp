@@ -1,13 +1,18 @@
-// What the simulator reads from MuJoCo every step, compiled: the per-contact sums of contact
-// forces and their moments of wholebody.sim.simulator.Simulator._contact_wrenches_reference (the
-// reference, in Python; the same products and sums in the same order, every entry bitwise the
-// same: built with -ffp-contract=off, so that no multiply-add is fused). The arrays are MuJoCo's
-// own views (strided: a field of its contact structs), read in place. Usage:
+// What the simulator reads from MuJoCo every step, compiled; each function mirrors a Python
+// reference with the same operations in the same order, every result bitwise the same (built
+// with -ffp-contract=off, so that no multiply-add is fused). The arrays are MuJoCo's own views
+// (strided: a field of its contact structs), read in place. Usage:
 //   contact_wrenches(con.geom, con.efc_address, con.dim, con.frame, con.pos, d.efc_force,
 //                    d.site_xpos, owner, sites) -> (len(sites), 6)
+//       reference: wholebody.sim.simulator.Simulator._contact_wrenches_reference
+//   mj_to_pin(qpos, qvel) -> (q, v)
+//       reference: wholebody.sim.convert.mj_to_pin
+//   beyond_limits(qpos, addresses, lower, upper) -> bool
+//       reference: wholebody.sim.incidents.IncidentLog._beyond_limits
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <cmath>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -19,10 +24,10 @@ namespace
   template<typename T>
   using Strided = py::array_t<T, py::array::forcecast>;
 
-  void check(bool ok, const std::string & what)
+  void check(bool ok, const std::string & what, const char * function = "contact_wrenches")
   {
     if (!ok)
-      throw std::invalid_argument("contact_wrenches: " + what);
+      throw std::invalid_argument(std::string(function) + ": " + what);
   }
 
   // Force on the robot and torque about each contact frame's origin (world axes), summed over
@@ -98,6 +103,60 @@ namespace
     }
     return result;
   }
+
+  // (q, v) in Pinocchio's convention from MuJoCo's (qpos, qvel) of a free-floating base: the
+  // quaternion (w, x, y, z) -> (x, y, z, w) normalised by sqrt(x x + y y + z z + w w), the linear
+  // velocity turned to the base frame by R(q)^T of the quaternion normalised once more.
+  py::tuple mj_to_pin(const Strided<double> & qpos, const Strided<double> & qvel)
+  {
+    const char * f = "mj_to_pin";
+    check(qpos.ndim() == 1 && qpos.shape(0) >= 7, "qpos: expected a vector of >= 7", f);
+    check(qvel.ndim() == 1 && qvel.shape(0) >= 6, "qvel: expected a vector of >= 6", f);
+    const py::ssize_t nq = qpos.shape(0), nv = qvel.shape(0);
+    py::array_t<double> q_out(nq), v_out(nv);
+    auto q = q_out.mutable_unchecked<1>();
+    auto v = v_out.mutable_unchecked<1>();
+    const auto qp = qpos.unchecked<1>();
+    const auto qv = qvel.unchecked<1>();
+    for (py::ssize_t i = 0; i < nq; ++i)
+      q(i) = qp(i);
+    for (py::ssize_t i = 0; i < nv; ++i)
+      v(i) = qv(i);
+    double w = q(3), x = q(4), y = q(5), z = q(6);
+    double norm = std::sqrt(x * x + y * y + z * z + w * w);
+    x = x / norm, y = y / norm, z = z / norm, w = w / norm;
+    q(3) = x, q(4) = y, q(5) = z, q(6) = w;
+    norm = std::sqrt(x * x + y * y + z * z + w * w);
+    x = x / norm, y = y / norm, z = z / norm, w = w / norm;
+    const double a = v(0), b = v(1), c = v(2);
+    v(0) = (1.0 - 2.0 * (y * y + z * z)) * a + 2.0 * (x * y + z * w) * b + 2.0 * (x * z - y * w) * c;
+    v(1) = 2.0 * (x * y - z * w) * a + (1.0 - 2.0 * (x * x + z * z)) * b + 2.0 * (y * z + x * w) * c;
+    v(2) = 2.0 * (x * z + y * w) * a + 2.0 * (y * z - x * w) * b + (1.0 - 2.0 * (x * x + y * y)) * c;
+    return py::make_tuple(q_out, v_out);
+  }
+
+  // True when some qpos[addresses[k]] <= lower[k] or >= upper[k] (a NaN is on no limit).
+  bool beyond_limits(const Strided<double> & qpos, const Strided<std::int64_t> & addresses,
+                     const Strided<double> & lower, const Strided<double> & upper)
+  {
+    const char * f = "beyond_limits";
+    check(qpos.ndim() == 1 && addresses.ndim() == 1 && lower.ndim() == 1 && upper.ndim() == 1,
+          "expected vectors", f);
+    const py::ssize_t n = addresses.shape(0), nq = qpos.shape(0);
+    check(lower.shape(0) == n && upper.shape(0) == n, "lower, upper: expected one per address", f);
+    const auto qp = qpos.unchecked<1>();
+    const auto at = addresses.unchecked<1>();
+    const auto lo = lower.unchecked<1>();
+    const auto hi = upper.unchecked<1>();
+    for (py::ssize_t k = 0; k < n; ++k)
+    {
+      const std::int64_t a = at(k);
+      check(a >= 0 && a < nq, "addresses: an index out of range", f);
+      if (qp(a) <= lo(k) || qp(a) >= hi(k))
+        return true;
+    }
+    return false;
+  }
 } // namespace
 
 PYBIND11_MODULE(_sim_reads, m)
@@ -106,4 +165,7 @@ PYBIND11_MODULE(_sim_reads, m)
   m.def("contact_wrenches", &contact_wrenches, py::arg("geom"), py::arg("efc_address"),
         py::arg("dim"), py::arg("frame"), py::arg("pos"), py::arg("efc_force"),
         py::arg("site_xpos"), py::arg("owner"), py::arg("sites"));
+  m.def("mj_to_pin", &mj_to_pin, py::arg("qpos"), py::arg("qvel"));
+  m.def("beyond_limits", &beyond_limits, py::arg("qpos"), py::arg("addresses"), py::arg("lower"),
+        py::arg("upper"));
 }

@@ -36,7 +36,7 @@ from ..sim.simulator import Simulator
 from ..tasks.wrench import DAMPING_RATIO_THETA, DAMPING_RATIO_X, TrunkImpedance, trunk_weights
 from .base import TIME_SPAN, BaseHeight, Parameter, RobotRelative
 from .loop import run_closed_loop
-from .measures import FALL_HEIGHT_FRACTION, update_to_state
+from .measures import FALL_HEIGHT_FRACTION, TwinGait, update_to_state
 
 CONTROLLERS = ("passive", "quasi-static")
 
@@ -442,13 +442,6 @@ def gain_options(robot, controller: str, gains: dict, options: dict) -> dict:
     return {**extra, **options}
 
 
-def horizontal_speed(velocity: np.ndarray) -> float:
-    """|(vx, vy)| of a world velocity, as np.linalg.norm computes it (sqrt(x . x)) without its
-    dispatch (measured for every foot every cycle)."""
-    xy = velocity[:2]
-    return math.sqrt(xy.dot(xy))
-
-
 def run_gait(robot, controller: str = "passive", gait: str = "crawl",
              command: VelocityCommand | None = None, duration: float = 10.0,
              environment: Environment | None = None, terrain: Terrain | None = None,
@@ -494,30 +487,27 @@ def run_gait(robot, controller: str = "passive", gait: str = "crawl",
     fall_height = FALL_HEIGHT_FRACTION * float(robot.q_ref[2])
     fell_at = None
     legs = planner.legs
-    frame_ids = [robot.model.getFrameId(robot.contact(n).frame) for n in legs]
+    twin = TwinGait(robot, legs)
 
     def observe(t, result):
         nonlocal fell_at
         plan = ctrl.last_plan
         q, v = sim.state()
-        update_to_state(robot, q, v)  # (an estimate, or a controller keeping its own terms)
-        placements = robot.data.oMf  # (the frames of that state: Robot.update places them)
+        if on_cycle is not None:  # it may read the robot's cycle: at the twin's state
+            update_to_state(robot, q, v)
+        rotation, com, feet, speeds = twin.at(q, v)
         # the twin's trunk errors (eq. 4's, against the plan's trunk reference): under real-robot
         # conditions the controller's own (impedance.last_errors) are the estimate's
-        com_error, orientation_error = TrunkImpedance.pose_errors(robot.data.oMi[1].rotation,
-                                                                  robot.com, plan.trunk)
-        lo, hi = ctrl.torque_limits.bounds(robot)
+        com_error, orientation_error = TrunkImpedance.pose_errors(rotation, com, plan.trunk)
+        lo, hi = ctrl.torque_limits.bounds(robot, q)
         log.append(
             t=t, com_error=com_error, orientation_error=orientation_error,
-            com=robot.com, com_ref=plan.trunk.position,
-            feet=[placements[f].translation for f in frame_ids], stance=plan.contact,
+            com=com, com_ref=plan.trunk.position, feet=feet, stance=plan.contact,
             tau=result.tau, tau_min=lo, tau_max=hi, ok=result.ok,
             swing_error=max((r.error for r in result.tasks if r.name.startswith("swing")),
                             default=0.0),
             cycle_time=sum(result.timings.get(k, 0.0) for k in ("assemble", "solve")),
-            forces=result.lam,
-            contact_speed=[horizontal_speed(robot.contact_jacobians[n] @ robot.v)
-                           for n in legs])
+            forces=result.lam, contact_speed=speeds)
         # (one number clipped with min/max: np.clip's own cost is many times the arithmetic's)
         tilt = np.arccos(min(max(pin.Quaternion(q[3:7]).toRotationMatrix()[2, 2], -1.0), 1.0))
         if fell_at is None and (q[2] - planner.terrain.height(q[0], q[1]) < fall_height

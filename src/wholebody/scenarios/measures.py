@@ -107,6 +107,38 @@ class TwinCentroidal:
         return data.com[0].copy(), data.vcom[0].copy(), data.hg.vector.copy()
 
 
+class TwinGait:
+    """What a gait run measures of the twin every cycle — the base rotation, the CoM, the legs'
+    foot-frame positions and the horizontal speeds of their contact points — at a simulator state
+    (q, v), by one forward-kinematics pass on a Pinocchio Data of its own: none of the dynamics
+    terms of ``Robot.update``, and the robot's own cycle left as the controller made it. The
+    rotation, CoM and feet are Robot.update's numbers bit for bit; a contact point's velocity is
+    its frame's (Pinocchio's recursive velocities) plus ω × d for a sphere's material point
+    d = (0, 0, -r) below the centre, what ``J_p v`` gives up to round-off."""
+
+    def __init__(self, robot, legs):
+        self.model, self.data = robot.model, robot.model.createData()
+        contacts = [robot.contact(n) for n in legs]
+        self._frames = [c.frame_id for c in contacts]
+        self._radii = [float(c.spec.radius) if c.dim == 3 else 0.0 for c in contacts]
+
+    def at(self, q: np.ndarray, v: np.ndarray):
+        """(base rotation, com, [foot-frame position], [horizontal contact-point speed]); the
+        arrays are the Data's (read them before the next call)."""
+        model, data, LWA = self.model, self.data, pin.LOCAL_WORLD_ALIGNED
+        pin.forwardKinematics(model, data, q, v)
+        pin.updateFramePlacements(model, data)
+        com = pin.centerOfMass(model, data, pin.KinematicLevel.POSITION, False)
+        placements, feet, speeds = data.oMf, [], []
+        for frame, r in zip(self._frames, self._radii):
+            feet.append(placements[frame].translation)
+            motion = pin.getFrameVelocity(model, data, frame, LWA)
+            (vx, vy, _), (wx, wy, _) = motion.linear.tolist(), motion.angular.tolist()
+            x, y = vx - r * wy, vy + r * wx  # the material point: v + ω × (0, 0, -r)
+            speeds.append(math.sqrt(x * x + y * y))
+        return data.oMi[1].rotation, com, feet, speeds
+
+
 def update_to_state(robot, q: np.ndarray, v: np.ndarray) -> None:
     """``robot.update(q, v)`` unless the robot's cycle is of that state already (the controller
     read it): the measures read the twin's state. The same bytes are the same state; other

@@ -14,6 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+try:
+    from .. import _sim_reads
+except ImportError:  # built without the compiled parts (see setup.py): the Python reference
+    _sim_reads = None
+
 
 @dataclass(frozen=True)
 class Incident:
@@ -59,19 +64,33 @@ class IncidentLog:
         q = sim.data.qpos[self._qpos]  # a posture on a limit (e.g. closed grippers, which then
         # touch it on and off) is not something that went wrong: only arrivals count
         self._seen = np.stack((q <= self._lower, q >= self._upper), axis=1)  # [joint, side]
+        self._addresses = self._qpos.astype(np.int64)
+        self._watch()
+
+    def _watch(self) -> None:
+        """The limits still watched: a side already seen becomes -inf / +inf, which no finite
+        position reaches, so that the per-step test is true only on a new arrival."""
+        self._lower_watched = np.where(self._seen[:, 0], -np.inf, self._lower)
+        self._upper_watched = np.where(self._seen[:, 1], np.inf, self._upper)
         # (qpos address, lower, upper) as Python numbers: the per-step test of a few joints
         # costs a fraction of numpy's calls (the same comparisons)
-        self._limits = list(zip(self._qpos.tolist(), self._lower.tolist(),
-                                self._upper.tolist()))
+        self._limits = list(zip(self._qpos.tolist(), self._lower_watched.tolist(),
+                                self._upper_watched.tolist()))
+
+    def _beyond_limits(self, qpos: np.ndarray) -> bool:
+        """True when some joint is at or beyond a limit not yet seen (the reference of the
+        compiled ``beyond_limits``, asked every step)."""
+        values = qpos.tolist()
+        return any(values[address] <= lower or values[address] >= upper
+                   for address, lower, upper in self._limits)
 
     def step(self, sim) -> None:
-        qpos = sim.data.qpos.tolist()
-        for address, lower, upper in self._limits:
-            if qpos[address] <= lower or qpos[address] >= upper:
-                break
-        else:  # no joint on a limit
-            return
-        q = sim.data.qpos[self._qpos]
+        qpos = sim.data.qpos
+        if not (self._beyond_limits(qpos) if _sim_reads is None else
+                _sim_reads.beyond_limits(qpos, self._addresses, self._lower_watched,
+                                         self._upper_watched)):
+            return  # no joint arrived on a limit
+        q = qpos[self._qpos]
         low = (q <= self._lower) & ~self._seen[:, 0]
         high = (q >= self._upper) & ~self._seen[:, 1]
         if not (low.any() or high.any()):
@@ -81,6 +100,7 @@ class IncidentLog:
             limit = (self._lower, self._upper)[side][joint]
             self._add(sim.t, f"joint {self._names[joint]} at its {('lower', 'upper')[side]} "
                              f"position limit ({limit:.3f})")
+        self._watch()
 
     def controller_result(self, sim, result) -> None:
         if not result.ok and result.outcome not in self._failure_seen:

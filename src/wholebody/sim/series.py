@@ -133,3 +133,59 @@ class SeriesLog:
     def arrays(self) -> dict[str, np.ndarray]:
         """Every series as an array (read-only views), by name."""
         return {name: s.array() for name, s in self._series.items()}
+
+
+class RowLog:
+    """Named fields of fixed shapes appended together (the same keywords as
+    :meth:`SeriesLog.append`), stored side by side in one :class:`Series` of flat float64 rows:
+    per append, one copy of each field into a row buffer and one row appended — a per-step log's
+    cheapest form. Each field reads as an attribute of its name, a view (rows, *shape) of the
+    stored rows; :meth:`arrays` gives them all. ``shapes``: field name -> shape (``()``: a number).
+    A value takes its field's shape by numpy's assignment rules (broadcast)."""
+
+    def __init__(self, shapes: dict[str, tuple[int, ...]]):
+        self._shapes = {name: tuple(shape) for name, shape in shapes.items()}
+        sizes = [int(np.prod(shape, dtype=int)) for shape in self._shapes.values()]
+        self._row = np.empty(sum(sizes))
+        self._slices, start = {}, 0
+        self._views = {}  # field -> its part of the row buffer, in the field's shape
+        for (name, shape), size in zip(self._shapes.items(), sizes):
+            self._slices[name] = slice(start, start + size)
+            self._views[name] = self._row[start:start + size].reshape(shape)
+            start += size
+        self._rows = Series(np.float64)
+
+    def append(self, **row) -> None:
+        """One row of every field (keywords: the fields, all of them)."""
+        views = self._views
+        if row.keys() != views.keys():
+            missing, unknown = views.keys() - row.keys(), row.keys() - views.keys()
+            raise ValueError(f"{type(self).__name__}.append: missing {sorted(missing)}, unknown "
+                             f"{sorted(unknown)}")
+        for name, value in row.items():
+            views[name][...] = value
+        self._rows.append(self._row)
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        slices = self.__dict__.get("_slices", {})
+        if name in slices:
+            return self._field(name)
+        raise AttributeError(f"'{type(self).__name__}' object has no attribute '{name}'")
+
+    def _field(self, name: str) -> np.ndarray:
+        rows = self._rows.array()
+        if rows.ndim == 1:  # no row yet
+            rows = rows.reshape(0, len(self._row))
+        return rows[:, self._slices[name]].reshape(len(rows), *self._shapes[name])
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the rows' storage."""
+        return self._rows.nbytes
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every field as an array (read-only views), by name."""
+        return {name: self._field(name) for name in self._shapes}

@@ -19,13 +19,17 @@ from . import convert
 from .disturbance import Push
 from .environment import Environment
 from .mismatch import Mismatch
-from .series import SeriesLog
+from .series import RowLog
 from .twin import SimOptions, Twin, build_twin
 
 try:
     from .. import _sim_reads
 except ImportError:  # built without the compiled parts (see setup.py): the Python reference
     _sim_reads = None
+
+#: MuJoCo's (qpos, qvel) -> Pinocchio's (q, v): compiled where built (the same operations as the
+#: Python reference :func:`~wholebody.sim.convert.mj_to_pin`, bit for bit), else that reference
+_mj_to_pin = convert.mj_to_pin if _sim_reads is None else _sim_reads.mj_to_pin
 
 log = logging.getLogger(__name__)
 
@@ -50,20 +54,20 @@ class SimulationDiverged(RuntimeError):
                          f"robot model drove the state to NaN/inf")
 
 
-class SimLog(SeriesLog):
+class SimLog(RowLog):
     """Time series recorded by :class:`Simulator`, one float64 row per step (Pinocchio
     convention), each read as an array (steps, ...): ``t``, ``q``, ``v``, ``tau_command``,
     ``tau_applied``, ``contact_wrenches`` (steps, ncontact, 6: world [force; torque about the
-    contact frame]) and ``push_force`` (steps, 3: world). Stored as numbers in chunks
-    (:class:`~wholebody.sim.series.SeriesLog`): about 8 bytes per number per step, no object per
-    row."""
+    contact frame]) and ``push_force`` (steps, 3: world). Stored as numbers, the fields of a step
+    side by side in one row (:class:`~wholebody.sim.series.RowLog`): about 8 bytes per number per
+    step, no object per row."""
 
     FIELDS = ("t", "q", "v", "tau_command", "tau_applied", "contact_wrenches", "push_force")
-    DTYPES = dict.fromkeys(FIELDS, np.float64)
 
-    def __init__(self, contact_names: Sequence[str]):
-        super().__init__()
+    def __init__(self, contact_names: Sequence[str], nq: int, nv: int, na: int):
         self.contact_names = tuple(contact_names)
+        super().__init__(dict(zip(self.FIELDS, ((), (nq,), (nv,), (na,), (na,),
+                                                 (len(self.contact_names), 6), (3,)))))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The log as numpy arrays (read-only), and the ``contact_names``."""
@@ -184,6 +188,7 @@ class Simulator:
         self._generation = 0
         self._wrenches_generation = -1
         self._wrenches = np.zeros((len(robot.contact_names), 6))
+        self._tau_given = self._tau_given_bytes = self._tau_checked = None  # see step()
         self._state_key: tuple[bytes, bytes] | None = None  # see state()
         self._state: tuple[np.ndarray, np.ndarray] | None = None
         self._pin_data = robot.model.createData()
@@ -213,7 +218,7 @@ class Simulator:
         self._generation += 1
         self._delay = deque([np.zeros(robot.na)] * self.mismatch.torque_delay)
         self._lagged = None  # the actuators' torque (Mismatch.torque_bandwidth), from the first
-        self.log = SimLog(robot.contact_names)
+        self.log = SimLog(robot.contact_names, robot.nq, robot.nv, robot.na)
         self.last_clipped = np.zeros(robot.na)
         self.active_pushes: list[tuple[np.ndarray, np.ndarray]] = []
         for observer in self.observers:
@@ -271,7 +276,7 @@ class Simulator:
 
     def _to_pinocchio(self, qpos, qvel) -> tuple[np.ndarray, np.ndarray]:
         """Pinocchio's (q, v) from the robot's MuJoCo (qpos, qvel)."""
-        q, v = convert.mj_to_pin(qpos, qvel)
+        q, v = _mj_to_pin(qpos, qvel)
         robot = self.robot
         if not robot.angles_are_coordinates:  # hinge angles -> (cos, sin) pairs
             full = robot.q_ref.copy()
@@ -337,7 +342,14 @@ class Simulator:
         """Advance one time step with the commanded actuated-joint torques ``tau``.
         :class:`SimulationDiverged` (with the time) if MuJoCo cannot integrate the state."""
         robot, mismatch, data = self.robot, self.mismatch, self.data
-        tau = check_vector(tau, robot.na, "tau")
+        # a controller's torque is held over several steps: checked once while the same array
+        # holds the same numbers
+        if not (tau is self._tau_given and type(tau) is np.ndarray
+                and tau.tobytes() == self._tau_given_bytes):
+            self._tau_checked = check_vector(tau, robot.na, "tau")
+            self._tau_given = tau
+            self._tau_given_bytes = tau.tobytes() if type(tau) is np.ndarray else None
+        tau = self._tau_checked
         q, v = self._current_state()  # read here; the log copies them
         if mismatch.torque_delay:
             self._delay.append(tau)

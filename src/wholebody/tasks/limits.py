@@ -59,8 +59,10 @@ class TorqueLimits(Task):
     def row_count(self, layout):
         return layout.robot.na
 
-    def bounds(self, robot) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = robot.torque_bounds()  # (new arrays)
+    def bounds(self, robot, q=None) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) torque bounds at configuration ``q`` (default: the robot's cached
+        state)."""
+        lo, hi = robot.torque_bounds(q)  # (new arrays)
         if self.scale != 1.0:  # (x * 1.0 is x: the common case skips two products)
             lo, hi = lo * self.scale, hi * self.scale
         for joint, value in self.upper_override.items():
