@@ -8,8 +8,12 @@ Each run is ``SCENARIO[:CONTROLLER][@ROBOT][+key=value...]`` as ``wholebody run`
 (``Scenario.run`` without an output directory: no figures, no summary file). Simulated time is
 counted by a :class:`~wholebody.sim.simulator.SimObserver` (steps x dt over every simulation the
 scenario makes); wall time is that of ``Scenario.run`` (the robot is loaded before). For each run
-the median, the fastest and the slowest of ``--repeats`` runs are printed, and the real-time factor
-(simulated / wall) of the median. ``--profile`` adds one run under cProfile per scenario and prints
+the median, the fastest and the slowest of ``--repeats`` runs are printed, the real-time factor
+(simulated / wall) of the median, and where the median run's wall time went: ``physics`` (inside
+MuJoCo's ``mj_step``, timed through a stand-in for the simulator's ``mujoco`` module), ``ctrl``
+(from the end of a step to the controller's result reaching the observers: reading the state and
+``compute``) and ``rest`` (the simulator's per-step work, the scenario's measures and logs); the
+physics-only real-time factor (simulated / physics) bounds what any loop around it can reach. ``--profile`` adds one run under cProfile per scenario and prints
 its top functions by cumulative and by own time. ``--metrics`` writes each run's summary metrics
 (the first repeat's); ``--compare`` reads such a file and prints, per run, the largest difference
 of any metric but the controller's own wall-clock times (absolute and relative), so that a change
@@ -33,6 +37,7 @@ import re  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
 
+import wholebody.sim.simulator as simulator_module  # noqa: E402
 from wholebody.robots.check import load_fit_robot  # noqa: E402
 from wholebody.scenarios import get_scenario  # noqa: E402
 from wholebody.scenarios.base import _jsonable  # noqa: E402
@@ -40,20 +45,43 @@ from wholebody.scenarios.base import _jsonable  # noqa: E402
 RUNS = ("push:pd", "push:lqr", "stand", "crawl", "crawl+gait=trot", "walk")
 
 
-class StepCounter:
-    """A SimObserver that adds up the simulated time of every simulation it watches."""
+class TimedPhysics:
+    """Stands for the ``mujoco`` module in the simulator: every ``mj_step`` timed (``seconds``,
+    and when the last one ended), everything else MuJoCo's."""
 
-    def __init__(self):
+    def __init__(self, module):
+        self._module = module
+        self.seconds = 0.0
+        self.last_end = None
+
+    def __getattr__(self, name):
+        return getattr(self._module, name)
+
+    def mj_step(self, *args):
+        start = time.perf_counter()
+        self._module.mj_step(*args)
+        self.last_end = time.perf_counter()
+        self.seconds += self.last_end - start
+
+
+class StepCounter:
+    """A SimObserver that adds up the simulated time of every simulation it watches, and the wall
+    time from the end of the last physics step to each controller result (``controller``)."""
+
+    def __init__(self, physics: TimedPhysics):
         self.simulated = 0.0
+        self.controller = 0.0
+        self.physics = physics
 
     def start(self, sim) -> None:
-        pass
+        self.physics.last_end = None
 
     def step(self, sim) -> None:
         self.simulated += sim.dt
 
     def controller_result(self, sim, result) -> None:
-        pass
+        if self.physics.last_end is not None:
+            self.controller += time.perf_counter() - self.physics.last_end
 
 
 def parse_run(text: str) -> tuple[str, str | None, str | None, dict[str, str]]:
@@ -66,19 +94,24 @@ def parse_run(text: str) -> tuple[str, str | None, str | None, dict[str, str]]:
 
 
 def run_once(text: str, profile: cProfile.Profile | None = None):
-    """(simulated s, wall s, metrics) of one run of ``text``."""
+    """(simulated s, wall s, metrics, physics s, controller s) of one run of ``text``."""
     name, controller, robot_name, overrides = parse_run(text)
     scenario = get_scenario(name)
     robot = load_fit_robot(robot_name or scenario.default_robot)
-    counter = StepCounter()
-    start = time.perf_counter()
-    if profile is not None:
-        profile.enable()
-    result = scenario.run(robot, controller, overrides, None, False, observers=(counter,))
-    if profile is not None:
-        profile.disable()
-    wall = time.perf_counter() - start
-    return counter.simulated, wall, _jsonable(result.metrics)
+    physics = TimedPhysics(simulator_module.mujoco)
+    counter = StepCounter(physics)
+    simulator_module.mujoco = physics
+    try:
+        start = time.perf_counter()
+        if profile is not None:
+            profile.enable()
+        result = scenario.run(robot, controller, overrides, None, False, observers=(counter,))
+        if profile is not None:
+            profile.disable()
+        wall = time.perf_counter() - start
+    finally:
+        simulator_module.mujoco = physics._module
+    return counter.simulated, wall, _jsonable(result.metrics), physics.seconds, counter.controller
 
 
 def _numbers(value, prefix=""):
@@ -137,17 +170,22 @@ def main() -> None:
     runs = [r for r in args.runs.split(",") if r]
     reference = json.loads(open(args.compare).read()) if args.compare else {}
     metrics = {}
-    print(f"{'run':<22} {'sim s':>7} {'wall s median':>14} {'min':>7} {'max':>7} {'x real time':>12}")
+    print(f"{'run':<22} {'sim s':>7} {'wall s median':>14} {'min':>7} {'max':>7} {'x real time':>12}"
+          f" | {'physics':>7} {'ctrl':>5} {'rest':>5} {'x physics only':>15}")
     for text in runs:
-        walls, simulated = [], 0.0
+        walls, parts, simulated = [], [], 0.0
         for k in range(args.repeats):
-            simulated, wall, m = run_once(text)
+            simulated, wall, m, physics, controller = run_once(text)
             walls.append(wall)
+            parts.append((wall, physics, controller))
             if k == 0:
                 metrics[text] = m
         median = statistics.median(walls)
+        wall, physics, controller = sorted(parts)[(len(parts) - 1) // 2]  # the median run's
+        rest = wall - physics - controller
         print(f"{text:<22} {simulated:>7.2f} {median:>14.3f} {min(walls):>7.3f} {max(walls):>7.3f} "
-              f"{simulated / median:>12.2f}", flush=True)
+              f"{simulated / median:>12.2f} | {physics / wall:>7.0%} {controller / wall:>5.0%} "
+              f"{rest / wall:>5.0%} {simulated / physics:>15.1f}", flush=True)
         if text in reference:
             worst_abs, worst_rel, key, odd = compare(reference[text], metrics[text])
             print(f"    vs {args.compare}: max |diff| {worst_abs:.3g}, max relative {worst_rel:.3g}"

@@ -117,6 +117,10 @@ def finite_array(value, name: str, *, shape: tuple | None = None,
         raise ValueError(f"{name}: expected numbers, got {value!r}") from exc
     if shape is not None and arr.shape != tuple(shape):
         raise ValueError(f"{name}: expected shape {tuple(shape)}, got {arr.shape}")
+    # the common case in few numpy calls (asked every control cycle); the first bad entry is
+    # looked for only when there is one
+    if np.isfinite(arr).all() and not (nonnegative and arr.size and arr.min() < 0.0):
+        return arr
     bad = ~np.isfinite(arr) | ((arr < 0.0) if nonnegative else False)
     if np.any(bad):
         index = tuple(int(i) for i in np.argwhere(bad)[0])
