@@ -8,7 +8,8 @@ metadata is in pyproject.toml):
 - ``wholebody._estimator``: the state estimator's per-cycle numerics
   (``KinematicInertialEKF(engine="native")``);
 - ``wholebody._sim_reads``: what the simulator reads from MuJoCo every step (the contact
-  wrenches).
+  wrenches, read from MuJoCo's structs in place with the headers of the ``mujoco`` build
+  requirement; the state conversion; the joint-limit watch).
 
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
 and ``cmeel-eigen``; the cascade and the estimator need Eigen only), so the extensions link no
@@ -35,6 +36,18 @@ def cmeel_include() -> Path | None:
         if (include / "pinocchio").is_dir() and (include / "eigen3").is_dir():
             return include
     return None
+
+
+def mujoco_include() -> list[str]:
+    """[MuJoCo's include folder] from the installed ``mujoco`` package (a build requirement), or
+    [] where it is missing: the simulator's compiled reads of MuJoCo's structs are then left
+    out (the simulator reads them in Python, with the same results)."""
+    try:
+        import mujoco
+    except ImportError:
+        return []
+    include = Path(mujoco.__file__).parent / "include"
+    return [str(include)] if (include / "mujoco" / "mjdata.h").is_file() else []
 
 
 def extensions() -> list[Extension]:
@@ -79,11 +92,14 @@ def extensions() -> list[Extension]:
             sources=["src/wholebody/native/estimator.cpp"],
             include_dirs=eigen, define_macros=[("NDEBUG", None)],
             extra_compile_args=flags, language="c++", optional=True),
-        Extension(  # the simulator's reads: pybind11 only, no fused multiply-adds (its sums are
-            # those of the Python reference, bit for bit)
+        Extension(  # the simulator's reads: pybind11 and MuJoCo's headers (its structs, read in
+            # place; no MuJoCo library linked), no fused multiply-adds (its sums are those of the
+            # Python reference, bit for bit)
             "wholebody._sim_reads",
             sources=["src/wholebody/native/sim_reads.cpp"],
-            include_dirs=[pybind11.get_include()], define_macros=[("NDEBUG", None)],
+            include_dirs=[pybind11.get_include()] + mujoco_include(),
+            define_macros=[("NDEBUG", None)] + ([("WHOLEBODY_MUJOCO_HEADERS", None)]
+                                                if mujoco_include() else []),
             extra_compile_args=flags + ["-ffp-contract=off"], language="c++", optional=True),
     ]
 

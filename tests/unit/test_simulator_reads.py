@@ -71,25 +71,29 @@ def test_contact_wrenches_sum_mujoco_contact_forces(robots, rng, name, cone, con
 @pytest.mark.parametrize("name", ["talos14", "hyq"])
 @pytest.mark.parametrize("condim", [1, 3, 4, 6])
 def test_compiled_contact_wrenches_are_the_python_sums_bit_for_bit(robots, rng, name, condim):
-    """The compiled sums (``wholebody._sim_reads``, what the simulator reads where it was built)
-    are those of the Python reference, every entry to the bit, on states where contacts load,
-    unload and slide; malformed arrays are refused naming the field."""
+    """The compiled sums (``wholebody._sim_reads``, reading MuJoCo's structs in place; built with
+    the headers of the MuJoCo that runs, so the simulator uses them) are those of the Python
+    reference, every entry to the bit, on states where contacts load, unload and slide; an
+    owner table not of the model's geoms is refused naming the field."""
     from conftest import native_cycle_or_skip
     native_cycle_or_skip("_sim_reads")
     from wholebody import _sim_reads
+    from wholebody.sim import simulator
+    assert simulator._DIRECT_READS, "built without MuJoCo's headers, or for another MuJoCo"
     sim = Simulator(robots[name], record=False)
     sim.model.geom_condim[:] = condim
     sim.reset()
     seen = 0
     for _ in shaken(sim, rng, 120):
-        np.testing.assert_array_equal(sim._contact_wrenches(), sim._contact_wrenches_reference())
+        expected = sim._contact_wrenches_reference()
+        got = _sim_reads.contact_wrenches_at(sim.model._address, sim.data._address,
+                                             sim._geom_contact, sim._contact_site)
+        assert got.tobytes() == expected.tobytes()
         seen += sim.data.ncon
     assert seen > 120
-    con, d = sim.data.contact, sim.data
-    with pytest.raises(ValueError, match="frame"):
-        _sim_reads.contact_wrenches(con.geom, con.efc_address, con.dim, con.frame[:, :3],
-                                    con.pos, d.efc_force, d.site_xpos, sim._geom_contact,
-                                    sim._contact_site)
+    with pytest.raises(ValueError, match="owner"):
+        _sim_reads.contact_wrenches_at(sim.model._address, sim.data._address,
+                                       sim._geom_contact[:-1], sim._contact_site)
 
 
 def test_contact_wrenches_follow_each_step_and_reset(robots, rng):

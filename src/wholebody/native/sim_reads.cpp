@@ -1,9 +1,8 @@
 // What the simulator reads from MuJoCo every step, compiled; each function mirrors a Python
 // reference with the same operations in the same order, every result bitwise the same (built
-// with -ffp-contract=off, so that no multiply-add is fused). The arrays are MuJoCo's own views
-// (strided: a field of its contact structs), read in place. Usage:
-//   contact_wrenches(con.geom, con.efc_address, con.dim, con.frame, con.pos, d.efc_force,
-//                    d.site_xpos, owner, sites) -> (len(sites), 6)
+// with -ffp-contract=off, so that no multiply-add is fused). Usage:
+//   contact_wrenches_at(model._address, data._address, owner, sites) -> (len(sites), 6)
+//       (built where MuJoCo's headers were found: WHOLEBODY_MUJOCO_HEADERS; mujoco_version)
 //       reference: wholebody.sim.simulator.Simulator._contact_wrenches_reference
 //   mj_to_pin(qpos, qvel) -> (q, v)
 //       reference: wholebody.sim.convert.mj_to_pin
@@ -11,6 +10,10 @@
 //       reference: wholebody.sim.incidents.IncidentLog._beyond_limits
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+
+#ifdef WHOLEBODY_MUJOCO_HEADERS
+#include <mujoco/mujoco.h>
+#endif
 
 #include <cmath>
 #include <cstdint>
@@ -24,56 +27,48 @@ namespace
   template<typename T>
   using Strided = py::array_t<T, py::array::forcecast>;
 
-  void check(bool ok, const std::string & what, const char * function = "contact_wrenches")
+  void check(bool ok, const std::string & what, const char * function)
   {
     if (!ok)
       throw std::invalid_argument(std::string(function) + ": " + what);
   }
 
+#ifdef WHOLEBODY_MUJOCO_HEADERS
   // Force on the robot and torque about each contact frame's origin (world axes), summed over
-  // MuJoCo's contacts of each robot contact's geoms: ``geom`` (ncon, 2) the contact's geoms,
-  // ``efc_address`` (ncon,) its first row in ``efc_force`` (< 0: excluded), ``dim`` its condim,
-  // ``frame`` (ncon, 9) its frame's axes as rows (normal first), ``pos`` (ncon, 3) its point;
-  // ``owner`` (ngeom,) the robot contact a geom belongs to (-1: none), ``sites`` the contacts'
-  // frame sites in ``site_xpos``. geom1 the robot's: the force on it is minus MuJoCo's.
-  py::array_t<double> contact_wrenches(const Strided<std::int32_t> & geom,
-                                       const Strided<std::int32_t> & efc_address,
-                                       const Strided<std::int32_t> & dim,
-                                       const Strided<double> & frame, const Strided<double> & pos,
-                                       const Strided<double> & efc_force,
-                                       const Strided<double> & site_xpos,
-                                       const Strided<std::int64_t> & owner,
-                                       const Strided<std::int64_t> & sites)
+  // MuJoCo's contacts of each robot contact's geoms, read from MuJoCo's own structs: the mjModel
+  // and mjData at the addresses its Python bindings give (``_address``), no numpy view of their
+  // fields made. ``owner`` (ngeom,): the robot contact a geom belongs to (-1: none); ``sites``:
+  // the contacts' frame sites. geom[0] the robot's: the force on it is minus MuJoCo's. Only for
+  // the MuJoCo whose headers this was built with (``mujoco_version``, which the caller compares
+  // with ``mujoco.mj_version()``).
+  py::array_t<double> contact_wrenches_at(std::uintptr_t model_address,
+                                          std::uintptr_t data_address,
+                                          const Strided<std::int64_t> & owner,
+                                          const Strided<std::int64_t> & sites)
   {
-    check(geom.ndim() == 2 && geom.shape(1) == 2, "geom: expected shape (ncon, 2)");
-    const py::ssize_t n = geom.shape(0);
-    check(efc_address.ndim() == 1 && efc_address.shape(0) == n, "efc_address: expected (ncon,)");
-    check(dim.ndim() == 1 && dim.shape(0) == n, "dim: expected (ncon,)");
-    check(frame.ndim() == 2 && frame.shape(0) == n && frame.shape(1) == 9,
-          "frame: expected (ncon, 9)");
-    check(pos.ndim() == 2 && pos.shape(0) == n && pos.shape(1) == 3, "pos: expected (ncon, 3)");
-    check(efc_force.ndim() == 1, "efc_force: expected a vector");
-    check(site_xpos.ndim() == 2 && site_xpos.shape(1) == 3, "site_xpos: expected (nsite, 3)");
-    check(owner.ndim() == 1 && sites.ndim() == 1, "owner, sites: expected vectors");
-    const py::ssize_t nc = sites.shape(0), nefc = efc_force.shape(0), ngeom = owner.shape(0);
+    const char * f = "contact_wrenches_at";
+    check(model_address != 0 && data_address != 0, "null model or data", f);
+    const mjModel * m = reinterpret_cast<const mjModel *>(model_address);
+    const mjData * d = reinterpret_cast<const mjData *>(data_address);
+    check(owner.ndim() == 1 && owner.shape(0) == py::ssize_t(m->ngeom),
+          "owner: expected one entry per geom of the model", f);
+    check(sites.ndim() == 1, "sites: expected a vector", f);
+    const py::ssize_t nc = sites.shape(0);
     py::array_t<double> result({nc, py::ssize_t(6)});
     auto out = result.mutable_unchecked<2>();
     for (py::ssize_t j = 0; j < nc; ++j)
       for (py::ssize_t c = 0; c < 6; ++c)
         out(j, c) = 0.0;
-    const auto g = geom.unchecked<2>();
-    const auto address = efc_address.unchecked<1>();
-    const auto condim = dim.unchecked<1>();
-    const auto r = frame.unchecked<2>();
-    const auto p = pos.unchecked<2>();
-    const auto efc = efc_force.unchecked<1>();
-    const auto xpos = site_xpos.unchecked<2>();
     const auto own = owner.unchecked<1>();
     const auto site = sites.unchecked<1>();
-    for (py::ssize_t k = 0; k < n; ++k)
+    const std::int64_t ngeom = m->ngeom, nsite = m->nsite, nefc = d->nefc;
+    for (int k = 0; k < d->ncon; ++k)
     {
-      const std::int64_t g1 = g(k, 0), g2 = g(k, 1);
-      check(g1 >= 0 && g1 < ngeom && g2 >= 0 && g2 < ngeom, "geom: an index out of range");
+      const mjContact & con = d->contact[k];
+      const std::int64_t g1 = con.geom[0], g2 = con.geom[1];
+      if (g1 < 0 || g2 < 0) // a flex contact: no robot geom
+        continue;
+      check(g1 < ngeom && g2 < ngeom, "a contact's geom out of range", f);
       std::int64_t j = own(g1);
       double sign = -1.0;
       if (j < 0)
@@ -81,19 +76,23 @@ namespace
         j = own(g2);
         sign = 1.0;
       }
-      const std::int64_t a = address(k);
+      const std::int64_t a = con.efc_address;
       if (j < 0 || a < 0) // not a robot contact, or excluded (no force)
         continue;
-      check(j < nc, "owner: a contact index out of range");
-      const bool three = condim(k) >= 3;
-      check(a + (three ? 2 : 0) < nefc, "efc_address: a row out of range");
-      const double f0 = efc(a), f1 = three ? efc(a + 1) : 0.0, f2 = three ? efc(a + 2) : 0.0;
-      const double fx = sign * (f0 * r(k, 0) + f1 * r(k, 3) + f2 * r(k, 6));
-      const double fy = sign * (f0 * r(k, 1) + f1 * r(k, 4) + f2 * r(k, 7));
-      const double fz = sign * (f0 * r(k, 2) + f1 * r(k, 5) + f2 * r(k, 8));
+      check(j < nc, "owner: a contact index out of range", f);
+      const bool three = con.dim >= 3;
+      check(a + (three ? 2 : 0) < nefc, "a contact's efc_address out of range", f);
+      const double * efc = d->efc_force;
+      const double f0 = efc[a], f1 = three ? efc[a + 1] : 0.0, f2 = three ? efc[a + 2] : 0.0;
+      const double * r = con.frame;
+      const double fx = sign * (f0 * r[0] + f1 * r[3] + f2 * r[6]);
+      const double fy = sign * (f0 * r[1] + f1 * r[4] + f2 * r[7]);
+      const double fz = sign * (f0 * r[2] + f1 * r[5] + f2 * r[8]);
       const std::int64_t s = site(j);
-      check(s >= 0 && s < xpos.shape(0), "sites: an index out of range");
-      const double lx = p(k, 0) - xpos(s, 0), ly = p(k, 1) - xpos(s, 1), lz = p(k, 2) - xpos(s, 2);
+      check(s >= 0 && s < nsite, "sites: an index out of range", f);
+      const double * o = d->site_xpos + 3 * s;
+      const double * p = con.pos;
+      const double lx = p[0] - o[0], ly = p[1] - o[1], lz = p[2] - o[2];
       out(j, 0) += fx;
       out(j, 1) += fy;
       out(j, 2) += fz;
@@ -103,6 +102,7 @@ namespace
     }
     return result;
   }
+#endif
 
   // (q, v) in Pinocchio's convention from MuJoCo's (qpos, qvel) of a free-floating base: the
   // quaternion (w, x, y, z) -> (x, y, z, w) normalised by sqrt(x x + y y + z z + w w), the linear
@@ -162,9 +162,11 @@ namespace
 PYBIND11_MODULE(_sim_reads, m)
 {
   m.doc() = "What wholebody.sim.simulator reads from MuJoCo every step, compiled.";
-  m.def("contact_wrenches", &contact_wrenches, py::arg("geom"), py::arg("efc_address"),
-        py::arg("dim"), py::arg("frame"), py::arg("pos"), py::arg("efc_force"),
-        py::arg("site_xpos"), py::arg("owner"), py::arg("sites"));
+#ifdef WHOLEBODY_MUJOCO_HEADERS
+  m.def("contact_wrenches_at", &contact_wrenches_at, py::arg("model_address"),
+        py::arg("data_address"), py::arg("owner"), py::arg("sites"));
+  m.attr("mujoco_version") = int(mjVERSION_HEADER);
+#endif
   m.def("mj_to_pin", &mj_to_pin, py::arg("qpos"), py::arg("qvel"));
   m.def("beyond_limits", &beyond_limits, py::arg("qpos"), py::arg("addresses"), py::arg("lower"),
         py::arg("upper"));

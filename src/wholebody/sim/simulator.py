@@ -27,6 +27,10 @@ try:
 except ImportError:  # built without the compiled parts (see setup.py): the Python reference
     _sim_reads = None
 
+#: the compiled reads of MuJoCo's own structs: built with the headers of the MuJoCo that runs
+_DIRECT_READS = (_sim_reads is not None and hasattr(_sim_reads, "contact_wrenches_at")
+                 and _sim_reads.mujoco_version == mujoco.mj_version())
+
 #: MuJoCo's (qpos, qvel) -> Pinocchio's (q, v): compiled where built (the same operations as the
 #: Python reference :func:`~wholebody.sim.convert.mj_to_pin`, bit for bit), else that reference
 _mj_to_pin = convert.mj_to_pin if _sim_reads is None else _sim_reads.mj_to_pin
@@ -408,16 +412,14 @@ class Simulator:
         return self._wrenches
 
     def _contact_wrenches(self) -> np.ndarray:
-        """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts: compiled
-        (``wholebody._sim_reads``, the same products and sums bit for bit) where it was built,
-        else :meth:`_contact_wrenches_reference`."""
+        """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts: compiled where built
+        for this MuJoCo (``wholebody._sim_reads``, reading MuJoCo's structs in place; the same
+        products and sums bit for bit), else :meth:`_contact_wrenches_reference`."""
         d = self.data
-        if d.ncon == 0 or _sim_reads is None or self._options.cone == _PYRAMIDAL:
+        if d.ncon == 0 or not _DIRECT_READS or self._options.cone == _PYRAMIDAL:
             return self._contact_wrenches_reference()
-        con = d.contact
-        return _sim_reads.contact_wrenches(con.geom, con.efc_address, con.dim, con.frame, con.pos,
-                                           d.efc_force, d.site_xpos, self._geom_contact,
-                                           self._contact_site)
+        return _sim_reads.contact_wrenches_at(self.model._address, d._address,
+                                              self._geom_contact, self._contact_site)
 
     def _contact_wrenches_reference(self) -> np.ndarray:
         """The sums of :meth:`contact_wrenches_array` over MuJoCo's contacts in plain floats (the
