@@ -66,6 +66,7 @@ def extensions() -> list[Extension]:
 
     flags = ["-std=c++17", "-O2", "-g0", "-fvisibility=hidden"]
     eigen = [str(include / "eigen3"), pybind11.get_include()]
+    mujoco = mujoco_include()
     # Pinocchio's joint variants need larger Boost.MPL limits (its CMake exports these)
     pinocchio_macros = [("BOOST_MPL_LIMIT_LIST_SIZE", "30"), ("BOOST_MPL_LIMIT_VECTOR_SIZE", "30"),
                         ("BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", None),
@@ -97,9 +98,9 @@ def extensions() -> list[Extension]:
             # Python reference, bit for bit)
             "wholebody._sim_reads",
             sources=["src/wholebody/native/sim_reads.cpp"],
-            include_dirs=[pybind11.get_include()] + mujoco_include(),
+            include_dirs=[pybind11.get_include()] + mujoco,
             define_macros=[("NDEBUG", None)] + ([("WHOLEBODY_MUJOCO_HEADERS", None)]
-                                                if mujoco_include() else []),
+                                                if mujoco else []),
             extra_compile_args=flags + ["-ffp-contract=off"], language="c++", optional=True),
     ]
 

@@ -95,6 +95,14 @@ class Series:
         self._last = self._chunks[-1]
 
 
+def _check_fields(log, row: dict, fields: dict) -> None:
+    """ValueError naming ``log``'s class unless ``row`` has exactly the keys of ``fields``."""
+    if row.keys() != fields.keys():
+        missing, unknown = fields.keys() - row.keys(), row.keys() - fields.keys()
+        raise ValueError(f"{type(log).__name__}.append: missing {sorted(missing)}, unknown "
+                         f"{sorted(unknown)}")
+
+
 class SeriesLog:
     """Named :class:`Series` appended together, one row each per :meth:`append`; a subclass names
     them in ``FIELDS`` and may fix some dtypes in ``DTYPES`` (name -> dtype). Each series reads as
@@ -108,10 +116,7 @@ class SeriesLog:
 
     def append(self, **row) -> None:
         """One row of every series (keywords: the ``FIELDS``, all of them)."""
-        if row.keys() != self._series.keys():
-            missing, unknown = self._series.keys() - row.keys(), row.keys() - self._series.keys()
-            raise ValueError(f"{type(self).__name__}.append: missing {sorted(missing)}, unknown "
-                             f"{sorted(unknown)}")
+        _check_fields(self, row, self._series)
         series = self._series
         for name, value in row.items():
             series[name].append(value)
@@ -158,10 +163,7 @@ class RowLog:
     def append(self, **row) -> None:
         """One row of every field (keywords: the fields, all of them)."""
         views = self._views
-        if row.keys() != views.keys():
-            missing, unknown = views.keys() - row.keys(), row.keys() - views.keys()
-            raise ValueError(f"{type(self).__name__}.append: missing {sorted(missing)}, unknown "
-                             f"{sorted(unknown)}")
+        _check_fields(self, row, views)
         for name, value in row.items():
             views[name][...] = value
         self._rows.append(self._row)
