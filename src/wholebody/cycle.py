@@ -281,6 +281,7 @@ class HierarchyCycle:
         self._programs: dict = {}
         self._program: _Program | None = None
         self._levels_seen = None  # the stack's levels when _structure, _python, _layout_keys were taken
+        self._variables_of = (None, None)  # see _solve_native
         self._qv = None  # the state of the last update (native engine)
         self._terms = None  # terms_view's arrays, bound on first use
         self.engine = None
@@ -420,8 +421,8 @@ class HierarchyCycle:
         overflow, its status naming ``v``); bad input — q/v of the wrong size or with NaN, a
         task producing NaN rows — raises ValueError naming the field or task."""
         robot = self.robot
-        variables = self.formulation.variables_for(self.stack, variables)
         if not self.native:
+            variables = self.formulation.variables_for(self.stack, variables)
             t0 = time.perf_counter()
             robot.update(q, v)
             t1 = time.perf_counter()
@@ -453,18 +454,23 @@ class HierarchyCycle:
         self._require_native("solve_updated")
         if self._qv is None:
             raise RuntimeError("solve_updated: call update(q, v) first (or solve(q, v))")
-        return self._solve_native(self.formulation.variables_for(self.stack, variables),
-                                  diagnostics, None)
+        return self._solve_native(variables, diagnostics, None)
 
-    def _solve_native(self, variables: Variables, diagnostics: bool, state) -> Solution:
+    def _solve_native(self, variables: Variables | None, diagnostics: bool, state) -> Solution:
         """The native cycle at ``state`` = (q, v), updated in the same compiled call as the rows
-        and the solve, or (``state`` None) at the state of the last :meth:`update`."""
+        and the solve, or (``state`` None) at the state of the last :meth:`update`; ``variables``
+        as :meth:`solve` takes them."""
         robot = self.robot
         q, v = state if state is not None else self._qv
         t0 = time.perf_counter()
         python_rows = {}
         if self._levels_seen is None or self.stack.levels != self._levels_seen:
             self._take_stack()
+        given, resolved = self._variables_of
+        if variables is not given or resolved is None:  # (kept while the stack is unchanged)
+            resolved = self.formulation.variables_for(self.stack, variables)
+            self._variables_of = (variables, resolved)
+        variables = resolved
         if self._python:  # tasks without a kernel read the Python robot's cache
             robot.update(q, v)
             python_rows = {id(t): t.rows(robot, variables) for t in self._python}
@@ -525,15 +531,19 @@ class HierarchyCycle:
                              if type(t).layout_key is not KernelTask.layout_key]
         by_identity = all(type(t).__eq__ is object.__eq__ for t in tasks)
         self._levels_seen = [list(level) for level in stack.levels] if by_identity else None
+        self._variables_of = (None, None)  # (the variables given, with the stack's auxiliaries)
 
     def _program_for(self, variables: Variables, python_rows: dict) -> _Program:
         """The program of the stack as it is now (its levels and tasks, their layouts, the
         Python tasks' row signatures) and the active contacts; built on first use."""
-        key = (variables.contacts, variables.auxiliary, self._structure,
-               tuple([layout_key() for layout_key in self._layout_keys]),
+        layout = tuple([layout_key() for layout_key in self._layout_keys])
+        program = self._program
+        if (program is not None and program.variables is variables and not python_rows
+                and program.key[2] is self._structure and program.key[3] == layout):
+            return program  # the common case: the last cycle's (its key's other parts the same)
+        key = (variables.contacts, variables.auxiliary, self._structure, layout,
                tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None,
                        r.aux is None) for i, r in python_rows.items()]))
-        program = self._program
         if program is None or program.key != key:
             program = self._programs.get(key)
             if program is None:

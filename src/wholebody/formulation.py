@@ -406,7 +406,7 @@ def make_solution(qdd: np.ndarray, lam: np.ndarray, tau: np.ndarray,
     ``bounds`` = (tau_min, tau_max) (and ``excess``, if known); ``x``: the solution vector whose
     last entries are the auxiliary variables (unscaled), if there are any."""
     tau, outcome, status = guard_torque(tau, bounds[0], bounds[1], outcome, status, excess)
-    forces = {n: lam[variables.lambda_slices[n]] for n in variables.contacts}
+    forces = {n: lam[s] for n, s in variables.lambda_slices.items()}  # (in contact order)
     solution = Solution(qdd, lam, tau, forces, outcome, status, np.asarray(costs),
                         contacts=variables.contacts)
     if variables.n_aux and x is not None:

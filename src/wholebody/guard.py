@@ -37,7 +37,12 @@ class Outcome(enum.Enum):
 
     @property
     def ok(self) -> bool:
-        return self in (Outcome.SOLVED, Outcome.FALLBACK)
+        return self in _SUCCESSES
+
+
+#: the outcomes that are successes (a module tuple: reading an Enum member from its class is slow,
+#: and ``ok`` runs every cycle)
+_SUCCESSES = (Outcome.SOLVED, Outcome.FALLBACK)
 
 
 def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome: Outcome,
@@ -51,7 +56,7 @@ def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome:
     Limits with a NaN (a bug upstream: robot files and constructors validate them) give zero
     torque, ``HELD``. ``excess``: max(τ − upper, lower − τ), NaN if anything is not finite,
     where the caller computed it already (the compiled cycle does)."""
-    if outcome.ok:  # the common case first: one pass, NaN anywhere makes ``excess`` NaN
+    if outcome in _SUCCESSES:  # the common case first: one pass, NaN anywhere makes ``excess`` NaN
         if excess is None:
             excess = _max(_larger(np.subtract(tau, upper), np.subtract(lower, tau)))
         if excess <= 0.0:
@@ -63,7 +68,7 @@ def guard_torque(tau: np.ndarray, lower: np.ndarray, upper: np.ndarray, outcome:
     if not np.isfinite(np.add.reduce(tau)):
         tau = np.zeros(np.shape(tau))
         outcome, reason = Outcome.HELD, f"{reason}; non-finite torque replaced by zero"
-    elif outcome.ok:
+    elif outcome in _SUCCESSES:
         joint = int(np.argmax(np.maximum(np.subtract(tau, upper), np.subtract(lower, tau))))
         reason = (f"torque {excess:.3g} Nm outside limits after solve (joint {joint}); "
                   f"clipped")

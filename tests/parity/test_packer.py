@@ -97,3 +97,88 @@ def test_packer_refuses_a_view_it_cannot_write():
                       (np.zeros((1, 3)), "vector")]:
         with pytest.raises(ValueError, match=why):
             ParameterPacker([param.source(Holder(1.0), view, None, None)])
+
+
+class Mapped:
+    """A task's stand-in with a per-contact dict ``value`` and its stacking as the reference."""
+
+    name = "mapped"
+
+    def __init__(self, value):
+        self.value = value
+
+
+def stacked(default):
+    """The reference ``get`` of a mapping: the entries of the layout's contacts, one after the
+    other (``default`` where an entry is missing), written with numpy only."""
+    def get(task, layout, state):
+        return np.hstack([np.asarray(task.value.get(n, default), dtype=float).reshape(-1)
+                          for n in layout.contacts])
+    return get
+
+
+MAPPINGS = [{"a": np.array([1.0, 2.0, 3.0]), "b": np.array([4.0, 5.0, 6.0])},
+            {"b": np.array([4.0, 5.0, 6.0]), "a": np.array([-1.0, 0.0, 1e300])},  # any dict order
+            {"a": np.array([1.0, 2.0, 3.0])},  # "b" missing: the default, or get's
+            {}, {"a": np.array([1, 2, 3]), "b": np.array([4.0, 5.0, 6.0])},  # an int entry
+            {"a": [1.0, 2.0, 3.0], "b": np.array([4.0, 5.0, 6.0])},  # a list entry
+            {"a": np.arange(6.0)[::2], "b": np.ones(3)},  # a strided entry
+            {"a": np.ones((1, 3)), "b": np.ones(3)},  # a 2-D entry
+            {"a": np.array([np.nan, 1.0, np.inf]), "b": np.ones(3)},
+            {"a": np.ones(3), "b": np.ones(3), "c": np.ones(3)},  # a contact not in the layout
+            None, "abc"]
+
+
+@pytest.mark.parametrize("default", [(0.0, 0.0, 1.0), None])
+def test_packer_reads_a_mapping_as_its_reference_stacks_it(default):
+    """A per-contact mapping (``Param.mapping``) read by the packer equals its ``get``'s value
+    for every kind of dict and entry; where the packer cannot read it, ``get`` decides (its
+    value, or its error with its message)."""
+    from wholebody._hierarchy_cycle import ParameterPacker
+    from wholebody.tasks.schema import LayoutContext
+
+    layout = LayoutContext(None, contacts=("a", "b"))
+    param = Param("value", Size(3, "contact"), "vector", get=stacked(default), mapping="value",
+                  default=default)
+    for value in MAPPINGS:
+        task = Mapped(value)
+        python_buffer, packed_buffer = np.full(10, -7.0), np.full(10, -7.0)
+        write = param.writer(task, python_buffer[2:8], layout, None)
+        packer = ParameterPacker([param.source(task, packed_buffer[2:8], layout, None)])
+        expected, got = outcome(write, python_buffer), outcome(packer.pack, packed_buffer)
+        assert same(expected, got), f"{value!r}: Python {expected}, packer {got}"
+
+
+def test_a_mapping_param_is_a_per_contact_vector_with_its_reference():
+    with pytest.raises(ValueError, match="mapping"):
+        Param("value", Size(3, "contact"), "vector", mapping="value")  # no get
+    with pytest.raises(ValueError, match="mapping"):
+        Param("value", Size(3), "vector", get=stacked(None), mapping="value")
+    with pytest.raises(ValueError, match="default"):
+        Param("value", Size(3, "contact"), "vector", get=stacked(None), mapping="value",
+              default=(0.0, 1.0))
+
+
+def test_packer_reads_a_full_mapping_without_its_reference():
+    """The compiled read is the one taken for float64 entries (or the default): ``get`` is not
+    called; for another entry it is."""
+    from wholebody._hierarchy_cycle import ParameterPacker
+    from wholebody.tasks.schema import LayoutContext
+
+    calls = []
+    reference = stacked((0.0, 0.0, 1.0))
+
+    def get(task, layout, state):
+        calls.append(1)
+        return reference(task, layout, state)
+
+    param = Param("value", Size(3, "contact"), "vector", get=get, mapping="value",
+                  default=(0.0, 0.0, 1.0))
+    task = Mapped({"b": np.array([4.0, 5.0, 6.0])})
+    buffer = np.zeros(6)
+    packer = ParameterPacker([param.source(task, buffer, LayoutContext(None, ("a", "b")), None)])
+    packer.pack()
+    assert buffer.tolist() == [0.0, 0.0, 1.0, 4.0, 5.0, 6.0] and not calls
+    task.value["a"] = [1, 2, 3]
+    packer.pack()
+    assert buffer.tolist() == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0] and len(calls) == 1

@@ -6,7 +6,11 @@
 // writes a value of any other kind (and names the task's field when it cannot). The common values
 // — a Python or numpy float or int, a float64 array of exactly the view's entries (for a matrix:
 // C-contiguous, any shape), or of one entry — are written here; everything else goes through
-// ``assign``, so the Python writers stay the reference for what a value means.
+// ``assign``, so the Python writers stay the reference for what a value means. A matrix also
+// takes a Fortran-order 2-D array (a rotation from Pinocchio), written in C order. A per-contact
+// source with a ``mapping`` (wholebody.tasks.schema.Param.mapping) is read from the task's dict
+// (contact name -> k values) here, the layout's contacts' entries stacked; where it cannot be
+// (a missing entry without a default, an entry of another kind, not a dict) its ``get`` decides.
 #pragma once
 
 #include <pybind11/numpy.h>
@@ -32,9 +36,9 @@ namespace wholebody_native
       for (const py::handle item : sources)
       {
         auto t = py::reinterpret_borrow<py::tuple>(item);
-        if (t.size() != 8)
+        if (t.size() != 9)
           throw std::invalid_argument("ParameterPacker: a source is (task, name, get, layout, "
-                                      "state, view, form, assign)");
+                                      "state, view, form, assign, mapping)");
         Source s;
         s.task = t[0];
         s.name = t[1];
@@ -64,6 +68,8 @@ namespace wholebody_native
           throw std::invalid_argument("ParameterPacker: unknown form '" + form + "'");
         if (s.get.is_none() == s.name.is_none())
           throw std::invalid_argument("ParameterPacker: a source has a name or a get, not both");
+        if (!t[8].is_none())
+          take_mapping(s, t[8]);
         sources_.push_back(std::move(s));
       }
     }
@@ -73,6 +79,8 @@ namespace wholebody_native
     {
       for (Source & s : sources_)
       {
+        if (s.mapped && write_mapping(s))
+          continue;
         PyObject * value = s.get.is_none()
                              ? PyObject_GetAttr(s.task.ptr(), s.name.ptr())
                              : call_get(s);
@@ -93,7 +101,76 @@ namespace wholebody_native
       double * data = nullptr;
       py::ssize_t size = 0;
       Form form = Form::Vector;
+      // a mapping source: the task's attribute, the keys in order, entries per key, the default
+      bool mapped = false;
+      py::object map_name;
+      std::vector<py::object> keys;
+      py::ssize_t per_key = 0;
+      std::vector<double> fallback; // the default entry (empty: none)
     };
+
+    // (attribute, keys, k, default or None) of a mapping source (Param.source).
+    static void take_mapping(Source & s, const py::handle spec)
+    {
+      auto t = py::reinterpret_borrow<py::tuple>(spec);
+      if (t.size() != 4 || s.get.is_none() || s.form != Form::Vector)
+        throw std::invalid_argument("ParameterPacker: a mapping is (attribute, keys, k, default) "
+                                    "of a vector source with a get");
+      s.mapped = true;
+      s.map_name = t[0];
+      for (const py::handle key : t[1])
+        s.keys.push_back(py::reinterpret_borrow<py::object>(key));
+      s.per_key = t[2].cast<py::ssize_t>();
+      if (s.per_key * static_cast<py::ssize_t>(s.keys.size()) != s.size)
+        throw std::invalid_argument("ParameterPacker: a mapping's keys x k must fill its view");
+      if (!t[3].is_none())
+      {
+        s.fallback = t[3].cast<std::vector<double>>();
+        if (static_cast<py::ssize_t>(s.fallback.size()) != s.per_key)
+          throw std::invalid_argument("ParameterPacker: a mapping's default has k entries");
+      }
+    }
+
+    // The mapping's entries for the keys into the view (true), or false: left to ``get``.
+    static bool write_mapping(Source & s)
+    {
+      PyObject * map = PyObject_GetAttr(s.task.ptr(), s.map_name.ptr());
+      if (map == nullptr)
+      {
+        PyErr_Clear(); // ``get`` says what is wrong
+        return false;
+      }
+      const py::object owned = py::reinterpret_steal<py::object>(map);
+      if (!PyDict_Check(map))
+        return false;
+      const std::size_t k = static_cast<std::size_t>(s.per_key);
+      double * out = s.data;
+      for (const py::object & key : s.keys)
+      {
+        PyObject * entry = PyDict_GetItemWithError(map, key.ptr()); // borrowed
+        if (entry == nullptr)
+        {
+          if (PyErr_Occurred() || s.fallback.empty())
+          {
+            PyErr_Clear();
+            return false;
+          }
+          std::copy(s.fallback.begin(), s.fallback.end(), out);
+        }
+        else
+        {
+          if (!py::array_t<double>::check_(entry))
+            return false;
+          auto arr = py::reinterpret_borrow<py::array_t<double>>(entry);
+          if (arr.ndim() != 1 || !(arr.flags() & py::array::c_style)
+              || arr.size() != s.per_key)
+            return false;
+          std::memcpy(out, arr.data(), sizeof(double) * k);
+        }
+        out += k;
+      }
+      return true;
+    }
 
     static PyObject * call_get(const Source & s)
     {
@@ -125,19 +202,30 @@ namespace wholebody_native
       if (!py::array_t<double>::check_(value))
         return false;
       auto arr = py::reinterpret_borrow<py::array_t<double>>(value);
-      if (!(arr.flags() & py::array::c_style))
-        return false;
       const py::ssize_t n = arr.size();
       // a vector or a gain takes a vector of its entries (a matrix is assign's to refuse); a
       // matrix takes its entries in C order, whatever the shape
       if (s.form != Form::Matrix && arr.ndim() != 1)
         return false;
-      if (n == s.size)
-        std::memcpy(s.data, arr.data(), sizeof(double) * static_cast<std::size_t>(n));
-      else if (n == 1)
-        std::fill(s.data, s.data + s.size, *arr.data());
-      else
+      if (arr.flags() & py::array::c_style)
+      {
+        if (n == s.size)
+          std::memcpy(s.data, arr.data(), sizeof(double) * static_cast<std::size_t>(n));
+        else if (n == 1)
+          std::fill(s.data, s.data + s.size, *arr.data());
+        else
+          return false;
+        return true;
+      }
+      // a Fortran-order matrix (Pinocchio's rotations): its entries in C order (as np.ravel)
+      if (s.form != Form::Matrix || arr.ndim() != 2 || n != s.size
+          || !(arr.flags() & py::array::f_style))
         return false;
+      const py::ssize_t rows = arr.shape(0), cols = arr.shape(1);
+      const double * d = arr.data();
+      for (py::ssize_t i = 0; i < rows; ++i)
+        for (py::ssize_t j = 0; j < cols; ++j)
+          s.data[i * cols + j] = d[j * rows + i];
       return true;
     }
 

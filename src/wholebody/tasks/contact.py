@@ -113,13 +113,19 @@ class _PerContact(Task):
         return np.asarray(self.normals.get(contact, WORLD_UP), dtype=float)
 
     def stacked_normals(self, layout, state=None) -> np.ndarray:
-        """The normals of the layout's contacts, stacked (the compiled kernels' parameter)."""
+        """The normals of the layout's contacts, stacked (the compiled kernels' parameter,
+        :attr:`NORMALS`)."""
         normals = self.normals
         if not normals:
             return _world_up(len(layout.contacts))
         # the stored normals are float arrays (normal_map); one read each, no conversion
         return (np.concatenate([normals.get(n, WORLD_UP) for n in layout.contacts])
                 if layout.contacts else ())
+
+    #: the kernels' ``normals`` parameter: read from :attr:`normals` by the compiled packer,
+    #: :meth:`stacked_normals` its reference
+    NORMALS = schema.vector("normals", 3, "contact", get=stacked_normals, mapping="normals",
+                            default=tuple(WORLD_UP))
 
     def _lambda_rows(self, variables, blocks: dict[str, np.ndarray]) -> np.ndarray:
         """Stack per-contact (rows x dim) blocks into (rows x n_lambda)."""
@@ -177,7 +183,7 @@ class ContactConstraint(_PerContact):
 
     kernel = "contact_constraint"
     params = (schema.scalar("kp"), schema.scalar("kd"),
-              schema.vector("anchors", 3, "contact",
+              schema.vector("anchors", 3, "contact", mapping="anchors",
                             get=lambda t, layout, state: t.stacked_anchors(layout, state)),
               schema.scalar("rank_tolerance"))
 
@@ -193,13 +199,15 @@ class ContactConstraint(_PerContact):
 
     def stacked_anchors(self, layout, state) -> np.ndarray | float:
         """The anchors of the layout's contacts, each held where ``state`` first saw its frame
-        (only when the anchor gains are on, as :meth:`rows`)."""
-        if not (self.kp or self.kd):
+        — only while the anchor gains are on, as :meth:`rows`; with the gains off (the kernel
+        reads no anchor) the anchors held already, or zero."""
+        anchors = self.anchors
+        missing = [n for n in layout.contacts if n not in anchors]
+        if missing and not (self.kp or self.kd):
             return 0.0
-        for n in layout.contacts:
-            if n not in self.anchors:
-                self.anchors[n] = state.contact_frame_position(n)
-        return np.concatenate([self.anchors[n] for n in layout.contacts]) if layout.contacts else ()
+        for n in missing:
+            anchors[n] = state.contact_frame_position(n)
+        return np.concatenate([anchors[n] for n in layout.contacts]) if layout.contacts else ()
 
     def rows(self, robot, variables):
         names = contact_subset(variables, self.contacts)
@@ -253,7 +261,7 @@ class FrictionCone(_PerContact):
 
     kernel = "friction_cone"
     params = (schema.scalar("mu"),
-              schema.vector("normals", 3, "contact", get=_PerContact.stacked_normals))
+              _PerContact.NORMALS)
 
     def selection(self, robot):
         return {"torsion": [int(self.torsion)]}
@@ -350,7 +358,7 @@ class NormalForceBounds(_PerContact):
 
     kernel = "normal_force_bounds"
     params = (schema.scalar("f_min"), schema.scalar("f_max"),
-              schema.vector("normals", 3, "contact", get=_PerContact.stacked_normals))
+              _PerContact.NORMALS)
 
     def row_count(self, layout):
         return len(layout.contacts)

@@ -89,8 +89,7 @@ class TangentialForceRegularizer(_PerContact):
     params = (schema.scalar("mu"),
               schema.vector("lean", 3,
                             get=lambda t, layout, state: 0.0 if t.lean is None else t.lean),
-              schema.vector("normals", 3, "contact",
-                            get=lambda t, layout, state: t.stacked_normals(layout)))
+              _PerContact.NORMALS)
 
     def __init__(self, name=None, weight=1.0, contacts=None, normals=None, lean=None,
                  mu: float = math.inf):

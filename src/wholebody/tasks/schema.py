@@ -89,16 +89,34 @@ class CycleState(Protocol):
 class Param:
     """One parameter of a task's kernel: ``name`` (the kernel looks it up by this name),
     ``size``, ``form`` (:data:`FORMS`) and ``get`` (task, layout, state) -> value (default: the
-    task's attribute ``name``)."""
+    task's attribute ``name``).
+
+    ``mapping`` (a per-contact vector with a ``get``): the task's attribute that holds the value
+    per contact (contact name -> k values, e.g. the surface normals). ``get`` stays the reference;
+    the compiled packer reads the mapping itself — the layout's contacts' entries stacked,
+    ``default`` for a contact it lacks — and takes ``get``'s value instead where that is not
+    possible (an entry missing without a default, an entry that is not a float64 vector of k
+    values, a mapping that is not a dict). So ``get`` must give that same stacking whenever it
+    applies."""
 
     name: str
     size: Size
     form: str = "vector"
     get: Callable[[Any, LayoutContext, CycleState], Any] | None = None
+    mapping: str | None = None
+    default: tuple[float, ...] | None = None
 
     def __post_init__(self):
         if self.form not in FORMS:
             raise ValueError(f"Param.form: expected one of {FORMS}, got {self.form!r}")
+        if self.mapping is not None and (self.get is None or self.form != "vector"
+                                         or self.size.per != "contact"):
+            raise ValueError(f"Param {self.name!r}: a mapping is read per contact into a vector, "
+                             "with get as its reference")
+        if self.default is not None and (self.mapping is None
+                                         or len(self.default) != self.size.k):
+            raise ValueError(f"Param {self.name!r}: default needs a mapping and {self.size.k} "
+                             "values")
 
     def assigner(self, task, view: np.ndarray) -> Callable[[Any], None]:
         """A function that writes a value of this parameter into ``view`` (its entries). A value
@@ -140,16 +158,21 @@ class Param:
         """This parameter of ``task`` as a source of the compiled packer
         (``wholebody._hierarchy_cycle.ParameterPacker``, which writes the common values itself and
         hands the others to :meth:`assigner`'s function)."""
+        mapping = None
+        if self.mapping is not None:  # (attribute, the keys in order, k, default or None)
+            mapping = (self.mapping, tuple(layout.contacts), self.size.k,
+                       None if self.default is None else np.array(self.default, dtype=float))
         return (task, self.name if self.get is None else None, self.get, layout, state, view,
-                self.form, self.assigner(task, view))
+                self.form, self.assigner(task, view), mapping)
 
 
 def scalar(name: str, get=None) -> Param:
     return Param(name, Size(1), "vector", get)
 
 
-def vector(name: str, k: int = 1, per: str = "", get=None) -> Param:
-    return Param(name, Size(k, per), "vector", get)
+def vector(name: str, k: int = 1, per: str = "", get=None, mapping: str | None = None,
+           default: tuple[float, ...] | None = None) -> Param:
+    return Param(name, Size(k, per), "vector", get, mapping, default)
 
 
 def diagonal(name: str, k: int = 1, per: str = "", get=None) -> Param:
