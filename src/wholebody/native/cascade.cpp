@@ -57,6 +57,10 @@ namespace
 
   VectorXd sq_norms(const MatrixXd & A) { return A.rowwise().squaredNorm(); }
 
+  // A new numpy vector with v's values: the per-cycle results (pybind11's Eigen caster wraps a
+  // heap copy in a capsule, which costs more than the copy).
+  py::array_t<double> numpy_copy(const VectorXd & v) { return py::array_t<double>(v.size(), v.data()); }
+
   MatrixXd rows_of(const MatrixXd & A, const Mask & keep)
   {
     MatrixXd out(Index(keep.size()), A.cols());
@@ -878,7 +882,7 @@ public:
     double qp = 0.0;
     for (double t : qp_times_)
       qp += t;
-    return py::make_tuple(VectorXd(x_), costs, qp, qp_count_);
+    return py::make_tuple(numpy_copy(x_), numpy_copy(costs), qp, qp_count_);
   }
 
   std::vector<Index> nullspace_dims() const
@@ -1384,7 +1388,7 @@ public:
     VectorXd costs = this->costs(x_);
     if (!std::isfinite(costs.sum()))
       return py::none();
-    return py::make_tuple(VectorXd(x_), costs, qp_time_, 1);
+    return py::make_tuple(numpy_copy(x_), numpy_copy(costs), qp_time_, 1);
   }
 
 private:
