@@ -1087,6 +1087,37 @@ def test_independent_contact_rows_with_a_nan_name_the_task(robots, engine):
 
 
 @native
+def test_anchors_held_with_the_gains_off_are_unused(robots):
+    """The stance task's anchors enter its rows only through its gains: with kp = kd = 0 the
+    anchors it holds (read by the compiled packer from the task's dict, a NaN one among them)
+    leave the native torques equal to the Python engine's; turned on, the gains pull towards
+    the anchors held, in both engines."""
+    robot = robots["hyq"]
+    q, v = moving_states(robot, 2)[1]
+    robot.update(q, v)
+    feet = {n: robot.data.oMf[robot.contact(n).frame_id].translation.copy()
+            for n in robot.contact_names}
+    first = robot.contact_names[0]
+    solutions = {}
+    for engine in ("python", "native"):
+        stack = Stack([[NewtonEuler(name="newton-euler"), ContactConstraint(name="contacts")],
+                       [PostureTask(name="posture", kp=10.0, kd=2.0)]])
+        contacts = stack.find("contacts")
+        contacts.anchors = {n: p + np.array([0.004, -0.003, 0.0]) for n, p in feet.items()}
+        contacts.anchors[first] = np.array([np.nan, 0.0, 0.0])
+        cycle = HierarchyCycle(robot, stack, engine=engine)
+        off = cycle.solve(q, v)
+        contacts.anchors[first] = feet[first] + np.array([-0.002, 0.002, 0.001])
+        contacts.kp, contacts.kd = 50.0, 5.0
+        solutions[engine] = off, cycle.solve(q, v)
+    (py_off, py_on), (nat_off, nat_on) = solutions["python"], solutions["native"]
+    assert py_off.ok and nat_off.ok and py_on.ok and nat_on.ok
+    np.testing.assert_allclose(nat_off.tau, py_off.tau, atol=1e-6)
+    np.testing.assert_allclose(nat_on.tau, py_on.tau, atol=1e-6)
+    assert np.abs(py_on.tau - py_off.tau).max() > 1e-3
+
+
+@native
 def test_matrix_gain_names_the_field(robots):
     """The native cycle takes scalar or per-joint gains: a matrix posture kp (which the Python
     engine accepts) is a ValueError naming the task and the field 'kp'."""
