@@ -25,7 +25,7 @@ import functools
 import logging
 import time
 from types import SimpleNamespace
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -92,6 +92,18 @@ class _Slot:
 
 
 # ---------------------------------------------------------------------------- programs
+class _ProgramKey(NamedTuple):
+    """What a program is built for: the active contacts, the auxiliary variables, the stack's
+    structure (task ids, level lengths), the tasks' layout keys and the Python tasks' row
+    signatures."""
+
+    contacts: tuple
+    auxiliary: tuple
+    structure: tuple
+    layout: tuple
+    python_rows: tuple
+
+
 class _Program:
     """The level arrays of one stack and contact set, filled by the compiled cycle: per level its
     equality rows then its inequality rows (as Formulation's plan), one buffer each for all
@@ -539,11 +551,11 @@ class HierarchyCycle:
         layout = tuple([layout_key() for layout_key in self._layout_keys])
         program = self._program
         if (program is not None and program.variables is variables and not python_rows
-                and program.key[2] is self._structure and program.key[3] == layout):
+                and program.key.structure is self._structure and program.key.layout == layout):
             return program  # the common case: the last cycle's (its key's other parts the same)
-        key = (variables.contacts, variables.auxiliary, self._structure, layout,
-               tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None, r.tau is None,
-                       r.aux is None) for i, r in python_rows.items()]))
+        key = _ProgramKey(variables.contacts, variables.auxiliary, self._structure, layout,
+                          tuple([(i, r.m, r.is_equality, r.qdd is None, r.lam is None,
+                                  r.tau is None, r.aux is None) for i, r in python_rows.items()]))
         if program is None or program.key != key:
             program = self._programs.get(key)
             if program is None:
