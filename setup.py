@@ -14,7 +14,9 @@ metadata is in pyproject.toml):
 Pinocchio is used header-only (headers and Eigen come from the build requirements ``libpinocchio``
 and ``cmeel-eigen``; the cascade and the estimator need Eigen only), so the extensions link no
 Pinocchio library and need no run-time path. ``BuildExt`` adds ``-mavx2 -mfma`` when the building machine has AVX2 and
-FMA (``WHOLEBODY_PORTABLE=1`` builds for any x86-64 CPU). The extensions are optional: without a
+FMA (``WHOLEBODY_PORTABLE=1`` builds for any x86-64 CPU); every extension is built with
+``-ffp-contract=off``, so that its results do not depend on where the compiler fuses
+multiply-adds. The extensions are optional: without a
 C++ compiler, without the headers or pybind11, or with ``WHOLEBODY_NO_NATIVE=1``, the package
 installs without them; ``engine="native"`` then raises a clear error and everything else runs in
 Python with the same results.
@@ -64,7 +66,10 @@ def extensions() -> list[Extension]:
         print("wholebody: pybind11 not found; building without the native cycle", file=sys.stderr)
         return []
 
-    flags = ["-std=c++17", "-O2", "-g0", "-fvisibility=hidden"]
+    # no fused multiply-adds formed by the compiler: with -mfma GCC fuses a * b + c where its
+    # inlining lets it, which changes with the rest of the translation unit, so that an unrelated
+    # edit could move a closed-loop result at round-off; Eigen's explicit FMA kernels are kept
+    flags = ["-std=c++17", "-O2", "-g0", "-fvisibility=hidden", "-ffp-contract=off"]
     eigen = [str(include / "eigen3"), pybind11.get_include()]
     mujoco = mujoco_include()
     # Pinocchio's joint variants need larger Boost.MPL limits (its CMake exports these)
@@ -94,14 +99,14 @@ def extensions() -> list[Extension]:
             include_dirs=eigen, define_macros=[("NDEBUG", None)],
             extra_compile_args=flags, language="c++", optional=True),
         Extension(  # the simulator's reads: pybind11 and MuJoCo's headers (its structs, read in
-            # place; no MuJoCo library linked), no fused multiply-adds (its sums are those of the
-            # Python reference, bit for bit)
+            # place; no MuJoCo library linked); without fused multiply-adds its sums are those of
+            # the Python reference, bit for bit
             "wholebody._sim_reads",
             sources=["src/wholebody/native/sim_reads.cpp"],
             include_dirs=[pybind11.get_include()] + mujoco,
             define_macros=[("NDEBUG", None)] + ([("WHOLEBODY_MUJOCO_HEADERS", None)]
                                                 if mujoco else []),
-            extra_compile_args=flags + ["-ffp-contract=off"], language="c++", optional=True),
+            extra_compile_args=flags, language="c++", optional=True),
     ]
 
 

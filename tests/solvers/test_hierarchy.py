@@ -937,7 +937,12 @@ def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots):
     tests/solvers/test_quadprog_adapter.py) on all but a few cycles (measured: none with the Python engine, one with
     the native engine, whose level QP has a sole's wrench at the apex of its contact wrench cone,
     all 16 of its rows active, and DAQP's solution 3e-6 outside a row after its proximal retry),
-    and the torques equal those of a cycle solved by quadprog alone to 1e-6 Nm (measured 9e-8).
+    and the torques equal those of a cycle solved by quadprog alone to 1e-6 Nm — except on a few
+    such vertices, where DAQP's torques are only as exact as DAQP itself makes them: solved again
+    at the state with v changed by 1e-15 (relative), they move by as much; there the two backends
+    must agree to 4 times that spread (quadprog's own is orders of magnitude smaller). Which
+    states these are depends on the build's rounding (e.g. whether the compiler fuses
+    multiply-adds).
     With DAQP's own sing_tol and the earlier primal_tol 1e-7 (``backend_options``, both engines)
     the same states leave QPs to quadprog on over a third of the cycles ("infeasible" on nearly
     dependent active rows, or solutions refused on the raw rows): the case the settings are for.
@@ -961,14 +966,35 @@ def test_daqp_settings_leave_no_table1_level_qp_to_the_fallback(robots):
         ("quadprog after daqp") when the fallback failed on a lower level."""
         return "solved with quadprog" in status or status.startswith("optimal (quadprog after daqp")
 
+    def daqp_spread(index, tau):
+        """How far DAQP's torques ``tau`` at states[index] move when v changes by 1e-15
+        (relative), solved again after the same earlier states (the stack's references are those
+        of its first cycle: a fresh cycle would take other ones)."""
+        q, v = states[index]
+        rng = np.random.default_rng(7)
+        spread = 0.0
+        for _ in range(4):
+            again = cycle("daqp")
+            for q_seen, v_seen in states[:index]:
+                again.solve(q_seen, v_seen, variables)
+            v_near = v * (1.0 + 1e-15 * rng.standard_normal(v.shape))
+            spread = max(spread, np.abs(again.solve(q, v_near, variables).tau - tau).max())
+        return spread
+
     daqp, quadprog = cycle("daqp"), cycle("quadprog")
-    fallbacks = 0
-    for q, v in states:
+    fallbacks, loose = 0, []
+    for index, (q, v) in enumerate(states):
         a, b = daqp.solve(q, v, variables), quadprog.solve(q, v, variables)
         assert a.ok and (a.status == "optimal" or fell_back(a.status)), a.status
         fallbacks += a.status != "optimal"
-        np.testing.assert_allclose(a.tau, b.tau, atol=1e-6, rtol=0)
+        apart = np.abs(a.tau - b.tau).max()
+        if apart > 1e-6:
+            loose.append((index, apart, a.tau.copy()))
     assert fallbacks <= 3
+    assert len(loose) <= 3, [(i, apart) for i, apart, *_ in loose]
+    for index, apart, tau in loose:
+        spread = daqp_spread(index, tau)
+        assert apart <= 4.0 * spread, (index, apart, spread)
     for engine in ("native", "python"):
         before = cycle("daqp", engine, sing_tol=3.7e-11, primal_tol=1e-7)
         fallbacks = sum(fell_back(before.solve(q, v, variables).status) for q, v in states[:400])
