@@ -250,8 +250,9 @@ class _Program:
                 good = (np.isfinite(self.mat[rows].sum() + w.sum()) and (w > 0).all()
                         and (lo <= up).all())
             if not good:
-                raise ValueError(f"level {s.rank}: task '{s.task.name}' produced NaN/inf rows, "
-                                 f"lower > upper or a bad weight")
+                raise ValueError(f"level {s.rank}: task '{s.task.name}' produced NaN/inf rows "
+                                 f"(or entries whose sum overflows), lower > upper or a bad "
+                                 f"weight")
 
 
 # ---------------------------------------------------------------------------- the cycle

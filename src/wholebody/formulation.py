@@ -475,8 +475,9 @@ class _LevelPlan:
         """Name the task whose rows are NaN/inf, whose bounds cross or whose weight is bad."""
         for _, task, eq, a, b, _ in self.slots:
             if not self._valid(slice(a, b), eq):
-                raise ValueError(f"level {self.rank}: task '{task.name}' produced NaN/inf rows, "
-                                 f"lower > upper or a bad weight")
+                raise ValueError(f"level {self.rank}: task '{task.name}' produced NaN/inf rows "
+                                 f"(or entries whose sum overflows), lower > upper or a bad "
+                                 f"weight")
 
     def _valid(self, rows: slice, eq: bool) -> bool:
         if eq:

@@ -1069,6 +1069,32 @@ def test_task_producing_nan_names_the_task(robots, engine):
                           where="after NaN")
 
 
+class HugeRows(Task):
+    """A user's task whose entries are finite but sum past the largest double (1e307 on every
+    joint acceleration): rows no QP can use."""
+
+    def rows(self, robot, variables):
+        return TaskRows(qdd=np.full((2, robot.nv), 1e307), lam=None, tau=None,
+                        target=np.zeros(2))
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_rows_whose_sum_overflows_are_refused_naming_the_task(robots, engine):
+    """The check of the level arrays is a sum (one pass): rows whose finite entries sum past the
+    largest double are refused as a NaN would be, by both engines alike (the compiled fill's
+    check is the Python reference's), naming the task; the stack solves again without it."""
+    robot = robots["talos14"]
+    stack = table2_stack(robot)
+    stack.levels[2].append(HugeRows(name="huge rows", weight=1e-12))
+    cycle = HierarchyCycle(robot, stack, engine=engine)
+    q, v = moving_states(robot, 1)[0]
+    with np.errstate(over="ignore"), pytest.raises(ValueError,
+                                                   match="task 'huge rows' produced NaN/inf rows"):
+        cycle.solve(q, v)
+    stack.remove("huge rows")
+    assert cycle.solve(q, v).ok
+
+
 @pytest.mark.parametrize("engine", ENGINES)
 def test_independent_contact_rows_with_a_nan_name_the_task(robots, engine):
     """A contact task taking an independent set of its rows (``rank_tolerance``) with a NaN

@@ -251,8 +251,9 @@ public:
 
   // Fills a program's level arrays from this cycle's terms and its parameters (Formulation.levels
   // without the weights, which are packed before, and without the rows of tasks that have no
-  // kernel, which Python writes before this call). False if some entry is NaN/inf, lower > upper,
-  // or a weight is not finite or below its least value (w_min).
+  // kernel, which Python writes before this call). False if some entry is NaN/inf (or the
+  // entries' sum overflows: the reference's check, sum_is_finite), lower > upper, or a weight is
+  // not finite or below its least value (w_min).
   bool fill(int id)
   {
     Program & P = program(id);
@@ -275,7 +276,7 @@ public:
     if (P.n > nv_)
       A.rightCols(P.n - nv_).array().rowwise() *= P.scales.tail(P.n - nv_).transpose().array();
     const Map<const VectorXd> w(P.weights, P.rows);
-    return A.allFinite() && e.allFinite() && !(lo.array() > up.array()).any()
+    return sum_is_finite(A) && sum_is_finite(e) && !(lo.array() > up.array()).any()
            && !lo.array().isNaN().any() && !up.array().isNaN().any() && std::isfinite(w.sum())
            && (w.array() >= P.w_min.array()).all();
   }

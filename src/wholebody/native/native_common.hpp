@@ -39,6 +39,15 @@ namespace wholebody_native
   constexpr double kGravity = 9.81; // as wholebody.tasks.wrench.GRAVITY
   constexpr int kEqual = 5, kFree = 0; // DAQP constraint senses
 
+  // The finiteness test of the Python reference (formulation._LevelPlan._valid): the sum of the
+  // entries is finite — false for a NaN or an infinity anywhere, and for finite entries whose sum
+  // overflows (rows no QP can use). One vectorised pass, cheaper than Eigen's allFinite().
+  template <typename Derived>
+  inline bool sum_is_finite(const Eigen::DenseBase<Derived> & x)
+  {
+    return std::isfinite(x.sum());
+  }
+
   // input() for a state vector: also refuses arrays of another shape with that many values.
   inline const double * vector_input(const DoubleArray & a, py::ssize_t size, const char * field)
   {
