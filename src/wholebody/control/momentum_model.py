@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dpotrs
 
 from ..tasks.momentum import centroidal_map, skew
 from ..validation import contact_dims, contact_positions as check_positions, positive, vector, weight_matrix
@@ -50,23 +51,26 @@ RANK_PIVOT_SHARE = 1e-4
 def _weighted_least_norm(G: np.ndarray, w: np.ndarray, factor: WeightFactor) -> np.ndarray:
     """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable).
 
-    With G of full row rank, the closed form lambda = W^-1 G^T (G W^-1 G^T)^-1 w (the 6 x 6
-    normal equations of the constraint, checked positive definite by their Cholesky pivots);
-    otherwise the least-squares solution of minimum weighted norm: lambda = L^-T mu with mu the
-    minimum-norm least-squares solution of (G L^-T) mu = w (LAPACK's SVD-based solver)."""
+    With G of full row rank, the closed form lambda = W^-1 G^T (G W^-1 G^T)^-1 w: the 6 x 6
+    normal equations of the constraint factored by LAPACK's Cholesky (``dpotrf``, called
+    directly: numpy.linalg's per-call checks cost more than the factorisation), checked positive
+    definite by its pivots, and solved with that factor; otherwise the least-squares solution of
+    minimum weighted norm: lambda = L^-T mu with mu the minimum-norm least-squares solution of
+    (G L^-T) mu = w (LAPACK's SVD-based solver)."""
     A = G @ factor.inverse  # G W^-1
     S = A @ G.T
-    try:
-        pivots = np.diagonal(np.linalg.cholesky(S))
-        full_rank = pivots.min() > RANK_PIVOT_SHARE * pivots.max()
-    except np.linalg.LinAlgError:
-        full_rank = False
-    if full_rank:
-        return A.T @ np.linalg.solve(S, w)
+    C, info = dpotrf(S, lower=1)
+    if info == 0:
+        pivots = np.diagonal(C)
+        if _min(pivots) > RANK_PIVOT_SHARE * _max(pivots):
+            return A.T @ dpotrs(C, w, lower=1)[0]
     L = factor.L
     GL = np.linalg.solve(L, G.T).T  # G L^-T
     mu, *_ = np.linalg.lstsq(GL, w, rcond=None)
     return np.linalg.solve(L.T, mu)
+
+
+_min, _max = np.minimum.reduce, np.maximum.reduce  # (without ndarray.min's Python wrapper)
 
 
 def _momentum_map(X: np.ndarray, com: np.ndarray, dims: tuple[int, ...]) -> np.ndarray:
