@@ -48,6 +48,9 @@ class WeightFactor:
 RANK_PIVOT_SHARE = 1e-4
 
 
+_min, _max = np.minimum.reduce, np.maximum.reduce  # (without ndarray.min's Python wrapper)
+
+
 def _weighted_least_norm(G: np.ndarray, w: np.ndarray, factor: WeightFactor) -> np.ndarray:
     """argmin lambda^T W lambda s.t. G lambda = w (least-squares if w is not reachable).
 
@@ -68,9 +71,6 @@ def _weighted_least_norm(G: np.ndarray, w: np.ndarray, factor: WeightFactor) -> 
     GL = np.linalg.solve(L, G.T).T  # G L^-T
     mu, *_ = np.linalg.lstsq(GL, w, rcond=None)
     return np.linalg.solve(L.T, mu)
-
-
-_min, _max = np.minimum.reduce, np.maximum.reduce  # (without ndarray.min's Python wrapper)
 
 
 def _momentum_map(X: np.ndarray, com: np.ndarray, dims: tuple[int, ...]) -> np.ndarray:
