@@ -5,6 +5,8 @@ scalars, lists, tuples, float and int arrays, arrays of one entry, 0-d, strided 
 arrays, wrong sizes, strings, None, flags — both write the same entries, or both raise the same
 error with the same message; neither writes outside its view."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -16,12 +18,13 @@ pytestmark = pytest.mark.skipif(not native_available(),
 
 
 class Holder:
-    """A task's stand-in: a name and the attribute ``value``."""
+    """A task's stand-in: a name and the attribute ``value``, also held as ``inner.value``."""
 
     name = "holder"
 
     def __init__(self, value):
         self.value = value
+        self.inner = SimpleNamespace(value=value)
 
 
 def by_attribute(form, n):
@@ -30,6 +33,10 @@ def by_attribute(form, n):
 
 def by_get(form, n):
     return Param("value", Size(n), form, get=lambda task, layout, state: task.value)
+
+
+def by_path(form, n):
+    return Param("gain", Size(n), form, attribute="inner.value")
 
 
 VALUES = [2.5, 3, -0, True, False, np.float64(1.5), np.float32(0.25), np.int64(4), np.bool_(True),
@@ -55,7 +62,7 @@ def same(a, b):
     return np.array_equal(a, b, equal_nan=True)
 
 
-@pytest.mark.parametrize("make", [by_attribute, by_get])
+@pytest.mark.parametrize("make", [by_attribute, by_get, by_path])
 @pytest.mark.parametrize("form,n", [("vector", 3), ("vector", 1), ("diagonal", 3), ("matrix", 9),
                                     ("matrix", 3), ("flag", 1)])
 def test_packer_writes_what_the_python_writer_writes(make, form, n):
@@ -87,6 +94,30 @@ def test_packer_reads_the_current_value_every_pack():
     task.value = 0.5
     packer.pack()
     assert buffer.tolist() == [0.5, 0.5, 0.5]
+
+
+@pytest.mark.parametrize("path", ["inner.missing", "missing.value", "inner.value.real.imag.x"])
+def test_an_attribute_path_that_breaks_raises_as_python_does(path):
+    """A path through a missing attribute: the packer raises Python's AttributeError, message
+    and all, and writes nothing."""
+    from wholebody._hierarchy_cycle import ParameterPacker
+
+    param = Param("gain", Size(3), "vector", attribute=path)
+    task = Holder(np.array([1.0, 2.0, 3.0]))
+    python_buffer, packed_buffer = np.full(3, -7.0), np.full(3, -7.0)
+    write = param.writer(task, python_buffer, None, None)
+    packer = ParameterPacker([param.source(task, packed_buffer, None, None)])
+    expected, got = outcome(write, python_buffer), outcome(packer.pack, packed_buffer)
+    assert expected[0] is AttributeError and expected == got
+    assert (packed_buffer == -7.0).all()
+
+
+def test_an_attribute_path_is_names_and_no_get():
+    for path in ["", "inner..value", ".value", "inner."]:
+        with pytest.raises(ValueError, match="dotted path"):
+            Param("gain", Size(3), "vector", attribute=path)
+    with pytest.raises(ValueError, match="dotted path"):
+        Param("gain", Size(3), "vector", attribute="inner.value", get=lambda t, layout, state: 0)
 
 
 def test_packer_refuses_a_view_it_cannot_write():

@@ -1,7 +1,8 @@
 // The per-cycle copy of task parameters into a program's arrays (wholebody.cycle), compiled.
 //
 // A source is one parameter (or a task's weight) as wholebody.tasks.schema declares it: where its
-// value comes from (the task's attribute, or a ``get(task, layout, state)`` function), the view
+// value comes from (the task's attribute, an attribute path through objects the task holds — a
+// tuple of names —, or a ``get(task, layout, state)`` function), the view
 // of the program array it goes to, its form, and ``assign(value)``: the Python function that
 // writes a value of any other kind (and names the task's field when it cannot). The common values
 // — a Python or numpy float or int, a float64 array of exactly the view's entries (for a matrix:
@@ -42,6 +43,17 @@ namespace wholebody_native
         Source s;
         s.task = t[0];
         s.name = t[1];
+        if (py::isinstance<py::tuple>(s.name))
+        {
+          for (const py::handle part : s.name)
+          {
+            if (!py::isinstance<py::str>(part))
+              throw std::invalid_argument("ParameterPacker: an attribute path is a tuple of names");
+            s.path.push_back(py::reinterpret_borrow<py::object>(part));
+          }
+          if (s.path.empty())
+            throw std::invalid_argument("ParameterPacker: an attribute path is a tuple of names");
+        }
         s.get = t[2];
         s.layout = t[3];
         s.state = t[4];
@@ -81,9 +93,9 @@ namespace wholebody_native
       {
         if (s.mapped && write_mapping(s))
           continue;
-        PyObject * value = s.get.is_none()
-                             ? PyObject_GetAttr(s.task.ptr(), s.name.ptr())
-                             : call_get(s);
+        PyObject * value = !s.get.is_none()  ? call_get(s)
+                           : s.path.empty() ? PyObject_GetAttr(s.task.ptr(), s.name.ptr())
+                                            : get_path(s);
         if (value == nullptr)
           throw py::error_already_set();
         py::object owned = py::reinterpret_steal<py::object>(value);
@@ -98,6 +110,7 @@ namespace wholebody_native
     struct Source
     {
       py::object task, name, get, layout, state, view, assign;
+      std::vector<py::object> path; // an attribute path's names (empty: ``name`` itself)
       double * data = nullptr;
       py::ssize_t size = 0;
       Form form = Form::Vector;
@@ -170,6 +183,22 @@ namespace wholebody_native
         out += k;
       }
       return true;
+    }
+
+    // The task's attribute at the end of the path (a new reference, or null with the error set).
+    static PyObject * get_path(const Source & s)
+    {
+      PyObject * value = s.task.ptr();
+      Py_INCREF(value);
+      for (const py::object & part : s.path)
+      {
+        PyObject * next = PyObject_GetAttr(value, part.ptr());
+        Py_DECREF(value);
+        if (next == nullptr)
+          return nullptr;
+        value = next;
+      }
+      return value;
     }
 
     static PyObject * call_get(const Source & s)

@@ -21,6 +21,7 @@ means and writes the values the packer leaves to it.
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 from typing import Any, Callable, Protocol, Sequence
 
@@ -89,7 +90,8 @@ class CycleState(Protocol):
 class Param:
     """One parameter of a task's kernel: ``name`` (the kernel looks it up by this name),
     ``size``, ``form`` (:data:`FORMS`) and ``get`` (task, layout, state) -> value (default: the
-    task's attribute ``name``).
+    task's attribute ``attribute``, a dotted path through objects the task holds such as
+    ``"impedance.K_x"``, read by the compiled packer without a Python call; default ``name``).
 
     ``mapping`` (a per-contact vector with a ``get``): the task's attribute that holds the value
     per contact (contact name -> k values, e.g. the surface normals). ``get`` stays the reference;
@@ -105,10 +107,15 @@ class Param:
     get: Callable[[Any, LayoutContext, CycleState], Any] | None = None
     mapping: str | None = None
     default: tuple[float, ...] | None = None
+    attribute: str | None = None
 
     def __post_init__(self):
         if self.form not in FORMS:
             raise ValueError(f"Param.form: expected one of {FORMS}, got {self.form!r}")
+        if self.attribute is not None and (self.get is not None
+                                           or not all(self.attribute.split("."))):
+            raise ValueError(f"Param {self.name!r}: attribute is a dotted path of names, read "
+                             f"instead of a get (got {self.attribute!r})")
         if self.mapping is not None and (self.get is None or self.form != "vector"
                                          or self.size.per != "contact"):
             raise ValueError(f"Param {self.name!r}: a mapping is read per contact into a vector, "
@@ -149,9 +156,10 @@ class Param:
     def writer(self, task, view: np.ndarray, layout: LayoutContext,
                state: CycleState) -> Callable[[], None]:
         """A function that writes the task's current value into ``view`` (:meth:`assigner`)."""
-        assign, name, get = self.assigner(task, view), self.name, self.get
+        assign, get = self.assigner(task, view), self.get
         if get is None:
-            return lambda: assign(getattr(task, name))
+            read = operator.attrgetter(self.attribute or self.name)
+            return lambda: assign(read(task))
         return lambda: assign(get(task, layout, state))
 
     def source(self, task, view: np.ndarray, layout: LayoutContext, state: CycleState) -> tuple:
@@ -162,8 +170,10 @@ class Param:
         if self.mapping is not None:  # (attribute, the keys in order, k, default or None)
             mapping = (self.mapping, tuple(layout.contacts), self.size.k,
                        None if self.default is None else np.array(self.default, dtype=float))
-        return (task, self.name if self.get is None else None, self.get, layout, state, view,
-                self.form, self.assigner(task, view), mapping)
+        name = (None if self.get is not None else self.name if self.attribute is None
+                else tuple(self.attribute.split(".")))
+        return (task, name, self.get, layout, state, view, self.form, self.assigner(task, view),
+                mapping)
 
 
 def scalar(name: str, get=None) -> Param:
@@ -171,20 +181,20 @@ def scalar(name: str, get=None) -> Param:
 
 
 def vector(name: str, k: int = 1, per: str = "", get=None, mapping: str | None = None,
-           default: tuple[float, ...] | None = None) -> Param:
-    return Param(name, Size(k, per), "vector", get, mapping, default)
+           default: tuple[float, ...] | None = None, attribute: str | None = None) -> Param:
+    return Param(name, Size(k, per), "vector", get, mapping, default, attribute)
 
 
-def diagonal(name: str, k: int = 1, per: str = "", get=None) -> Param:
-    return Param(name, Size(k, per), "diagonal", get)
+def diagonal(name: str, k: int = 1, per: str = "", get=None, attribute: str | None = None) -> Param:
+    return Param(name, Size(k, per), "diagonal", get, attribute=attribute)
 
 
-def matrix(name: str, k: int, per: str = "", get=None) -> Param:
-    return Param(name, Size(k, per), "matrix", get)
+def matrix(name: str, k: int, per: str = "", get=None, attribute: str | None = None) -> Param:
+    return Param(name, Size(k, per), "matrix", get, attribute=attribute)
 
 
-def flag(name: str, get=None) -> Param:
-    return Param(name, Size(1), "flag", get)
+def flag(name: str, get=None, attribute: str | None = None) -> Param:
+    return Param(name, Size(1), "flag", get, attribute=attribute)
 
 
 class KernelTask:
