@@ -147,3 +147,74 @@ def test_bound_weighted_follows_its_arrays():
     levels[0].b = np.repeat(levels[0].b, 2)[::2]  # a strided view: not held as it is
     with pytest.raises(ValueError, match="level 'hard' b: needs a C-contiguous"):
         BoundWeighted(levels, settings)
+
+
+def full_weighted_qp(levels, n, eps):
+    """The weighted QP with the hard equality rows kept as rows (no elimination), assembled here
+    on its own: min ½‖W(B x − b)‖² + ½ε‖x‖² + ½‖s‖² over [x; s], s ≥ 0 implied by the rows —
+    solved by quadprog, the oracle."""
+    from wholebody.solvers.backends import solve_qp
+    hard, obj = levels
+    keep = hard.w > 0
+    wB, wb = obj.w[:, None] * obj.B, obj.w * obj.b
+    m = obj.C.shape[0]
+    H = np.zeros((n + m, n + m))
+    H[:n, :n] = wB.T @ wB + eps * np.eye(n)
+    H[n:, n:] = np.eye(m)
+    g = np.concatenate((-(wB.T @ wb), np.zeros(m)))
+    rows = [np.hstack((hard.B[keep], np.zeros((keep.sum(), m)))),
+            np.hstack((hard.C, np.zeros((hard.C.shape[0], m))))]
+    lower, upper = [hard.b[keep], hard.lower], [hard.b[keep], hard.upper]
+    for i in range(m):  # v C x + s ≥ v lower, v C x − s ≤ v upper
+        for sign, lo, up in ((1.0, obj.v[i] * obj.lower[i], np.inf),
+                             (-1.0, -np.inf, obj.v[i] * obj.upper[i])):
+            if np.isfinite(lo) or np.isfinite(up):
+                row = np.zeros(n + m)
+                row[:n], row[n + i] = obj.v[i] * obj.C[i], sign
+                rows.append(row[None])
+                lower.append([lo])
+                upper.append([up])
+    y, status, ok = solve_qp(H, g, np.vstack(rows), np.concatenate(lower), np.concatenate(upper),
+                             backend="quadprog")
+    return y[:n] if ok else None
+
+
+@pytest.mark.parametrize("equalities", ["independent", "dependent", "as many as variables"])
+def test_weighted_over_the_nullspace_equals_the_qp_with_equality_rows(equalities):
+    """The weighted QP posed over the nullspace of the hard equalities (x = x1 + Z u) has the
+    optimum of the same QP with the equality rows kept, solved by quadprog on an assembly of
+    its own — compiled and Python, on feasible pairs; with dependent equality rows (one row
+    repeated; the oracle is given it once) or as many as the variables they stay rows, with the
+    same optimum."""
+    native_cycle_or_skip("_cascade")
+    rng = np.random.default_rng(17)
+    eps = 1e-6
+    settings = cfg(method="weighted", backend="daqp", regularization=eps)
+    compared = 0
+    for i in range(60):
+        n = int(rng.integers(4, 12))
+        hard, obj = feasible_pair(rng, n)
+        oracle = full_weighted_qp([hard, obj], n, eps)  # (quadprog takes independent rows only)
+        if equalities == "dependent":
+            keep = hard.w > 0
+            if not keep.any():
+                continue
+            B, b = hard.B[keep], hard.b[keep]
+            hard = Level(eq=(np.vstack((B, B[:1])), np.concatenate((b, b[:1]))),
+                         ineq=(hard.C, hard.lower, hard.upper), name="hard")
+        elif equalities == "as many as variables":
+            x = np.linalg.solve(hard.B[:1] @ hard.B[:1].T, hard.b[:1]) @ hard.B[:1]
+            B = np.vstack((hard.B[:1], rng.standard_normal((n - 1, n))))
+            hard = Level(eq=(B, B @ x), ineq=(hard.C, hard.C @ x - 1.0,
+                                               np.full(hard.C.shape[0], np.inf)), name="hard")
+            oracle = full_weighted_qp([hard, obj], n, eps)
+        if oracle is None:
+            continue
+        for compiled in (True, False):
+            sol = solve_hierarchy([hard, obj], settings=settings, compiled=compiled)
+            assert sol.ok and sol.method == "weighted", (i, compiled, sol.status)
+            scale = 1.0 + np.abs(oracle).max()
+            np.testing.assert_allclose(sol.x, oracle, atol=1e-6 * scale, rtol=0,
+                                       err_msg=f"problem {i} compiled={compiled}")
+        compared += 1
+    assert compared > 40

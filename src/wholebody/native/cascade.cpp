@@ -280,6 +280,28 @@ namespace
     return out;
   }
 
+  // common.regular_nullspace: one complete Householder QR of Bᵀ = [Q1 Q2] [R; 0] (Bᵀ: n × k)
+  // into ``qr`` and Q (n × n, formed in any case); where B is regular — k ≤ n, every |R_ii| >
+  // 1e-12 max |R_jj|, y = R⁻ᵀ b finite — x1 = Q1 y, the least-norm solution of B x = b, and true
+  // (Q2 then spans null(B); Herzog et al. 2016, eq. 17).
+  bool regular_nullspace(const MatrixXd & Bt, const VectorXd & b,
+                         Eigen::HouseholderQR<MatrixXd> & qr, MatrixXd & Q, VectorXd & x1)
+  {
+    const Index n = Bt.rows(), k = Bt.cols(), p = std::min(k, n);
+    qr.compute(Bt);
+    Q.setIdentity(n, n);
+    Q.applyOnTheLeft(qr.householderQ());
+    const auto R = qr.matrixQR().topLeftCorner(p, p);
+    const VectorXd d = R.diagonal().cwiseAbs();
+    if (!(k <= n && p > 0 && d.allFinite() && d.minCoeff() > 1e-12 * d.maxCoeff()))
+      return false;
+    const VectorXd y = R.triangularView<Eigen::Upper>().transpose().solve(b);
+    if (!y.allFinite())
+      return false;
+    x1 = Q.leftCols(k) * y;
+    return true;
+  }
+
   // _implicit_equalities: the rows tight at x whose signed, projected, normalised normals are
   // positively dependent (see the Python function's docstring), found with ``nnls`` — the
   // caller's NNLS solver (scipy.optimize.nnls), called as nnls(A, b) -> (y, residual).
@@ -1012,23 +1034,11 @@ private:
     const Index k = B.rows();
     const MatrixXd Bt = (w.asDiagonal() * B).transpose();
     const VectorXd wb = w.cwiseProduct(b);
-    Eigen::HouseholderQR<MatrixXd> qr(Bt);
-    MatrixXd Q = MatrixXd::Identity(n_, n_);
-    Q.applyOnTheLeft(qr.householderQ());
-    const Index p = std::min(k, n_);
-    const auto R = qr.matrixQR().topLeftCorner(p, p);
-    const VectorXd d = R.diagonal().cwiseAbs();
-    bool regular = k <= n_ && p > 0 && d.allFinite() && d.minCoeff() > 1e-12 * d.maxCoeff();
-    VectorXd y;
-    if (regular)
-    {
-      y = R.triangularView<Eigen::Upper>().transpose().solve(wb);
-      regular = y.allFinite();
-    }
-    if (regular)
-      x1_ = Q.leftCols(k) * y;
-    else
+    Eigen::HouseholderQR<MatrixXd> qr;
+    MatrixXd Q;
+    if (!regular_nullspace(Bt, wb, qr, Q, x1_))
       x1_ = Bt.completeOrthogonalDecomposition().pseudoInverse().transpose() * wb;
+    const Index p = std::min(k, n_);
     Z1_ = Q.rightCols(n_ - p);
   }
 
@@ -1262,14 +1272,18 @@ private:
 };
 
 // The weighted method (weighted._solve_weighted, line for line; Fahmi et al. 2019, eq. 7):
-// levels = [hard, objective] (or [objective]) as one QP over y = [x; s] — H = (WB)ᵀWB + ε I on x
-// and I on the objective's slacks s, g = −(WB)ᵀ W b; as rows the hard level's equalities of
-// positive weight and its inequalities, and the objective's inequality rows V C x + s ≥ V lower,
-// V C x − s ≤ V upper, one slack each. DAQP's QP is solved here (DaqpSolver: the adapter's rows,
-// settings, retry and verdict, as for the cascade's level QPs); another backend's comes from
-// qp() and its solution back through give(). The solution is refused (the caller then runs the
-// cascade) unless the hard level holds within feas_tol. Buffers are sized once for the levels'
-// row counts; the arrays are held, not copied (a control loop's level buffers). Usage:
+// levels = [hard, objective] (or [objective]) as one QP over y = [u; s]. The hard level's
+// equality rows of positive weight E x = e are eliminated when independent (Herzog et al. 2016,
+// eq. 17: x = x1 + Z u with x1 = E⁺e and Z an orthonormal basis of null(E), from one complete
+// Householder QR of Eᵀ), else (dependent rows, or as many rows as variables) they stay rows of
+// the QP and x = u. H = (WBZ)ᵀWBZ + ε I on u and I on the objective's slacks s, g = (WBZ)ᵀ(WB x1
+// − W b) + ε Zᵀx1; as rows the hard level's inequalities (and its equalities where not
+// eliminated), and the objective's inequality rows V C x + s ≥ V lower, V C x − s ≤ V upper, one
+// slack each, all over u. DAQP's QP is solved here (DaqpSolver: the adapter's rows, settings,
+// retry and verdict, as for the cascade's level QPs); another backend's comes from qp() and its
+// solution back through give(). The solution is refused (the caller then runs the cascade)
+// unless the hard level holds within feas_tol. Buffers are sized for the levels' row counts;
+// the arrays are held, not copied (a control loop's level buffers). Usage:
 //   run = WeightedRun(B, b, w, C, lower, upper, V, names, n, eps, feas_tol)
 //   kind = run.solve_daqp(DaqpSolver(...))  # or: kind = run.give(backend(*run.qp()))
 //   x, costs, residuals, violations, level_seconds, qp_seconds = run.result()  # kind "done"
@@ -1288,13 +1302,10 @@ public:
       throw std::invalid_argument("WeightedRun: takes [hard, objective] levels, got "
                                   + std::to_string(nl_) + " levels");
     obj_ = nl_ - 1;
-    const Index m = rows_of_level(Cs_, obj_), nv = n_ + m;
-    const Index most = (nl_ == 2 ? rows_of_level(Bs_, 0) + rows_of_level(Cs_, 0) : 0) + 2 * m;
-    H_.setZero(nv, nv);
-    g_.setZero(nv);
-    A_.setZero(most, nv);
-    lower_.setZero(most);
-    upper_.setZero(most);
+    const Index m = rows_of_level(Cs_, obj_);
+    most_ = (nl_ == 2 ? rows_of_level(Bs_, 0) + rows_of_level(Cs_, 0) : 0) + 2 * m;
+    lower_.setZero(most_);
+    upper_.setZero(most_);
     wB_.setZero(rows_of_level(Bs_, obj_), n_);
     x_.setZero(n_);
   }
@@ -1304,33 +1315,60 @@ public:
   {
     const ConstRowMap Bo = matrix(Bs_, obj_), Co = matrix(Cs_, obj_);
     const ConstVecMap wo = vec(ws_, obj_), bo = vec(bs_, obj_);
-    const Index n = n_, m = Co.rows();
+    const Index m = Co.rows();
+    eliminate();
+    const Index nu = eliminated_ ? Z_.cols() : n_, nv = nu + m;
+    if (H_.rows() != nv) // (the same size every cycle unless the equalities' rank changes)
+    {
+      H_.resize(nv, nv);
+      g_.resize(nv);
+      A_.resize(most_, nv);
+    }
     wB_.noalias() = wo.asDiagonal() * Bo;
-    H_.topLeftCorner(n, n).noalias() = wB_.transpose() * wB_;
-    H_.diagonal().head(n).array() += eps_;
-    H_.diagonal().tail(m).setOnes(); // (the rest of H stays zero from the constructor)
-    g_.head(n).noalias() = -(wB_.transpose() * wo.cwiseProduct(bo));
+    rhs_ = wo.cwiseProduct(bo);
+    H_.setZero();
+    g_.setZero();
+    if (eliminated_)
+    {
+      M_.noalias() = wB_ * Z_;
+      rhs_.noalias() -= wB_ * x1_;
+      add_gram(M_);
+      g_.head(nu).noalias() += eps_ * (Z_.transpose() * x1_);
+    }
+    else
+      add_gram(wB_);
+    H_.diagonal().head(nu).array() += eps_;
+    H_.diagonal().tail(m).setOnes();
     rows_ = 0;
     if (nl_ == 2)
     {
       const ConstRowMap Bh = matrix(Bs_, 0), Ch = matrix(Cs_, 0);
       const ConstVecMap wh = vec(ws_, 0), bh = vec(bs_, 0), lh = vec(lowers_, 0),
                         uh = vec(uppers_, 0);
-      for (Index i = 0; i < Bh.rows(); ++i)
-        if (wh[i] > 0) // a zero-weight row is not part of the hard level's cost
-          add_row(Bh.row(i), 1.0, -1, 0.0, bh[i], bh[i]);
-      for (Index i = 0; i < Ch.rows(); ++i)
-        add_row(Ch.row(i), 1.0, -1, 0.0, lh[i], uh[i]);
+      if (!eliminated_)
+        for (Index i = 0; i < Bh.rows(); ++i)
+          if (wh[i] > 0) // a zero-weight row is not part of the hard level's cost
+            add_row(Bh.row(i), 1.0, -1, 0.0, bh[i], bh[i]);
+      if (eliminated_ && Ch.rows()) // the block over u in one product, its values at x1
+      {
+        CZ_.noalias() = Ch * Z_;
+        cx1_.noalias() = Ch * x1_;
+        for (Index i = 0; i < Ch.rows(); ++i)
+          put_row(CZ_.row(i), nu, -1, 0.0, lh[i] - cx1_[i], uh[i] - cx1_[i]);
+      }
+      else
+        for (Index i = 0; i < Ch.rows(); ++i)
+          add_row(Ch.row(i), 1.0, -1, 0.0, lh[i], uh[i]);
     }
     if (m) // soft rows of the objective level, one slack each (as in the cascade)
     {
       const ConstVecMap vo = vec(Vs_, obj_), lo = vec(lowers_, obj_), uo = vec(uppers_, obj_);
       for (Index i = 0; i < m; ++i)
         if (std::isfinite(lo[i]))
-          add_row(Co.row(i), vo[i], n + i, 1.0, vo[i] * lo[i], kInf);
+          add_row(Co.row(i), vo[i], nu + i, 1.0, vo[i] * lo[i], kInf);
       for (Index i = 0; i < m; ++i)
         if (std::isfinite(uo[i]))
-          add_row(Co.row(i), vo[i], n + i, -1.0, -kInf, vo[i] * uo[i]);
+          add_row(Co.row(i), vo[i], nu + i, -1.0, -kInf, vo[i] * uo[i]);
     }
   }
 
@@ -1392,13 +1430,89 @@ public:
   }
 
 private:
+  // x1 = E⁺e and Z, an orthonormal basis of null(E), of the hard level's equality rows of
+  // positive weight E x = e (regular_nullspace) — ``eliminated_`` where E has rows, fewer than
+  // the variables, and is regular.
+  void eliminate()
+  {
+    eliminated_ = false;
+    if (nl_ != 2)
+      return;
+    const ConstRowMap Bh = matrix(Bs_, 0);
+    const ConstVecMap wh = vec(ws_, 0), bh = vec(bs_, 0);
+    Index k = 0;
+    for (Index i = 0; i < Bh.rows(); ++i)
+      k += wh[i] > 0;
+    if (k == 0 || k >= n_)
+      return;
+    Et_.resize(n_, k);
+    e_.resize(k);
+    for (Index i = 0, j = 0; i < Bh.rows(); ++i)
+      if (wh[i] > 0)
+      {
+        Et_.col(j) = Bh.row(i).transpose();
+        e_[j++] = bh[i];
+      }
+    if (!regular_nullspace(Et_, e_, qr_, Q_, x1_))
+      return;
+    Z_ = Q_.rightCols(n_ - k);
+    eliminated_ = true;
+  }
+
+  // H's first block += MᵀM and g's −= Mᵀ rhs_ (M: the objective's weighted rows over the QP's
+  // variables), each row of M over its span of nonzero columns only (an objective's rows are
+  // mostly short where nothing is eliminated: a posture or force regulariser's one entry, a
+  // wrench task's the forces), row after row into the lower triangle, then mirrored.
+  template <typename Rows>
+  void add_gram(const Rows & M)
+  {
+    const Index n = M.cols();
+    for (Index i = 0; i < M.rows(); ++i)
+    {
+      const double * r = M.row(i).data();
+      Index first = 0, last = n - 1;
+      while (first < n && r[first] == 0.0)
+        ++first;
+      if (first == n)
+        continue;
+      while (r[last] == 0.0)
+        --last;
+      const double ri = rhs_[i];
+      for (Index a = first; a <= last; ++a)
+      {
+        const double ra = r[a];
+        if (ra == 0.0)
+          continue;
+        double * h = H_.row(a).data();
+        for (Index c = first; c <= a; ++c)
+          h[c] += ra * r[c];
+        g_[a] -= ra * ri;
+      }
+    }
+    for (Index a = 0; a < n; ++a)
+      for (Index c = 0; c < a; ++c)
+        H_(c, a) = H_(a, c);
+  }
+
   // Row ``rows_`` of the QP: scale · a on x, ``slack_sign`` in column ``slack`` (none if < 0).
+  // Over u where the equalities are eliminated: scale · a Z, the bounds less scale · a x1.
   template <typename Row>
   void add_row(const Row & a, double scale, Index slack, double slack_sign, double lo, double up)
   {
+    if (!eliminated_)
+      return put_row(scale * a, n_, slack, slack_sign, lo, up);
+    const double shift = scale * a.dot(x1_);
+    put_row(scale * (a * Z_), Z_.cols(), slack, slack_sign, lo - shift, up - shift);
+  }
+
+  // Row ``rows_`` of the QP: ``a`` on the first ``nu`` variables, ``slack_sign`` in column
+  // ``slack`` (none if < 0), the rest zero.
+  template <typename Row>
+  void put_row(const Row & a, Index nu, Index slack, double slack_sign, double lo, double up)
+  {
     auto row = A_.row(rows_);
-    row.head(n_) = scale * a;
-    row.tail(A_.cols() - n_).setZero();
+    row.head(nu) = a;
+    row.tail(A_.cols() - nu).setZero();
     if (slack >= 0)
       row[slack] = slack_sign;
     lower_[rows_] = lo;
@@ -1406,11 +1520,14 @@ private:
     ++rows_;
   }
 
-  // x = y[:n], kept if the hard level holds: |B x − b| ≤ feas_tol (1 + |b|) on its rows of
+  // x = x1 + Z u (or u), kept if the hard level holds: |B x − b| ≤ feas_tol (1 + |b|) on its rows of
   // positive weight, violations ≤ feas_tol (1 + |C x|).
   std::string accept()
   {
-    x_ = y_.head(n_);
+    if (eliminated_)
+      x_.noalias() = x1_ + Z_ * y_.head(Z_.cols());
+    else
+      x_ = y_.head(n_);
     if (nl_ == 2)
     {
       const ConstRowMap Bh = matrix(Bs_, 0), Ch = matrix(Cs_, 0);
@@ -1436,8 +1553,14 @@ private:
   double eps_, feas_tol_;
   std::size_t obj_ = 0;
   Index rows_ = 0;
-  RowMatrix H_, A_, wB_;
-  VectorXd g_, lower_, upper_, y_, x_;
+  Index most_ = 0; // the QP's rows at most
+  RowMatrix H_, A_, wB_, M_, CZ_;
+  VectorXd g_, lower_, upper_, y_, x_, rhs_, cx1_;
+  // the eliminated equalities: Eᵀ, e, its QR and Q, x1, Z
+  bool eliminated_ = false;
+  MatrixXd Et_, Q_, Z_;
+  VectorXd e_, x1_;
+  Eigen::HouseholderQR<MatrixXd> qr_;
   double qp_time_ = 0.0;
   std::string status_;
 };

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from scipy.linalg import lapack
 
 from .backends import FALLBACK_OPTIONS, solve_qp
 from .level import Level
@@ -48,6 +49,31 @@ class HierarchySolution:
     levels_solved: int = 0
     nullspace_dims: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     warnings: tuple = ()
+
+
+def regular_nullspace(B: np.ndarray, b: np.ndarray):
+    """(x1, Z) of the rows B x = b (k × n): x1 = Bᵀ(B Bᵀ)⁻¹ b, the least-norm solution, and Z an
+    orthonormal basis of null(B), from one complete QR of Bᵀ = [Q1 Q2] [R; 0] (LAPACK
+    dgeqrf/dorgqr; Herzog et al. 2016 §2.4, eq. 17): since B Bᵀ = RᵀR, x1 = Q1 R⁻ᵀ b and Z = Q2.
+    None where B is not regular: more rows than columns, some |R_ii| ≤ 1e-12 max |R_jj|, or a
+    result that is not finite."""
+    k = b.shape[0]
+    Bt = np.array(B.T, order="F")
+    if k == 0 or k > Bt.shape[0]:
+        return None
+    qr, tau, _, info = lapack.dgeqrf(Bt, overwrite_a=True)
+    d = np.abs(qr.diagonal()[:k])
+    if info != 0 or not d.min() > 1e-12 * d.max():
+        return None
+    q = np.zeros((Bt.shape[0], Bt.shape[0]), order="F")
+    q[:, :k] = qr
+    Q, _, info = lapack.dorgqr(q, tau, overwrite_a=True)
+    if info != 0:
+        return None
+    y, info = lapack.dtrtrs(qr[:k], b, lower=0, trans=1)  # Rᵀ y = b (reads R's triangle only)
+    if info != 0 or not np.isfinite(y).all():
+        return None
+    return Q[:, :k] @ y, Q[:, k:]  # Z orthonormal by construction
 
 
 class FirstLevelSolution(NamedTuple):

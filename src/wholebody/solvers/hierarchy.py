@@ -45,11 +45,11 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.linalg import lapack
 
 from . import compiled_cascade
 from .cascade import _solve_cascade
-from .common import FirstLevelSolution, HierarchySolution, _checked_arguments, evaluate_levels
+from .common import (FirstLevelSolution, HierarchySolution, _checked_arguments, evaluate_levels,
+                     regular_nullspace)
 from .compiled_cascade import BoundCascade, BoundWeighted, _solve_compiled, _solve_weighted_compiled
 from .daqp_hierarchy import _solve_daqp, row_normalised
 from .level import Level
@@ -155,20 +155,10 @@ def analytic_first_level(level: Level) -> "FirstLevelSolution":
     k = w.shape[0]
     if k == 0:
         raise ValueError(f"level {level.name!r}: the analytic first level needs equality rows")
-    Bt = np.array((level.B * w[:, None]).T, order="F")
-    qr, tau, _, info = lapack.dgeqrf(Bt, overwrite_a=True)
-    d = np.abs(qr.diagonal()[:k])
-    if info == 0 and (k > Bt.shape[0] or not d.min() > 1e-12 * d.max()):
-        info = -1  # (numerically) rank-deficient
-    if info == 0:
-        q = np.zeros((Bt.shape[0], Bt.shape[0]), order="F")
-        q[:, :k] = qr
-        Q, _, info = lapack.dorgqr(q, tau, overwrite_a=True)
-        if info == 0:  # Rᵀ y = b with R the upper triangle of qr (dtrtrs reads only that)
-            y, info = lapack.dtrtrs(qr[:k], level.b * w, lower=0, trans=1)
-    if info != 0 or not np.isfinite(y).all():  # rank-deficient B: the plain formulas
-        B = level.B * w[:, None]
-        x1 = B.T @ np.linalg.lstsq(B @ B.T, level.b * w, rcond=None)[0]
+    B, b = level.B * w[:, None], level.b * w
+    regular = regular_nullspace(B, b)
+    if regular is None:  # rank-deficient B: the plain formulas
+        x1 = B.T @ np.linalg.lstsq(B @ B.T, b, rcond=None)[0]
         Q, _ = np.linalg.qr(B.T, mode="complete")
         return FirstLevelSolution(x1, Q[:, k:])
-    return FirstLevelSolution(Q[:, :k] @ y, Q[:, k:])  # orthonormal by construction
+    return FirstLevelSolution(*regular)
