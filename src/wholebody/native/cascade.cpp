@@ -280,17 +280,18 @@ namespace
     return out;
   }
 
-  // common.regular_nullspace: one complete Householder QR of Bᵀ = [Q1 Q2] [R; 0] (Bᵀ: n × k)
-  // into ``qr`` and Q (n × n, formed in any case); where B is regular — k ≤ n, every |R_ii| >
-  // 1e-12 max |R_jj|, y = R⁻ᵀ b finite — x1 = Q1 y, the least-norm solution of B x = b, and true
-  // (Q2 then spans null(B); Herzog et al. 2016, eq. 17).
+  // common.regular_nullspace: one complete Householder QR of Bᵀ = [Q1 Q2] [R; 0] (Bᵀ: n × k,
+  // into ``qr``) and Z = Q2, its last n − min(k, n) columns (formed in any case); where B is
+  // regular — k ≤ n, every |R_ii| > 1e-12 max |R_jj|, y = R⁻ᵀ b finite — x1 = Q1 y, the
+  // least-norm solution of B x = b, and true (Z then spans null(B); Herzog et al. 2016, eq. 17).
   bool regular_nullspace(const MatrixXd & Bt, const VectorXd & b,
-                         Eigen::HouseholderQR<MatrixXd> & qr, MatrixXd & Q, VectorXd & x1)
+                         Eigen::HouseholderQR<MatrixXd> & qr, VectorXd & x1, MatrixXd & Z)
   {
     const Index n = Bt.rows(), k = Bt.cols(), p = std::min(k, n);
     qr.compute(Bt);
-    Q.setIdentity(n, n);
-    Q.applyOnTheLeft(qr.householderQ());
+    Z.setZero(n, n - p);
+    Z.bottomRows(n - p).setIdentity();
+    Z.applyOnTheLeft(qr.householderQ());
     const auto R = qr.matrixQR().topLeftCorner(p, p);
     const VectorXd d = R.diagonal().cwiseAbs();
     if (!(k <= n && p > 0 && d.allFinite() && d.minCoeff() > 1e-12 * d.maxCoeff()))
@@ -298,7 +299,9 @@ namespace
     const VectorXd y = R.triangularView<Eigen::Upper>().transpose().solve(b);
     if (!y.allFinite())
       return false;
-    x1 = Q.leftCols(k) * y;
+    x1.setZero(n);
+    x1.head(k) = y;
+    x1.applyOnTheLeft(qr.householderQ());
     return true;
   }
 
@@ -1024,22 +1027,17 @@ private:
   }
 
   // x1 = B⁺ b (least norm) and an orthonormal basis Z1 of null(B) for level 1's weighted rows
-  // (Herzog et al. 2016 eq. 17; hierarchy.analytic_first_level): one complete Householder QR of
-  // Bᵀ = [Q1 Q2] [R; 0], x1 = Q1 R⁻ᵀ b, Z1 = Q2; a rank-deficient B (some |R_ii| ≤
-  // 1e-12 max |R_jj|) takes the pseudo-inverse.
+  // (Herzog et al. 2016 eq. 17; hierarchy.analytic_first_level): regular_nullspace; a
+  // rank-deficient B (some |R_ii| ≤ 1e-12 max |R_jj|) takes the pseudo-inverse.
   void first_level_solution()
   {
     const ConstRowMap B = matrix(Bs_, 0);
     const ConstVecMap w = vec(ws_, 0), b = vec(bs_, 0);
-    const Index k = B.rows();
     const MatrixXd Bt = (w.asDiagonal() * B).transpose();
     const VectorXd wb = w.cwiseProduct(b);
     Eigen::HouseholderQR<MatrixXd> qr;
-    MatrixXd Q;
-    if (!regular_nullspace(Bt, wb, qr, Q, x1_))
+    if (!regular_nullspace(Bt, wb, qr, x1_, Z1_))
       x1_ = Bt.completeOrthogonalDecomposition().pseudoInverse().transpose() * wb;
-    const Index p = std::min(k, n_);
-    Z1_ = Q.rightCols(n_ - p);
   }
 
   // The higher rows over the current null space: HZ, without the rows that have no freedom left
@@ -1453,10 +1451,7 @@ private:
         Et_.col(j) = Bh.row(i).transpose();
         e_[j++] = bh[i];
       }
-    if (!regular_nullspace(Et_, e_, qr_, Q_, x1_))
-      return;
-    Z_ = Q_.rightCols(n_ - k);
-    eliminated_ = true;
+    eliminated_ = regular_nullspace(Et_, e_, qr_, x1_, Z_);
   }
 
   // H's first block += MᵀM and g's −= Mᵀ rhs_ (M: the objective's weighted rows over the QP's
@@ -1556,9 +1551,9 @@ private:
   Index most_ = 0; // the QP's rows at most
   RowMatrix H_, A_, wB_, M_, CZ_;
   VectorXd g_, lower_, upper_, y_, x_, rhs_, cx1_;
-  // the eliminated equalities: Eᵀ, e, its QR and Q, x1, Z
+  // the eliminated equalities: Eᵀ, e, its QR, x1, Z
   bool eliminated_ = false;
-  MatrixXd Et_, Q_, Z_;
+  MatrixXd Et_, Z_;
   VectorXd e_, x1_;
   Eigen::HouseholderQR<MatrixXd> qr_;
   double qp_time_ = 0.0;
