@@ -10,9 +10,13 @@ printed: the Python references and task updates, the compiled update, the rows, 
 Slack modes: per-direction (a weighted least-squares term, no variables), single (one slack
 variable per swing foot + 6 rows; not the native engine: the stack's is an auxiliary variable),
 none (hard swing equality). For reference the same QP through the generic two-level Formulation
-(``as_stack``, method "weighted"). A benchmark, not a test.
+(``as_stack``, method "weighted"). ``--interleaved N`` instead times the native and the stack
+engine (per-direction slacks) in one process over the first 300 recorded crawl states, engine
+after engine for N passes, and prints the medians of the per-pass median cycle times and of their
+ratio (the two engines see the same machine load). A benchmark, not a test.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_passive.py [--cycles 1500] [--repeat 3] [--passes 5]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_passive.py --interleaved 15
 """
 
 from __future__ import annotations
@@ -107,15 +111,44 @@ def time_stack(robot, states):
     return np.array(full) * 1e6
 
 
+def interleaved(robot, states, passes: int) -> None:
+    """Native and stack engine (per-direction) on the same states, pass after pass in turn."""
+    engines = {engine: PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
+                                  engine=engine) for engine in ("native", "stack")}
+    medians = {engine: [] for engine in engines}
+    for wbc in engines.values():  # warm: every stance set's program built
+        for q, v, plan in states:
+            wbc.cycle(q, v, plan)
+    for _ in range(passes):
+        for engine, wbc in engines.items():
+            times = []
+            for q, v, plan in states:
+                t0 = time.perf_counter()
+                wbc.cycle(q, v, plan)
+                times.append(time.perf_counter() - t0)
+            medians[engine].append(np.median(times) * 1e6)
+    native, stack = np.array(medians["native"]), np.array(medians["stack"])
+    ratio = stack / native
+    print(f"{len(states)} crawl states, {passes} passes: native {np.median(native):.1f} µs, "
+          f"stack {np.median(stack):.1f} µs (medians of the per-pass medians); stack / native "
+          f"{np.median(ratio):.3f} (quartiles {np.percentile(ratio, 25):.3f}-"
+          f"{np.percentile(ratio, 75):.3f})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=1500)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--passes", type=int, default=1,
                         help="run each cycle K times and keep its fastest (noisy machines)")
+    parser.add_argument("--interleaved", type=int, default=0, metavar="N",
+                        help="only native against stack, interleaved, N passes over 300 crawl states")
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; passes {args.passes}")
     robot = wb.load_robot("hyq")
+    if args.interleaved:
+        interleaved(robot, record(robot, "crawl", 300), args.interleaved)
+        return
     for gait in ("crawl", "trot"):
         states = record(robot, gait, args.cycles)
         swinging = sum(not p.contact.all() for _, _, p in states)
