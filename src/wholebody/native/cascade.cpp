@@ -293,14 +293,13 @@ namespace
     Z.bottomRows(n - p).setIdentity();
     Z.applyOnTheLeft(qr.householderQ());
     const auto R = qr.matrixQR().topLeftCorner(p, p);
-    const VectorXd d = R.diagonal().cwiseAbs();
+    const auto d = R.diagonal().cwiseAbs();
     if (!(k <= n && p > 0 && d.allFinite() && d.minCoeff() > 1e-12 * d.maxCoeff()))
       return false;
-    const VectorXd y = R.triangularView<Eigen::Upper>().transpose().solve(b);
-    if (!y.allFinite())
-      return false;
     x1.setZero(n);
-    x1.head(k) = y;
+    x1.head(k) = R.triangularView<Eigen::Upper>().transpose().solve(b);
+    if (!x1.allFinite())
+      return false;
     x1.applyOnTheLeft(qr.householderQ());
     return true;
   }
@@ -1352,7 +1351,10 @@ public:
         CZ_.noalias() = Ch * Z_;
         cx1_.noalias() = Ch * x1_;
         for (Index i = 0; i < Ch.rows(); ++i)
-          put_row(CZ_.row(i), nu, -1, 0.0, lh[i] - cx1_[i], uh[i] - cx1_[i]);
+        {
+          A_.row(rows_).head(nu) = CZ_.row(i);
+          end_row(nu, -1, 0.0, lh[i] - cx1_[i], uh[i] - cx1_[i]);
+        }
       }
       else
         for (Index i = 0; i < Ch.rows(); ++i)
@@ -1495,18 +1497,21 @@ private:
   void add_row(const Row & a, double scale, Index slack, double slack_sign, double lo, double up)
   {
     if (!eliminated_)
-      return put_row(scale * a, n_, slack, slack_sign, lo, up);
+    {
+      A_.row(rows_).head(n_) = scale * a;
+      return end_row(n_, slack, slack_sign, lo, up);
+    }
+    const Index nu = Z_.cols();
+    A_.row(rows_).head(nu).noalias() = scale * (a * Z_);
     const double shift = scale * a.dot(x1_);
-    put_row(scale * (a * Z_), Z_.cols(), slack, slack_sign, lo - shift, up - shift);
+    end_row(nu, slack, slack_sign, lo - shift, up - shift);
   }
 
-  // Row ``rows_`` of the QP: ``a`` on the first ``nu`` variables, ``slack_sign`` in column
-  // ``slack`` (none if < 0), the rest zero.
-  template <typename Row>
-  void put_row(const Row & a, Index nu, Index slack, double slack_sign, double lo, double up)
+  // Row ``rows_`` of the QP, its first ``nu`` entries written: the rest zero but
+  // ``slack_sign`` in column ``slack`` (none if < 0), its bounds; the next row.
+  void end_row(Index nu, Index slack, double slack_sign, double lo, double up)
   {
     auto row = A_.row(rows_);
-    row.head(nu) = a;
     row.tail(A_.cols() - nu).setZero();
     if (slack >= 0)
       row[slack] = slack_sign;

@@ -52,11 +52,11 @@ class HierarchySolution:
 
 
 def regular_nullspace(B: np.ndarray, b: np.ndarray):
-    """(x1, Z) of the rows B x = b (k × n): x1 = Bᵀ(B Bᵀ)⁻¹ b, the least-norm solution, and Z an
-    orthonormal basis of null(B), from one complete QR of Bᵀ = [Q1 Q2] [R; 0] (LAPACK
-    dgeqrf/dorgqr; Herzog et al. 2016 §2.4, eq. 17): since B Bᵀ = RᵀR, x1 = Q1 R⁻ᵀ b and Z = Q2.
-    None where B is not regular: more rows than columns, some |R_ii| ≤ 1e-12 max |R_jj|, or a
-    result that is not finite."""
+    """(x1, Z) of the rows B x = b (k × n): x1 = Bᵀ(B Bᵀ)⁻¹ b, the least-norm solution, and Z
+    an orthonormal basis of null(B), from one complete QR of Bᵀ = [Q1 Q2] [R; 0] (LAPACK
+    dgeqrf/dorgqr; Herzog et al. 2016 §2.4, eq. 17): since B Bᵀ = RᵀR, x1 = Q1 R⁻ᵀ b and
+    Z = Q2. None where B is not regular: more rows than columns, some |R_ii| ≤ 1e-12
+    max |R_jj|, or a result that is not finite."""
     k = b.shape[0]
     Bt = np.array(B.T, order="F")
     if k == 0 or k > Bt.shape[0]:

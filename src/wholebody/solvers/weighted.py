@@ -4,8 +4,9 @@ The single weighted QP (Fahmi et al. 2019, eq. 7): ``levels = [hard, objective]`
 hard level's rows as constraints, its independent equality rows eliminated first
 (:func:`~.common.regular_nullspace`: the QP over their nullspace, Herzog et al. 2016 eq. 17,
 smaller for the backend; dependent rows, or as many as the variables, stay rows). Equal to the
-two-level cascade whenever the hard level is feasible, up to the ε effect of the cascade's soft first level (it trades an
-O(ε) violation for norm; the hard rows do not), i.e. exactly equal as ε → 0. If the hard level
+two-level cascade whenever the hard level is feasible, up to the ε effect of the cascade's soft
+first level (it trades an O(ε) violation for norm; the hard rows do not), i.e. exactly equal as
+ε → 0. If the hard level
 is infeasible (or the backend fails on the single QP, e.g. quadprog on inconsistent equality
 rows), :func:`_solve_weighted` returns None and ``solve_hierarchy`` returns the cascade's
 result instead (:func:`_cascade_instead`), recorded in ``method`` and ``warnings``.
@@ -42,11 +43,10 @@ def _solve_weighted(levels, n, settings, feas_tol, t0):
         keep = hard.w > 0  # a zero-weight row is not part of the hard level's cost
         if 0 < keep.sum() < n:  # (as many rows as variables: x fixed, left to the backend)
             elimination = regular_nullspace(Bh[keep], hard.b[keep])
+    Z, M = None, wB
     if elimination is not None:
         x1, Z = elimination
         M, rhs = wB @ Z, rhs - wB @ x1
-    else:
-        x1, Z, M = np.zeros(n), None, wB
     nu = M.shape[1]
     m = Co.shape[0]
     nv = nu + m
