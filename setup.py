@@ -1,7 +1,8 @@
 """Builds the optional compiled extensions from src/wholebody/native (the rest of the package
 metadata is in pyproject.toml):
 
-- ``wholebody._passive_cycle``: the passive WBC's whole cycle (``PassiveWBC(engine="native")``);
+- ``wholebody._passive_references``: the passive WBC's per-cycle references around its QP
+  (``PassiveWBC(engine="native")``, whose QP is a stack solved by ``_hierarchy_cycle``);
 - ``wholebody._hierarchy_cycle``: the rigid-body terms and task rows of ``HierarchyCycle``;
 - ``wholebody._cascade``: the cascade of QPs and the single weighted QP, which solve DAQP's QPs
   themselves and hand the other backends' QPs to Python;
@@ -78,8 +79,8 @@ def extensions() -> list[Extension]:
                         ("BOOST_FUSION_INVOKE_MAX_ARITY", "12"), ("NDEBUG", None)]
     return [
         Extension(
-            "wholebody._passive_cycle",
-            sources=["src/wholebody/native/passive_cycle.cpp"],
+            "wholebody._passive_references",
+            sources=["src/wholebody/native/passive_references.cpp"],
             include_dirs=[str(include)] + eigen,
             define_macros=pinocchio_macros,
             extra_compile_args=flags, language="c++", optional=True),

@@ -3,17 +3,17 @@ the swing slacks, C++ on an i5; issue target here: full cycle median <= 60 µs, 
 
 States (q, v, plan) are recorded from closed-loop HyQ crawl and trot runs in the twin, then replayed:
 full cycle = rigid-body update + assembly + DAQP solve + τ (eq. 19) + the Solution; the QP time is
-the DAQP call. Engines: "python" (Robot.update + numpy assembly), "native" (the compiled cycle,
-PassiveWBC(engine="native")) and "stack" (Robot.update for the controller's references, then the
-same QP as a stack of tasks through the compiled HierarchyCycle, method "weighted"; its parts are
-printed: the Python references and task updates, the compiled update, the rows, the QP).
-Slack modes: per-direction (a weighted least-squares term, no variables), single (one slack
-variable per swing foot + 6 rows; not the native engine: the stack's is an auxiliary variable),
-none (hard swing equality). For reference the same QP through the generic two-level Formulation
-(``as_stack``, method "weighted"). ``--interleaved N`` instead times the native and the stack
-engine (per-direction slacks) in one process over the first 300 recorded crawl states, engine
-after engine for N passes, and prints the medians of the per-pass median cycle times and of their
-ratio (the two engines see the same machine load). A benchmark, not a test.
+the DAQP call. Engines: "python" (Robot.update + the hand-assembled QP in numpy) and "native"
+(the same QP as a stack of tasks through the compiled HierarchyCycle, method "weighted", with the
+controller's references compiled; its parts are printed: the references and task updates, the
+compiled update, the rows, the QP). Slack modes: per-direction (a weighted least-squares term,
+no variables), single (one slack variable per swing foot: 6 rows in the hand-assembled QP, an
+auxiliary variable of the stack), none (hard swing equality). For reference the same QP through
+the generic two-level Formulation in Python (``as_stack``, method "weighted").
+``--interleaved N`` instead times both engines (per-direction slacks) in one process over the
+first 300 recorded crawl states, engine after engine for N passes, and prints the medians of the
+per-pass median cycle times and of their ratio (the two engines see the same machine load). A
+benchmark, not a test.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_passive.py [--cycles 1500] [--repeat 3] [--passes 5]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_passive.py --interleaved 15
@@ -32,12 +32,14 @@ from types import SimpleNamespace  # noqa: E402
 import numpy as np  # noqa: E402
 
 import wholebody as wb  # noqa: E402
-from wholebody.control.passive import ENGINES, PassiveWBC  # noqa: E402
+from wholebody.control.passive import PassiveWBC  # noqa: E402
 from wholebody.formulation import Formulation  # noqa: E402
 from wholebody.planning.trunk import VelocityCommand  # noqa: E402
 from wholebody.scenarios.locomotion import run_gait  # noqa: E402
 from wholebody.solvers import SolverSettings  # noqa: E402
 
+#: the engines timed
+ENGINES = ("python", "native")
 #: the generic route's solver: the two levels in one weighted QP by DAQP (Fahmi et al. 2019, eq. 7)
 WEIGHTED = SolverSettings(method="weighted", backend="daqp")
 
@@ -91,7 +93,7 @@ def time_dedicated(robot, states, swing_slack: str, passes: int = 1, engine: str
 
 
 def stack_parts(parts) -> str:
-    """Medians of the stack engine's parts (µs)."""
+    """Medians of the native engine's parts (µs)."""
     return " ".join(f"{key} {1e6 * np.median([p[key] for p in parts]):4.0f}"
                     for key in ("prepare", "update", "rows", "qp"))
 
@@ -112,9 +114,9 @@ def time_stack(robot, states):
 
 
 def interleaved(robot, states, passes: int) -> None:
-    """Native and stack engine (per-direction) on the same states, pass after pass in turn."""
+    """Both engines (per-direction) on the same states, pass after pass in turn."""
     engines = {engine: PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
-                                  engine=engine) for engine in ("native", "stack")}
+                                  engine=engine) for engine in ENGINES}
     medians = {engine: [] for engine in engines}
     for wbc in engines.values():  # warm: every stance set's program built
         for q, v, plan in states:
@@ -127,10 +129,10 @@ def interleaved(robot, states, passes: int) -> None:
                 wbc.cycle(q, v, plan)
                 times.append(time.perf_counter() - t0)
             medians[engine].append(np.median(times) * 1e6)
-    native, stack = np.array(medians["native"]), np.array(medians["stack"])
-    ratio = stack / native
+    native, python = np.array(medians["native"]), np.array(medians["python"])
+    ratio = native / python
     print(f"{len(states)} crawl states, {passes} passes: native {np.median(native):.1f} µs, "
-          f"stack {np.median(stack):.1f} µs (medians of the per-pass medians); stack / native "
+          f"python {np.median(python):.1f} µs (medians of the per-pass medians); native / python "
           f"{np.median(ratio):.3f} (quartiles {np.percentile(ratio, 25):.3f}-"
           f"{np.percentile(ratio, 75):.3f})")
 
@@ -142,7 +144,8 @@ def main() -> None:
     parser.add_argument("--passes", type=int, default=1,
                         help="run each cycle K times and keep its fastest (noisy machines)")
     parser.add_argument("--interleaved", type=int, default=0, metavar="N",
-                        help="only native against stack, interleaved, N passes over 300 crawl states")
+                        help="only native against python, interleaved, N passes over 300 crawl "
+                        "states")
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; passes {args.passes}")
     robot = wb.load_robot("hyq")
@@ -157,13 +160,11 @@ def main() -> None:
         for rep in range(args.repeat):
             for engine in ENGINES:
                 for mode in ("per-direction", "single", "none"):
-                    if engine == "native" and mode == "single":
-                        continue
                     update, full, qp, parts = time_dedicated(robot, states, mode, args.passes,
                                                              engine)
                     medians.setdefault((engine, mode), []).append(np.median(full))
                     extra = f" | update {np.median(update):4.0f}" if engine == "python" else ""
-                    extra += f" | {stack_parts(parts)}" if engine == "stack" else ""
+                    extra += f" | {stack_parts(parts)}" if engine == "native" else ""
                     print(f"[{rep}] {engine:6s} {mode:14s} full cycle {stats(full)} | QP "
                           f"{np.median(qp):5.0f}{extra}")
         for engine in ENGINES:
@@ -175,9 +176,6 @@ def main() -> None:
         ratio = [n / p for n, p in zip(medians[("native", "per-direction")],
                                        medians[("python", "per-direction")])]
         print(f"native / python (per-direction, paired by repeat): {np.median(ratio):.2f}")
-        ratio = [s / n for s, n in zip(medians[("stack", "per-direction")],
-                                       medians[("native", "per-direction")])]
-        print(f"stack / native (per-direction, paired by repeat): {np.median(ratio):.2f}")
         stack = time_stack(robot, states[:max(200, args.cycles // 5)])
         print(f"generic Formulation, same QP (weighted) {stats(stack)}")
 

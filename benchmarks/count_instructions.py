@@ -9,7 +9,8 @@ cycle removes time, and the split shows where the cycle goes.
 
 Parts per case: ``update`` (Robot.update only), ``cycle`` (update + assembly + QP + τ) and, for
 the passive WBC, ``qp`` (the recorded QPs replayed through ``daqp.solve`` with the same warm start)
-and ``native`` (the whole cycle with ``engine="native"``, the compiled cycle).
+and ``native`` (the whole cycle with ``engine="native"``: the QP as a stack of tasks through the
+compiled hierarchy cycle).
 
     python benchmarks/count_instructions.py [--cases passive-trot,table2] [--cycles 100]
 

@@ -25,7 +25,7 @@ def test_crawl_with_a_force_cap(robots):
     capped = run_gait(robot, "passive", "crawl", command, duration=5.0,
                       controller_options={"extra_tasks": {"hard": [ForceCap(cap)]}})
     plain = run_gait(robot, "passive", "crawl", command, duration=5.0)
-    assert capped.controller.engine == "stack"
+    assert capped.controller.engine == "native"
     for run in (capped, plain):
         assert not run.fell and run.failures == 0
     assert abs(capped.distance - plain.distance) < 0.05 * plain.distance

@@ -17,7 +17,7 @@ from wholebody.solvers import SolverSettings
 from conftest import native_cycle_or_skip
 
 native_cycle_or_skip("_hierarchy_cycle")
-native_cycle_or_skip("_passive_cycle")
+native_cycle_or_skip("_passive_references")
 
 PRESETS = preset_names()
 

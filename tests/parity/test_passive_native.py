@@ -1,12 +1,9 @@
-"""PassiveWBC's compiled engines against the Python engine — the hand-assembled QP, their tested
-reference — on closed-loop HyQ trot and crawl states (and an 8-DoF Solo's crawl, whose stance
-rows are dependent): engine="native", the compiled cycle
-(src/wholebody/native/passive_cycle.cpp), also against Robot.update's Pinocchio terms (it
-rebuilds the model from arrays) and in closed loop in the twin; engine="stack", the same QP as a
-stack of library tasks (control/passive_stack.py) through the compiled hierarchy program
-(HierarchyCycle, method "weighted"), its tasks and programs kept across cycles. The compiled QP
-leaves out the swing feet's force variables and the free rows; equal torques also check that
-this changes nothing."""
+"""PassiveWBC's native engine — its QP a stack of library tasks (control/passive_stack.py) solved
+by the compiled hierarchy program (HierarchyCycle, method "weighted"), its tasks and programs kept
+across cycles, its references around the QP compiled (native/passive_references.cpp) — against
+the Python engine, the hand-assembled QP (control/passive_qp.py), on closed-loop HyQ trot and
+crawl states (and an 8-DoF Solo's crawl, whose stance rows are dependent), and in closed loop in
+the twin."""
 
 from dataclasses import replace
 from types import SimpleNamespace
@@ -22,10 +19,8 @@ from wholebody.tasks import JointTrajectoryTask
 
 from conftest import ForceCap, native_cycle_or_skip
 
-native_cycle_or_skip()
+native_cycle_or_skip("_passive_references")
 native_cycle_or_skip("_hierarchy_cycle")
-
-ENGINES = ("native", "stack")
 
 
 def gait_states(robot, gait, duration):
@@ -78,28 +73,6 @@ def assert_same_solution(a, b, where=""):
     assert a.contacts == b.contacts, where
 
 
-def test_terms_match_robot_update(robots, rng):
-    """M, h, CoM and its velocity, centroidal momentum, the contact points' Jacobians, drifts and
-    positions equal Robot.update's (Pinocchio's Python bindings on the URDF model)."""
-    robot = robots["hyq"]
-    wbc = PassiveWBC(robot, planner=planner(robot), engine="native")
-    for _ in range(20):
-        q, v = robot.random_state(rng)
-        robot.update(q, v)
-        wbc._native.update(q, v)
-        terms = wbc._native.terms()
-        np.testing.assert_allclose(terms["M"], robot.M, atol=1e-10)
-        np.testing.assert_allclose(terms["h"], robot.h, atol=1e-9)
-        np.testing.assert_allclose(terms["com"], robot.com, atol=1e-12)
-        np.testing.assert_allclose(terms["vcom"], robot.vcom, atol=1e-12)
-        np.testing.assert_allclose(terms["h_G"], robot.h_G, atol=1e-10)
-        np.testing.assert_allclose(terms["J"], robot.stacked_contact_jacobian(wbc.contacts),
-                                   atol=1e-12)
-        np.testing.assert_allclose(terms["drift"], robot.stacked_contact_drift(wbc.contacts),
-                                   atol=1e-9)
-        np.testing.assert_allclose(terms["points"], robot.contact_points, atol=1e-12)
-
-
 CONFIGS = {
     "default": {},
     "hard swing": {"swing_slack": "none"},
@@ -111,18 +84,17 @@ CONFIGS = {
 }
 
 
-@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("gait", ["trot", "crawl"])
 @pytest.mark.parametrize("name", list(CONFIGS))
 @pytest.mark.parametrize("ramp", [False, True], ids=["flat", "ramp"])
-def test_matches_python_engine(robots, request, gait, name, ramp, engine):
+def test_matches_python_engine(robots, request, gait, name, ramp):
     """Same torques, forces, accelerations and task reports as the Python engine, cycle by cycle
     (the stance anchors of eq. 32 evolve in both)."""
     robot = robots["hyq"]
     states = request.getfixturevalue(f"{gait}_states")
     options = CONFIGS[name]
     python = PassiveWBC(robot, planner=planner(robot), engine="python", **options)
-    native = PassiveWBC(robot, planner=planner(robot), engine=engine, **options)
+    native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
     if name.startswith("no feed-forward"):
         for wbc in (python, native):
             wbc.impedance.feedforward = False
@@ -145,15 +117,15 @@ def test_matches_python_engine(robots, request, gait, name, ramp, engine):
 @pytest.mark.parametrize("ramp", [False, True], ids=["flat", "ramp"])
 def test_single_slack_stack_matches_python_engine(robots, request, gait, slack_weight, ramp):
     """The single swing slack (one ε per swing foot, |J q̈ − b| ≤ ε, cost α ε²: Fahmi et al.
-    2019's ∞-norm) as a stack of tasks with auxiliary variables (engine "stack", what "auto"
-    picks for it) gives the hand-assembled QP's torques, forces, accelerations and swing
+    2019's ∞-norm) as a stack of tasks with auxiliary variables (engine "native", what "auto"
+    picks) gives the hand-assembled QP's torques, forces, accelerations and swing
     residuals cycle by cycle; with a small α the slack binds (the residuals are large)."""
     robot = robots["hyq"]
     states = request.getfixturevalue(f"{gait}_states")
     options = {"swing_slack": "single", "slack_weight": slack_weight}
     python = PassiveWBC(robot, planner=planner(robot), engine="python", **options)
     stack = PassiveWBC(robot, planner=planner(robot), **options)
-    assert stack.engine == "stack"
+    assert stack.engine == "native"
     largest = 0.0
     for k, (q, v, plan) in enumerate(states):
         plan = tilted(plan) if ramp else plan
@@ -164,8 +136,8 @@ def test_single_slack_stack_matches_python_engine(robots, request, gait, slack_w
 
 
 def test_stack_matches_python_engine_on_dependent_stance_rows():
-    """ODRI's 8-DoF Solo (legs of two joints): the stack engine, whose stance task takes an
-    independent set of its rows (what engine "auto" picks for it), gives the Python engine's
+    """ODRI's 8-DoF Solo (legs of two joints): the native engine, whose stance task takes an
+    independent set of its rows, gives the Python engine's
     torques, forces and task reports cycle by cycle on the states of a closed-loop crawl."""
     from conftest import solo8_description
 
@@ -173,8 +145,8 @@ def test_stack_matches_python_engine_on_dependent_stance_rows():
     solo = wb.load_robot(solo8_description())
     states = gait_states(solo, "crawl", 2.0)
     python = PassiveWBC(solo, planner=planner(solo), engine="python")
-    stack = PassiveWBC(solo, planner=planner(solo), engine="stack")
-    assert python.dependent_stance and PassiveWBC(solo, planner=planner(solo)).engine == "stack"
+    stack = PassiveWBC(solo, planner=planner(solo), engine="native")
+    assert python.dependent_stance and PassiveWBC(solo, planner=planner(solo)).engine == "native"
     swinging = 0
     for k, (q, v, plan) in enumerate(states):
         a, b = python.cycle(q, v, plan), stack.cycle(q, v, plan)
@@ -184,14 +156,13 @@ def test_stack_matches_python_engine_on_dependent_stance_rows():
     assert swinging > len(states) // 4
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_heading_weights_match_python_engine(robots, trot_states, engine):
+def test_heading_weights_match_python_engine(robots, trot_states):
     """Trunk weights that differ about x and y act in the heading frame of the trunk reference:
     with the references turned by 0.7 rad about z both engines weigh the wrench error alike."""
     robot = robots["hyq"]
     Q = (1.0, 0.8, 1.0, 1.2, 0.6, 1.0)
     python = PassiveWBC(robot, planner=planner(robot), engine="python", Q=Q)
-    native = PassiveWBC(robot, planner=planner(robot), engine=engine, Q=Q)
+    native = PassiveWBC(robot, planner=planner(robot), engine="native", Q=Q)
     turn = pin.rpy.rpyToMatrix(0.0, 0.0, 0.7)
     for k, (q, v, plan) in enumerate(trot_states[:120]):
         plan = plan.copy()
@@ -199,15 +170,14 @@ def test_heading_weights_match_python_engine(robots, trot_states, engine):
         assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan), f"cycle {k}")
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_observer_matches_python_engine(robots, trot_states, engine):
+def test_observer_matches_python_engine(robots, trot_states):
     """With the W_ext observer (its input is the engine's centroidal momentum and commanded
     wrench) both engines stay equal."""
     robot = robots["hyq"]
     python = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
                          engine="python")
     native = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
-                        engine=engine)
+                        engine="native")
     for q, v, plan in trot_states[:150]:
         assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan))
     np.testing.assert_allclose(native.impedance.external_wrench,
@@ -215,12 +185,11 @@ def test_observer_matches_python_engine(robots, trot_states, engine):
     assert np.abs(python.impedance.external_wrench).max() > 0.1  # the observer did something
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_configure_hands_over_changed_settings(robots, trot_states, engine):
+def test_configure_hands_over_changed_settings(robots, trot_states):
     """Settings are copied when the engine is built: a change is seen only after configure()."""
     robot = robots["hyq"]
     python = PassiveWBC(robot, planner=planner(robot), engine="python")
-    native = PassiveWBC(robot, planner=planner(robot), engine=engine)
+    native = PassiveWBC(robot, planner=planner(robot), engine="native")
     q, v, plan = next(s for s in trot_states if not s[2].contact.all())
     for wbc in (python, native):
         wbc.Q[:] = (1.0, 1.0, 1.0, 10.0, 10.0, 10.0)
@@ -232,15 +201,13 @@ def test_configure_hands_over_changed_settings(robots, trot_states, engine):
     assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan))
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_infeasible_is_a_flagged_value(robots, rng, engine):
+def test_infeasible_is_a_flagged_value(robots, rng):
     """An infeasible QP (normal-force floor above the weight share): ok False, the reason, and the
-    same finite, limited torque as the Python engine (the compiled cycle; the stack of tasks
-    through the hierarchy program)."""
+    same finite, limited torque as the Python engine."""
     robot = robots["hyq"]
     options = {"f_min": 1500.0, "f_max": 2000.0, "torque_limit_override": {"lf_kfe_joint": 1.0}}
     python = PassiveWBC(robot, planner=planner(robot), engine="python", **options)
-    native = PassiveWBC(robot, planner=planner(robot), engine=engine, **options)
+    native = PassiveWBC(robot, planner=planner(robot), engine="native", **options)
     q = robot.q_ref.copy()
     q[7:] += rng.normal(scale=0.02, size=robot.na)
     v = rng.normal(scale=0.05, size=robot.nv)
@@ -262,10 +229,10 @@ def test_infeasible_is_a_flagged_value(robots, rng, engine):
 
 @pytest.mark.parametrize("gait", ["trot", "crawl"])
 def test_stack_tasks_and_programs_kept_across_cycles(robots, request, gait):
-    """engine="stack" builds its tasks once and only changes their references; the compiled
+    """engine="native" builds its tasks once and only changes their references; the compiled
     cycle builds one program per stance set met (with its swing tasks' level), no more."""
     robot = robots["hyq"]
-    wbc = PassiveWBC(robot, planner=planner(robot), engine="stack")
+    wbc = PassiveWBC(robot, planner=planner(robot), engine="native")
     tasks = {id(t) for t in wbc._stack.hard + wbc._stack.objective + wbc._stack.swing}
     stance_sets = set()
     for q, v, plan in request.getfixturevalue(f"{gait}_states"):
@@ -278,18 +245,18 @@ def test_stack_tasks_and_programs_kept_across_cycles(robots, request, gait):
 
 @pytest.mark.parametrize("gait,posture", [("trot", False), ("crawl", False), ("trot", True)])
 def test_stack_references_compiled_equal_python(robots, request, gait, posture, monkeypatch):
-    """The stack engine's per-cycle references computed in compiled code (τ bounds, stance
+    """The native engine's per-cycle references computed in compiled code (τ bounds, stance
     anchors with their slip history, W_d and its errors, the posture target, the commanded
     wrench) equal those computed in Python from the same terms (the engine without
-    ``wholebody._passive_cycle``), cycle after cycle, also after the impedance's gains, the
+    ``wholebody._passive_references``), cycle after cycle, also after the impedance's gains, the
     torque limits' scale and caps, the posture gains and the control period change between
     cycles (read as they are, as the tasks' rows read theirs); so do the torques, on a robot
     whose own torque profile is scaled. ``posture``: the posture regulariser on every joint (on
     HyQ's legs of three joints it acts on none)."""
     robot = robots["hyq"]
     monkeypatch.setattr(robot.torque_limits, "scale", 0.9)  # the robot's own profile scaled
-    compiled = PassiveWBC(robot, planner=planner(robot), engine="stack")
-    python = PassiveWBC(robot, planner=planner(robot), engine="stack")
+    compiled = PassiveWBC(robot, planner=planner(robot), engine="native")
+    python = PassiveWBC(robot, planner=planner(robot), engine="native")
     python._references = None
     assert compiled._references is not None
     if posture:
@@ -339,8 +306,8 @@ def test_bad_state_names_the_field(robots, field, args):
 
 
 @pytest.mark.parametrize("kwargs,match", [
-    ({"engine": "gpu"}, "engine: expected one of .*'stack'"),
-    ({"engine": "native", "swing_slack": "single"}, "engine: 'native' supports swing_slack")])
+    ({"engine": "gpu"}, "engine: expected one of .*'python'"),
+    ({"engine": "stack"}, "engine: expected one of .*'native'")])
 def test_bad_engine_options_name_the_field(robots, kwargs, match):
     with pytest.raises(ValueError, match=match):
         PassiveWBC(robots["hyq"], planner=planner(robots["hyq"]), **kwargs)
@@ -376,7 +343,7 @@ def extra_tasks(robot):
 
 def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
     """Tasks added to the passive controller's QP (a user's Python constraint in the hard
-    level, a library task in the objective) run on the stack engine, the Python one's rows
+    level, a library task in the objective) run on the native engine, the Python one's rows
     written into the compiled program: each cycle's torques equal the Python Formulation's on
     the same stack, the user's cap holds on the solved forces (and binds: the controller
     without it exceeds it), and the hips' task residual is never larger than with the cap alone
@@ -384,10 +351,10 @@ def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
     smaller (the stance feet leave the hips little freedom)."""
     robot = robots["hyq"]
     wbc = PassiveWBC(robot, planner=planner(robot), extra_tasks=extra_tasks(robot))
-    plain = PassiveWBC(robot, planner=planner(robot), engine="stack")
+    plain = PassiveWBC(robot, planner=planner(robot), engine="native")
     cap_only = PassiveWBC(robot, planner=planner(robot),
                           extra_tasks={"hard": extra_tasks(robot)["hard"]})
-    assert wbc.engine == "stack" and wbc._stack_cycle.native
+    assert wbc.engine == "native" and wbc._stack_cycle.native
     cap = 0.3 * robot.mass * 9.81
     hips = [6 + robot.joint_names.index(j) for j in wbc.extra_tasks["objective"][0].joints]
     capped = closer = 0
@@ -411,7 +378,6 @@ def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
 
 
 @pytest.mark.parametrize("kwargs,match", [
-    ({"engine": "native"}, "extra_tasks: engine 'native' .* cannot take tasks"),
     ({"engine": "python"}, "extra_tasks: engine 'python' .* cannot take tasks"),
     ({"extra_tasks": {"soft": []}}, "extra_tasks: level 'soft' is not one of"),
     ({"extra_tasks": {"hard": [1.0]}}, r"extra_tasks\['hard'\]: expected tasks"),

@@ -19,7 +19,7 @@ from wholebody.control.balance import MomentumBalance
 from wholebody.control.passive import PLAN_ARRAYS, PassiveWBC
 from wholebody.guard import Outcome
 
-native_cycle_or_skip("_passive_cycle")
+native_cycle_or_skip("_passive_references")
 native_cycle_or_skip("_hierarchy_cycle")
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
@@ -87,7 +87,7 @@ def test_engines_agree_beyond_the_joint_limits(robots, robot_name, controller):
 
 
 # ------------------------------------------------------------------ PassiveWBC at t = 1e300
-@pytest.mark.parametrize("engine", ["python", "native", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_passive_plan_at_an_absurd_time_is_held(robots, engine):
     """t = 1e300 makes the planner's trunk reference NaN: both engines return the previous
     torque, HELD, naming the plan's field; the next cycle with a sane plan is solved (checked
@@ -114,7 +114,7 @@ def test_passive_engines_agree_at_an_absurd_time(robots):
     robot = robots["hyq"]
     q, v = robot.q_ref, np.zeros(robot.nv)
     out = []
-    for engine in ("python", "native", "stack"):
+    for engine in ("python", "native"):
         ctrl = PassiveWBC(robot, engine=engine)
         ctrl.compute(q, v, 0.0)
         out.append(ctrl.compute(q, v, 1e300))
@@ -145,7 +145,7 @@ def test_overflowing_velocity_is_a_flagged_value_naming_v(robots, engine, gains,
     assert max(dyn.residuals(q, v, again)) < 1e-6 * dyn.weight
 
 
-@pytest.mark.parametrize("engine", ["python", "native", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_passive_overflowing_velocity_names_v(robots, engine):
     robot = robots["hyq"]
     ctrl = PassiveWBC(robot, engine=engine)
@@ -261,11 +261,11 @@ def test_other_hierarchy_controllers_count_failed_cycles(robots, kind):
 @pytest.mark.parametrize("field", PLAN_ARRAYS)
 def test_passive_nonfinite_plan_field_is_named_alike_by_every_engine(robots, field):
     """One NaN in one plan array: every engine holds the previous torque and names that field
-    (the stack engine's compiled references check the arrays themselves)."""
+    (the native engine's compiled references check the arrays themselves)."""
     robot = robots["hyq"]
     q, v = robot.q_ref, np.zeros(robot.nv)
     statuses = set()
-    for engine in ("python", "native", "stack"):
+    for engine in ("python", "native"):
         ctrl = PassiveWBC(robot, engine=engine)
         assert ctrl.compute(q, v, 0.0).ok
         plan = copy.deepcopy(ctrl.last_plan)

@@ -24,11 +24,13 @@ def planner(robot):
 
 
 def test_passive_wbc_defaults_to_the_compiled_cycle(robots, rng, plan_for):
-    module = native_cycle_or_skip("_passive_cycle")
+    native_cycle_or_skip("_hierarchy_cycle")
+    module = native_cycle_or_skip("_passive_references")
     robot = robots["hyq"]
     auto = PassiveWBC(robot, planner=planner(robot))
     python = PassiveWBC(robot, planner=planner(robot), engine="python")
-    assert auto.engine == "native" and isinstance(auto._native, module.PassiveCycle)
+    assert auto.engine == "native" and auto._stack_cycle.native
+    assert isinstance(auto._references, module.PassiveReferences)
     q = robot.q_ref.copy()
     q[7:] += rng.normal(scale=0.02, size=robot.na)
     v = rng.normal(scale=0.05, size=robot.nv)
@@ -39,22 +41,16 @@ def test_passive_wbc_defaults_to_the_compiled_cycle(robots, rng, plan_for):
     np.testing.assert_allclose(a.tau, b.tau, atol=1e-6)
 
 
-def test_single_slack_runs_on_the_stack_engine(robots, caplog):
-    """The single swing slack (an auxiliary variable per swing foot) has no hand-written compiled
-    form: engine "auto" runs the stack of tasks on the compiled hierarchy cycle, no warning."""
+def test_single_slack_runs_on_the_native_engine(robots, caplog):
+    """The single swing slack (an auxiliary variable per swing foot): engine "auto" runs the
+    stack of tasks on the compiled hierarchy cycle, no warning."""
     native_cycle_or_skip("_hierarchy_cycle")
     robot = robots["hyq"]
     warn_python_fallback.cache_clear()
     with caplog.at_level(logging.WARNING, logger="wholebody.cycle"):
         wbc = PassiveWBC(robot, planner=planner(robot), swing_slack="single")
-    assert wbc.engine == "stack" and wbc._native is None and wbc._stack_cycle.native
+    assert wbc.engine == "native" and wbc._stack_cycle.native
     assert not [r for r in caplog.records if "runs the Python engine" in r.message]
-
-
-def test_explicit_native_refuses_what_it_cannot_run(robots):
-    robot = robots["hyq"]
-    with pytest.raises(ValueError, match="'native' supports swing_slack"):
-        PassiveWBC(robot, planner=planner(robot), swing_slack="single", engine="native")
 
 
 def test_momentum_balance_defaults_to_the_compiled_cycle(robots):

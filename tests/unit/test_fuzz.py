@@ -22,7 +22,7 @@ import pytest
 
 from conftest import native_cycle_or_skip
 
-native_cycle_or_skip("_passive_cycle")
+native_cycle_or_skip("_passive_references")
 native_cycle_or_skip("_hierarchy_cycle")
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))

@@ -114,12 +114,12 @@ def test_slack_per_direction_is_weighted_least_squares(rng):
         np.testing.assert_allclose(z[n:], np.abs(A @ x_ls - b), atol=1e-6)
 
 
-@pytest.mark.parametrize("engine", ["python", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_single_slack_couples_directions(robots, rng, plan_for, engine):
     """With one slack per swing foot the violation is bounded in the ∞-norm: the largest residual
     direction sets ε and every direction's residual is within it. The residual of eq. 12
     (J q̈ + J̇ v − v̇_d, eq. 6's v̇_d) from the robot's frame terms, not the controller's rows."""
-    if engine == "stack":
+    if engine == "native":
         native_cycle_or_skip("_hierarchy_cycle")
     robot = robots["hyq"]
     state = standing_state(robot, rng)
@@ -197,7 +197,7 @@ def test_swing_gains_checked():
         SwingGains(D=-1.0)
 
 
-@pytest.mark.parametrize("engine", ["python", "native", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_one_absurd_velocity_sample_does_not_wind_up_the_stance_anchors(robots, engine):
     """Standing still, one state sample with every velocity at 300 (a sensor glitch) moves the
     stance anchors by at most the feet's radius, so the cycles after it solve again without
@@ -212,7 +212,7 @@ def test_one_absurd_velocity_sample_does_not_wind_up_the_stance_anchors(robots, 
     assert all(after[5:]), after
 
 
-@pytest.mark.parametrize("engine", ["python", "native", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_torques_within_limits_under_an_impossible_wrench(robots, rng, plan_for, engine):
     """A 3000 N downward external wrench estimate on a weak knee: whatever the QP does, the torque
     that leaves the controller is finite and within the limits it enforces (the robot's, lowered on
@@ -249,7 +249,7 @@ def _stance_motion(robot, q, base_velocity, slip=None):
     return np.concatenate([base_velocity, joints])
 
 
-@pytest.mark.parametrize("engine", ["python", "native", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_stance_task_ignores_rolling_and_opposes_slip(robots, rng, plan_for, engine):
     """Eq. 32 is active only when a foot slips (Fahmi et al. 2019, Sect. IV): the trunk moves over
     four feet that roll without slipping, so the bottoms of the foot spheres travel (checked), and
@@ -338,26 +338,22 @@ def test_force_parallel_regularization_spreads_friction_evenly(robots, plan_for)
     assert ratios["force-parallel"].max() < ratios["force-normal"].max() - 0.02
 
 
-@pytest.mark.parametrize("engine", ["python", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_dependent_stance_rows_are_met_in_the_least_squares_sense(rng, plan_for, engine):
     """ODRI's 8-DoF Solo (two joints per leg): its stance rows are linearly dependent, so the
     stance task's targets are generally inconsistent. The controller still solves: the dynamics
     hold (RNEA), and the stance feet's accelerations are the least-squares part of the target
     (J_s J_s⁺ b_s, by numpy's lstsq on the rows the test builds), with the hand-assembled QP
     (engine "python") and with the stack of tasks, whose stance task takes an independent set of
-    its rows (engine "stack", what "auto" picks); the native engine refuses it."""
+    its rows (engine "native")."""
     from conftest import solo8_description
 
     import wholebody as wb
     from wholebody.cycle import native_available
     solo = wb.load_robot(solo8_description())
     planner = SimpleNamespace(legs=solo.contact_names)
-    with pytest.raises(ValueError, match="engine: 'native' needs linearly independent"):
-        PassiveWBC(solo, planner=planner, engine="native")
-    if engine == "stack" and not native_available():
-        pytest.skip("the stack engine needs the compiled wholebody._hierarchy_cycle")
-    if native_available():
-        assert PassiveWBC(solo, planner=planner).engine == "stack"
+    if engine == "native" and not native_available():
+        pytest.skip("the native engine needs the compiled wholebody._hierarchy_cycle")
     wbc = PassiveWBC(solo, planner=planner, engine=engine)
     assert wbc.dependent_stance
     solved = 0
@@ -505,7 +501,7 @@ def test_quasi_static_baseline_redistributes_forces_within_torque_limits(robots,
     assert np.all(np.abs(sol.tau) <= 0.1)
 
 
-@pytest.mark.parametrize("engine", ["python", "native", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 @pytest.mark.parametrize("gain", [0.0, 0.3])
 def test_footholds_get_the_measured_com_velocity(robots, engine, gain):
     """The Raibert feedback of the footholds (``feedback_gain`` k) is fed the CoM velocity of the
@@ -537,7 +533,7 @@ def test_footholds_get_the_measured_com_velocity(robots, engine, gain):
         np.testing.assert_allclose(plan.touchdown_position[i][:2], expected, atol=1e-9)
 
 
-@pytest.mark.parametrize("engine", ["python", "stack"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_nonfinite_external_wrench_is_a_held_cycle(robots, engine):
     """An external-wrench estimate with a NaN makes W_d of eq. 4 NaN: the cycle is a held value
     (the previous torque, finite), not an exception, and the next cycle with a finite estimate

@@ -1,9 +1,11 @@
 """Passive whole-body control for quadrupeds (Fahmi et al. 2019, Sect. II and IV).
 
-One QP per control cycle over u = [q̈, F_grf] (eq. 7), written into the preallocated arrays of
-:class:`~wholebody.control.passive_qp.PassiveQP` (the generic
-:class:`~wholebody.formulation.Formulation` builds the same problem as a two-level stack, see
-:meth:`PassiveWBC.as_stack`, but costs much more per cycle):
+One QP per control cycle over u = [q̈, F_grf] (eq. 7), posed as a two-level stack of library
+tasks (:class:`~wholebody.control.passive_stack.PassiveStack`: the hard constraints, then the
+weighted objective) and solved by the compiled :class:`~wholebody.cycle.HierarchyCycle` with
+method "weighted" (engine "native", what "auto" runs where it is built); engine "python"
+assembles the same QP by hand into the preallocated arrays of
+:class:`~wholebody.control.passive_qp.PassiveQP`, the reference the tests hold the stack to:
 
 * cost ‖W_com − W_com,d‖²_Q + ‖u‖²_R (eqs. 7a, 8): the trunk wrench task of eq. 4
   (:class:`~wholebody.tasks.wrench.TrunkImpedance`) plus a regulariser — forces near the cone
@@ -25,17 +27,12 @@ One QP per control cycle over u = [q̈, F_grf] (eq. 7), written into the preallo
   bounds with Δt = 10 dt (eqs. 16-18);
 * torques by eq. 19.
 
-The QP is solved by DAQP through :func:`~wholebody.solvers.backends.solve_daqp_qp`, warm-started
-from the previous cycle's multipliers (the layout never changes size).
-
-``engine="native"`` runs the same cycle — rigid-body terms, assembly, eq. 19 — in the compiled
-``wholebody._passive_cycle`` (src/wholebody/native/passive_cycle.cpp, Pinocchio's C++ templates),
-writing into the very arrays DAQP is called with; this Python assembly is its tested reference.
-``engine="stack"`` solves the same QP as a stack of library tasks
-(:class:`~wholebody.control.passive_stack.PassiveStack`) through the compiled
-:class:`~wholebody.cycle.HierarchyCycle` (method "weighted"); it is what ``engine="auto"`` runs
-for the single slack (an auxiliary variable per swing foot), for dependent stance rows and for
-``extra_tasks``.
+Both solve it by DAQP (the hand-assembled QP warm-started from the previous cycle's
+multipliers, its layout never changing size). The native engine computes the controller's
+per-cycle references around the QP (τ bounds, stance anchors, W_d, the posture target, the
+commanded wrench) in the compiled ``wholebody._passive_references`` from the hierarchy cycle's
+rigid-body terms (:meth:`HierarchyCycle.terms_view <wholebody.cycle.HierarchyCycle.terms_view>`),
+and takes the user's ``extra_tasks``.
 """
 
 from __future__ import annotations
@@ -57,7 +54,7 @@ from ..robot import Robot
 from ..robots.reference import froude_ratio
 from ..robots.roles import leg_joints
 from ..solvers import SolverSettings
-from ..solvers.backends import DaqpResult, solve_daqp_qp
+from ..solvers.backends import DaqpResult
 from ..tasks.base import Task
 from ..tasks.contact import independent_rows
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
@@ -135,9 +132,9 @@ def independent_rank(J: np.ndarray | None = None, singular: np.ndarray | None = 
 
 
 SLACKS = ("per-direction", "single", "none")
-ENGINES = ("auto", "native", "python", "stack")
+ENGINES = ("auto", "native", "python")
 
-#: how engine "stack" solves its two levels: one weighted QP by DAQP (eq. 7), ε negligible next
+#: how engine "native" solves its two levels: one weighted QP by DAQP (eq. 7), ε negligible next
 #: to the R terms, no cascade fallback (a failed QP holds the previous torque, as the other engines)
 STACK_SETTINGS = SolverSettings(method="weighted", backend="daqp", regularization=1e-12,
                                 fallback_backend=None)
@@ -196,11 +193,10 @@ class PassiveConfig:
     instead of 0, which holds them near the standing posture;
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
-    ``ENGINES`` ("auto": native when it is built, "stack" where the stance rows are dependent
-    (legs of two joints) or the swing slack is "single", Python with one logged warning where
-    the compiled extensions are not built;
-    "stack": the same QP as a two-level stack of library tasks solved by the compiled
-    :class:`~wholebody.cycle.HierarchyCycle`, :class:`PassiveStack`).
+    ``ENGINES`` ("native": the QP as a two-level stack of library tasks, :class:`PassiveStack`,
+    solved by the compiled :class:`~wholebody.cycle.HierarchyCycle`; "python": the same QP
+    assembled by hand and solved from Python, the reference; "auto": native when it is built,
+    else Python with one logged warning).
     """
 
     mu: float | None = None
@@ -231,9 +227,6 @@ class PassiveConfig:
                              f"got '{self.regularization}'")
         if self.engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, got '{self.engine}'")
-        if self.engine == "native" and self.swing_slack == "single":
-            raise ValueError("engine: 'native' supports swing_slack 'per-direction' and 'none', "
-                             "not 'single' (engine 'stack' and 'auto' do)")
         if self.mu is not None:
             number(self.mu, "mu", low=0.0, low_open=True)
         number(self.f_min, "f_min", low=0.0)
@@ -319,19 +312,18 @@ class PassiveWBC(PlannedController):
     limit tasks), which the Python engine reads every cycle; ``config`` keeps what it was built
     with.
 
-    ``engine="native"`` computes each cycle in compiled code (faster: docs/results.md,
-    benchmarks/bench_passive.py) with the same results; it supports the "per-direction" and "none"
-    swing slacks. It keeps its own rigid-body terms: ``compute``/``cycle`` do not refresh
-    ``robot``'s Python cache (``robot.M``, ``robot.com``... stay those of the last
-    ``robot.update``). Its weights, gains and limits are copied when it is built: after changing
-    any of them call :meth:`configure`.
+    ``engine="native"`` (what "auto" runs where the compiled extensions are built) solves the QP
+    as a stack of library tasks in compiled code (faster: docs/results.md,
+    benchmarks/bench_passive.py) with the Python engine's results. It keeps its own rigid-body
+    terms: ``compute``/``cycle`` do not refresh ``robot``'s Python cache (``robot.M``,
+    ``robot.com``... stay those of the last ``robot.update``). Its tasks' weights and gains are
+    copied when it is built: after changing any of them call :meth:`configure`.
 
     ``extra_tasks`` adds library or user tasks to the QP (``{"hard": [...], "objective":
     [...]}``: constraints beside the dynamics, contacts, friction and limits, or weighted terms
     beside the trunk wrench — a task's ``weight`` scales its rows, so a row costs weight² times
-    its squared residual, as the trunk wrench's √Q). The hand-assembled engines have no place for
-    them: the QP is then solved as a stack (engine "stack", which "auto" picks; "native" and
-    "python" refuse them); the tasks are live objects, read every cycle.
+    its squared residual, as the trunk wrench's √Q), on the native engine (the hand-assembled
+    Python engine has no place for them); the tasks are live objects, read every cycle.
     """
 
     def __init__(self, robot: Robot, planner=None, config: PassiveConfig | None = None, *,
@@ -406,16 +398,13 @@ class PassiveWBC(PlannedController):
         #: the stance feet's rows are linearly dependent in the standing posture (legs of fewer
         #: than three joints): each cycle they are replaced by an independent set
         self.dependent_stance = stance_rank(robot, self.contacts) < 3 * c
-        #: the stance task's rank tolerance on engine "stack" (0: its rows as they are)
+        #: the stance task's rank tolerance on engine "native" (0: its rows as they are)
         self.stance_rank_tolerance = STANCE_RANK_TOLERANCE if self.dependent_stance else 0.0
         #: the user's tasks of each level ("hard", "objective"), see the class docstring
         self.extra_tasks = extra_task_levels(extra_tasks)
-        self.engine = self._resolve_engine(config, self.dependent_stance,
-                                           any(self.extra_tasks.values()))
-        self._native = self._stack = None
+        self.engine = self._resolve_engine(config, any(self.extra_tasks.values()))
+        self._stack = None
         if self.engine == "native":
-            self._native = self._build_native()
-        elif self.engine == "stack":
             self._build_stack()
 
     # the QP's arrays (those of the last cycle)
@@ -430,9 +419,6 @@ class PassiveWBC(PlannedController):
     # ------------------------------------------------------------------ per cycle
     def solve(self, plan) -> Solution:
         """One QP (eq. 7) at the robot's cached state for ``plan`` (a PlanState-like object)."""
-        if self._native is not None:
-            self._native.update(self.robot.q, self.robot.v)
-            return self._solve_native(plan, self.robot.q)
         if self._stack is not None:
             self._stack_cycle.update(self.robot.q, self.robot.v)
             return self._solve_stack(plan)
@@ -521,7 +507,7 @@ class PassiveWBC(PlannedController):
     def _independent_stance_rows(self, J, target, pat: StancePattern) -> None:
         """Stance rows J_s q̈ = b_s that are linearly dependent (legs of fewer than three joints:
         a foot cannot move sideways without the body) replaced by an independent set
-        (:func:`~wholebody.tasks.contact.independent_rows`, as the stance task of engine "stack"
+        (:func:`~wholebody.tasks.contact.independent_rows`, as the stance task of engine "native"
         with ``rank_tolerance``); the other rows are freed. The least-squares part of b_s is
         kept; what no q̈ can meet is dropped instead of making the equalities inconsistent."""
         qp = self.qp
@@ -609,7 +595,7 @@ class PassiveWBC(PlannedController):
             qdd, F, tau, status = self._failed(result.status, robot.h[6:])
         timings["iterations"] = result.iterations
         slacks = None
-        if ok and self.swing_slack == "single":  # the swing feet's, as the stack engine names them
+        if ok and self.swing_slack == "single":  # the swing feet's, as the native engine names them
             eps = x[nv + nf:]
             slacks = {f"slack {self.contacts[i]}": eps[i:i + 1].copy() for i in pat.swing}
         return self._report(ok, qdd, F, tau, status, G @ F, W_d, pat.s3[::3], swing_errors,
@@ -670,116 +656,43 @@ class PassiveWBC(PlannedController):
                         tasks=reports, timings=timings, contacts=tuple(forces),
                         auxiliary=auxiliary or {})
 
-    # ------------------------------------------------------------------ native engine
+    # ------------------------------------------------------------------ the native engine
     @staticmethod
-    def _resolve_engine(config: PassiveConfig, dependent_stance: bool = False,
-                        extra_tasks: bool = False) -> str:
-        """``config.engine``, with "auto" resolved: native when built and the slack and the
-        stance rows supported; dependent stance rows (legs of two joints), the single slack and
-        extra tasks on the stack engine."""
-        if extra_tasks and config.engine in ("native", "python"):
-            raise ValueError(f"extra_tasks: engine '{config.engine}' (a hand-assembled QP) "
-                             "cannot take tasks; use engine='stack' or 'auto'")
-        if extra_tasks and not native_available():
-            raise ValueError("extra_tasks: they are solved by the stack engine, which needs the "
-                             "compiled extension wholebody._hierarchy_cycle (install with a C++ "
-                             "compiler)")
-        if dependent_stance and config.engine == "native":
-            raise ValueError("engine: 'native' needs linearly independent stance rows (legs of "
-                             "three joints or more); this robot's are dependent, use "
-                             "engine='stack', 'python' or 'auto'")
-        if config.engine == "stack" and not native_available():
-            raise ValueError("engine: 'stack' needs the compiled extension "
-                             "wholebody._hierarchy_cycle (install with a C++ compiler)")
-        if config.engine != "auto":
-            return config.engine
-        # the stack's stance task takes an independent set of dependent rows; its swing tasks
-        # have the single slack as an auxiliary variable
-        if dependent_stance or config.swing_slack == "single" or extra_tasks:
-            if native_available():
-                return "stack"
-            warn_python_fallback("PassiveWBC", "the compiled wholebody._hierarchy_cycle is not "
-                                               "built")
+    def _resolve_engine(config: PassiveConfig, extra_tasks: bool = False) -> str:
+        """``config.engine``, with "auto" resolved: native where the compiled hierarchy cycle is
+        built, else Python (one logged warning)."""
+        if extra_tasks and config.engine == "python":
+            raise ValueError("extra_tasks: engine 'python' (the hand-assembled QP) cannot take "
+                             "tasks; use engine='native' or 'auto'")
+        if config.engine == "native" or extra_tasks:
+            if not native_available():
+                what = "extra_tasks" if extra_tasks else "engine"
+                raise ValueError(f"{what}: engine 'native' needs the compiled extension "
+                                 "wholebody._hierarchy_cycle (install with a C++ compiler)")
+            return "native"
+        if config.engine == "python":
             return "python"
-        try:
-            from .. import _passive_cycle  # noqa: F401
-        except ImportError:
-            warn_python_fallback("PassiveWBC", "the compiled cycle wholebody._passive_cycle is "
-                                               "not built")
-            return "python"
-        return "native"
+        if native_available():
+            return "native"
+        warn_python_fallback("PassiveWBC", "the compiled wholebody._hierarchy_cycle is not built")
+        return "python"
 
-    def _build_native(self):
-        try:
-            from .. import _passive_cycle
-        except ImportError as exc:
-            raise RuntimeError(
-                "engine: 'native' needs the compiled cycle wholebody._passive_cycle, which was not "
-                "built with this install (it needs a C++17 compiler at 'pip install' time; "
-                "WHOLEBODY_NO_NATIVE=1 skips it); use engine='python'") from exc
-        cycle = _passive_cycle.PassiveCycle(self._native_spec())
-        robot, c, qp = self.robot, len(self.contacts), self.qp
-        self._nb = {  # the arrays the compiled cycle writes (the QP's are self.qp's)
-            "H": qp.H, "g": qp.g, "A": qp.A, "upper": qp.upper, "lower": qp.lower,
-            "sense": qp.sense, "feet": np.zeros((len(self.planner.legs), 3)),
-            "tau": np.zeros(robot.na), "tau_lo": np.zeros(robot.na), "tau_hi": np.zeros(robot.na),
-            "h": np.zeros(robot.nv), "h_G": np.zeros(6), "wrench_d": np.zeros(6),
-            "commanded": np.zeros(6), "errors": self.impedance.last_errors,
-            "swing_residual": np.zeros(c), "qdd": np.zeros(robot.nv), "forces": np.zeros(self.nf)}
-        cycle.bind(self._nb)
-        self._compact_views: dict[tuple[int, int], tuple] = {}
-        return cycle
-
-    def _native_spec(self) -> dict:
-        """Model, contacts, weights, gains and limits for the compiled cycle (copied)."""
-        robot, model = self.robot, self.robot.model
-        frames = [model.frames[robot.contact(n).frame_id] for n in self.contacts]
-        limits = robot.torque_limits
-        linkage_rows, linkage_params = limits.linkage
-        cap = np.full(robot.na, np.inf)
-        for joint, value in self.torque_limits.upper_override.items():
-            if joint not in robot.joint_names:
-                raise ValueError(f"upper_override: unknown joint '{joint}'")
-            i = robot.joint_names.index(joint)
-            cap[i] = min(cap[i], float(value))
-        imp, lim = self.impedance, self.joint_limits
+    def _references_spec(self) -> dict:
+        """What the compiled references are built with: the model (the posture's Lie
+        difference), the contacts' radii and legs, the mass, the reference posture."""
+        robot = self.robot
         return robot.native_model_spec() | {
-            "contact_joints": [int(f.parentJoint) for f in frames],
-            "contact_placements": np.array([f.placement.homogeneous for f in frames]),
             "radii": self._radii, "leg": [int(i) for i in self._leg],
-            "n_legs": len(self.planner.legs), "q_min": robot.q_min, "q_max": robot.q_max,
-            "torque_constant": limits.constant, "linkage_rows": [int(i) for i in linkage_rows],
-            "linkage_params": linkage_params.ravel(),
-            "torque_scale": limits.scale * self.torque_limits.scale, "torque_cap": cap,
-            "swing_slack": self.swing_slack, "slack_weight": self.slack_weight,
-            "K_st": float(self.K_st), "D_st": float(self.D_st),
-            "control_period": float(self.control_period), "Q": self.Q,
-            "R_qdd": float(self.R_qdd), "R_force": float(self.R_force),
-            "posture": robot.q_ref, "posture_K": float(self.posture_K),
-            "posture_D": float(self.posture_D), "posture_mask": self.posture_mask,
-            "regularization": self.regularization,
-            "tangential_weight": float(self.tangential_weight),
-            "torque_weights": self.torque_weights, "mu": self.mu, "f_min": float(self.f_min),
-            "f_max": float(self.f_max), "swing_K": float(self.swing.K),
-            "swing_D": float(self.swing.D), "swing_feedforward": bool(self.swing.feedforward),
-            "K_x": imp.K_x, "D_x": imp.D_x, "K_theta": imp.K_theta, "D_theta": imp.D_theta,
-            "trunk_feedforward": bool(imp.feedforward), "mass": robot.mass,
-            "limits_mode": lim.mode, "horizon": float(lim.horizon), "a_max": float(lim.a_max),
-            "steepness": float(lim.steepness)}
+            "n_legs": len(self.planner.legs), "mass": robot.mass, "posture": robot.q_ref}
 
     def configure(self) -> None:
-        """Hand changed weights, gains or limits to the native engine (the stack engine's tasks
-        built anew; no-op for "python")."""
+        """Hand changed weights, gains or limits to the native engine (its tasks built anew,
+        the stance history kept; no-op for "python")."""
         if self._stack is not None:
             self._build_stack()
-        if self._native is not None:
-            self._native.configure(self._native_spec())
-            if self._nb["errors"] is not self.impedance.last_errors:  # a new impedance object
-                self._nb["errors"] = self.impedance.last_errors
-                self._native.bind(self._nb)
 
     def _build_stack(self) -> None:
-        """The stack engine's tasks, its compiled cycle and the terms it reads every cycle."""
+        """The native engine's tasks, its compiled cycle and the terms it reads every cycle."""
         self._stack = PassiveStack(self)
         self._stack_cycle = HierarchyCycle(self.robot, self._stack.stack, engine="native",
                                            settings=STACK_SETTINGS)
@@ -789,26 +702,24 @@ class PassiveWBC(PlannedController):
         self._references = self._compiled_references()
 
     def _compiled_references(self):
-        """The stack engine's state-dependent references (τ bounds, stance anchors, W_d, the
-        posture target) computed by the compiled ``PassiveCycle.stack_references`` from the
+        """The native engine's state-dependent references (τ bounds, stance anchors, W_d, the
+        posture target) computed by the compiled ``PassiveReferences.update`` from the
         hierarchy cycle's terms, written into the stack's task parameters (made once; on
-        :meth:`configure` given the new settings and arrays, its stance history kept); None
-        where ``wholebody._passive_cycle`` is not built (they are then computed in Python)."""
+        :meth:`configure` bound to the new arrays, its stance history kept); None where
+        ``wholebody._passive_references`` is not built (they are then computed in Python)."""
         try:
-            from .. import _passive_cycle
+            from .. import _passive_references
         except ImportError:
             return None
-        robot, terms, spec = self.robot, self._terms, self._native_spec()
+        robot, terms = self.robot, self._terms
         references = getattr(self, "_references", None)
         if references is None:
-            references = _passive_cycle.PassiveCycle(spec)
-        else:  # configure(): the settings anew, the stance history (slip) kept
-            references.configure(spec)
+            references = _passive_references.PassiveReferences(self._references_spec())
         self._W_d = np.zeros(6)
         self._lean = self._W_d[:3]  # (one view: the tangential task keeps it, see PassiveStack)
         self._commanded = np.zeros(6)
         self._tau_lo, self._tau_hi = np.zeros(robot.na), np.zeros(robot.na)
-        references.bind_stack({
+        references.bind({
             "q": terms.q, "v": terms.v, "points": terms.points,
             "point_velocities": terms.point_velocities, "com": terms.com, "vcom": terms.vcom,
             "rotation": terms.rotation, "Ig": terms.Ig, "tau_max": terms.tau_max,
@@ -820,72 +731,22 @@ class PassiveWBC(PlannedController):
 
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) at time ``t`` (see PlannedController.compute)."""
-        if self._stack is not None:  # the compiled cycle's terms, as the native engine's
-            self._stack_cycle.update(q, v)
-            terms = self._terms
-            plan = self.planner.update(t, feet=terms.frame_positions[self._leg_contact],
-                                       com_velocity=terms.vcom.copy())
-            return self._solve_stack(plan)
-        if self._native is None:
+        if self._stack is None:
             return super().compute(q, v, t)
-        self._native.update(q, v)
-        nb = self._nb  # the compiled update wrote the feet and h_G (its linear part m v_com)
-        plan = self.planner.update(t, feet=nb["feet"].copy(),
-                                   com_velocity=nb["h_G"][:3] / self.robot.mass)
-        return self._solve_native(plan, q)
+        self._stack_cycle.update(q, v)  # the compiled cycle's terms
+        terms = self._terms
+        plan = self.planner.update(t, feet=terms.frame_positions[self._leg_contact],
+                                   com_velocity=terms.vcom.copy())
+        return self._solve_stack(plan)
 
     def cycle(self, q, v, plan) -> Solution:
         """One cycle at the state (q, v) for a given ``plan``: update + QP + torques."""
-        if self._stack is not None:
-            self._stack_cycle.update(q, v)
-            return self._solve_stack(plan)
-        if self._native is None:
+        if self._stack is None:
             self.robot.update(q, v)
             return self.solve(plan)
-        self._native.update(q, v)
-        return self._solve_native(plan, q)
+        self._stack_cycle.update(q, v)
+        return self._solve_stack(plan)
 
-    def _solve_native(self, plan, q) -> Solution:
-        """:meth:`solve` in the compiled cycle, updated to the state (``q``, v) already."""
-        t0 = time.perf_counter()
-        self.last_plan = plan
-        nb, trunk = self._nb, plan.trunk
-        bad = nonfinite_plan_field(plan)
-        if bad is not None:
-            return self._bad_plan(plan, bad, np.asarray(q, dtype=float), nb["h"][6:], t0)
-        if self.observer is not None and self._commanded_wrench is not None:
-            self.impedance.external_wrench = self.observer.update(
-                nb["h_G"], self._commanded_wrench, self.robot.mass, self.control_period)
-        shape = self._native.assemble(plan.contact, plan.touchdown_normal, plan.foot_position,
-                                      plan.foot_velocity, plan.foot_acceleration, trunk.position,
-                                      trunk.velocity, trunk.acceleration, trunk.rotation,
-                                      trunk.angular_velocity, trunk.angular_acceleration,
-                                      self.impedance.external_wrench)
-        t1 = time.perf_counter()
-        qp = self._compact_views.get(shape)
-        if qp is None:
-            qp = self._compact_views[shape] = self.qp.compact(*shape)
-        result = solve_daqp_qp(*qp)  # the compact layout changes with the split: no warm start
-        self.last_x = result.x
-        t2 = time.perf_counter()
-        self._tau_bounds = nb["tau_lo"], nb["tau_hi"]
-        excess = self._native.finish(result.x) if result.ok else math.nan
-        ok = excess == excess  # NaN: failed
-        if ok:
-            qdd, F, tau = nb["qdd"].copy(), nb["forces"].copy(), nb["tau"].copy()
-            status = "solved"
-            commanded = nb["commanded"].copy()
-        else:
-            reason = result.status if not result.ok else "daqp: non-finite solution"
-            qdd, F, tau, status = self._failed(reason, nb["h"][6:])
-            commanded = np.zeros(6)
-        stance = plan.contact[self._leg]
-        swing_errors = nb["swing_residual"] if ok else None
-        return self._report(ok, qdd, F, tau, status, commanded, nb["wrench_d"].copy(), stance,
-                            swing_errors, {"assemble": t1 - t0, "solve": t2 - t1,
-                                           "iterations": result.iterations})
-
-    # ------------------------------------------------------------------ the stack engine
     def _solve_stack(self, plan) -> Solution:
         """:meth:`solve` through the compiled hierarchy program, updated to the state already:
         the controller's state-dependent references (stance anchors, observer, W_d) from the
@@ -940,7 +801,7 @@ class PassiveWBC(PlannedController):
         parts = sol.timings
         rows = parts.get("rows", 0.0)
         if references is not None:
-            references.stack_commanded(F)
+            references.commanded(F)
             commanded = self._commanded.copy()
         else:
             commanded = contact_wrench_map(terms, self.contacts, self._G,
@@ -953,10 +814,10 @@ class PassiveWBC(PlannedController):
                             sol.auxiliary if sol.ok else None)
 
     def _state_references(self, plan, stance) -> tuple[str | None, np.ndarray, np.ndarray, bool]:
-        """The stack engine's references of the cycle from the hierarchy cycle's terms: τ
+        """The native engine's references of the cycle from the hierarchy cycle's terms: τ
         bounds, stance anchors, W_d (and, compiled, the posture target, written into its task);
         (the plan's first non-finite field or None, W_d, the lean force, whether W_d is
-        finite). Compiled (``PassiveCycle.stack_references``, the plan checked first) where
+        finite). Compiled (``PassiveReferences.update``, the plan checked first) where
         built, else in Python."""
         terms, references = self._terms, self._references
         if references is None:
@@ -969,10 +830,10 @@ class PassiveWBC(PlannedController):
                                            terms.mass, terms.Ig, plan.trunk)
             return None, W_d, W_d[:3], math.isfinite(W_d.sum())
         self._overrides()  # the settings as they are now, as the tasks read theirs
-        references.stack_settings(self.torque_limits.scale, self._override_cap, self.posture_K,
+        references.settings(self.torque_limits.scale, self._override_cap, self.posture_K,
                                   self.posture_D, self.posture_mask, self.control_period)
         trunk, imp = plan.trunk, self.impedance
-        code = references.stack_references(
+        code = references.update(
             plan.contact, plan.touchdown_normal, plan.foot_position, plan.foot_velocity,
             plan.foot_acceleration, trunk.position, trunk.velocity, trunk.acceleration,
             trunk.rotation, trunk.angular_velocity, trunk.angular_acceleration,

@@ -13,7 +13,8 @@ pinned to zero) come first in ``upper``/``lower``/``sense``, then the rows of ``
 
 The layout never changes with the stance split, so DAQP's multipliers warm-start the next cycle.
 :class:`PassiveQP` owns the arrays and writes each block from numbers the controller computes
-(:class:`~wholebody.control.passive.PassiveWBC`); the compiled cycle writes the same arrays.
+(:class:`~wholebody.control.passive.PassiveWBC`'s Python engine, the reference its native
+engine, a stack of library tasks, is tested against).
 """
 
 from __future__ import annotations
@@ -221,11 +222,3 @@ class PassiveQP:
                                dual_start=self.dual)
         self.dual = result.dual
         return result
-
-    def compact(self, k: int, rows: int) -> tuple:
-        """Views (H, g, A, upper, lower, sense) of the arrays holding a compact QP of ``k``
-        variables and ``rows`` rows written at their start (the compiled cycle leaves out the
-        swing feet's forces and the free rows, see passive_cycle.cpp)."""
-        return (self.H.reshape(-1)[:k * k].reshape(k, k), self.g[:k],
-                self.A.reshape(-1)[:rows * k].reshape(rows, k), self.upper[:k + rows],
-                self.lower[:k + rows], self.sense[:k + rows])

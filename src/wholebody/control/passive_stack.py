@@ -112,8 +112,8 @@ class PassiveStack:
     def set_state_references(self, q=None, v=None) -> None:
         """The references that follow the controller's state, computed in Python: the stance
         anchors (the controller's, as the contact frames' origins) and the posture target at
-        (q, v), default the robot's cached state. (The stack engine's compiled references,
-        ``PassiveCycle.stack_references``, write the same arrays.)"""
+        (q, v), default the robot's cached state. (The native engine's compiled references,
+        ``PassiveReferences.update``, write the same arrays.)"""
         wbc = self.wbc
         np.add(wbc._anchors, self._radius_offset, out=self.anchor_frames)
         # in place: the target was checked when set, a posture acceleration of a finite state

@@ -298,7 +298,7 @@ def _roles(robot, report: RobotCheck) -> None:
                        f"do not count): a foot cannot move sideways without the body, so the "
                        f"stance feet's position rows (the contact constraint, eq. 32's stance "
                        f"task) are linearly dependent; the passive WBC replaces them by an "
-                       f"independent set every cycle (its stack engine, or the Python one) and "
+                       f"independent set every cycle (on either engine) and "
                        f"the trunk's sideways sway is out of reach. The trotting scenarios (crawl --set gait=trot, "
                        f"ramp) refuse such a robot; the crawl needs 2 moving joints per leg",
                        "give each leg three joints (e.g. a hip abduction) to trot")

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..control.passive import ENGINES, stance_rank
+from ..control.passive import ENGINES
+from ..cycle import native_available
 from ..planning.trunk import VelocityCommand
 from ..tasks.wrench import TrunkImpedance
 from ..report.locomotion_figures import crawl_tracking_figure
@@ -36,9 +37,9 @@ PARAMETERS = (
     Parameter("duration", 12.0, "simulated time (s)",
               **TIME_SPAN),
     GAIT,
-    Parameter("engine", "auto", "passive WBC engine: native (the compiled cycle), python (the "
-                                "reference), stack (the same QP as a stack of tasks through the "
-                                "compiled hierarchy program) or auto (native when built)",
+    Parameter("engine", "auto", "passive WBC engine: native (its QP a stack of tasks through the "
+                                "compiled hierarchy program), python (the hand-assembled QP, the "
+                                "reference) or auto (native when built)",
               choices=ENGINES),
     Parameter("baseline_feedforward", True, "quasi-static baseline: add the trunk impedance's "
               "feed-forward W_ff = M_com v̇_com,d (as the passive WBC does); false: feedback and "
@@ -88,11 +89,10 @@ def validate(robot, params: dict) -> None:
     check_quadruped(robot, "the crawl scenario", params["gait"])
     if params["engine"] not in ENGINES:
         raise ValueError(f"--set engine: expected one of {ENGINES}, got '{params['engine']}'")
-    if params["engine"] == "native" and stance_rank(
-            robot, robot.contact_names) < 3 * len(robot.contact_names):
-        raise ValueError(f"--set engine: 'native' needs linearly independent stance rows (legs "
-                         f"of three joints or more); {robot.name}'s are dependent: use auto, "
-                         "stack or python")
+    if params["engine"] == "native" and not native_available():
+        raise ValueError("--set engine: 'native' needs the compiled extension "
+                         "wholebody._hierarchy_cycle (install with a C++ compiler); use auto or "
+                         "python")
 
 
 def run(robot, controller: str, params: dict, out_dir: Path | None, progress: bool,
