@@ -7,10 +7,9 @@ each case twice under ``valgrind --tool=callgrind`` with N and 3N cycles and rep
 misses and IPC differ between parts), but a change that removes instructions from a Python-bound
 cycle removes time, and the split shows where the cycle goes.
 
-Parts per case: ``update`` (Robot.update only), ``cycle`` (update + assembly + QP + τ) and, for
-the passive WBC, ``qp`` (the recorded QPs replayed through ``daqp.solve`` with the same warm start)
-and ``native`` (the whole cycle with ``engine="native"``: the QP as a stack of tasks through the
-compiled hierarchy cycle).
+Parts per case: ``update`` (Robot.update only), ``cycle`` (update + assembly + QP + τ; for the
+passive WBC its Python engine) and, for the passive WBC, ``native`` (the whole cycle with
+``engine="native"``: the QP as a stack of tasks through the compiled hierarchy cycle).
 
     python benchmarks/count_instructions.py [--cases passive-trot,table2] [--cycles 100]
 
@@ -31,8 +30,8 @@ import tempfile
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 CASES = ("passive-crawl", "passive-trot", "table2", "table1")
-PARTS = {"passive-crawl": ("update", "cycle", "qp", "native"),
-         "passive-trot": ("update", "cycle", "qp", "native"),
+PARTS = {"passive-crawl": ("update", "cycle", "native"),
+         "passive-trot": ("update", "cycle", "native"),
          "table2": ("update", "cycle"), "table1": ("update", "cycle")}
 
 
@@ -45,29 +44,16 @@ def worker(case: str, part: str, cycles: int, data: str) -> None:
         from types import SimpleNamespace
 
         from wholebody.control.passive import PassiveWBC
-        states, qps = pickle.load(open(data, "rb"))
+        states = pickle.load(open(data, "rb"))
         robot = wb.load_robot("hyq")
         wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names),
                          engine="native" if part == "native" else "python")
-        if part == "native":
-            for k in range(cycles):
-                q, v, plan = states[k % len(states)]
-                wbc.cycle(q, v, plan)
-            return
-        if part == "qp":
-            import daqp
-            dual = None
-            for k in range(cycles):
-                H, g, A, up, lo, sense = qps[k % len(qps)]
-                extra = {} if dual is None else {"dual_start": dual}
-                _, _, flag, info = daqp.solve(H, g, A, up, lo, sense, **extra)
-                dual = info["lam"] if flag in (1, 2) else None
-            return
         for k in range(cycles):
             q, v, plan = states[k % len(states)]
-            robot.update(q, v)
-            if part == "cycle":
-                wbc.solve(plan)
+            if part == "update":
+                robot.update(q, v)
+            else:
+                wbc.cycle(q, v, plan)
         return
     from wholebody.control.stacks import table1_stack, table2_stack
     from wholebody.formulation import Formulation
@@ -87,28 +73,14 @@ def worker(case: str, part: str, cycles: int, data: str) -> None:
 
 # ---------------------------------------------------------------------------- parent
 def record_passive(gait: str, path: str, cycles: int = 300) -> None:
-    """Closed-loop HyQ states (after 1.6 s, so that legs swing) and the QPs the WBC built on them."""
-    from types import SimpleNamespace
-
+    """Closed-loop HyQ states (after 1.6 s, so that legs swing)."""
     import wholebody as wb
-    from wholebody.control.passive import PassiveWBC
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from bench_passive import record
     robot = wb.load_robot("hyq")
     states = record(robot, gait, 400 + cycles)[400:]
-    wbc = PassiveWBC(robot, planner=SimpleNamespace(legs=robot.contact_names))
-    qps, solve_qp = [], wbc._solve_qp
-
-    def keep():
-        qps.append(tuple(a.copy() for a in (wbc.H, wbc.g, wbc.A, wbc.upper, wbc.lower, wbc.sense)))
-        return solve_qp()
-
-    wbc._solve_qp = keep
-    for q, v, plan in states:
-        robot.update(q, v)
-        wbc.solve(plan)
     with open(path, "wb") as f:
-        pickle.dump((states, qps), f)
+        pickle.dump(states, f)
 
 
 def count(case: str, part: str, cycles: int, data: str) -> int:
@@ -146,9 +118,8 @@ def main() -> None:
             for part in PARTS[case]:
                 per_cycle[part] = (count(case, part, 3 * n, data) - count(case, part, n, data)) / (2 * n)
             line = "  ".join(f"{p} {v / 1e3:7.0f}k" for p, v in per_cycle.items())
-            rest = per_cycle["cycle"] - per_cycle["update"] - per_cycle.get("qp", 0.0)
-            label = "assembly + τ" if "qp" in per_cycle else "rows + solve + τ"
-            print(f"{case:14s} instructions per cycle: {line}  ({label} {rest / 1e3:.0f}k)",
+            rest = per_cycle["cycle"] - per_cycle["update"]
+            print(f"{case:14s} instructions per cycle: {line}  (rows + solve + τ {rest / 1e3:.0f}k)",
                   flush=True)
 
 

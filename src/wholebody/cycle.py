@@ -353,15 +353,15 @@ class HierarchyCycle:
         return self.engine.h_G if self.native else self.robot.h_G.copy()
 
     def terms_view(self) -> SimpleNamespace:
-        """Arrays the native engine rewrites at every :meth:`update` (bound on first call, the
-        same objects afterwards): ``q``, ``v``, ``nle`` (h), ``h_G``, ``com``, ``vcom``,
-        ``rotation`` (the base's), ``Ig`` (locked centroidal inertia, world axes); per contact
-        (robot order) ``points`` (sphere bottoms, as ``Robot.contact_points``) and their
+        """Arrays rewritten at every :meth:`update` (bound on first call, the same objects
+        afterwards): ``q``, ``v``, ``nle`` (h), ``h_G``, ``com``, ``vcom``, ``rotation`` (the
+        base's), ``Ig`` (locked centroidal inertia, world axes); per contact (robot order)
+        ``points`` (sphere bottoms, as ``Robot.contact_points``) and their
         ``point_velocities``, and of the contact frames' origins ``frame_positions``,
         ``frame_jacobians`` (linear rows, (nc, 3, nv)), ``frame_drifts`` (classical
         accelerations) and ``frame_velocities``; ``tau_max`` the robot's torque bounds
-        τ_max(q) (``robot.torque_limits.upper``)."""
-        self._require_native("terms_view")
+        τ_max(q) (``robot.torque_limits.upper``). The native engine writes them in its compiled
+        update; the Python engine copies them from the robot's cache after ``robot.update``."""
         if self._terms is None:
             robot, nc = self.robot, len(self.robot.contacts)
             arrays = {"q": (robot.nq,), "v": (robot.nv,), "nle": (robot.nv,), "h_G": (6,),
@@ -371,9 +371,30 @@ class HierarchyCycle:
                       "frame_drifts": (nc, 3), "frame_velocities": (nc, 3),
                       "tau_max": (robot.na,)}
             buffers = {name: np.zeros(shape) for name, shape in arrays.items()}
-            self.engine.bind_state(buffers)
             self._terms = SimpleNamespace(mass=robot.mass, **buffers)
+            if self.native:
+                self.engine.bind_state(buffers)
+            elif self._qv is not None:
+                self._copy_terms()
         return self._terms
+
+    def _copy_terms(self) -> None:
+        """terms_view's arrays from the Python robot's cache (the Python engine's update)."""
+        robot, terms = self.robot, self._terms
+        terms.q[:], terms.v[:], terms.nle[:] = robot.q, robot.v, robot.h
+        terms.h_G[:], terms.com[:], terms.vcom[:] = robot.h_G, robot.com, robot.vcom
+        terms.rotation[:] = robot.data.oMi[1].rotation
+        terms.Ig[:] = robot.data.Ig.inertia
+        terms.points[:] = robot.contact_points
+        terms.point_velocities[:] = [robot.contact_jacobians[name][:3] @ robot.v
+                                     for name in robot.contact_names]
+        frames = robot.contact_frame_jacobians[:, :3]
+        terms.frame_positions[:] = [robot.data.oMf[c.frame_id].translation
+                                    for c in robot.contacts]
+        terms.frame_jacobians[:] = frames
+        terms.frame_drifts[:] = robot.contact_frame_drifts[:, :3]
+        terms.frame_velocities[:] = frames @ robot.v
+        terms.tau_max[:] = robot.torque_limits.upper(robot.q[7:])
 
     def frame_index(self, frame: str) -> int:
         """The compiled cycle's index of a model frame (added to it on first use)."""
@@ -433,41 +454,45 @@ class HierarchyCycle:
         within limits, as :meth:`Formulation.solve`; so is a finite state whose rigid-body terms
         overflow, its status naming ``v``); bad input — q/v of the wrong size or with NaN, a
         task producing NaN rows — raises ValueError naming the field or task."""
-        robot = self.robot
         if not self.native:
-            variables = self.formulation.variables_for(self.stack, variables)
-            t0 = time.perf_counter()
-            robot.update(q, v)
-            t1 = time.perf_counter()
-            sol = self.formulation.solve(self.stack, variables, self.settings,
-                                         diagnostics=diagnostics)
-            sol.timings["update"] = t1 - t0
-            sol.timings["total"] = time.perf_counter() - t0
-            return sol
+            self.update(q, v)
+            return self._solve_python(variables, diagnostics)
         return self._solve_native(variables, diagnostics, (q, v))
 
-    def _require_native(self, what: str) -> None:
-        if self.engine is None:
-            raise RuntimeError(f"{what}: the native engine only (this cycle runs "
-                               f"engine='{self.engine_name}'); call solve(q, v)")
-
     def update(self, q, v) -> None:
-        """The native engine's rigid-body terms at (q, v), for :meth:`solve_updated` (which
-        :meth:`solve` makes in its one compiled call; a controller reads the terms in between,
-        :meth:`terms_view`). Bad q/v (size, NaN) raise ValueError naming the field."""
-        self._require_native("update")
+        """The rigid-body terms at (q, v), for :meth:`solve_updated` (which :meth:`solve` makes
+        in its one call; a controller reads the terms in between, :meth:`terms_view`): the
+        native engine's compiled update, the Python engine's ``robot.update``. Bad q/v (size,
+        NaN) raise ValueError naming the field."""
         t0 = time.perf_counter()
-        self.engine.update(q, v)
-        self._q, self._qv = q, (q, v)
+        if self.native:
+            self.engine.update(q, v)
+            self._q = q
+        else:
+            self.robot.update(q, v)
+            if self._terms is not None:
+                self._copy_terms()
+        self._qv = (q, v)
         self._update_time = time.perf_counter() - t0
 
     def solve_updated(self, variables: Variables | None = None,
                       diagnostics: bool = False) -> Solution:
-        """:meth:`solve` at the state of the last :meth:`update` (native engine)."""
-        self._require_native("solve_updated")
+        """:meth:`solve` at the state of the last :meth:`update`."""
         if self._qv is None:
             raise RuntimeError("solve_updated: call update(q, v) first (or solve(q, v))")
+        if not self.native:
+            return self._solve_python(variables, diagnostics)
         return self._solve_native(variables, diagnostics, None)
+
+    def _solve_python(self, variables: Variables | None, diagnostics: bool) -> Solution:
+        """The Python engine's solve at the robot's state of the last :meth:`update`."""
+        t0 = time.perf_counter()
+        variables = self.formulation.variables_for(self.stack, variables)
+        sol = self.formulation.solve(self.stack, variables, self.settings,
+                                     diagnostics=diagnostics)
+        sol.timings["update"] = self._update_time
+        sol.timings["total"] = self._update_time + time.perf_counter() - t0
+        return sol
 
     def _solve_native(self, variables: Variables | None, diagnostics: bool, state) -> Solution:
         """The native cycle at ``state`` = (q, v), updated in the same compiled call as the rows
@@ -566,9 +591,11 @@ class HierarchyCycle:
 
     def task_rows(self, task: Task) -> tuple[np.ndarray, ...]:
         """(A, target) of an equality task's rows, (A, lower, upper) of an inequality task's, in
-        the last cycle's level arrays (native engine; views, valid until the next solve; A over
-        the solver's scaled variables)."""
-        return self._program.rows_of[id(task)]
+        the last cycle's level arrays (views, valid until the next solve; A over the solver's
+        scaled variables)."""
+        if self.native:
+            return self._program.rows_of[id(task)]
+        return self.formulation.task_rows(task)
 
     @property
     def levels(self) -> list[Level]:

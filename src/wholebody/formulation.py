@@ -338,6 +338,16 @@ class Formulation:
         return make_solution(qdd, lam, tau, robot.torque_bounds(), outcome, status, costs,
                              variables, x=x)
 
+    def task_rows(self, task: Task) -> tuple[np.ndarray, ...]:
+        """(A, target) of an equality task's rows, (A, lower, upper) of an inequality task's, in
+        the last :meth:`solve`'s level arrays (views, valid until the next solve; A over the
+        solver's scaled variables)."""
+        for level in (self._plan.levels if self._plan is not None else ()):
+            for entry in level.meta:
+                if entry[0] is task:
+                    return entry[2:4] if entry[1] == "eq" else entry[2:5]
+        raise ValueError(f"task '{task.name}': no rows in the last solve")
+
     @staticmethod
     def task_reports(x, meta, active_tol: float = 1e-7) -> list[TaskReport]:
         reports = []

@@ -144,16 +144,17 @@ def test_the_trunk_weights_turn_with_the_heading(monkeypatch):
     reference's heading axes, so the mean roll (the simulator's base, after 3 s) stays small; the
     same weights left in world axes, which once the robot has turned weigh its roll instead, let it
     trot rolled to one side."""
-    import wholebody.control.passive as passive
+    import wholebody.control.passive_stack as passive_stack
     from conftest import anymal_b_description
 
     robot = wb.load_robot(anymal_b_description())
     command = VelocityCommand.constant(0.1 * froude_ratio(robot), 0.0, 0.3)
-    python = {"engine": "python"}  # the patch below reaches the Python engine only
-    heading, yaw = _trot_mean_roll(robot, "passive", command, 8.0, python)
+    heading, yaw = _trot_mean_roll(robot, "passive", command, 8.0, {})
     assert abs(yaw) > 1.5  # it did turn
-    monkeypatch.setattr(passive, "heading_weights", lambda Q, rotation: np.diag(np.asarray(Q)))
-    world, _ = _trot_mean_roll(robot, "passive", command, 8.0, python)
+    task = passive_stack.TrunkWrenchTask
+    monkeypatch.setattr(passive_stack, "TrunkWrenchTask",
+                        lambda *args, **kwargs: task(*args, **{**kwargs, "heading": False}))
+    world, _ = _trot_mean_roll(robot, "passive", command, 8.0, {})
     assert heading < 0.03 and world > 0.06, (heading, world)
 
 

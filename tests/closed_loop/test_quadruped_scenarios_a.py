@@ -9,9 +9,7 @@ full experiments are the CLI scenarios.
 import numpy as np
 import pytest
 
-from wholebody.control.passive import PassiveWBC, relative_slack_weight
-from wholebody.planning.gait import crawl
-from wholebody.planning.planner import GaitPlanner
+from wholebody.control.passive import relative_slack_weight
 from wholebody.robot import FREE_FLYER_NQ
 from wholebody.scenarios.friction_mismatch import crawl_run
 from wholebody.scenarios.gait_measures import (intervals, outcome, settled_stance, slip_events,
@@ -75,23 +73,6 @@ def test_controller_joint_limits_touch_only_the_controller_side(hyq):
     with pytest.raises(ValueError):
         with controller_joint_limits(hyq, "no_such_joint", lower=0.0):
             pass
-
-
-def test_single_slack_hessian_is_symmetric_with_a_swing_foot(hyq):
-    """Regression: the single-slack layout of the hand-assembled QP (the Python engine's; engine
-    "auto" runs the single slack as a stack) wrote the slack weights into the whole slack
-    block."""
-    planner = GaitPlanner.for_robot(hyq, crawl(start=0.5))
-    ctrl = PassiveWBC(hyq, planner, swing_slack="single", engine="python")
-    q, v = hyq.q_ref.copy(), np.zeros(hyq.nv)
-    swings = 0
-    for t in np.arange(0.0, 2.5, 0.02):
-        sol = ctrl.compute(q, v, t)
-        swings += not all(ctrl.last_plan.contact)
-        np.testing.assert_array_equal(ctrl.H, ctrl.H.T)
-        assert np.linalg.eigvalsh(ctrl.H).min() > 0.0
-        assert sol.ok, sol.status
-    assert swings > 5  # swing feet were exercised
 
 
 # ---------------------------------------------------------------------- Sect. V-B friction

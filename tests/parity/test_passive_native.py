@@ -1,9 +1,9 @@
-"""PassiveWBC's native engine — its QP a stack of library tasks (control/passive_stack.py) solved
-by the compiled hierarchy program (HierarchyCycle, method "weighted"), its tasks and programs kept
-across cycles, its references around the QP compiled (native/passive_references.cpp) — against
-the Python engine, the hand-assembled QP (control/passive_qp.py), on closed-loop HyQ trot and
-crawl states (and an 8-DoF Solo's crawl, whose stance rows are dependent), and in closed loop in
-the twin."""
+"""PassiveWBC's engines — its QP a stack of library tasks (control/passive_stack.py) solved by
+the compiled hierarchy program (engine "native", its tasks and programs kept across cycles, its
+references around the QP compiled in native/passive_references.cpp) or by the Python Formulation
+(engine "python") — against each other and against the same QP assembled by hand
+(tests/passive_oracle.py), on closed-loop HyQ trot and crawl states (and an 8-DoF Solo's crawl,
+whose stance rows are dependent), and in closed loop in the twin."""
 
 from dataclasses import replace
 from types import SimpleNamespace
@@ -18,6 +18,7 @@ from wholebody.formulation import Formulation
 from wholebody.tasks import JointTrajectoryTask
 
 from conftest import ForceCap, native_cycle_or_skip
+from passive_oracle import hand_assembled
 
 native_cycle_or_skip("_passive_references")
 native_cycle_or_skip("_hierarchy_cycle")
@@ -73,6 +74,28 @@ def assert_same_solution(a, b, where=""):
     assert a.contacts == b.contacts, where
 
 
+def assert_matches_hand_assembled(wbc, plan, sol, where=""):
+    """``sol``, the Python-engine controller ``wbc``'s solution of ``plan`` at the robot's cached
+    state, equals the hand-assembled QP's: ok, torques, forces, accelerations, swing residuals
+    and single slacks."""
+    ref = hand_assembled(wbc, plan)
+    assert ref.ok == sol.ok, where
+    if not ref.ok:
+        return
+    np.testing.assert_allclose(sol.tau, ref.tau, atol=1e-6, rtol=0, err_msg=where)
+    np.testing.assert_allclose(sol.lam, ref.lam, atol=1e-5, rtol=0, err_msg=where)
+    np.testing.assert_allclose(sol.qdd, ref.qdd, atol=1e-5, rtol=0, err_msg=where)
+    swing = {t.name: t.error for t in sol.tasks if t.name.startswith("swing ")}
+    assert swing == {f"swing {wbc.contacts[i]}": swing.get(f"swing {wbc.contacts[i]}")
+                     for i in np.flatnonzero(~plan.contact[wbc._leg])}, where
+    for i, name in enumerate(wbc.contacts):
+        if f"swing {name}" in swing:
+            assert swing[f"swing {name}"] == pytest.approx(ref.swing_errors[i], abs=1e-5), where
+    assert set(sol.auxiliary) == set(ref.slacks), where
+    for key, value in ref.slacks.items():
+        assert float(sol.auxiliary[key][0]) == pytest.approx(value, abs=1e-5), where
+
+
 CONFIGS = {
     "default": {},
     "hard swing": {"swing_slack": "none"},
@@ -89,7 +112,7 @@ CONFIGS = {
 @pytest.mark.parametrize("ramp", [False, True], ids=["flat", "ramp"])
 def test_matches_python_engine(robots, request, gait, name, ramp):
     """Same torques, forces, accelerations and task reports as the Python engine, cycle by cycle
-    (the stance anchors of eq. 32 evolve in both)."""
+    (the stance anchors of eq. 32 evolve in both), and as the hand-assembled QP."""
     robot = robots["hyq"]
     states = request.getfixturevalue(f"{gait}_states")
     options = CONFIGS[name]
@@ -106,6 +129,7 @@ def test_matches_python_engine(robots, request, gait, name, ramp):
         a = python.cycle(q, v, plan)
         b = native.cycle(q, v, plan)
         assert_same_solution(a, b, f"{name} cycle {k}")
+        assert_matches_hand_assembled(python, plan, a, f"{name} cycle {k}")
         np.testing.assert_allclose(native.impedance.last_errors, python.impedance.last_errors,
                                    atol=1e-12)
         swinging += not plan.contact.all()
@@ -117,9 +141,9 @@ def test_matches_python_engine(robots, request, gait, name, ramp):
 @pytest.mark.parametrize("ramp", [False, True], ids=["flat", "ramp"])
 def test_single_slack_stack_matches_python_engine(robots, request, gait, slack_weight, ramp):
     """The single swing slack (one ε per swing foot, |J q̈ − b| ≤ ε, cost α ε²: Fahmi et al.
-    2019's ∞-norm) as a stack of tasks with auxiliary variables (engine "native", what "auto"
-    picks) gives the hand-assembled QP's torques, forces, accelerations and swing
-    residuals cycle by cycle; with a small α the slack binds (the residuals are large)."""
+    2019's ∞-norm) as a stack of tasks with auxiliary variables gives, on both engines, the
+    hand-assembled QP's torques, forces, accelerations, swing residuals and slacks cycle by
+    cycle; with a small α the slack binds (the residuals are large)."""
     robot = robots["hyq"]
     states = request.getfixturevalue(f"{gait}_states")
     options = {"swing_slack": "single", "slack_weight": slack_weight}
@@ -131,14 +155,15 @@ def test_single_slack_stack_matches_python_engine(robots, request, gait, slack_w
         plan = tilted(plan) if ramp else plan
         a, b = python.cycle(q, v, plan), stack.cycle(q, v, plan)
         assert_same_solution(a, b, f"single slack cycle {k}")
+        assert_matches_hand_assembled(python, plan, a, f"single slack cycle {k}")
         largest = max([largest] + [t.error for t in a.tasks if t.name.startswith("swing")])
     assert largest > (1e-2 if slack_weight == 1.0 else 1e-6)  # the swing rows were relaxed
 
 
 def test_stack_matches_python_engine_on_dependent_stance_rows():
     """ODRI's 8-DoF Solo (legs of two joints): the native engine, whose stance task takes an
-    independent set of its rows, gives the Python engine's
-    torques, forces and task reports cycle by cycle on the states of a closed-loop crawl."""
+    independent set of its rows, gives the Python engine's and the hand-assembled QP's torques,
+    forces and task reports cycle by cycle on the states of a closed-loop crawl."""
     from conftest import solo8_description
 
     import wholebody as wb
@@ -152,6 +177,7 @@ def test_stack_matches_python_engine_on_dependent_stance_rows():
         a, b = python.cycle(q, v, plan), stack.cycle(q, v, plan)
         assert a.ok, a.status
         assert_same_solution(a, b, f"solo8 cycle {k}")
+        assert_matches_hand_assembled(python, plan, a, f"solo8 cycle {k}")
         swinging += not plan.contact.all()
     assert swinging > len(states) // 4
 
@@ -167,7 +193,9 @@ def test_heading_weights_match_python_engine(robots, trot_states):
     for k, (q, v, plan) in enumerate(trot_states[:120]):
         plan = plan.copy()
         plan.trunk = replace(plan.trunk, rotation=turn @ plan.trunk.rotation)
-        assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan), f"cycle {k}")
+        a = python.cycle(q, v, plan)
+        assert_same_solution(a, native.cycle(q, v, plan), f"cycle {k}")
+        assert_matches_hand_assembled(python, plan, a, f"cycle {k}")
 
 
 def test_observer_matches_python_engine(robots, trot_states):
@@ -179,14 +207,16 @@ def test_observer_matches_python_engine(robots, trot_states):
     native = PassiveWBC(robot, planner=planner(robot), observer=MomentumObserver(10.0),
                         engine="native")
     for q, v, plan in trot_states[:150]:
-        assert_same_solution(python.cycle(q, v, plan), native.cycle(q, v, plan))
+        a = python.cycle(q, v, plan)
+        assert_same_solution(a, native.cycle(q, v, plan))
+        assert_matches_hand_assembled(python, plan, a)
     np.testing.assert_allclose(native.impedance.external_wrench,
                                python.impedance.external_wrench, atol=1e-6)
     assert np.abs(python.impedance.external_wrench).max() > 0.1  # the observer did something
 
 
 def test_configure_hands_over_changed_settings(robots, trot_states):
-    """Settings are copied when the engine is built: a change is seen only after configure()."""
+    """Settings are copied when the tasks are built: a change is seen only after configure()."""
     robot = robots["hyq"]
     python = PassiveWBC(robot, planner=planner(robot), engine="python")
     native = PassiveWBC(robot, planner=planner(robot), engine="native")
@@ -194,7 +224,9 @@ def test_configure_hands_over_changed_settings(robots, trot_states):
     for wbc in (python, native):
         wbc.Q[:] = (1.0, 1.0, 1.0, 10.0, 10.0, 10.0)
         wbc.joint_limits.mode = "tanh"
+    python.configure()
     a = python.cycle(q, v, plan)
+    assert_matches_hand_assembled(python, plan, a)
     assert np.abs(native.cycle(q, v, plan).tau - a.tau).max() > 1e-3
     native.configure()
     # both engines now have one cycle of stance history (the stance task integrates slip)
@@ -345,12 +377,14 @@ def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
     """Tasks added to the passive controller's QP (a user's Python constraint in the hard
     level, a library task in the objective) run on the native engine, the Python one's rows
     written into the compiled program: each cycle's torques equal the Python Formulation's on
-    the same stack, the user's cap holds on the solved forces (and binds: the controller
+    the same stack and the Python engine's, the user's cap holds on the solved forces (and binds: the controller
     without it exceeds it), and the hips' task residual is never larger than with the cap alone
     (a convex cost with one more term cannot increase that term at its optimum) and mostly
     smaller (the stance feet leave the hips little freedom)."""
     robot = robots["hyq"]
     wbc = PassiveWBC(robot, planner=planner(robot), extra_tasks=extra_tasks(robot))
+    python = PassiveWBC(robot, planner=planner(robot), extra_tasks=extra_tasks(robot),
+                        engine="python")
     plain = PassiveWBC(robot, planner=planner(robot), engine="native")
     cap_only = PassiveWBC(robot, planner=planner(robot),
                           extra_tasks={"hard": extra_tasks(robot)["hard"]})
@@ -366,6 +400,7 @@ def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
         robot.update(q, v)
         ref = Formulation(robot).solve(wbc._stack.stack, variables, STACK_SETTINGS)
         np.testing.assert_allclose(sol.tau, ref.tau, atol=1e-6, err_msg=f"cycle {k}")
+        assert_same_solution(python.cycle(q, v, plan), sol, f"cycle {k}")
         fz = np.array([f[2] for f in sol.forces.values()])
         assert fz.max() <= cap + 1e-6
         capped += max(f[2] for f in other.forces.values()) > cap
@@ -378,7 +413,6 @@ def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
 
 
 @pytest.mark.parametrize("kwargs,match", [
-    ({"engine": "python"}, "extra_tasks: engine 'python' .* cannot take tasks"),
     ({"extra_tasks": {"soft": []}}, "extra_tasks: level 'soft' is not one of"),
     ({"extra_tasks": {"hard": [1.0]}}, r"extra_tasks\['hard'\]: expected tasks"),
     ({"extra_tasks": {"hard": [ForceCap(1.0)], "objective": [ForceCap(2.0)]}},

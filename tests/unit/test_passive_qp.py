@@ -1,7 +1,7 @@
-"""The QP of PassiveWBC (Fahmi et al. 2019, eq. 7) as solved through the DAQP adapter
-(solvers.backends.solve_daqp_qp, warm-started) against quadprog (Goldfarb–Idnani) on the very same
-arrays: same optimum. Also the adapter alone on random QPs with simple bounds, senses and warm
-starts, and its failure values."""
+"""The QP of PassiveWBC (Fahmi et al. 2019, eq. 7), assembled by hand (tests/passive_oracle.py),
+as solved through the DAQP adapter (solvers.backends.solve_daqp_qp, warm-started) against quadprog
+(Goldfarb–Idnani) on the very same arrays: same optimum. Also the adapter alone on random QPs with
+simple bounds, senses and warm starts, and its failure values, and the hand assembly's blocks."""
 
 from types import SimpleNamespace
 
@@ -10,8 +10,9 @@ import pytest
 import quadprog
 
 from wholebody.control.passive import PassiveConfig, PassiveWBC
-from wholebody.control.passive_qp import PassiveQP
 from wholebody.solvers.backends import DAQP_EXIT, DAQP_SENSE_EQ, solve_daqp_qp
+
+from passive_oracle import PassiveQP, hand_assembled
 
 
 def quadprog_solve(H, g, A, upper, lower, sense):
@@ -45,11 +46,12 @@ def test_adapter_optimum_matches_quadprog(robots, rng, options, plan_for):
         q[7:] += rng.normal(scale=0.03, size=robot.na)
         robot.update(q, rng.normal(scale=0.05, size=robot.nv))
         plan = plan_for(robot, rng, STANCES[k % len(STANCES)], swing_noise=(0.005, 0.05, 0.2))
-        sol = wbc.solve(plan)
+        sol = wbc.solve(plan)  # this cycle's stance anchors, W_d and torque bounds
         assert sol.ok, sol.status
-        qp = wbc.qp
+        ref = hand_assembled(wbc, plan, None if k == 0 else qp)
+        qp = ref.qp
         x_ref, cost_ref = quadprog_solve(qp.H, qp.g, qp.A, qp.upper, qp.lower, qp.sense)
-        x = wbc.last_x
+        x = ref.x
         cost = 0.5 * x @ qp.H @ x + qp.g @ x
         assert cost == pytest.approx(cost_ref, rel=1e-9, abs=1e-9)
         np.testing.assert_allclose(x, x_ref, atol=1e-7 * max(1.0, np.abs(x_ref).max()))

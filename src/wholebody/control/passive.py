@@ -2,10 +2,9 @@
 
 One QP per control cycle over u = [q̈, F_grf] (eq. 7), posed as a two-level stack of library
 tasks (:class:`~wholebody.control.passive_stack.PassiveStack`: the hard constraints, then the
-weighted objective) and solved by the compiled :class:`~wholebody.cycle.HierarchyCycle` with
-method "weighted" (engine "native", what "auto" runs where it is built); engine "python"
-assembles the same QP by hand into the preallocated arrays of
-:class:`~wholebody.control.passive_qp.PassiveQP`, the reference the tests hold the stack to:
+weighted objective) and solved by a :class:`~wholebody.cycle.HierarchyCycle` with method
+"weighted" — compiled (engine "native", what "auto" runs where it is built) or the Python
+reference (engine "python"):
 
 * cost ‖W_com − W_com,d‖²_Q + ‖u‖²_R (eqs. 7a, 8): the trunk wrench task of eq. 4
   (:class:`~wholebody.tasks.wrench.TrunkImpedance`) plus a regulariser — forces near the cone
@@ -20,19 +19,19 @@ assembles the same QP by hand into the preallocated arrays of
   rolling foot: the contact point minus the slip integrated since touchdown);
 * swing feet: eq. 6/11-12 at the acceleration level; ``swing_slack`` = "per-direction" (eq. 33 with
   one slack per direction: at the optimum ε = |A u − b| so α‖ε‖² is exactly the weighted
-  least-squares term α‖A_sw u − b_sw‖², no variables added), "single" (one slack per foot, its own
-  variable and 6 rows: the ∞-norm coupling the paper warns about) or "none" (hard equality, eq. 11);
+  least-squares term α‖A_sw u − b_sw‖², no variables added), "single" (one slack per foot, an
+  auxiliary variable: the ∞-norm coupling the paper warns about) or "none" (hard equality, eq. 11);
 * friction pyramid and normal-force bounds about each foot's terrain normal (eqs. 13-14), torque
   limits with joint-dependent bounds τ_min(q), τ_max(q) (eq. 15), joint limits as acceleration
   bounds with Δt = 10 dt (eqs. 16-18);
 * torques by eq. 19.
 
-Both solve it by DAQP (the hand-assembled QP warm-started from the previous cycle's
-multipliers, its layout never changing size). The native engine computes the controller's
-per-cycle references around the QP (τ bounds, stance anchors, W_d, the posture target, the
-commanded wrench) in the compiled ``wholebody._passive_references`` from the hierarchy cycle's
-rigid-body terms (:meth:`HierarchyCycle.terms_view <wholebody.cycle.HierarchyCycle.terms_view>`),
-and takes the user's ``extra_tasks``.
+The QP is solved by DAQP over the nullspace of the hard equalities. The native engine also
+computes the controller's per-cycle references around the QP (τ bounds, stance anchors, W_d, the
+posture target, the commanded wrench) in the compiled ``wholebody._passive_references`` from the
+hierarchy cycle's rigid-body terms (:meth:`HierarchyCycle.terms_view
+<wholebody.cycle.HierarchyCycle.terms_view>`); the Python engine computes them from
+``robot.update``'s. ``extra_tasks`` adds the user's tasks to either level.
 """
 
 from __future__ import annotations
@@ -54,15 +53,12 @@ from ..robot import Robot
 from ..robots.reference import froude_ratio
 from ..robots.roles import leg_joints
 from ..solvers import SolverSettings
-from ..solvers.backends import DaqpResult
 from ..tasks.base import Task
-from ..tasks.contact import independent_rows
 from ..tasks.limits import JointAccelerationLimits, TorqueLimits
 from ..tasks.wrench import (F_MAX_WEIGHTS, TrunkImpedance, contact_wrench_map, force_bound,
-                            heading_weights, trunk_weights)
+                            trunk_weights)
 from ..validation import finite_array, nonnegative, number, positive
 from .base import PlannedController
-from .passive_qp import FREE, PassiveQP, StancePattern
 from .passive_stack import PassiveStack, passive_stack
 
 log = logging.getLogger(__name__)
@@ -134,8 +130,8 @@ def independent_rank(J: np.ndarray | None = None, singular: np.ndarray | None = 
 SLACKS = ("per-direction", "single", "none")
 ENGINES = ("auto", "native", "python")
 
-#: how engine "native" solves its two levels: one weighted QP by DAQP (eq. 7), ε negligible next
-#: to the R terms, no cascade fallback (a failed QP holds the previous torque, as the other engines)
+#: how the stack's two levels are solved: one weighted QP by DAQP (eq. 7), ε negligible next to
+#: the R terms, no cascade fallback (a failed QP holds the previous torque)
 STACK_SETTINGS = SolverSettings(method="weighted", backend="daqp", regularization=1e-12,
                                 fallback_backend=None)
 REGULARIZATIONS = ("force-normal", "force-parallel", "torque")
@@ -193,10 +189,9 @@ class PassiveConfig:
     instead of 0, which holds them near the standing posture;
     ``torque_limit_override`` lowers named joints' limits (the weak knee of Sect. V-C);
     ``control_period`` sets Δt = 10 dt of eq. 18 and the observer's time step; ``engine`` one of
-    ``ENGINES`` ("native": the QP as a two-level stack of library tasks, :class:`PassiveStack`,
-    solved by the compiled :class:`~wholebody.cycle.HierarchyCycle`; "python": the same QP
-    assembled by hand and solved from Python, the reference; "auto": native when it is built,
-    else Python with one logged warning).
+    ``ENGINES`` (the QP's stack of library tasks, :class:`PassiveStack`, solved by a
+    :class:`~wholebody.cycle.HierarchyCycle` of that engine: "native" compiled, "python" the
+    reference; "auto": native when it is built, else Python with one logged warning).
     """
 
     mu: float | None = None
@@ -309,21 +304,20 @@ class PassiveWBC(PlannedController):
     contact wrench commanded the cycle before, and writes it into ``impedance.external_wrench``)
     are live objects. The configuration's values are copied into attributes of the same names
     (``Q`` an array, ``torque_weights`` one per joint, ``torque_limits``/``joint_limits`` the
-    limit tasks), which the Python engine reads every cycle; ``config`` keeps what it was built
-    with.
+    limit tasks); ``config`` keeps what it was built with. The QP's tasks take the weights and
+    gains when they are built: after changing any of them call :meth:`configure`.
 
     ``engine="native"`` (what "auto" runs where the compiled extensions are built) solves the QP
-    as a stack of library tasks in compiled code (faster: docs/results.md,
-    benchmarks/bench_passive.py) with the Python engine's results. It keeps its own rigid-body
-    terms: ``compute``/``cycle`` do not refresh ``robot``'s Python cache (``robot.M``,
-    ``robot.com``... stay those of the last ``robot.update``). Its tasks' weights and gains are
-    copied when it is built: after changing any of them call :meth:`configure`.
+    in compiled code (faster: docs/results.md, benchmarks/bench_passive.py) with the Python
+    engine's results. It keeps its own rigid-body terms: ``compute``/``cycle`` do not refresh
+    ``robot``'s Python cache (``robot.M``, ``robot.com``... stay those of the last
+    ``robot.update``).
 
     ``extra_tasks`` adds library or user tasks to the QP (``{"hard": [...], "objective":
     [...]}``: constraints beside the dynamics, contacts, friction and limits, or weighted terms
     beside the trunk wrench — a task's ``weight`` scales its rows, so a row costs weight² times
-    its squared residual, as the trunk wrench's √Q), on the native engine (the hand-assembled
-    Python engine has no place for them); the tasks are live objects, read every cycle.
+    its squared residual, as the trunk wrench's √Q); the tasks are live objects, read every
+    cycle.
     """
 
     def __init__(self, robot: Robot, planner=None, config: PassiveConfig | None = None, *,
@@ -374,13 +368,8 @@ class PassiveWBC(PlannedController):
         self.joint_limits = JointAccelerationLimits(mode="braking",
                                                     horizon=10 * config.control_period)
         self.control_period = config.control_period
-        self.qp = PassiveQP(robot.nv, c, single_slack=self.swing_slack == "single")
-        self.nf = self.qp.nf
-        self._R_diagonal = np.zeros(self.qp.n)
-        self._R_diagonal[:robot.nv] = self.R_qdd
-        self._R_diagonal[robot.nv:robot.nv + self.nf] = self.R_force
+        self.nf = 3 * c
         self._G = np.zeros((6, self.nf))  # contact wrench map of eq. 8
-        self._swing_targets = np.zeros((c, 3))
         self._anchors = np.zeros((c, 3))  # stance task (eq. 32): x̂_st of the last cycle
         self._slip = np.zeros((c, 3))  # material contact point's displacement since touchdown
         self._was_stance = np.zeros(c, dtype=bool)
@@ -391,88 +380,26 @@ class PassiveWBC(PlannedController):
         self.last_tau: np.ndarray | None = None
         self.last_desired_wrench: np.ndarray | None = None  # W_d of the last cycle (eq. 8)
         self.last_plan = None
-        self.last_x: np.ndarray | None = None  # the raw QP solution (slacks last if "single")
         self._failing = 0  # length of the current streak of failed cycles
+        #: cycles run (the native engine leaves ``robot.cycle`` as it is)
+        self.cycles = 0
         self.observer = observer
         self._commanded_wrench: np.ndarray | None = None  # G F of the last solved cycle
         #: the stance feet's rows are linearly dependent in the standing posture (legs of fewer
         #: than three joints): each cycle they are replaced by an independent set
         self.dependent_stance = stance_rank(robot, self.contacts) < 3 * c
-        #: the stance task's rank tolerance on engine "native" (0: its rows as they are)
+        #: the stance task's rank tolerance (0: its rows as they are)
         self.stance_rank_tolerance = STANCE_RANK_TOLERANCE if self.dependent_stance else 0.0
         #: the user's tasks of each level ("hard", "objective"), see the class docstring
         self.extra_tasks = extra_task_levels(extra_tasks)
-        self.engine = self._resolve_engine(config, any(self.extra_tasks.values()))
-        self._stack = None
-        if self.engine == "native":
-            self._build_stack()
-
-    # the QP's arrays (those of the last cycle)
-    A = property(lambda self: self.qp.A)
-    H = property(lambda self: self.qp.H)
-    g = property(lambda self: self.qp.g)
-    upper = property(lambda self: self.qp.upper)
-    lower = property(lambda self: self.qp.lower)
-    sense = property(lambda self: self.qp.sense)
-    _r_feet = property(lambda self: self.qp.r_feet)
+        self.engine = self._resolve_engine(config)
+        self._build_stack()
 
     # ------------------------------------------------------------------ per cycle
     def solve(self, plan) -> Solution:
         """One QP (eq. 7) at the robot's cached state for ``plan`` (a PlanState-like object)."""
-        if self._stack is not None:
-            self._stack_cycle.update(self.robot.q, self.robot.v)
-            return self._solve_stack(plan)
-        t0 = time.perf_counter()
-        self.last_plan = plan
-        bad = nonfinite_plan_field(plan)
-        if bad is not None:
-            return self._bad_plan(plan, bad, self.robot.q, self.robot.h[6:], t0)
-        robot, qp = self.robot, self.qp
-        J = robot.stacked_contact_jacobian(self.contacts)
-        stance = plan.contact[self._leg]
-        qp.set_friction(plan.touchdown_normal[self._leg], self.mu, self.f_min, self.f_max)
-        pat = qp.pattern(stance)
-        tau_lo, tau_hi = self._tau_bounds = self._torque_bounds()
-        qp.set_dynamics(robot.M, J, robot.h, tau_lo, tau_hi)
-        qp.set_joint_bounds(*self.joint_limits.bounds(robot))
-        # stance feet, eq. 10 / 32
-        points = robot.contact_points[self._contact_order]
-        velocity = J @ robot.v
-        self._stance_anchors(stance, points, velocity.reshape(-1, 3))
-        target = -robot.stacked_contact_drift(self.contacts)
-        if self.K_st or self.D_st:
-            target += self.K_st * (self._anchors - points).ravel()
-            target -= self.D_st * velocity
-        qp.set_feet(J, target, pat)
-        if self.dependent_stance:
-            self._independent_stance_rows(J, target, pat)
-        qp.set_forces(pat)
-        # cost: ‖u‖²_R, the trunk wrench (eqs. 7a, 8), the force regulariser (Sect. V-D)
-        G = contact_wrench_map(robot, self.contacts, self._G, points)
-        if self.observer is not None and self._commanded_wrench is not None:
-            self.impedance.external_wrench = self.observer.update(
-                robot.h_G, self._commanded_wrench, robot.mass, self.control_period)
-        W_d = self.impedance.wrench(robot, plan.trunk)
-        GQ = G.T @ heading_weights(self.Q, plan.trunk.rotation)
-        HF = GQ @ G
-        if self.regularization == "torque":  # footnote 16: R_F = J_st,j R_τ J_st,jᵀ
-            JjT = J[:, 6:].T * np.sqrt(self.torque_weights)[:, None]
-            HF += JjT.T @ JjT
-        elif self.regularization == "force-parallel" and self.tangential_weight:
-            HF += self.tangential_weight * qp.leaning_tangential(stance, W_d[:3], self.mu)
-        elif self.tangential_weight:
-            HF += self.tangential_weight * pat.tangential
-        qp.set_cost(self._R_diagonal, HF, -GQ @ W_d)
-        if (self.posture_K or self.posture_D) and self.posture_mask.any():
-            qp.g[6:robot.nv] -= self.R_qdd * self.posture_acceleration()
-        if self.swing_slack == "single":
-            qp.set_single_slacks(stance, self.slack_weight)
-        if not pat.all_stance:
-            self._swing_rows(plan, pat)
-        t1 = time.perf_counter()
-        result = self._solve_qp()
-        t2 = time.perf_counter()
-        return self._solution(result, J, W_d, G, pat, {"assemble": t1 - t0, "solve": t2 - t1})
+        self._stack_cycle.update(self.robot.q, self.robot.v)
+        return self._solve(plan)
 
     def posture_acceleration(self, q=None, v=None) -> np.ndarray:
         """The joints' q̈ the ‖q̈‖²_R term pulls toward: K (q_ref − q) − D q̇ (Lie difference, so
@@ -504,54 +431,6 @@ class PassiveWBC(PlannedController):
         self._was_stance[:] = stance
         np.subtract(points, slip, out=self._anchors)
 
-    def _independent_stance_rows(self, J, target, pat: StancePattern) -> None:
-        """Stance rows J_s q̈ = b_s that are linearly dependent (legs of fewer than three joints:
-        a foot cannot move sideways without the body) replaced by an independent set
-        (:func:`~wholebody.tasks.contact.independent_rows`, as the stance task of engine "native"
-        with ``rank_tolerance``); the other rows are freed. The least-squares part of b_s is
-        kept; what no q̈ can meet is dropped instead of making the equalities inconsistent."""
-        qp = self.qp
-        rows = np.flatnonzero(pat.s3)
-        A, b, rank = independent_rows(J[rows], target[rows], STANCE_RANK_TOLERANCE)
-        at = qp.n + qp.r_feet + rows
-        qp.A[qp.r_feet + rows, :self.robot.nv] = A
-        qp.upper[at] = qp.lower[at] = b
-        qp.sense[at[rank:]] = FREE
-        qp.upper[at[rank:]], qp.lower[at[rank:]] = np.inf, -np.inf
-        if qp.dual is not None:  # the rows changed: their old multipliers mean nothing
-            qp.dual[at] = 0.0
-
-    def _swing_rows(self, plan, pat: StancePattern) -> None:
-        """Swing feet: eq. 6 (desired foot acceleration) and eq. 12 rows J q̈ = v̇_d − J̇ v, all
-        swing feet at once; the planner's swing trajectory is the foot frame's."""
-        nv = self.robot.nv
-        Jsw, target = self._swing_targets_of(plan, pat.swing)
-        self.qp.set_swing(Jsw.reshape(-1, nv), target.reshape(-1), pat, self.swing_slack,
-                          self.slack_weight)
-
-    def _swing_targets_of(self, plan, sw) -> tuple[np.ndarray, np.ndarray]:
-        """(J_sw (k, 3, nv), v̇_d − J̇ v (k, 3)) of the swing feet ``sw`` (indices), kept in
-        ``_swing_targets``."""
-        robot = self.robot
-        idx = self._contact_order[sw]
-        legs = self._leg[sw]
-        Jsw = robot.contact_frame_jacobians[idx, :3]  # (k, 3, nv), frame origins (sphere centres)
-        pos = robot.contact_points[idx]
-        pos[:, 2] += self._radii[sw]
-        a_d = self.swing.K * (plan.foot_position[legs] - pos)
-        a_d += self.swing.D * (plan.foot_velocity[legs] - Jsw @ robot.v)
-        if self.swing.feedforward:
-            a_d += plan.foot_acceleration[legs]
-        target = a_d - robot.contact_frame_drifts[idx, :3]
-        self._swing_targets[sw] = target
-        return Jsw, target
-
-    def _solve_qp(self) -> DaqpResult:
-        """DAQP on the assembled QP (warm-started)."""
-        result = self.qp.solve()
-        self.last_x = result.x
-        return result
-
     def _overrides(self) -> None:
         """The torque-limit task's weak-joint overrides as indices, values and a per-joint cap
         (inf: none), taken again when they change."""
@@ -578,29 +457,6 @@ class PassiveWBC(PlannedController):
             hi[self._override_index] = np.minimum(hi[self._override_index], self._override_value)
         return -hi, hi
 
-    def _solution(self, result: DaqpResult, J, W_d, G, pat, timings) -> Solution:
-        robot, nv, nf = self.robot, self.robot.nv, self.nf
-        ok, x = result.ok, result.x
-        swing_errors = None
-        if ok:
-            qdd, F = x[:nv], x[nv:nv + nf]
-            tau = robot.M[6:] @ qdd + robot.h[6:] - J[:, 6:].T @ F  # eq. 19
-            status = "solved"
-            if not pat.all_stance:
-                swing_errors = np.zeros(len(self.contacts))
-                residuals = (robot.contact_frame_jacobians[self._contact_order[pat.swing], :3] @ qdd
-                             - self._swing_targets[pat.swing])
-                swing_errors[pat.swing] = np.sqrt(np.einsum("ij,ij->i", residuals, residuals))
-        else:
-            qdd, F, tau, status = self._failed(result.status, robot.h[6:])
-        timings["iterations"] = result.iterations
-        slacks = None
-        if ok and self.swing_slack == "single":  # the swing feet's, as the native engine names them
-            eps = x[nv + nf:]
-            slacks = {f"slack {self.contacts[i]}": eps[i:i + 1].copy() for i in pat.swing}
-        return self._report(ok, qdd, F, tau, status, G @ F, W_d, pat.s3[::3], swing_errors,
-                            timings, slacks)
-
     def _bad_plan(self, plan, field: str, q, gravity_torque, t0: float) -> Solution:
         """A plan with a NaN/inf entry (e.g. a planner evaluated at an absurd time): no QP, the
         previous torque held (both engines alike, before anything of the cycle is assembled:
@@ -620,7 +476,7 @@ class PassiveWBC(PlannedController):
                       f"velocity overflow); {reason}")
         status = f"{reason}: previous torque held (clipped to limits)"
         if self._failing == 0:  # one warning per streak of failed cycles, not one per cycle
-            log.warning("PassiveWBC cycle %d: %s", self.robot.cycle, status)
+            log.warning("PassiveWBC cycle %d: %s", self.cycles, status)
         return np.zeros(self.robot.nv), np.zeros(self.nf), tau, status
 
     def _report(self, ok, qdd, F, tau, status, commanded, W_d, stance, swing_errors,
@@ -635,7 +491,7 @@ class PassiveWBC(PlannedController):
                                             Outcome.SOLVED if ok else Outcome.HELD, status)
         if ok and self._failing:
             log.warning("PassiveWBC cycle %d: solved again after %d failed cycles",
-                        self.robot.cycle, self._failing)
+                        self.cycles, self._failing)
         self._failing = 0 if ok else self._failing + 1
         self.last_tau = tau
         self.last_desired_wrench = W_d
@@ -656,22 +512,16 @@ class PassiveWBC(PlannedController):
                         tasks=reports, timings=timings, contacts=tuple(forces),
                         auxiliary=auxiliary or {})
 
-    # ------------------------------------------------------------------ the native engine
+    # ------------------------------------------------------------------ the engines
     @staticmethod
-    def _resolve_engine(config: PassiveConfig, extra_tasks: bool = False) -> str:
+    def _resolve_engine(config: PassiveConfig) -> str:
         """``config.engine``, with "auto" resolved: native where the compiled hierarchy cycle is
         built, else Python (one logged warning)."""
-        if extra_tasks and config.engine == "python":
-            raise ValueError("extra_tasks: engine 'python' (the hand-assembled QP) cannot take "
-                             "tasks; use engine='native' or 'auto'")
-        if config.engine == "native" or extra_tasks:
-            if not native_available():
-                what = "extra_tasks" if extra_tasks else "engine"
-                raise ValueError(f"{what}: engine 'native' needs the compiled extension "
-                                 "wholebody._hierarchy_cycle (install with a C++ compiler)")
-            return "native"
-        if config.engine == "python":
-            return "python"
+        if config.engine == "native" and not native_available():
+            raise ValueError("engine: 'native' needs the compiled extension "
+                             "wholebody._hierarchy_cycle (install with a C++ compiler)")
+        if config.engine != "auto":
+            return config.engine
         if native_available():
             return "native"
         warn_python_fallback("PassiveWBC", "the compiled wholebody._hierarchy_cycle is not built")
@@ -686,20 +536,20 @@ class PassiveWBC(PlannedController):
             "n_legs": len(self.planner.legs), "mass": robot.mass, "posture": robot.q_ref}
 
     def configure(self) -> None:
-        """Hand changed weights, gains or limits to the native engine (its tasks built anew,
-        the stance history kept; no-op for "python")."""
-        if self._stack is not None:
-            self._build_stack()
+        """Hand changed weights, gains or limits to the stack's tasks (built anew, the stance
+        history kept)."""
+        self._build_stack()
 
     def _build_stack(self) -> None:
-        """The native engine's tasks, its compiled cycle and the terms it reads every cycle."""
+        """The QP's tasks, the hierarchy cycle of the engine that solves them and the terms the
+        controller reads every cycle (its references compiled on the native engine)."""
         self._stack = PassiveStack(self)
-        self._stack_cycle = HierarchyCycle(self.robot, self._stack.stack, engine="native",
+        self._stack_cycle = HierarchyCycle(self.robot, self._stack.stack, engine=self.engine,
                                            settings=STACK_SETTINGS)
         self._terms = self._stack_cycle.terms_view()
         #: per leg of the planner, its contact (the planner's feet are in leg order)
         self._leg_contact = self._contact_order[np.argsort(self._leg)]
-        self._references = self._compiled_references()
+        self._references = self._compiled_references() if self.engine == "native" else None
 
     def _compiled_references(self):
         """The native engine's state-dependent references (τ bounds, stance anchors, W_d, the
@@ -731,30 +581,26 @@ class PassiveWBC(PlannedController):
 
     def compute(self, q, v, t: float = 0.0) -> Solution:
         """Torques for the state (q, v) at time ``t`` (see PlannedController.compute)."""
-        if self._stack is None:
-            return super().compute(q, v, t)
-        self._stack_cycle.update(q, v)  # the compiled cycle's terms
+        self._stack_cycle.update(q, v)
         terms = self._terms
         plan = self.planner.update(t, feet=terms.frame_positions[self._leg_contact],
                                    com_velocity=terms.vcom.copy())
-        return self._solve_stack(plan)
+        return self._solve(plan)
 
     def cycle(self, q, v, plan) -> Solution:
         """One cycle at the state (q, v) for a given ``plan``: update + QP + torques."""
-        if self._stack is None:
-            self.robot.update(q, v)
-            return self.solve(plan)
         self._stack_cycle.update(q, v)
-        return self._solve_stack(plan)
+        return self._solve(plan)
 
-    def _solve_stack(self, plan) -> Solution:
-        """:meth:`solve` through the compiled hierarchy program, updated to the state already:
-        the controller's state-dependent references (stance anchors, observer, W_d) from the
-        compiled cycle's terms (:meth:`HierarchyCycle.terms_view
-        <wholebody.cycle.HierarchyCycle.terms_view>`), then the persistent :class:`PassiveStack`
-        updated and solved by its :class:`~wholebody.cycle.HierarchyCycle` (weighted, one
-        program per stance set)."""
+    def _solve(self, plan) -> Solution:
+        """:meth:`solve`, the hierarchy cycle updated to the state already: the controller's
+        state-dependent references (stance anchors, observer, W_d) from the cycle's terms
+        (:meth:`HierarchyCycle.terms_view <wholebody.cycle.HierarchyCycle.terms_view>`), then
+        the persistent :class:`PassiveStack` updated and solved by its
+        :class:`~wholebody.cycle.HierarchyCycle` (weighted, one program per stance set on the
+        native engine)."""
         t0 = time.perf_counter()
+        self.cycles += 1
         self.last_plan = plan
         terms = self._terms
         references, observer = self._references, self.observer
@@ -770,8 +616,8 @@ class PassiveWBC(PlannedController):
         if bad is not None:
             return self._bad_plan(plan, bad, terms.q, terms.nle[6:], t0)
         t1 = time.perf_counter()
-        # failed cycles are values, as in the Python engine: a W_d that is not finite (e.g. the
-        # external wrench), NaN/inf task rows (the state was checked by the update)
+        # failed cycles are values: a W_d that is not finite (e.g. the external wrench), NaN/inf
+        # task rows (the state was checked by the update)
         sol = SimpleNamespace(ok=False, status="the desired trunk wrench W_d is not finite",
                               timings={})
         if finite:
@@ -814,11 +660,11 @@ class PassiveWBC(PlannedController):
                             sol.auxiliary if sol.ok else None)
 
     def _state_references(self, plan, stance) -> tuple[str | None, np.ndarray, np.ndarray, bool]:
-        """The native engine's references of the cycle from the hierarchy cycle's terms: τ
-        bounds, stance anchors, W_d (and, compiled, the posture target, written into its task);
-        (the plan's first non-finite field or None, W_d, the lean force, whether W_d is
-        finite). Compiled (``PassiveReferences.update``, the plan checked first) where
-        built, else in Python."""
+        """The references of the cycle from the hierarchy cycle's terms: τ bounds, stance
+        anchors, W_d, the posture target (written into its task); (the plan's first non-finite
+        field or None, W_d, the lean force, whether W_d is finite). Compiled on the native
+        engine (``PassiveReferences.update``, the plan checked first) where built, else in
+        Python."""
         terms, references = self._terms, self._references
         if references is None:
             self._tau_bounds = self._torque_bounds(terms.q, terms.tau_max)
@@ -831,7 +677,7 @@ class PassiveWBC(PlannedController):
             return None, W_d, W_d[:3], math.isfinite(W_d.sum())
         self._overrides()  # the settings as they are now, as the tasks read theirs
         references.settings(self.torque_limits.scale, self._override_cap, self.posture_K,
-                                  self.posture_D, self.posture_mask, self.control_period)
+                            self.posture_D, self.posture_mask, self.control_period)
         trunk, imp = plan.trunk, self.impedance
         code = references.update(
             plan.contact, plan.touchdown_normal, plan.foot_position, plan.foot_velocity,

@@ -1,4 +1,6 @@
-"""The preallocated QP of passive whole-body control (Fahmi et al. 2019, eq. 7), in DAQP's form.
+"""The passive WBC's QP (Fahmi et al. 2019, eq. 7) assembled by hand in DAQP's form: the tests'
+independent oracle of the QP ``PassiveWBC`` poses as a stack of library tasks
+(wholebody/control/passive_stack.py) and solves on either engine.
 
 Variables u = [q̈ (nv), F (3 per foot), ε (one per foot, "single" swing slacks only)]; simple bounds
 on every variable (the base accelerations free, joint accelerations by eqs. 16-18, swing-foot forces
@@ -12,20 +14,24 @@ pinned to zero) come first in ``upper``/``lower``/``sense``, then the rows of ``
 * "single" slacks only, 3 per foot: the paired rows of the swing rows, J q̈ + ε ≥ b.
 
 The layout never changes with the stance split, so DAQP's multipliers warm-start the next cycle.
-:class:`PassiveQP` owns the arrays and writes each block from numbers the controller computes
-(:class:`~wholebody.control.passive.PassiveWBC`'s Python engine, the reference its native
-engine, a stack of library tasks, is tested against).
+:func:`hand_assembled` writes it at the robot's cached state from a controller's settings and the
+references of the cycle it just solved (stance anchors, W_d, τ bounds: the controller's state,
+checked by their own tests) and solves it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
-from ..solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE
-from ..solvers.backends import DaqpResult, solve_daqp_qp
-from ..tasks.contact import friction_faces, lean_rows, tangent_basis, tangent_rows
+from wholebody.control.passive import STANCE_RANK_TOLERANCE
+from wholebody.solvers.backends import DAQP_SENSE_EQ as EQ, DAQP_SENSE_INEQ as FREE
+from wholebody.solvers.backends import DaqpResult, solve_daqp_qp
+from wholebody.tasks.contact import (friction_faces, independent_rows, lean_rows, tangent_basis,
+                                     tangent_rows)
+from wholebody.tasks.wrench import contact_wrench_map, heading_weights
 
 _INF = np.inf
 
@@ -222,3 +228,86 @@ class PassiveQP:
                                dual_start=self.dual)
         self.dual = result.dual
         return result
+
+
+def hand_assembled(wbc, plan, qp: PassiveQP | None = None) -> SimpleNamespace:
+    """The QP of ``wbc`` (a PassiveWBC that has just solved ``plan`` at the robot's cached state:
+    its stance anchors, W_d and τ bounds are this cycle's) assembled in ``qp`` (a new one if
+    None; a kept one warm-starts DAQP) and solved: (ok, x, qdd, lam, tau by eq. 19, swing
+    residuals per contact, the single slacks, qp)."""
+    robot, nv = wbc.robot, wbc.robot.nv
+    contacts = wbc.contacts
+    if qp is None:
+        qp = PassiveQP(nv, len(contacts), single_slack=wbc.swing_slack == "single")
+    J = robot.stacked_contact_jacobian(contacts)
+    stance = plan.contact[wbc._leg]
+    qp.set_friction(plan.touchdown_normal[wbc._leg], wbc.mu, wbc.f_min, wbc.f_max)
+    pat = qp.pattern(stance)
+    qp.set_dynamics(robot.M, J, robot.h, *wbc._tau_bounds)
+    qp.set_joint_bounds(*wbc.joint_limits.bounds(robot))
+    points = robot.contact_points  # (PassiveWBC's contacts are the robot's, in its order)
+    target = -robot.stacked_contact_drift(contacts)
+    if wbc.K_st or wbc.D_st:  # eq. 32 about the controller's anchors
+        target += wbc.K_st * (wbc._anchors - points).ravel()
+        target -= wbc.D_st * (J @ robot.v)
+    qp.set_feet(J, target, pat)
+    if wbc.dependent_stance:  # an independent set of the dependent rows, the others free
+        rows = np.flatnonzero(pat.s3)
+        A, b, rank = independent_rows(J[rows], target[rows], STANCE_RANK_TOLERANCE)
+        at = qp.n + qp.r_feet + rows
+        qp.A[qp.r_feet + rows, :nv] = A
+        qp.upper[at] = qp.lower[at] = b
+        qp.sense[at[rank:]] = FREE
+        qp.upper[at[rank:]], qp.lower[at[rank:]] = np.inf, -np.inf
+        if qp.dual is not None:
+            qp.dual[at] = 0.0
+    qp.set_forces(pat)
+    # cost: ‖u‖²_R, the trunk wrench (eqs. 7a, 8), the force regulariser (Sect. V-D)
+    G = contact_wrench_map(robot, contacts, np.zeros((6, qp.nf)), points)
+    W_d = wbc.last_desired_wrench
+    GQ = G.T @ heading_weights(wbc.Q, plan.trunk.rotation)
+    HF = GQ @ G
+    if wbc.regularization == "torque":  # footnote 16: R_F = J_st,j R_τ J_st,jᵀ
+        JjT = J[:, 6:].T * np.sqrt(wbc.torque_weights)[:, None]
+        HF += JjT.T @ JjT
+    elif wbc.regularization == "force-parallel" and wbc.tangential_weight:
+        HF += wbc.tangential_weight * qp.leaning_tangential(stance, W_d[:3], wbc.mu)
+    elif wbc.tangential_weight:
+        HF += wbc.tangential_weight * pat.tangential
+    R = np.zeros(qp.n)
+    R[:nv], R[nv:nv + qp.nf] = wbc.R_qdd, wbc.R_force
+    qp.set_cost(R, HF, -GQ @ W_d)
+    if (wbc.posture_K or wbc.posture_D) and wbc.posture_mask.any():
+        qp.g[6:nv] -= wbc.R_qdd * wbc.posture_acceleration()
+    if wbc.swing_slack == "single":
+        qp.set_single_slacks(stance, wbc.slack_weight)
+    residual_of = None
+    if not pat.all_stance:  # eq. 6 and eq. 12 rows J q̈ = v̇_d − J̇ v of the swing feet
+        sw = pat.swing
+        legs = wbc._leg[sw]
+        Jsw = robot.contact_frame_jacobians[sw, :3]  # frame origins (sphere centres)
+        position = robot.contact_points[sw]
+        position[:, 2] += wbc._radii[sw]
+        a_d = wbc.swing.K * (plan.foot_position[legs] - position)
+        a_d += wbc.swing.D * (plan.foot_velocity[legs] - Jsw @ robot.v)
+        if wbc.swing.feedforward:
+            a_d += plan.foot_acceleration[legs]
+        swing_target = a_d - robot.contact_frame_drifts[sw, :3]
+        qp.set_swing(Jsw.reshape(-1, nv), swing_target.reshape(-1), pat, wbc.swing_slack,
+                     wbc.slack_weight)
+        residual_of = (Jsw, swing_target)
+    result = qp.solve()
+    out = SimpleNamespace(ok=result.ok, x=result.x, qp=qp, swing_errors=np.zeros(len(contacts)),
+                          slacks={})
+    if result.ok:
+        x = result.x
+        out.qdd, out.lam = x[:nv], x[nv:nv + qp.nf]
+        out.tau = robot.M[6:] @ out.qdd + robot.h[6:] - J[:, 6:].T @ out.lam  # eq. 19
+        if residual_of is not None:
+            Jsw, swing_target = residual_of
+            residual = Jsw @ out.qdd - swing_target
+            out.swing_errors[pat.swing] = np.sqrt(np.einsum("ij,ij->i", residual, residual))
+        if wbc.swing_slack == "single":
+            eps = x[nv + qp.nf:]
+            out.slacks = {f"slack {contacts[i]}": eps[i] for i in pat.swing}
+    return out
