@@ -26,7 +26,8 @@ reference (engine "python"):
   bounds with Δt = 10 dt (eqs. 16-18);
 * torques by eq. 19.
 
-The QP is solved by DAQP over the nullspace of the hard equalities. The native engine also
+The weighted QP is solved by DAQP, over the nullspace of the hard equality rows where they are
+independent (:mod:`wholebody.solvers.weighted`). The native engine also
 computes the controller's per-cycle references around the QP (τ bounds, stance anchors, W_d, the
 posture target, the commanded wrench) in the compiled ``wholebody._passive_references`` from the
 hierarchy cycle's rigid-body terms (:meth:`HierarchyCycle.terms_view
