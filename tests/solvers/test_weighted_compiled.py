@@ -11,7 +11,7 @@ from conftest import native_cycle_or_skip
 from test_hierarchy import cfg, random_hierarchy
 
 from wholebody.solvers import Level, solve_hierarchy
-from wholebody.solvers.weighted import FALLBACK_WARNING
+from wholebody.solvers.weighted import FAILED_STATUS, FALLBACK_WARNING
 
 
 def feasible_pair(rng, n):
@@ -115,6 +115,13 @@ def test_hard_infeasible_falls_back_to_the_cascade():
         np.testing.assert_allclose(sol.x, python.x, atol=1e-9)
         assert sol.costs[0] == pytest.approx(0.5, rel=1e-3)  # the hard level's compromise x0 = 0.5
     assert BoundWeighted([hard, obj], settings).solve_quick() is None  # no weighted optimum
+    failing = cfg(method="weighted", backend="daqp", weighted_fallback=False)
+    for sol in (solve_hierarchy([hard, obj], settings=failing, compiled=False),
+                solve_hierarchy([hard, obj], settings=failing),
+                BoundWeighted([hard, obj], failing).solve()):
+        assert not sol.ok and sol.method == "weighted"
+        assert sol.status.startswith(FAILED_STATUS + " (") and "daqp" in sol.status
+        assert sol.warnings == () and np.all(sol.x == 0.0)
 
 
 def test_bound_weighted_follows_its_arrays():

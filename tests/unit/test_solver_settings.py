@@ -44,6 +44,8 @@ native = pytest.mark.skipif(not native_available(),
     ("backend_options", {"primal_start": np.zeros(3)}),
     ("backend_options", {1: 1e-7}),
     ("analytic_first_level", "yes"),
+    ("weighted_fallback", "yes"),
+    ("weighted_fallback", None),
 ])
 def test_a_bad_field_is_a_value_error_naming_it(field, value):
     with pytest.raises(ValueError, match=rf"^{field}: ") as caught:

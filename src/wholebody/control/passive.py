@@ -132,9 +132,11 @@ SLACKS = ("per-direction", "single", "none")
 ENGINES = ("auto", "native", "python")
 
 #: how the stack's two levels are solved: one weighted QP by DAQP (eq. 7), ε negligible next to
-#: the R terms, no cascade fallback (a failed QP holds the previous torque)
+#: the R terms, no other backend and no cascade instead (a failed or infeasible QP holds the
+#: previous torque; the cascade's least-squares compromise would break the hard rows, the
+#: floating-base dynamics among them)
 STACK_SETTINGS = SolverSettings(method="weighted", backend="daqp", regularization=1e-12,
-                                fallback_backend=None)
+                                fallback_backend=None, weighted_fallback=False)
 REGULARIZATIONS = ("force-normal", "force-parallel", "torque")
 #: the levels of PassiveWBC's QP that take extra tasks: the hard constraints, the weighted objective
 EXTRA_LEVELS = ("hard", "objective")

@@ -36,7 +36,7 @@ from .backends import (BACKENDS, DAQP_DEFAULTS, DAQP_EXIT, DAQP_RAW_TOL, QP_ERRO
                        daqp_verdict, solve_daqp, solve_daqp_unit_rows, solve_qp)
 from .common import HierarchySolution, _backend_solve, _checked_arguments, _finish, log
 from .settings import HIERARCHY_DEFAULT, SolverSettings, settings_or_default
-from .weighted import _cascade_instead
+from .weighted import _without_weighted_solution
 
 try:  # the cascade, compiled (src/wholebody/native/cascade.cpp); optional
     from .._cascade import CascadeRun as _CompiledCascade
@@ -187,8 +187,8 @@ def _new_weighted_run(levels, n, eps, feas_tol):
 
 
 def _run_weighted(run, levels, settings, t0, daqp=None):
-    """:func:`.weighted._solve_weighted` on a compiled run → HierarchySolution, or None where the
-    Python function gives None (the QP failed, or the hard level does not hold). ``daqp`` (a
+    """:func:`.weighted._solve_weighted` on a compiled run → HierarchySolution, or the reason (a
+    str) where the Python function gives one (the QP failed, or the hard level does not hold). ``daqp`` (a
     :func:`_daqp_in_cascade` solver) lets the run solve the QP itself; otherwise, or when the QP
     has no rows, ``settings.backend`` solves it from Python."""
     if daqp is not None and BACKENDS.get(settings.backend) is solve_daqp:
@@ -202,11 +202,11 @@ def _run_weighted(run, levels, settings, t0, daqp=None):
         qp_time = time.perf_counter() - tq
         if not ok:
             log.debug("weighted QP failed: %s", status)
-            return None
+            return status
         kind = run.give(y)
     if kind != "done":
         log.debug("weighted QP: %s", run.status)
-        return None
+        return run.status
     x, costs, res, vio, level_times, run_qp_time = run.result()
     return _finish(levels, x, "optimal", True, t0, level_times, "weighted",
                    len(levels), _NO_DIMS, (), evaluated=(costs, res, vio),
@@ -223,8 +223,8 @@ class BoundWeighted:
     """The compiled weighted QP bound to the arrays of ``levels`` = [hard, objective], as
     :class:`BoundCascade` is for the cascade: :meth:`solve` returns what
     ``solve_hierarchy(levels, settings)`` (``settings.method`` "weighted") would for the arrays'
-    current contents — the cascade's result, recorded in ``method`` and ``warnings``, where the
-    weighted QP gives none. ``feas_tol`` checks the hard level; the other tolerances are those of
+    current contents — where the weighted QP gives none, the cascade's result, recorded in
+    ``method`` and ``warnings`` (or the failure, ``settings.weighted_fallback`` False). ``feas_tol`` checks the hard level; the other tolerances are those of
     that cascade (as :func:`solve_hierarchy`'s). The arrays must keep their shapes and stay
     finite (not re-checked). Needs the compiled extension (:data:`available`)."""
 
@@ -247,8 +247,9 @@ class BoundWeighted:
         if self._run is None:  # no variable: the cascade evaluates, as in solve_hierarchy
             return _solve_compiled(self.levels, 0, self.settings, None, self._tols, t0)
         sol = _run_weighted(self._run, self.levels, self.settings, t0, self._daqp)
-        if sol is None:
-            sol = _cascade_instead(self.levels, self.n, self.settings, self._tols, t0)
+        if isinstance(sol, str):
+            sol = _without_weighted_solution(self.levels, self.n, self.settings, self._tols, t0,
+                                             sol)
         return sol
 
     def solve_quick(self) -> tuple | None:

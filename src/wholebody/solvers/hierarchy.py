@@ -54,7 +54,7 @@ from .compiled_cascade import BoundCascade, BoundWeighted, _solve_compiled, _sol
 from .daqp_hierarchy import _solve_daqp, row_normalised
 from .level import Level
 from .settings import HIERARCHY_DEFAULT, SolverSettings, settings_or_default
-from .weighted import _cascade_instead, _solve_weighted
+from .weighted import _solve_weighted, _without_weighted_solution
 
 __all__ = ["HierarchySolution", "FirstLevelSolution", "solve_hierarchy", "evaluate_levels",
            "row_normalised", "analytic_first_level", "BoundCascade", "BoundWeighted"]
@@ -133,7 +133,9 @@ def solve_hierarchy(
         solve = (_solve_weighted_compiled if compiled and compiled_cascade._WeightedRun is not None
                  else _solve_weighted)
         sol = solve(levels, n, settings, feas_tol, t0)
-        return sol if sol is not None else _cascade_instead(levels, n, settings, tols, t0)
+        if isinstance(sol, str):  # the reason the weighted QP has no solution
+            return _without_weighted_solution(levels, n, settings, tols, t0, sol)
+        return sol
     if compiled and compiled_cascade._CompiledCascade is not None:
         return _solve_compiled(levels, n, settings, first_level_solution, tols, t0)
     if analytic:

@@ -27,6 +27,10 @@ class SolverSettings:
     ``(name, value)`` pairs, so that the settings are hashable (a control loop keeps what it
     built for them). ``analytic_first_level``: level 1 solved in closed form (Sect. 2.4, eq. 17;
     cascade only): None = when level 1 holds only dynamics and torque limits, True = required.
+    ``weighted_fallback`` (method ``"weighted"``): where the single QP has no solution (the hard
+    level infeasible, or the backend failed), the levels' cascade result (True, recorded in the
+    solution's ``method`` and ``warnings``) or the failure itself (False: for a controller that
+    holds its previous torque rather than take the cascade's compromise of the hard rows).
 
     A bad value raises ValueError naming the field and the value.
     """
@@ -37,6 +41,7 @@ class SolverSettings:
     regularization: float = 1e-6
     backend_options: tuple[tuple[str, float], ...] = ()
     analytic_first_level: bool | None = None
+    weighted_fallback: bool = True
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -59,6 +64,10 @@ class SolverSettings:
                 raise ValueError(f"analytic_first_level: expected None, True or False, got "
                                  f"{analytic!r}")
             object.__setattr__(self, "analytic_first_level", bool(analytic))
+        if self.weighted_fallback not in (True, False):
+            raise ValueError(f"weighted_fallback: expected True or False, got "
+                             f"{self.weighted_fallback!r}")
+        object.__setattr__(self, "weighted_fallback", bool(self.weighted_fallback))
 
     @property
     def options(self) -> dict:

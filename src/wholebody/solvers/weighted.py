@@ -8,8 +8,9 @@ two-level cascade whenever the hard level is feasible, up to the ε effect of th
 first level (it trades an O(ε) violation for norm; the hard rows do not), i.e. exactly equal as
 ε → 0. If the hard level
 is infeasible (or the backend fails on the single QP, e.g. quadprog on inconsistent equality
-rows), :func:`_solve_weighted` returns None and ``solve_hierarchy`` returns the cascade's
-result instead (:func:`_cascade_instead`), recorded in ``method`` and ``warnings``.
+rows), :func:`_solve_weighted` returns the reason and ``solve_hierarchy`` returns the cascade's
+result instead, recorded in ``method`` and ``warnings``, or with
+``SolverSettings(weighted_fallback=False)`` the failure (:func:`_without_weighted_solution`).
 
 :func:`_solve_weighted` is the reference; :mod:`.compiled_cascade` assembles the same QP in C++
 (``wholebody._cascade.WeightedRun``) and solves DAQP's there, the default when built.
@@ -24,13 +25,20 @@ from .cascade import _solve_cascade
 from .common import _finish, _rows, log, regular_nullspace
 
 FALLBACK_WARNING = "weighted: hard level infeasible or the single QP failed; result of the cascade"
+#: the status of a weighted QP without a solution where the cascade is not asked for (the
+#: reason follows in parentheses)
+FAILED_STATUS = "weighted: hard level infeasible or the single QP failed"
+#: the reason where the QP's solution breaks the hard level beyond the feasibility tolerance
+HARD_NOT_HELD = "hard level not satisfied"
 
 
 def _solve_weighted(levels, n, settings, feas_tol, t0):
     """One QP: rows of levels[0] as hard constraints, levels[-1] as weighted objective (Fahmi et
     al. 2019, eq. 7), over x = x1 + Z u where the hard equalities are eliminated
     (:func:`~.common.regular_nullspace`), solved by ``settings.backend`` with ε =
-    ``settings.regularization`` (ε‖x‖²: ε I on u, ε Zᵀx1 in the linear term)."""
+    ``settings.regularization`` (ε‖x‖²: ε I on u, ε Zᵀx1 in the linear term) → a
+    HierarchySolution, or the reason (a str) where the QP failed or the hard level does not
+    hold at its solution."""
     eps = settings.regularization
     obj = levels[-1]
     hard = levels[0] if len(levels) == 2 else None
@@ -89,7 +97,7 @@ def _solve_weighted(levels, n, settings, feas_tol, t0):
     y, status, ok = solve_qp(H, g, A, lower, upper, backend=settings.backend, **settings.options)
     if not ok:
         log.debug("weighted QP failed: %s", status)
-        return None
+        return status
     x = x1 + Z @ y[:nu] if Z is not None else y[:n]
     if hard is not None:
         r = np.abs(Bh[keep] @ x - hard.b[keep])
@@ -97,14 +105,21 @@ def _solve_weighted(levels, n, settings, feas_tol, t0):
         viol = np.maximum(np.maximum(hard.lower - cx, cx - hard.upper), 0.0)
         if np.any(r > feas_tol * (1.0 + np.abs(hard.b[keep]))) or np.any(viol > feas_tol * (1.0 + np.abs(cx))):
             log.debug("weighted QP: hard level not satisfied")
-            return None
+            return HARD_NOT_HELD
     times = np.full(len(levels), np.nan)
     return _finish(levels, x, "optimal", True, t0, times, "weighted", len(levels), np.zeros(0), [])
 
 
-def _cascade_instead(levels, n, settings, tols, t0):
-    """The cascade's result where the weighted QP gave none, with :data:`FALLBACK_WARNING` first
-    among its warnings (``method`` "cascade")."""
+def _without_weighted_solution(levels, n, settings, tols, t0, reason: str = ""):
+    """What the method returns where the weighted QP gave no solution (``reason``: why): the
+    cascade's result, with :data:`FALLBACK_WARNING` first among its warnings (``method``
+    "cascade"), or with ``settings.weighted_fallback`` False a failed solution (ok False,
+    :data:`FAILED_STATUS` and the reason, x zero)."""
+    if not settings.weighted_fallback:
+        status = f"{FAILED_STATUS} ({reason})" if reason else FAILED_STATUS
+        log.debug(status)
+        return _finish(levels, np.zeros(n), status, False, t0,
+                       np.full(len(levels), np.nan), "weighted", 0, np.zeros(0), [])
     log.debug(FALLBACK_WARNING)
     sol = _solve_cascade(levels, n, settings, None, tols, t0)
     sol.warnings = (FALLBACK_WARNING,) + sol.warnings
