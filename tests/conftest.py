@@ -182,8 +182,8 @@ class ForceCap(Task):
 
 
 def native_cycle_or_skip(module: str = "_hierarchy_cycle"):
-    """Import a compiled part of wholebody (``_hierarchy_cycle``, ``_cascade``...). Skip only where it
-    cannot have been built (no C++ compiler on this machine, or WHOLEBODY_NO_NATIVE set at
+    """Import a compiled part of wholebody (``_hierarchy_cycle``, ``_cascade``...). Skip only where
+    it cannot have been built (no C++ compiler on this machine, or WHOLEBODY_NO_NATIVE set at
     install); anywhere else a missing extension is a broken build and fails the test."""
     import importlib
     try:

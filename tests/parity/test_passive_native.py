@@ -86,11 +86,11 @@ def assert_matches_hand_assembled(wbc, plan, sol, where=""):
     np.testing.assert_allclose(sol.lam, ref.lam, atol=1e-5, rtol=0, err_msg=where)
     np.testing.assert_allclose(sol.qdd, ref.qdd, atol=1e-5, rtol=0, err_msg=where)
     swing = {t.name: t.error for t in sol.tasks if t.name.startswith("swing ")}
-    assert swing == {f"swing {wbc.contacts[i]}": swing.get(f"swing {wbc.contacts[i]}")
-                     for i in np.flatnonzero(~plan.contact[wbc._leg])}, where
-    for i, name in enumerate(wbc.contacts):
-        if f"swing {name}" in swing:
-            assert swing[f"swing {name}"] == pytest.approx(ref.swing_errors[i], abs=1e-5), where
+    swinging = np.flatnonzero(~plan.contact[wbc._leg])
+    assert set(swing) == {f"swing {wbc.contacts[i]}" for i in swinging}, where
+    for i in swinging:
+        error = swing[f"swing {wbc.contacts[i]}"]
+        assert error == pytest.approx(ref.swing_errors[i], abs=1e-5), where
     assert set(sol.auxiliary) == set(ref.slacks), where
     for key, value in ref.slacks.items():
         assert float(sol.auxiliary[key][0]) == pytest.approx(value, abs=1e-5), where
@@ -377,10 +377,10 @@ def test_extra_tasks_equal_the_python_reference(robots, crawl_states):
     """Tasks added to the passive controller's QP (a user's Python constraint in the hard
     level, a library task in the objective) run on the native engine, the Python one's rows
     written into the compiled program: each cycle's torques equal the Python Formulation's on
-    the same stack and the Python engine's, the user's cap holds on the solved forces (and binds: the controller
-    without it exceeds it), and the hips' task residual is never larger than with the cap alone
-    (a convex cost with one more term cannot increase that term at its optimum) and mostly
-    smaller (the stance feet leave the hips little freedom)."""
+    the same stack and the Python engine's, the user's cap holds on the solved forces (and
+    binds: the controller without it exceeds it), and the hips' task residual is never larger
+    than with the cap alone (a convex cost with one more term cannot increase that term at its
+    optimum) and mostly smaller (the stance feet leave the hips little freedom)."""
     robot = robots["hyq"]
     wbc = PassiveWBC(robot, planner=planner(robot), extra_tasks=extra_tasks(robot))
     python = PassiveWBC(robot, planner=planner(robot), extra_tasks=extra_tasks(robot),

@@ -188,9 +188,9 @@ def _new_weighted_run(levels, n, eps, feas_tol):
 
 def _run_weighted(run, levels, settings, t0, daqp=None):
     """:func:`.weighted._solve_weighted` on a compiled run → HierarchySolution, or the reason (a
-    str) where the Python function gives one (the QP failed, or the hard level does not hold). ``daqp`` (a
-    :func:`_daqp_in_cascade` solver) lets the run solve the QP itself; otherwise, or when the QP
-    has no rows, ``settings.backend`` solves it from Python."""
+    str) where the Python function gives one (the QP failed, or the hard level does not hold).
+    ``daqp`` (a :func:`_daqp_in_cascade` solver) lets the run solve the QP itself; otherwise, or
+    when the QP has no rows, ``settings.backend`` solves it from Python."""
     if daqp is not None and BACKENDS.get(settings.backend) is solve_daqp:
         kind = run.solve_daqp(daqp)
     else:
@@ -224,8 +224,9 @@ class BoundWeighted:
     :class:`BoundCascade` is for the cascade: :meth:`solve` returns what
     ``solve_hierarchy(levels, settings)`` (``settings.method`` "weighted") would for the arrays'
     current contents — where the weighted QP gives none, the cascade's result, recorded in
-    ``method`` and ``warnings`` (or the failure, ``settings.weighted_fallback`` False). ``feas_tol`` checks the hard level; the other tolerances are those of
-    that cascade (as :func:`solve_hierarchy`'s). The arrays must keep their shapes and stay
+    ``method`` and ``warnings`` (or the failure, ``settings.weighted_fallback`` False).
+    ``feas_tol`` checks the hard level; the other tolerances are those of that cascade (as
+    :func:`solve_hierarchy`'s). The arrays must keep their shapes and stay
     finite (not re-checked). Needs the compiled extension (:data:`available`)."""
 
     available = _WeightedRun is not None
